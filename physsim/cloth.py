@@ -1,0 +1,202 @@
+"""MJCF for a flex cloth, and the static arrays a rollout needs from it.
+
+Modelling choices (measured; see BENCHMARKS.md and experiments/fabric_motion.py):
+  * Stretching: flex edge equality constraints, slightly soft (``solref`` 4 ms)
+    so edges may strain about 1% (p99) and a few percent next to the pins, like
+    ArcSim's 0.95-1.05 strain limit. Softer (20 ms) let pin edges stretch >100%;
+    fewer than ~20 CG iterations diverged.
+  * Bending: MuJoCo's own 2-D flex bending (``elastic2d="bend"``) is compiled
+    once at the reference rigidity D0 of the material (``reference_rigidity``)
+    but turned off in MuJoCo; the rollout applies the same compiled 4x4 stencil
+    (``flex_bending``) times each world's bending scale as an applied force,
+    because MuJoCo Warp keeps ``flex_bending`` shared by all worlds.
+  * Mass: per-vertex, a third of each adjacent face's rest area times the area
+    weight (ArcSim's rule), set per world through ``body_mass``.
+  * Wind: ArcSim's face force, computed in JAX each substep (``physsim.wind``).
+    MuJoCo's own fluid model stays off (density 0), so nothing double counts.
+  * Self-collision off: a sheet in a fan's wind barely touches itself, and the
+    collision pipeline would dominate the cost.
+
+Bending mapping (``reference_rigidity``): ArcSim's hinge energy is
+``ke l^2 theta^2 / (8 (A0 + A1))``. Bent into a cylinder of curvature k, our
+alternating-diagonal grid stores ``7 ke k^2 / 72`` per unit area under that
+formula, while a plate of rigidity D stores ``D k^2 / 2``; so D0 = 7/36 ke. ``ke``
+is the measured 3x5 matrix averaged over its three directions at ArcSim's
+curvature sample 0.5 (between the first two columns), the range a 1 m sheet in
+a fan mostly sees. What one isotropic, linear D cannot represent: the 0/45/90
+degree anisotropy (up to ~2x in some fabrics), stiffening with curvature along
+a row, and ArcSim's min-over-sides rule.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from physsim import materials
+from physsim.mesh import Mesh
+
+_THICKNESS = 1e-3  # m; only the product E t^3 matters for bending.
+
+
+@dataclasses.dataclass(frozen=True)
+class SimConfig:
+  """Static simulation settings (changing any recompiles).
+
+  Attributes:
+    timestep: MuJoCo step, seconds.
+    iterations: constraint solver iterations.
+    solver: ``'CG'`` or ``'Newton'``.
+    edge_solref: time constant of the edge equality constraints, seconds.
+    air_density: ArcSim ``wind.density`` (its default 1, with no 1/2 factor).
+    air_drag: ArcSim ``wind.drag`` on the tangential flow (default 0).
+    bending_damping: Rayleigh damping on the bending stencil, seconds.
+  """
+
+  timestep: float = 0.002
+  iterations: int = 20
+  solver: str = 'CG'
+  edge_solref: float = 0.004
+  air_density: float = 1.0
+  air_drag: float = 0.0
+  bending_damping: float = 0.0
+
+
+def reference_rigidity(material: str) -> float:
+  """D0 in N*m: the material's measured bending as one plate rigidity."""
+  bend = materials.load_material(material).bending
+  ke = 0.5 * (bend[:, 0] + bend[:, 1]).mean()
+  return 7.0 / 36.0 * ke
+
+
+def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
+  """MJCF text of ``mesh`` as a pinned flex cloth.
+
+  The flex's total mass is a placeholder: rollouts set area-weighted masses.
+  """
+  if config.solver not in ('CG', 'Newton'):
+    raise ValueError(f"solver must be 'CG' or 'Newton', got {config.solver!r}")
+  if not (config.timestep > 0 and config.edge_solref >= 2 * config.timestep):
+    raise ValueError(
+      f'need timestep > 0 and edge_solref >= 2 * timestep, got '
+      f'{config.timestep} and {config.edge_solref}'
+    )
+  young = rigidity * 12.0 / _THICKNESS**3  # D = E t^3 / 12 with poisson 0
+  points = ' '.join(f'{v:.9g}' for v in mesh.vertices.ravel())
+  elements = ' '.join(str(i) for i in mesh.faces.ravel())
+  pins = ' '.join(str(i) for i in mesh.pinned)
+  return f"""<mujoco model="{mesh.name}">
+  <option timestep="{config.timestep}" integrator="Euler" solver="{config.solver}"
+          iterations="{config.iterations}" ls_iterations="10" density="0" viscosity="0"/>
+  <worldbody>
+    <flexcomp name="cloth" type="direct" dim="2" radius="0.002" mass="{mesh.area * 0.2}"
+              point="{points}" element="{elements}">
+      <edge equality="true" solref="{config.edge_solref} 1" solimp="0.95 0.99 0.001"/>
+      <elasticity young="{young:.9g}" poisson="0" thickness="{_THICKNESS}" elastic2d="bend"/>
+      <contact selfcollide="none" contype="0" conaffinity="0"/>
+      <pin id="{pins}"/>
+    </flexcomp>
+  </worldbody>
+</mujoco>"""
+
+
+@dataclasses.dataclass(frozen=True)
+class ClothModel:
+  """A compiled cloth and the static arrays a rollout needs.
+
+  Attributes:
+    mesh: the rest mesh.
+    config: the static simulation settings.
+    material: ArcSim material name.
+    rigidity: D0, N*m, the bending that a scale of 1 means.
+    mj_model: MuJoCo model with MuJoCo's own bending switched off (see module doc).
+    vert_qadr: (V,) qpos/qvel address of each vertex's x slide, -1 if pinned.
+    vert_body: (V,) body id of each vertex, 0 (world) if pinned.
+    hinge_verts: (H, 4) the edge's two vertices then its two flaps.
+    hinge_coef: (H, 4, 4) MuJoCo's compiled bending stencil at D0.
+    hinge_c16: (H,) MuJoCo's curved-rest-shape term (0 for flat meshes).
+  """
+
+  mesh: Mesh
+  config: SimConfig
+  material: str
+  rigidity: float
+  mj_model: mujoco.MjModel
+  vert_qadr: np.ndarray
+  vert_body: np.ndarray
+  hinge_verts: np.ndarray
+  hinge_coef: np.ndarray
+  hinge_c16: np.ndarray
+
+  @property
+  def n_vertices(self) -> int:
+    return len(self.mesh.vertices)
+
+  def vertex_masses(self, area_weight) -> np.ndarray:
+    """(..., V) physical vertex masses, kg, for area weights of shape (...)."""
+    return np.asarray(area_weight, np.float64)[..., None] * self.mesh.vertex_areas
+
+  def body_masses(self, area_weight) -> np.ndarray:
+    """(..., nbody) MuJoCo body masses for the given area weights."""
+    vm = self.vertex_masses(area_weight)
+    out = np.zeros(vm.shape[:-1] + (self.mj_model.nbody,))
+    moving = self.vert_qadr >= 0
+    out[..., self.vert_body[moving]] = vm[..., moving]
+    return out
+
+
+def build(
+  mesh: Mesh, material: str = 'gray_interlock', config: SimConfig | None = None
+):
+  """Compiles ``mesh`` into a ``ClothModel`` for ``material``.
+
+  Args:
+    mesh: rest mesh with pinned vertices.
+    material: a paper fabric name or an ArcSim material file stem.
+    config: static settings; defaults to ``SimConfig()``.
+
+  Returns:
+    The ``ClothModel``.
+  """
+  config = config or SimConfig()
+  rigidity = reference_rigidity(material)
+  m = mujoco.MjModel.from_xml_string(mjcf(mesh, config, rigidity))
+  if m.nflexvert != len(mesh.vertices):
+    raise ValueError(f'flex has {m.nflexvert} vertices, mesh {len(mesh.vertices)}')
+  vert_body = m.flex_vertbodyid.astype(np.int64)
+  vert_body[vert_body < 0] = 0
+  vert_qadr = -np.ones(len(vert_body), np.int64)
+  for v, b in enumerate(vert_body):
+    if b == 0:
+      continue
+    j = m.body_jntadr[b]
+    if m.body_jntnum[b] != 3 or not np.allclose(m.jnt_axis[j : j + 3], np.eye(3)):
+      raise ValueError(f'vertex {v}: expected x, y, z slide joints on body {b}')
+    vert_qadr[v] = m.jnt_qposadr[j]
+  if not np.array_equal(np.flatnonzero(vert_qadr < 0), np.sort(mesh.pinned)):
+    raise ValueError('pinned vertices of the compiled flex differ from the mesh')
+
+  flap = m.flex_edgeflap.reshape(-1, 2)
+  edge = m.flex_edge.reshape(-1, 2)
+  inner = flap[:, 1] >= 0
+  coef = m.flex_bending.reshape(-1, 17)[inner]
+  hinge_verts = np.concatenate([edge[inner], flap[inner]], axis=1).astype(np.int64)
+  # MuJoCo's bending is applied by the rollout (per-world scale), not by MuJoCo.
+  m.flex_bending[:] = 0.0
+  model = ClothModel(
+    mesh=mesh,
+    config=config,
+    material=material,
+    rigidity=rigidity,
+    mj_model=m,
+    vert_qadr=vert_qadr,
+    vert_body=vert_body,
+    hinge_verts=hinge_verts,
+    hinge_coef=coef[:, :16].reshape(-1, 4, 4).copy(),
+    hinge_c16=coef[:, 16].copy(),
+  )
+  # Area-weighted masses at a typical 0.2 kg/m^2; rollouts set their own.
+  m.body_mass[:] = model.body_masses(0.2)
+  return model

@@ -1,0 +1,135 @@
+"""Physical parameters of one simulated fabric and the optimiser's [-1, 1]^3 box.
+
+The search space is the paper's: bending 0.1x-10x of the material's measured
+matrix, wind 1-6 m/s, and a per-material area-weight range (kg/m^2).
+
+Normalisation (``to_unit`` / ``from_unit``), per field:
+  * bending scale: log-uniform, ``u = 2 (log b - log lo) / (log hi - log lo) - 1``.
+    For the default 0.1-10 range this is exactly ``u = log10(b)``: a factor of 10
+    is as far as 0.1 -> 1, which is how stiffness errors are judged.
+  * wind speed and area weight: linear, ``u = 2 (x - lo) / (hi - lo) - 1``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import numpy as np
+
+from physsim import materials
+
+FIELDS = ('bending_scale', 'wind_speed', 'area_weight')
+UNITS = {'bending_scale': 'x measured', 'wind_speed': 'm/s', 'area_weight': 'kg/m^2'}
+
+
+class Params(NamedTuple):
+  """Physical parameters; each field a scalar or an array of one batch shape.
+
+  Attributes:
+    bending_scale: multiplier of the material's measured bending, (B,).
+    wind_speed: mean flow speed of the fan's wind, m/s, (B,).
+    area_weight: mass per area of the cloth, kg/m^2, (B,).
+  """
+
+  bending_scale: np.ndarray
+  wind_speed: np.ndarray
+  area_weight: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class SearchSpace:
+  """Allowed (low, high) range per field; ``log_bending`` picks the bending map."""
+
+  bending_scale: tuple[float, float] = (0.1, 10.0)
+  wind_speed: tuple[float, float] = (1.0, 6.0)
+  area_weight: tuple[float, float] = (0.1, 0.37)
+  log_bending: bool = True
+
+  def bounds(self) -> np.ndarray:
+    """(3, 2) physical bounds in field order."""
+    return np.array([getattr(self, f) for f in FIELDS], dtype=np.float64)
+
+  def center(self) -> Params:
+    """The trivial estimate: the middle of the normalised box (u = 0)."""
+    return from_unit(np.zeros(3), self)
+
+
+def search_space(fabric_name: str) -> SearchSpace:
+  """The paper's search space for one of its seven fabrics."""
+  return SearchSpace(area_weight=materials.fabric(fabric_name).area_weight_range)
+
+
+def make(bending_scale, wind_speed, area_weight) -> Params:
+  """Params as float64 arrays broadcast to one shape."""
+  b, w, a = np.broadcast_arrays(
+    *(np.asarray(x, dtype=np.float64) for x in (bending_scale, wind_speed, area_weight))
+  )
+  return Params(b.copy(), w.copy(), a.copy())
+
+
+def validate(params: Params, space: SearchSpace | None = None) -> Params:
+  """Checks every field is finite, positive and inside ``space``.
+
+  Raises:
+    ValueError: naming the field, the offending value and the allowed range.
+  """
+  space = space or SearchSpace()
+  params = make(*params)
+  for name in FIELDS:
+    value = getattr(params, name)
+    lo, hi = getattr(space, name)
+    bad = ~np.isfinite(value) | (value < lo * (1 - 1e-9)) | (value > hi * (1 + 1e-9))
+    if np.any(bad):
+      first = value.ravel()[np.flatnonzero(bad.ravel())[0]]
+      raise ValueError(
+        f'{name}={first!r} {UNITS[name]} is outside the allowed range '
+        f'[{lo}, {hi}] (or not finite)'
+      )
+  return params
+
+
+def _edges(space: SearchSpace, name: str) -> tuple[float, float, bool]:
+  lo, hi = getattr(space, name)
+  log = name == 'bending_scale' and space.log_bending
+  return (np.log(lo), np.log(hi), True) if log else (lo, hi, False)
+
+
+def to_unit(params: Params, space: SearchSpace | None = None) -> np.ndarray:
+  """Maps validated physical params to the optimiser box, shape (..., 3)."""
+  space = space or SearchSpace()
+  params = validate(params, space)
+  cols = []
+  for name in FIELDS:
+    lo, hi, log = _edges(space, name)
+    x = getattr(params, name)
+    x = np.log(x) if log else x
+    cols.append(2.0 * (x - lo) / (hi - lo) - 1.0)
+  return np.stack(cols, axis=-1)
+
+
+def from_unit(u, space: SearchSpace | None = None) -> Params:
+  """Maps points of [-1, 1]^3, shape (..., 3), to physical params.
+
+  Raises:
+    ValueError: if ``u`` has the wrong trailing size, is not finite or leaves
+      the box (by more than rounding).
+  """
+  space = space or SearchSpace()
+  u = np.asarray(u, dtype=np.float64)
+  if u.shape[-1:] != (3,):
+    raise ValueError(f'normalised params need a trailing axis of 3, got {u.shape}')
+  if not np.all(np.isfinite(u)) or np.any(np.abs(u) > 1 + 1e-9):
+    raise ValueError(f'normalised params must be finite and in [-1, 1], got {u}')
+  u = np.clip(u, -1.0, 1.0)
+  out = []
+  for i, name in enumerate(FIELDS):
+    lo, hi, log = _edges(space, name)
+    x = lo + (u[..., i] + 1.0) * 0.5 * (hi - lo)
+    out.append(np.exp(x) if log else x)
+  return make(*out)
+
+
+def sample(rng: np.random.Generator, n: int, space: SearchSpace | None = None):
+  """``n`` parameter sets uniform in the normalised box (log-uniform bending)."""
+  return from_unit(rng.uniform(-1.0, 1.0, size=(n, 3)), space)

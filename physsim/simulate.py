@@ -1,0 +1,399 @@
+"""Batched cloth rollouts: MJX (``impl='warp'``) and the MuJoCo C oracle.
+
+``simulate`` takes a batch of parameter sets and returns vertex positions at the
+frame rate, ``(batch, frames, vertices, 3)``, and a per-world validity flag.
+Both backends run the same physics: MuJoCo integrates (Euler) with edge
+equality constraints; each substep the rollout computes ArcSim's face wind
+(with optional gusts) and MuJoCo's bending stencil times the world's bending
+scale, and applies them as ``xfrc_applied`` on the vertex bodies.
+
+Per-world fields: ``body_mass`` (area weight), wind speed, direction, gusts and
+bending scale are all arrays, so new values never recompile. Frame count,
+substeps, mesh and batch size are static.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import multiprocessing
+import os
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+
+from physsim import forces
+from physsim import params as params_lib
+from physsim.cloth import ClothModel, build
+
+# A vertex further than this from its rest position, or faster than this, means
+# the integration blew up (the cloth is 1 m; real flapping is a few m/s).
+MAX_DISPLACEMENT = 5.0  # m
+MAX_SPEED = 100.0  # m/s
+
+
+class Rollout(NamedTuple):
+  """Result of ``simulate``.
+
+  Attributes:
+    positions: (B, T, V, 3) float32 vertex positions at the frame times, m.
+    valid: (B,) bool, False where the world produced NaN or blew up.
+    times: (T,) float seconds of each frame after the warm-up.
+  """
+
+  positions: np.ndarray
+  valid: np.ndarray
+  times: np.ndarray
+
+  def check(self) -> Rollout:
+    """Returns self, or raises ValueError listing the worlds that blew up."""
+    bad = np.flatnonzero(~self.valid)
+    if bad.size:
+      raise ValueError(f'simulation blew up (NaN or runaway) in worlds {bad.tolist()}')
+    return self
+
+
+@dataclasses.dataclass(frozen=True)
+class Wind:
+  """Wind settings shared by a batch (arrays may carry a leading batch axis).
+
+  Attributes:
+    direction: (3,) or (B, 3) flow direction; normalised. Default +y, normal to
+      the resting cloth (the paper's tables quote this normal component).
+    gust_intensity: RMS relative fluctuation; 0 for steady wind.
+    gust_modes: number of frozen-turbulence modes.
+  """
+
+  direction: tuple[float, float, float] | np.ndarray = (0.0, 1.0, 0.0)
+  gust_intensity: float = 0.0
+  gust_modes: int = 8
+
+
+class _Consts(NamedTuple):
+  """Static arrays of a ``ClothModel`` as JAX arrays (closed over by jit)."""
+
+  rest: jax.Array  # (V, 3)
+  faces: jax.Array  # (F, 3)
+  face_area: jax.Array  # (F,)
+  moving: np.ndarray  # (Vm,) vertices with dofs
+  qidx: jax.Array  # (Vm, 3) qpos/qvel indices of those vertices
+  body: jax.Array  # (Vm,) their body ids
+  hinge_verts: jax.Array
+  hinge_coef: jax.Array
+  hinge_c16: jax.Array
+
+
+def _consts(model: ClothModel, dtype) -> _Consts:
+  moving = np.flatnonzero(model.vert_qadr >= 0)
+  return _Consts(
+    rest=jnp.asarray(model.mesh.vertices, dtype),
+    faces=jnp.asarray(model.mesh.faces, jnp.int32),
+    face_area=jnp.asarray(model.mesh.face_areas, dtype),
+    moving=moving,
+    qidx=jnp.asarray(model.vert_qadr[moving][:, None] + np.arange(3), jnp.int32),
+    body=jnp.asarray(model.vert_body[moving], jnp.int32),
+    hinge_verts=jnp.asarray(model.hinge_verts, jnp.int32),
+    hinge_coef=jnp.asarray(model.hinge_coef, dtype),
+    hinge_c16=jnp.asarray(model.hinge_c16, dtype),
+  )
+
+
+def _applied_forces(c: _Consts, model: ClothModel, qpos, qvel, t, w):
+  """(Vm, 3) wind + bending forces on the moving vertices at time ``t``."""
+  x = c.rest.at[c.moving].add(qpos[c.qidx])
+  v = jnp.zeros_like(c.rest).at[c.moving].set(qvel[c.qidx])
+  centroid = x[c.faces].mean(axis=1)
+  u = forces.wind_velocity(centroid, t, w['speed'], w['direction'], w['gusts'])
+  cfg = model.config
+  f = forces.face_wind_forces(
+    x, v, c.faces, c.face_area, u, cfg.air_density, cfg.air_drag
+  ) + forces.bending_forces(
+    x, v, c.hinge_verts, c.hinge_coef, c.hinge_c16, w['bending'], cfg.bending_damping
+  )
+  return f[c.moving]
+
+
+def _world_inputs(model, params, wind: Wind, key, dtype):
+  """Per-world arrays (leading axis B) that the rollout takes."""
+  b = params.bending_scale.shape[0]
+  direction = np.broadcast_to(np.asarray(wind.direction, np.float64), (b, 3))
+  norm = np.linalg.norm(direction, axis=-1, keepdims=True)
+  if not np.all(np.isfinite(direction)) or np.any(norm < 1e-9):
+    raise ValueError(
+      f'wind direction must be finite and non-zero, got {wind.direction}'
+    )
+  if not (0.0 <= wind.gust_intensity <= 1.0):
+    raise ValueError(f'gust_intensity must be in [0, 1], got {wind.gust_intensity}')
+  if wind.gust_intensity > 0 and key is None:
+    raise ValueError('gusty wind needs a PRNG key (simulate(..., key=...))')
+  key = jax.random.key(0) if key is None else key
+  gusts = jax.vmap(
+    lambda k: forces.sample_gusts(k, wind.gust_intensity, wind.gust_modes)
+  )(jax.random.split(key, b))
+  return {
+    'speed': jnp.asarray(params.wind_speed, dtype),
+    'direction': jnp.asarray(direction / norm, dtype),
+    'bending': jnp.asarray(params.bending_scale, dtype),
+    'gusts': jax.tree.map(lambda a: jnp.asarray(a, dtype), gusts),
+    'body_mass': jnp.asarray(model.body_masses(params.area_weight), dtype),
+  }
+
+
+def _frame_plan(model: ClothModel, frames: int, fps: float, warmup: float):
+  if frames < 1 or not fps > 0 or warmup < 0:
+    raise ValueError(
+      f'need frames >= 1, fps > 0, warmup >= 0; got {frames}, {fps}, {warmup}'
+    )
+  dt = model.config.timestep
+  substeps = round(1.0 / (fps * dt))
+  if abs(substeps * dt * fps - 1.0) > 1e-6:
+    raise ValueError(f'frame period 1/{fps} s is not a multiple of the timestep {dt} s')
+  return substeps, round(warmup * fps)
+
+
+def _valid(positions, rest):
+  finite = jnp.all(jnp.isfinite(positions), axis=(1, 2, 3))
+  disp = jnp.max(jnp.abs(positions - rest), axis=(1, 2, 3))
+  return finite & (disp < MAX_DISPLACEMENT)
+
+
+# ---------------------------------------------------------------- MJX backend
+
+
+def _mjx_rollout_fn(model: ClothModel, frames: int, substeps: int, warm_frames: int):
+  """A jitted ``(world_inputs) -> (positions (B,T,V,3), valid (B,))``."""
+  from mujoco import mjx  # imported lazily: the C backend works without it
+
+  m = model.mj_model
+  from mujoco.mjx.third_party import mujoco_warp as mjw
+
+  mx = mjx.put_model(m, impl='warp')
+  # The cloth has no contacts, and CG stopping at its iteration cap is expected
+  # (the cap is the setting we chose): skip the collision pass, keep the other
+  # overflow warnings (e.g. constraint buffers).
+  opt_impl = mx.opt._impl.replace(
+    run_collision_detection=False,
+    warn_overflow=mx.opt._impl.warn_overflow & ~int(mjw.OverflowType.ITERATIONS),
+  )
+  mx = mx.replace(opt=mx.opt.replace(_impl=opt_impl))
+  d0 = mjx.make_data(m, impl='warp', njmax=max(m.nflexedge, 1) + 8)
+  c = _consts(model, jnp.float32)
+  dt = model.config.timestep
+  nbody = m.nbody
+
+  def world(w, d):
+    mxw = mx.replace(body_mass=w['body_mass'])
+
+    def substep(d, t):
+      f = _applied_forces(c, model, d.qpos, d.qvel, t, w)
+      xfrc = jnp.zeros((nbody, 6), f.dtype).at[c.body, :3].set(f)
+      return mjx.step(mxw, d.replace(xfrc_applied=xfrc)), None
+
+    def frame(d, i):
+      d, _ = jax.lax.scan(substep, d, (i * substeps + jnp.arange(substeps)) * dt)
+      return d, c.rest.at[c.moving].add(d.qpos[c.qidx])
+
+    d, _ = jax.lax.scan(lambda d, i: (frame(d, i)[0], None), d, jnp.arange(warm_frames))
+    _, xs = jax.lax.scan(frame, d, warm_frames + jnp.arange(frames))
+    return xs  # (T, V, 3)
+
+  @jax.jit
+  def run(w):
+    # d0 is shared: MJX-warp broadcasts the data fields it writes per world.
+    xs = jax.vmap(world, in_axes=(0, None))(w, d0)  # (B, T, V, 3)
+    return xs, _valid(xs, c.rest)
+
+  return run
+
+
+_MJX_CACHE: dict = {}
+
+
+def mjx_rollout_fn(model: ClothModel, frames: int = 60, fps: float = 20.0, warmup=1.0):
+  """The cached jitted MJX rollout for ``model`` (exposed for benchmarks)."""
+  substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
+  k = (id(model), frames, substeps, warm_frames)
+  if k not in _MJX_CACHE:
+    _MJX_CACHE[k] = (model, _mjx_rollout_fn(model, frames, substeps, warm_frames))
+  return _MJX_CACHE[k][1]
+
+
+# ------------------------------------------------------------ MuJoCo C backend
+
+
+def _applied_forces_np(c, model, qpos, qvel, t, w):
+  rest = model.mesh.vertices
+  x = rest.copy()
+  v = np.zeros_like(rest)
+  x[c.moving] += qpos[c.qidx]
+  v[c.moving] = qvel[c.qidx]
+  faces = model.mesh.faces
+  p = x[faces]
+  g = w['gusts']
+  cen = p.mean(axis=1)
+  arg = (cen - w['speed'] * t * w['direction']) @ g.wavevector.T + g.phase
+  u = w['speed'] * (w['direction'] + (np.sin(arg) * g.amplitude) @ g.direction)
+  n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+  n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+  vrel = u - v[faces].mean(axis=1)
+  vn = np.sum(n * vrel, axis=-1, keepdims=True)
+  cfg = model.config
+  area = model.mesh.face_areas[:, None]
+  fface = area * (
+    cfg.air_density * np.abs(vn) * vn * n + cfg.air_drag * (vrel - vn * n)
+  )
+  out = np.zeros_like(x)
+  np.add.at(out, faces.ravel(), np.repeat(fface / 3.0, 3, axis=0))
+  hv = model.hinge_verts
+  ph = x[hv]
+  e0, e1, e2 = ph[:, 1] - ph[:, 0], ph[:, 2] - ph[:, 0], ph[:, 3] - ph[:, 0]
+  c1, c2, c3 = np.cross(e1, e2), np.cross(e2, e0), np.cross(e0, e1)
+  curved = np.stack([-(c1 + c2 + c3), c1, c2, c3], axis=1)
+  fb = (
+    np.einsum('hij,hjk->hik', model.hinge_coef, ph)
+    + model.hinge_c16[:, None, None] * curved
+  )
+  fb += cfg.bending_damping * np.einsum('hij,hjk->hik', model.hinge_coef, v[hv])
+  np.add.at(out, hv.ravel(), -w['bending'] * fb.reshape(-1, 3))
+  return out[c.moving]
+
+
+class _NpConsts(NamedTuple):
+  moving: np.ndarray
+  qidx: np.ndarray
+  body: np.ndarray
+
+
+def _c_world(model: ClothModel, w: dict, frames: int, substeps: int, warm_frames: int):
+  """One world on MuJoCo C; returns (T, V, 3) float64 positions."""
+  m = model.mj_model
+  d = mujoco.MjData(m)
+  saved = m.body_mass.copy(), m.dof_M0.copy()
+  moving = np.flatnonzero(model.vert_qadr >= 0)
+  c = _NpConsts(
+    moving, model.vert_qadr[moving][:, None] + np.arange(3), model.vert_body[moving]
+  )
+  dt = model.config.timestep
+  out = np.empty((frames, model.n_vertices, 3))
+  try:
+    m.body_mass[:] = w['body_mass']
+    # MuJoCo C takes the mass of "simple" slide-joint bodies from the compiled
+    # dof_M0, not body_mass; MuJoCo Warp recomputes it from body_mass.
+    m.dof_M0[c.qidx] = w['body_mass'][c.body][:, None]
+    for i in range(warm_frames + frames):
+      for s in range(substeps):
+        f = _applied_forces_np(c, model, d.qpos, d.qvel, (i * substeps + s) * dt, w)
+        d.xfrc_applied[c.body, :3] = f
+        mujoco.mj_step(m, d)
+      if i >= warm_frames:
+        x = model.mesh.vertices.copy()
+        x[moving] += d.qpos[c.qidx]
+        out[i - warm_frames] = x
+        if not np.all(np.isfinite(x)):
+          out[i - warm_frames :] = np.nan
+          break
+  finally:
+    m.body_mass[:], m.dof_M0[:] = saved
+  return out
+
+
+def _np_world_inputs(w: dict, i: int) -> dict:
+  g = forces.Gusts(*(np.asarray(a[i], np.float64) for a in w['gusts']))
+  return {k: (g if k == 'gusts' else np.asarray(w[k][i], np.float64)) for k in w}
+
+
+def _c_worker(args):
+  mesh, material, config, worlds, frames, substeps, warm_frames = args
+  model = build(mesh, material, config)
+  return [_c_world(model, w, frames, substeps, warm_frames) for w in worlds]
+
+
+def _c_rollout(model, w, frames, substeps, warm_frames, workers):
+  b = int(w['speed'].shape[0])
+  worlds = [_np_world_inputs(w, i) for i in range(b)]
+  if workers <= 1 or b == 1:
+    xs = [_c_world(model, wi, frames, substeps, warm_frames) for wi in worlds]
+  else:
+    chunks = [worlds[i::workers] for i in range(workers)]
+    ctx = multiprocessing.get_context('spawn')  # JAX is not fork-safe
+    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+      args = [
+        (model.mesh, model.material, model.config, ch, frames, substeps, warm_frames)
+        for ch in chunks
+      ]
+      parts = list(pool.map(_c_worker, args))
+    xs = [None] * b
+    for i, part in enumerate(parts):
+      for j, x in enumerate(part):
+        xs[i + j * workers] = x
+  xs = np.stack(xs)
+  finite = np.all(np.isfinite(xs), axis=(1, 2, 3))
+  disp = np.nanmax(np.abs(xs - model.mesh.vertices), axis=(1, 2, 3))
+  return xs, finite & (disp < MAX_DISPLACEMENT)
+
+
+# ------------------------------------------------------------------ public API
+
+
+def simulate(
+  model: ClothModel,
+  params: params_lib.Params,
+  *,
+  frames: int = 60,
+  fps: float = 20.0,
+  warmup: float = 1.0,
+  wind: Wind | None = None,
+  key: jax.Array | None = None,
+  backend: str = 'mjx',
+  space: params_lib.SearchSpace | None = None,
+  workers: int | None = None,
+) -> Rollout:
+  """Simulates a batch of parameter sets.
+
+  Args:
+    model: compiled cloth (``physsim.cloth.build``).
+    params: ``Params`` with fields of shape (B,) (scalars count as B = 1).
+    frames: recorded frames T (the paper: 60).
+    fps: frame rate (the paper: 20 Hz); 1/fps must be a multiple of the timestep.
+    warmup: seconds simulated from rest before the first recorded frame.
+    wind: direction and gusts; default steady wind normal to the cloth.
+    key: PRNG key for the gusts (one sub-key per world).
+    backend: ``'mjx'`` (MuJoCo Warp through MJX, batched) or ``'c'`` (MuJoCo C,
+      one world at a time, float64 forces; the oracle and CPU fallback).
+    space: allowed parameter ranges (default: the union over the paper's fabrics).
+    workers: processes for the C backend (default: all cores).
+
+  Returns:
+    ``Rollout`` with positions (B, T, V, 3) and validity (B,).
+
+  Raises:
+    ValueError: parameters out of range or not finite, bad frame plan or wind.
+  """
+  params = params_lib.validate(params, space)
+  params = params_lib.make(*(np.atleast_1d(p) for p in params))
+  if params.bending_scale.ndim != 1:
+    raise ValueError(
+      f'params must be scalars or 1-D batches, got {params.bending_scale.shape}'
+    )
+  wind = wind or Wind()
+  substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
+  times = np.arange(frames) / fps
+  if backend == 'mjx':
+    w = _world_inputs(model, params, wind, key, jnp.float32)
+    xs, valid = mjx_rollout_fn(model, frames, fps, warmup)(w)
+    xs, valid = np.asarray(xs), np.asarray(valid)
+  elif backend == 'c':
+    w = _world_inputs(model, params, wind, key, jnp.float32)
+    w = jax.tree.map(np.asarray, w)
+    w['body_mass'] = model.body_masses(params.area_weight)
+    w['speed'], w['bending'] = params.wind_speed, params.bending_scale
+    xs, valid = _c_rollout(
+      model, w, frames, substeps, warm_frames, workers or os.cpu_count() or 1
+    )
+    xs = xs.astype(np.float32)
+  else:
+    raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
+  return Rollout(xs, valid, times)
