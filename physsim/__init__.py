@@ -15,7 +15,7 @@ from physsim.forces import Gusts, face_wind_forces, sample_gusts
 from physsim.materials import FABRICS, Fabric, Material, fabric, load_material
 from physsim.mesh import GARMENTS, Mesh, garment, square
 from physsim.params import Params, SearchSpace, from_unit, search_space, to_unit
-from physsim.simulate import Rollout, Wind, simulate
+from physsim.rollout import Rollout, Wind, simulate
 
 __all__ = [
   'FABRICS',

@@ -47,7 +47,7 @@ class Mesh:
 
   Attributes:
     vertices: (V, 3) rest positions, metres.
-    faces: (F, 3) vertex indices, counter-clockwise seen from -y.
+    faces: (F, 3) vertex indices, one orientation (normals along -y at rest).
     pinned: (P,) indices of vertices held fixed.
     name: what it is, e.g. ``'square25'`` or ``'tshirt'``.
   """
@@ -93,7 +93,6 @@ def _grid_faces(mask: np.ndarray) -> np.ndarray:
       if not mask[i : i + 2, j : j + 2].all():
         continue
       a, b, c, d = idx[i, j], idx[i, j + 1], idx[i + 1, j], idx[i + 1, j + 1]
-      # Row 0 is the top, so (a, c, d) is counter-clockwise seen from -y.
       faces += [(a, c, d), (a, d, b)] if (i + j) % 2 == 0 else [(a, c, b), (b, c, d)]
   return np.asarray(faces, dtype=np.int64)
 

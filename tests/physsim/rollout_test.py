@@ -1,0 +1,169 @@
+"""Tests for physsim.rollout: MJX-warp vs the MuJoCo C oracle, and physics checks.
+
+The MJX rollout compiles once per session (Warp kernels then XLA), on an 8x8
+cloth with a handful of frames.
+"""
+
+import jax
+import numpy as np
+import pytest
+
+import physsim
+from physsim import rollout as sim
+
+# MJX-warp runs float32, the oracle float64; a 5 m/s gusty flap amplifies the
+# difference to a few mm by 0.4 s. Max over all vertices, and the median.
+_PARITY_TOL = 5e-3  # m, 0.5% of the cloth's size
+_PARITY_MEDIAN_TOL = 1e-4  # m
+_FRAMES, _FPS = 8, 20.0
+
+
+@pytest.fixture(scope='module')
+def model():
+  return physsim.build(physsim.square(8), 'gray_interlock')
+
+
+@pytest.fixture(scope='module')
+def batch():
+  # world 0 = reference; 1 more wind; 2 heavier; 3 stiffer; 4 gusty reference twin
+  return physsim.params.make(
+    bending_scale=[1.0, 1.0, 1.0, 10.0, 0.3],
+    wind_speed=[2.0, 4.0, 2.0, 2.0, 5.0],
+    area_weight=[0.15, 0.15, 0.37, 0.15, 0.25],
+  )
+
+
+@pytest.fixture(scope='module')
+def mjx_out(model, batch):
+  wind = physsim.Wind(gust_intensity=0.2)
+  return sim.simulate(
+    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind, key=jax.random.key(7)
+  )
+
+
+def test_mjx_matches_mujoco_c(model, batch, mjx_out):
+  wind = physsim.Wind(gust_intensity=0.2)
+  ref = sim.simulate(
+    model,
+    batch,
+    frames=_FRAMES,
+    fps=_FPS,
+    warmup=0.0,
+    wind=wind,
+    key=jax.random.key(7),
+    backend='c',
+    workers=1,
+  )
+  assert mjx_out.positions.shape == (5, _FRAMES, 64, 3)
+  assert mjx_out.valid.all() and ref.valid.all()
+  moved = np.abs(ref.positions[:, -1] - model.mesh.vertices).max()
+  assert moved > 0.1  # the comparison is not between two resting cloths
+  err = np.abs(mjx_out.positions - ref.positions)
+  assert err.max() < _PARITY_TOL
+  assert np.median(err) < _PARITY_MEDIAN_TOL
+
+
+def test_total_mass_is_area_times_area_weight(model):
+  moving = model.vert_qadr >= 0
+  for w in (0.1, 0.2, 0.37):
+    vm = model.vertex_masses(w)
+    assert vm.sum() == pytest.approx(model.mesh.area * w, rel=1e-12)
+    # Bodies carry the moving vertices' masses; pinned ones rest on the pins.
+    assert model.body_masses(w).sum() == pytest.approx(vm[moving].sum(), rel=1e-12)
+  # Mass sits where the area is: an interior vertex carries 4x a corner's share
+  # on this grid's alternating diagonals (6 or 2 adjacent half-cells).
+  va = model.mesh.vertex_areas
+  assert va.max() / va[model.mesh.pinned].max() > 1.9
+
+
+def test_pins_do_not_move(model, mjx_out):
+  pins = model.mesh.pinned
+  np.testing.assert_array_equal(
+    mjx_out.positions[:, :, pins],
+    np.broadcast_to(model.mesh.vertices[pins], (5, _FRAMES, 2, 3)),
+  )
+
+
+def _deflection(out):
+  """Mean wind-wise (y) displacement over the last half of the clip, per world."""
+  return out.positions[:, _FRAMES // 2 :, :, 1].mean(axis=(1, 2))
+
+
+def _curvature(model, out):
+  """Mean |dihedral angle| over hinges at the last frame, per world (rad)."""
+  hv = model.hinge_verts
+  x = out.positions[:, -1]
+  p0, p1, p2, p3 = (x[:, hv[:, k]] for k in range(4))
+  n1 = np.cross(p1 - p0, p2 - p0)
+  n2 = np.cross(p3 - p0, p1 - p0)
+  cos = np.sum(n1 * n2, -1) / np.linalg.norm(n1, axis=-1) / np.linalg.norm(n2, axis=-1)
+  return np.arccos(np.clip(cos, -1, 1)).mean(axis=1)
+
+
+def test_physics_moves_the_right_way(model, batch):
+  steady = sim.simulate(model, batch, frames=_FRAMES, fps=_FPS, warmup=0.5)
+  y = _deflection(steady)
+  assert y[1] > y[0] + 0.02  # more wind deflects more
+  assert y[2] < y[0] - 0.02  # heavier cloth deflects less
+
+
+def test_stiffer_bending_curves_less():
+  # At 1 m a fabric's bending length (D / w g)^(1/3) is only 1-7 cm, so bending
+  # barely shapes the sheet; a 20 cm denim swatch shows it clearly.
+  small = physsim.build(physsim.square(8, size=0.2), 'black_denim')
+  p = physsim.params.make([0.1, 10.0, 0.1, 10.0], [1.0, 1.0, 2.0, 2.0], 0.3)
+  out = sim.simulate(
+    small, p, frames=_FRAMES, fps=_FPS, warmup=0.5, backend='c', workers=1
+  )
+  k = _curvature(small, out)
+  assert k[1] < 0.2 * k[0] and k[3] < 0.2 * k[2]
+
+
+def test_changing_values_does_not_recompile(model, batch, mjx_out):
+  fn = sim.mjx_rollout_fn(model, _FRAMES, _FPS, 0.0)
+  before = fn._cache_size()
+  other = physsim.params.make(
+    batch.bending_scale[::-1], batch.wind_speed, batch.area_weight[::-1]
+  )
+  sim.simulate(
+    model,
+    other,
+    frames=_FRAMES,
+    fps=_FPS,
+    warmup=0.0,
+    wind=physsim.Wind(gust_intensity=0.2),
+    key=jax.random.key(8),
+  )
+  assert fn._cache_size() == before
+
+
+def test_blow_up_is_flagged_not_passed_on():
+  # A 20 ms step with a 40 ms constraint time constant is far past stability.
+  cfg = physsim.SimConfig(timestep=0.025, edge_solref=0.05, iterations=2)
+  model = physsim.build(physsim.square(6), 'pink_nylon', cfg)
+  p = physsim.params.make([0.1, 0.1], [6.0, 1.0], [0.16, 0.2])
+  out = sim.simulate(model, p, frames=40, warmup=0.0, backend='c', workers=1)
+  assert not out.valid[0]
+  with pytest.raises(ValueError, match=r'worlds \[0'):
+    out.check()
+
+
+@pytest.mark.parametrize(
+  ('kwargs', 'match'),
+  [
+    ({'frames': 0}, 'frames'),
+    ({'fps': 7.0}, 'multiple of the timestep'),
+    ({'wind': physsim.Wind(direction=(0, 0, 0))}, 'direction'),
+    ({'wind': physsim.Wind(gust_intensity=0.2)}, 'PRNG key'),
+    ({'backend': 'cuda'}, 'backend'),
+  ],
+)
+def test_bad_inputs_raise_clear_errors(model, kwargs, match):
+  p = physsim.params.make(1.0, 3.0, 0.2)
+  with pytest.raises(ValueError, match=match):
+    sim.simulate(model, p, backend=kwargs.pop('backend', 'c'), **kwargs)
+
+
+def test_out_of_range_params_are_rejected_before_simulating(model):
+  with pytest.raises(ValueError, match='wind_speed'):
+    sim.simulate(model, physsim.params.make(1.0, 9.0, 0.2), backend='c')
