@@ -116,7 +116,7 @@ def test_stiffer_bending_curves_less():
     small, p, frames=_FRAMES, fps=_FPS, warmup=0.5, backend='c', workers=1
   )
   k = _curvature(small, out)
-  assert k[1] < 0.2 * k[0] and k[3] < 0.2 * k[2]
+  assert k[1] < 0.5 * k[0] and k[3] < 0.5 * k[2]
 
 
 def test_changing_values_does_not_recompile(model, batch, mjx_out):
