@@ -3,8 +3,11 @@
 Modelling choices (measured; see BENCHMARKS.md and experiments/fabric_motion.py):
   * Stretching: flex edge equality constraints, slightly soft (``solref`` 4 ms)
     so edges may strain about 1% (p99) and a few percent next to the pins, like
-    ArcSim's 0.95-1.05 strain limit. Softer (20 ms) let pin edges stretch >100%;
-    fewer than ~20 CG iterations diverged.
+    ArcSim's 0.95-1.05 strain limit. Softer (20 ms) let pin edges stretch >100%.
+    Solver: CG with an iteration cap of 100 (it stops early on tolerance). MuJoCo
+    C converges in ~20 on a 25x25 cloth; MuJoCo Warp's float32 CG did not, and
+    its worlds blew up at 20 (matched C at 100; Newton x5 also matched, 7x slower
+    on CPU).
   * Bending: MuJoCo's own 2-D flex bending (``elastic2d="bend"``) is compiled
     once at the reference rigidity D0 of the material (``reference_rigidity``)
     but turned off in MuJoCo; the rollout applies the same compiled 4x4 stencil
@@ -56,7 +59,7 @@ class SimConfig:
   """
 
   timestep: float = 0.002
-  iterations: int = 20
+  iterations: int = 100
   solver: str = 'CG'
   edge_solref: float = 0.004
   air_density: float = 1.0
