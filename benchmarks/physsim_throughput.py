@@ -106,7 +106,10 @@ def _c_row(model, cores):
     results = [_c_job(args[0])]
   else:
     ctx = multiprocessing.get_context('spawn')
-    with concurrent.futures.ProcessPoolExecutor(cores, mp_context=ctx) as pool:
+    with (
+      sim.cpu_only_children(),
+      concurrent.futures.ProcessPoolExecutor(cores, mp_context=ctx) as pool,
+    ):
       results = list(pool.map(_c_job, args))
   wall = max(r[0] for r in results)  # all processes run at once
   steps = sum(r[1] for r in results)

@@ -15,6 +15,7 @@ substeps, mesh and batch size are static.
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import multiprocessing
 import os
@@ -261,6 +262,23 @@ def _applied_forces_np(c, model, qpos, qvel, t, w):
   return out[c.moving]
 
 
+@contextlib.contextmanager
+def cpu_only_children():
+  """Processes spawned inside keep JAX on the CPU (they must not grab the GPU)."""
+  saved = {
+    k: os.environ.get(k) for k in ('JAX_PLATFORMS', 'XLA_PYTHON_CLIENT_PREALLOCATE')
+  }
+  os.environ.update(JAX_PLATFORMS='cpu', XLA_PYTHON_CLIENT_PREALLOCATE='false')
+  try:
+    yield
+  finally:
+    for k, v in saved.items():
+      if v is None:
+        os.environ.pop(k, None)
+      else:
+        os.environ[k] = v
+
+
 class _NpConsts(NamedTuple):
   moving: np.ndarray
   qidx: np.ndarray
@@ -319,7 +337,10 @@ def _c_rollout(model, w, frames, substeps, warm_frames, workers):
   else:
     chunks = [worlds[i::workers] for i in range(workers)]
     ctx = multiprocessing.get_context('spawn')  # JAX is not fork-safe
-    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+    with (
+      cpu_only_children(),
+      concurrent.futures.ProcessPoolExecutor(workers, mp_context=ctx) as pool,
+    ):
       args = [
         (model.mesh, model.material, model.config, ch, frames, substeps, warm_frames)
         for ch in chunks
