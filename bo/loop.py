@@ -187,6 +187,7 @@ def minimize(
     dict(config._asdict(), bounds=bounds.tolist(), n_init=n_init, seed=seed)
   )
   key = jax.random.PRNGKey(seed)
+  step = propose.cached_propose(config)  # Validates the settings before any eval.
 
   # ---- state: resume or initial design ----
   X = np.zeros((0, d))
@@ -228,7 +229,6 @@ def minimize(
     save(0)
 
   # ---- BO iterations ----
-  step = propose.cached_propose(config)
   stopped = False
   it = it0
   with jax.enable_x64(True):
