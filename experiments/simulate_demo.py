@@ -37,27 +37,6 @@ flags.DEFINE_enum(
 flags.DEFINE_integer('seed', 0, 'gust seed')
 
 
-def motion_stats(model, positions, fps):
-  """Edge strain and the centre vertex's wind-wise motion for one world (T, V, 3)."""
-  e = model.mesh.edges
-  rest = np.linalg.norm(np.diff(model.mesh.vertices[e], axis=1)[:, 0], axis=-1)
-  cur = np.linalg.norm(positions[:, e[:, 1]] - positions[:, e[:, 0]], axis=-1)
-  strain = cur / rest - 1
-  centre = np.argmin(
-    np.linalg.norm(model.mesh.vertices - model.mesh.vertices.mean(0), axis=1)
-  )
-  y = positions[:, centre, 1] - positions[:, centre, 1].mean()
-  spec = np.abs(np.fft.rfft(y * np.hanning(len(y))))
-  freqs = np.fft.rfftfreq(len(y), 1 / fps)
-  return {
-    'strain_max': float(np.abs(strain).max()),
-    'strain_p99': float(np.quantile(np.abs(strain), 0.99)),
-    'centre_amplitude_m': float(np.ptp(y)),
-    'centre_dominant_hz': float(freqs[1:][np.argmax(spec[1:])]),
-    'mean_deflection_m': float(positions[:, :, 1].mean()),
-  }
-
-
 def filmstrip(models, rollouts, labels, path, n=6):
   fig, axes = plt.subplots(
     len(models),
@@ -118,7 +97,7 @@ def main(argv):
       key=jax.random.key(FLAGS.seed),
       backend=backend,
     ).check()
-    s = motion_stats(model, out.positions[0], 20.0)
+    s = physsim.motion.motion_stats(model.mesh, out.positions[0], 20.0)
     stats[name] = {'bending_scale': scale, 'area_weight': fab.real_area_weight, **s}
     models.append(model)
     rollouts.append(out.positions[0])

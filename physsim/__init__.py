@@ -9,7 +9,7 @@ Public API::
   out.positions  # (B, T, V, 3); out.valid: (B,)
 """
 
-from physsim import params
+from physsim import motion, params
 from physsim.cloth import ClothModel, SimConfig, build, reference_rigidity
 from physsim.forces import Gusts, face_wind_forces, sample_gusts
 from physsim.materials import FABRICS, Fabric, Material, fabric, load_material
@@ -36,6 +36,7 @@ __all__ = [
   'from_unit',
   'garment',
   'load_material',
+  'motion',
   'params',
   'reference_rigidity',
   'sample_gusts',
