@@ -5,16 +5,20 @@ The public entry point is ``minimize``; the GP (``gp``), kernels
 (``propose``) are exposed as building blocks.
 """
 
-from bo import acquisition, gp, kernels, propose, qmc
+from bo import acquisition, gp, kernels, propose, qmc, uncertainty
 from bo.loop import IterationInfo, Result, minimize
+from bo.uncertainty import MinimizerSamples, minimizer_samples
 
 __all__ = [
   'IterationInfo',
+  'MinimizerSamples',
   'Result',
   'acquisition',
   'gp',
   'kernels',
   'minimize',
+  'minimizer_samples',
   'propose',
   'qmc',
+  'uncertainty',
 ]
