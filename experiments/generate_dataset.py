@@ -171,7 +171,7 @@ def _renderer(faces, intrinsics, config: Config):
   noise = None
   if config.noise:
     try:
-      from physsim import sensor  # from the render branch; optional here
+      from physsim import sensor  # imported only when used
     except ImportError as e:
       raise ValueError(f'--noise needs physsim.sensor, which is missing ({e})') from e
     noise = sensor.SensorNoise()

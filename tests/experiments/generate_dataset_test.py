@@ -119,3 +119,20 @@ def test_flags_override_preset():
     flags.FLAGS.unparse_flags()
   assert cfg.frames == 7 and cfg.materials == ('red_violet',)
   assert cfg.cameras == gd.PRESETS['smoke'].cameras
+
+
+def test_rgb_and_sensor_noise(tmp_path):
+  cfg = dataclasses.replace(
+    _SMOKE, materials=('pink_nylon',), sequences=1, batch_size=1, rgb=True, noise=True
+  )
+  clean_cfg = dataclasses.replace(cfg, rgb=False, noise=False)
+  gd.run(cfg, str(tmp_path / 'noisy'))
+  gd.run(clean_cfg, str(tmp_path / 'clean'))
+  noisy = dataset.read_sequence(str(tmp_path / 'noisy' / 'pink_nylon' / '0000'))
+  clean = dataset.read_sequence(str(tmp_path / 'clean' / 'pink_nylon' / '0000'))
+  assert noisy.rgb.shape == (*noisy.depth.shape, 3) and noisy.rgb.max() > 0
+  assert clean.rgb is None
+  # noise only removes or perturbs pixels the clean render hit
+  assert not np.any((noisy.depth > 0) & (clean.depth == 0))
+  both = (noisy.depth > 0) & (clean.depth > 0)
+  assert both.any() and np.any(noisy.depth[both] != clean.depth[both])
