@@ -273,6 +273,7 @@ def run(config: Config, workdir: str) -> dict:
     'write': 0.0,
   }
   frames_simulated = 0
+  n_sim_batches = 0
   counts = {}
   frames_rendered = 0
   bar = tqdm(total=len(config.materials) * config.sequences, unit='seq')
@@ -310,6 +311,7 @@ def run(config: Config, workdir: str) -> dict:
         workers=config.workers or None,
       )
       dt = time.perf_counter() - t0
+      n_sim_batches += 1
       if first_batch:
         seconds['simulate_first_batches'] += dt
         first_batch = False
@@ -390,6 +392,7 @@ def run(config: Config, workdir: str) -> dict:
     counts[material]['invalid'] = sum(not r['valid'] for r in mrows)
     montages[material] = _montage(workdir, material, mrows)
   total = sum(c['written'] for c in counts.values())
+  sim_total = seconds['simulate'] + seconds['simulate_first_batches']
   summary = {
     'backend': backend,
     'device': jax.default_backend(),
@@ -401,6 +404,9 @@ def run(config: Config, workdir: str) -> dict:
     if seconds['render']
     else None,
     'frames_simulated_after_first_batches': frames_simulated,
+    'simulated_world_frames_per_s_with_compile': (
+      n_sim_batches * bs * config.frames / sim_total if sim_total else None
+    ),
     'simulated_world_frames_per_s': (
       frames_simulated / seconds['simulate'] if seconds['simulate'] else None
     ),
