@@ -7,41 +7,86 @@ Public API::
   p = physsim.params.make(bending_scale=[1, 3], wind_speed=[3, 4], area_weight=[.18, .2])
   out = physsim.simulate(model, p, wind=physsim.Wind(gust_intensity=0.2), key=key)
   out.positions  # (B, T, V, 3); out.valid: (B,)
+  poses = jax.vmap(lambda k: physsim.sample_poses(k, 6))(keys)  # (B, 6) cameras
+  render = physsim.make_depth_renderer(mesh.faces, physsim.Intrinsics())
+  depth = render(out.positions, poses)           # (B, C, T, H, W) metres, 0 = none
+
+  ds = physsim.dataset.open_dataset('data/sim')   # 16-bit mm PNG sequences
+  v = physsim.load_depth_video('capture/', source_fps=24)  # real depth video
 """
 
-from physsim import motion, params
+from physsim import camera, dataset, motion, params, render, video
+from physsim.camera import (
+  Intrinsics,
+  Pose,
+  PoseRanges,
+  look_at,
+  pose_from_dict,
+  pose_to_dict,
+  sample_poses,
+  world_to_camera,
+)
 from physsim.cloth import ClothModel, SimConfig, build, reference_rigidity
 from physsim.forces import Gusts, face_wind_forces, sample_gusts
 from physsim.materials import FABRICS, Fabric, Material, fabric, load_material
 from physsim.mesh import GARMENTS, Mesh, garment, square
 from physsim.params import Params, SearchSpace, from_unit, search_space, to_unit
+from physsim.render import (
+  FABRIC_COLORS,
+  depth_image,
+  make_depth_renderer,
+  render_depth,
+  render_rgb,
+  shade_rgb,
+)
 from physsim.rollout import Rollout, Wind, simulate
+from physsim.video import DepthVideo, load_depth_video
 
 __all__ = [
   'FABRICS',
+  'FABRIC_COLORS',
   'GARMENTS',
   'ClothModel',
+  'DepthVideo',
   'Fabric',
   'Gusts',
+  'Intrinsics',
   'Material',
   'Mesh',
   'Params',
+  'Pose',
+  'PoseRanges',
   'Rollout',
   'SearchSpace',
   'SimConfig',
   'Wind',
   'build',
+  'camera',
+  'dataset',
+  'depth_image',
   'fabric',
   'face_wind_forces',
   'from_unit',
   'garment',
+  'load_depth_video',
   'load_material',
+  'look_at',
+  'make_depth_renderer',
   'motion',
   'params',
+  'pose_from_dict',
+  'pose_to_dict',
   'reference_rigidity',
+  'render',
+  'render_depth',
+  'render_rgb',
   'sample_gusts',
+  'sample_poses',
   'search_space',
+  'shade_rgb',
   'simulate',
   'square',
   'to_unit',
+  'video',
+  'world_to_camera',
 ]

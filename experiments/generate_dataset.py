@@ -1,0 +1,475 @@
+"""Simulate and render the fabric dataset sweep into the ``physsim.dataset`` format.
+
+For each material: parameter sets drawn uniformly in its normalised search box
+(seeded per material), simulated in fixed batches (``physsim.simulate``), each
+world seen by random cameras (``physsim.sample_poses``) through the JAX
+ray-caster in one jitted call per batch, and written sequence by sequence,
+atomically. A rerun resumes: finished sequences are kept as they are.
+
+  PYTHONPATH=. python -m experiments.generate_dataset --out=data/sim
+  PYTHONPATH=. python -m experiments.generate_dataset --preset=smoke --out=/tmp/ds
+
+Invalid (blown-up) worlds are written with ``valid=False`` and no frames; they
+are rendered with the rest mesh in their place only to keep the batch shape
+fixed, and those frames are discarded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+import zlib
+
+import jax
+import jax.numpy as jnp
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from absl import app, flags  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+import physsim  # noqa: E402
+from physsim import dataset  # noqa: E402
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+  """One dataset sweep; every field is also a flag (``--frames=...``).
+
+  Attributes:
+    materials: fabric names (``physsim.FABRICS``).
+    sequences: parameter sets (simulations) per material.
+    frames: frames per sequence.
+    fps: frame rate, Hz.
+    warmup: seconds simulated before the first frame.
+    cameras: cameras per sequence.
+    resolution: image width = height, pixels.
+    cloth_resolution: cloth vertices per side.
+    seed: the only seed.
+    backend: ``'auto'`` (MJX on a GPU, else MuJoCo C), ``'mjx'`` or ``'c'``.
+    batch_size: worlds simulated and rendered at once. Sequences are grouped
+      in fixed chunks of this size, and gusts are drawn per chunk, so a resume
+      must use the same batch size (checked).
+    workers: processes for the C backend (0: all cores).
+    gust_intensity: RMS relative wind fluctuation.
+    rgb: also write shaded colour frames.
+    noise: apply ``physsim.sensor`` depth-camera noise to the depth frames.
+    render_method: ``'raster'`` or ``'brute'`` (``physsim.render``).
+  """
+
+  materials: tuple[str, ...] = tuple(physsim.FABRICS)
+  sequences: int = 30
+  frames: int = 60
+  fps: float = 20.0
+  warmup: float = 1.0
+  cameras: int = 6
+  resolution: int = 256
+  cloth_resolution: int = 25
+  seed: int = 0
+  backend: str = 'auto'
+  batch_size: int = 30
+  workers: int = 0
+  gust_intensity: float = 0.2
+  rgb: bool = False
+  noise: bool = False
+  render_method: str = 'raster'
+
+
+PRESETS = {
+  'paper': Config(),
+  'smoke': Config(
+    materials=('gray_interlock', 'black_denim'),
+    sequences=2,
+    frames=4,
+    warmup=0.25,
+    cameras=2,
+    resolution=32,
+    cloth_resolution=8,
+    backend='c',
+    batch_size=2,
+    workers=1,
+  ),
+}
+# Fields that do not change what is generated, so a resume may differ in them.
+_FREE_FIELDS = ('workers',)
+
+
+def _material_stream(seed: int, material: str) -> int:
+  # Stable across runs and material lists (Python's hash() is salted).
+  return zlib.crc32(f'{seed}/{material}'.encode())
+
+
+def material_params(config: Config, material: str) -> physsim.Params:
+  """The material's ``sequences`` parameter sets (a prefix-stable draw)."""
+  rng = np.random.default_rng([config.seed, _material_stream(config.seed, material)])
+  return physsim.params.sample(rng, config.sequences, physsim.search_space(material))
+
+
+def _resolve_backend(backend: str) -> str:
+  if backend == 'auto':
+    return 'mjx' if jax.default_backend() == 'gpu' else 'c'
+  if backend not in ('mjx', 'c'):
+    raise ValueError(f"backend must be 'auto', 'mjx' or 'c', got {backend!r}")
+  return backend
+
+
+def _check_config(config: Config) -> None:
+  unknown = [m for m in config.materials if m not in physsim.FABRICS]
+  if unknown or not config.materials:
+    raise ValueError(f'materials {unknown} not in {sorted(physsim.FABRICS)}')
+  if len(set(config.materials)) != len(config.materials):
+    raise ValueError(f'materials repeat: {config.materials}')
+  for name in ('sequences', 'frames', 'cameras', 'resolution', 'batch_size'):
+    if getattr(config, name) < 1:
+      raise ValueError(f'{name} must be >= 1, got {getattr(config, name)}')
+  if config.cloth_resolution < 2:
+    raise ValueError(f'cloth_resolution must be >= 2, got {config.cloth_resolution}')
+
+
+def _identity(config: Config, backend: str) -> dict:
+  d = dataclasses.asdict(config)
+  d['materials'] = list(config.materials)
+  d['backend'] = backend
+  for k in _FREE_FIELDS:
+    d.pop(k)
+  return d
+
+
+def _open_workdir(workdir: str, config: Config, backend: str) -> dict:
+  """Creates or checks ``dataset.json``; a resume must match the config."""
+  os.makedirs(workdir, exist_ok=True)
+  dataset.clean_tmp(workdir)
+  ident = _identity(config, backend)
+  info_path = os.path.join(workdir, 'dataset.json')
+  if os.path.isfile(info_path):
+    with open(info_path) as f:
+      info = json.load(f)
+    old = info.get('config', {})
+    diff = sorted(k for k in set(old) | set(ident) if old.get(k) != ident.get(k))
+    if diff:
+      raise ValueError(
+        f'{info_path}: this folder holds a dataset made with a different config '
+        f'({", ".join(f"{k}: {old.get(k)!r} -> {ident.get(k)!r}" for k in diff)}); '
+        'use another --out or the same settings'
+      )
+    return info
+  return dataset.write_dataset_info(
+    workdir,
+    seed=config.seed,
+    config=ident,
+    jax_backend=jax.default_backend(),
+    pose_ranges=physsim.PoseRanges().to_dict(),
+  )
+
+
+def _renderer(faces, intrinsics, config: Config):
+  """The jitted per-batch render stage: (positions, poses, key) -> depth[, rgb]."""
+  noise = None
+  if config.noise:
+    try:
+      from physsim import sensor  # imported only when used
+    except ImportError as e:
+      raise ValueError(f'--noise needs physsim.sensor, which is missing ({e})') from e
+    noise = sensor.SensorNoise()
+  faces = jnp.asarray(faces, jnp.int32)
+
+  @jax.jit
+  def render(positions, poses, key):
+    depth = physsim.render_depth(
+      positions, faces, intrinsics, poses, method=config.render_method
+    )  # (B, C, T, H, W)
+    if noise is not None:
+      flat = depth.reshape(-1, *depth.shape[-2:])
+      keys = jax.random.split(key, flat.shape[0])
+      flat = jax.vmap(lambda k, d: sensor.apply_noise(k, d, intrinsics, noise))(
+        keys, flat
+      )
+      depth = flat.reshape(depth.shape)
+    rgb = None
+    if config.rgb:
+      rgb = physsim.render_rgb(
+        positions, faces, intrinsics, poses, method=config.render_method
+      )  # (B, C, T, H, W, 3)
+      rgb = jnp.round(rgb * 255).astype(jnp.uint8)
+    return depth, rgb
+
+  return render
+
+
+def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str | None:
+  """A grid of camera-0 frames (rows: sequences, columns: time), read from disk."""
+  rows = [r for r in rows if r['valid']][:n]
+  if not rows:
+    return None
+  seqs = [
+    dataset.read_sequence(
+      dataset.sequence_dir(workdir, material, r['seq_id']), cameras=[0], rgb=False
+    )
+    for r in rows
+  ]
+  t = seqs[0].depth.shape[1]
+  cols = np.unique(np.linspace(0, t - 1, min(n, t)).round().astype(int))
+  valid = np.concatenate([s.depth[0][cols][s.depth[0][cols] > 0] for s in seqs])
+  lo, hi = np.percentile(valid, [1, 99]) if valid.size else (0.0, 1.0)
+  cmap = plt.get_cmap('viridis').with_extremes(bad='white')
+  fig, axes = plt.subplots(
+    len(seqs), len(cols), figsize=(1.6 * len(cols), 1.6 * len(seqs)), squeeze=False
+  )
+  for i, (s, r) in enumerate(zip(seqs, rows, strict=True)):
+    for j, c in enumerate(cols):
+      ax = axes[i, j]
+      d = s.depth[0, c]
+      im = ax.imshow(np.ma.masked_equal(d, 0.0), cmap=cmap, vmin=lo, vmax=hi)
+      ax.set(xticks=[], yticks=[])
+      if i == 0:
+        ax.set_title(f't={c / s.meta["fps"]:.2f} s', fontsize=7)
+      if j == 0:
+        ax.set_ylabel(
+          f'{r["seq_id"]}\nb{r["bending_scale"]:.2g} w{r["wind_speed"]:.2g}\n'
+          f'a{r["area_weight"]:.3g}',
+          fontsize=6,
+        )
+  fig.colorbar(im, ax=axes, shrink=0.6, label='depth, m (white: invalid)')
+  fig.suptitle(f'{material}, camera 0', fontsize=9)
+  path = os.path.join(workdir, f'montage_{material}.png')
+  tmp = os.path.join(workdir, f'{dataset.TMP_PREFIX}montage_{material}.png')
+  fig.savefig(tmp, dpi=110)
+  plt.close(fig)
+  os.replace(tmp, path)
+  return path
+
+
+def run(config: Config, workdir: str) -> dict:
+  """Generates (or resumes) the dataset in ``workdir``; returns the summary.
+
+  Args:
+    config: the sweep.
+    workdir: dataset root (``physsim.dataset`` layout).
+
+  Returns:
+    The summary also written to ``<workdir>/summary.json``: counts per
+    material, seconds simulating / rendering / writing, frames per second.
+  """
+  _check_config(config)
+  backend = _resolve_backend(config.backend)
+  _open_workdir(workdir, config, backend)
+  intrinsics = physsim.Intrinsics(width=config.resolution, height=config.resolution)
+  mesh = physsim.square(config.cloth_resolution)
+  render = _renderer(mesh.faces, intrinsics, config)
+  wind = physsim.Wind(gust_intensity=config.gust_intensity)
+  root_key = jax.random.key(config.seed)
+  bs = config.batch_size
+  n_batches = -(-config.sequences // bs)
+  # First calls include compiles (render once; MJX once per material's model).
+  seconds = {
+    'simulate': 0.0,
+    'simulate_first_batches': 0.0,
+    'render': 0.0,
+    'first_render_call': None,
+    'write': 0.0,
+  }
+  frames_simulated = 0
+  n_sim_batches = 0
+  counts = {}
+  frames_rendered = 0
+  bar = tqdm(total=len(config.materials) * config.sequences, unit='seq')
+  for m_idx, material in enumerate(config.materials):
+    space = physsim.search_space(material)
+    params = material_params(config, material)
+    model = physsim.build(mesh, material)
+    mkey = jax.random.fold_in(root_key, _material_stream(config.seed, material))
+    cam_key = jax.random.fold_in(mkey, 1)  # batches use fold_in(mkey, 2 + b)
+    c = counts[material] = {'existing': 0, 'written': 0, 'valid': 0, 'invalid': 0}
+    first_batch = True
+    for b in range(n_batches):
+      idx = np.arange(b * bs, min((b + 1) * bs, config.sequences))
+      todo = [i for i in idx if not dataset.is_complete(workdir, material, f'{i:04d}')]
+      c['existing'] += len(idx) - len(todo)
+      bar.update(len(idx) - len(todo))
+      if not todo:
+        continue
+      # Pad the last chunk to the full batch so nothing recompiles.
+      padded = np.concatenate([idx, np.full(bs - len(idx), idx[-1])])
+      p = physsim.Params(*(f[padded] for f in params))
+      bkey = jax.random.fold_in(mkey, 2 + b)
+      k_wind, k_noise = jax.random.split(bkey)
+      t0 = time.perf_counter()
+      out = physsim.simulate(
+        model,
+        p,
+        frames=config.frames,
+        fps=config.fps,
+        warmup=config.warmup,
+        wind=wind,
+        key=k_wind,
+        backend=backend,
+        space=space,
+        workers=config.workers or None,
+      )
+      dt = time.perf_counter() - t0
+      n_sim_batches += 1
+      if first_batch:
+        seconds['simulate_first_batches'] += dt
+        first_batch = False
+      else:
+        seconds['simulate'] += dt
+        frames_simulated += bs * config.frames
+      # Cameras per sequence, independent of batching.
+      poses = jax.vmap(
+        lambda i, k=cam_key: physsim.sample_poses(
+          jax.random.fold_in(k, i), config.cameras
+        )
+      )(jnp.asarray(padded))  # (B, C)
+      # Blown-up worlds render the rest mesh: same shapes, frames discarded.
+      positions = np.where(
+        out.valid[:, None, None, None], out.positions, mesh.vertices.astype(np.float32)
+      )
+      t0 = time.perf_counter()
+      depth, rgb = jax.block_until_ready(render(positions, poses, k_noise))
+      dt = time.perf_counter() - t0
+      if seconds['first_render_call'] is None:
+        seconds['first_render_call'] = dt  # includes the compile
+      else:
+        seconds['render'] += dt
+        frames_rendered += depth.size // (config.resolution**2)
+      depth = np.asarray(depth)
+      rgb = None if rgb is None else np.asarray(rgb)
+      t0 = time.perf_counter()
+      for j, i in enumerate(idx):
+        if i not in todo:
+          continue
+        valid = bool(out.valid[j])
+        row = dataset.make_row(
+          f'{i:04d}',
+          material,
+          m_idx * config.sequences + int(i),
+          physsim.Params(*(f[i] for f in params)),
+          space,
+          valid=valid,
+          n_cameras=config.cameras,
+          n_frames=config.frames,
+        )
+        meta = {
+          **row,
+          'fps': config.fps,
+          'warmup_s': config.warmup,
+          'intrinsics': intrinsics.to_dict(),
+          'extrinsics': [
+            physsim.pose_to_dict(
+              physsim.Pose(poses.rotation[j, k], poses.position[j, k])
+            )
+            for k in range(config.cameras)
+          ],
+          'mesh': mesh.name,
+          'seed': config.seed,
+          'backend': backend,
+          'gust_intensity': config.gust_intensity,
+          'noise': config.noise,
+          'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))
+          if valid
+          else None,
+        }
+        dataset.write_sequence(
+          workdir,
+          meta,
+          depth[j] if valid else None,
+          rgb[j] if valid and rgb is not None else None,
+        )
+        c['written'] += 1
+        bar.update(1)
+      dataset.rebuild_index(workdir)
+      seconds['write'] += time.perf_counter() - t0
+  bar.close()
+  rows = dataset.rebuild_index(workdir)
+  montages = {}
+  for material in config.materials:
+    mrows = [r for r in rows if r['material'] == material]
+    counts[material]['valid'] = sum(r['valid'] for r in mrows)
+    counts[material]['invalid'] = sum(not r['valid'] for r in mrows)
+    montages[material] = _montage(workdir, material, mrows)
+  total = sum(c['written'] for c in counts.values())
+  sim_total = seconds['simulate'] + seconds['simulate_first_batches']
+  summary = {
+    'backend': backend,
+    'device': jax.default_backend(),
+    'counts': counts,
+    'sequences_written': total,
+    'seconds': seconds,
+    'frames_rendered_after_compile': frames_rendered,
+    'render_frames_per_s': frames_rendered / seconds['render']
+    if seconds['render']
+    else None,
+    'frames_simulated_after_first_batches': frames_simulated,
+    'simulated_world_frames_per_s_with_compile': (
+      n_sim_batches * bs * config.frames / sim_total if sim_total else None
+    ),
+    'simulated_world_frames_per_s': (
+      frames_simulated / seconds['simulate'] if seconds['simulate'] else None
+    ),
+    'montages': montages,
+  }
+  dataset.write_json_atomic(os.path.join(workdir, 'summary.json'), summary)
+  return summary
+
+
+# ------------------------------------------------------------------ entry point
+
+FLAGS = flags.FLAGS
+flags.DEFINE_enum('preset', 'paper', list(PRESETS), 'base config; flags override it')
+flags.DEFINE_string('out', 'data/sim', 'dataset folder (created, or resumed)')
+for _f in dataclasses.fields(Config):
+  _help = f'override Config.{_f.name}'
+  if _f.type == 'tuple[str, ...]':
+    flags.DEFINE_list(_f.name, None, _help)
+  elif _f.type == 'bool':
+    flags.DEFINE_bool(_f.name, None, _help)
+  elif _f.type == 'int':
+    flags.DEFINE_integer(_f.name, None, _help)
+  elif _f.type == 'float':
+    flags.DEFINE_float(_f.name, None, _help)
+  else:
+    flags.DEFINE_string(_f.name, None, _help)
+
+
+def config_from_flags() -> Config:
+  """The preset with every flag that was given applied on top."""
+  over = {
+    f.name: getattr(FLAGS, f.name)
+    for f in dataclasses.fields(Config)
+    if getattr(FLAGS, f.name) is not None
+  }
+  if 'materials' in over:
+    over['materials'] = tuple(over['materials'])
+  return dataclasses.replace(PRESETS[FLAGS.preset], **over)
+
+
+def main(argv):
+  del argv
+  config = config_from_flags()
+  t0 = time.time()
+  s = run(config, FLAGS.out)
+  print(
+    f'\n{FLAGS.out}: {s["sequences_written"]} sequences written ({s["backend"]} backend, {s["device"]})'
+  )
+  print('| material | existing | written | valid | invalid |')
+  print('|---|---:|---:|---:|---:|')
+  for m, c in s['counts'].items():
+    print(f'| {m} | {c["existing"]} | {c["written"]} | {c["valid"]} | {c["invalid"]} |')
+  sec = s['seconds']
+  nan = float('nan')
+  print(
+    f'simulate: first batch per material (with compile) '
+    f'{sec["simulate_first_batches"]:.1f} s, later batches {sec["simulate"]:.1f} s '
+    f'({s["simulated_world_frames_per_s"] or nan:.1f} world-frames/s); render: first '
+    f'call (with compile) {sec["first_render_call"] or 0:.1f} s, later '
+    f'{sec["render"]:.1f} s ({s["render_frames_per_s"] or nan:.0f} frames/s); '
+    f'write {sec["write"]:.1f} s; total {time.time() - t0:.0f} s'
+  )
+
+
+if __name__ == '__main__':
+  app.run(main)

@@ -1,0 +1,138 @@
+"""Tests for experiments.generate_dataset: smoke sweep, resume, invalid worlds."""
+
+import dataclasses
+import json
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments import generate_dataset as gd
+from physsim import dataset
+
+# A smoke sweep on the MuJoCo C backend (MJX compiles for ~90 s on this CPU).
+_SMOKE = dataclasses.replace(gd.PRESETS['smoke'], backend='c', workers=1)
+# Depth where the cloth is can only lie between the nearest and farthest camera
+# distance allowed by the pose ranges, give or take the cloth's extent.
+_DEPTH_BOUNDS_M = (0.5, 4.0)
+
+
+def _mtimes(root):
+  return {
+    p: os.path.getmtime(os.path.join(p, 'meta.json'))
+    for p in dataset.finished_sequences(root)
+  }
+
+
+def test_smoke_sweep_then_resume(tmp_path):
+  root = str(tmp_path / 'ds')
+  s = gd.run(_SMOKE, root)
+  n = len(_SMOKE.materials) * _SMOKE.sequences
+  assert s['sequences_written'] == n
+  assert os.path.isfile(os.path.join(root, 'summary.json'))
+  for m in _SMOKE.materials:
+    assert os.path.isfile(os.path.join(root, f'montage_{m}.png'))
+  ds = dataset.open_dataset(root)
+  assert len(ds.rows) == n and len({r['label'] for r in ds.rows}) == n
+  for r in ds.rows:
+    space = physsim.search_space(r['material'])
+    p = physsim.params.make(r['bending_scale'], r['wind_speed'], r['area_weight'])
+    np.testing.assert_allclose(
+      [r['u_bending_scale'], r['u_wind_speed'], r['u_area_weight']],
+      physsim.to_unit(p, space),
+      atol=1e-12,
+    )
+  # parameters are the seeded per-material draw
+  first = ds.filter('gray_interlock').rows
+  ref = gd.material_params(_SMOKE, 'gray_interlock')
+  np.testing.assert_array_equal([r['bending_scale'] for r in first], ref.bending_scale)
+  seq = dataset.read_sequence(ds.path(first[1]))
+  assert seq.depth.shape == (2, 4, 32, 32)
+  hit = seq.depth[seq.depth > 0]
+  assert hit.size > 0
+  assert _DEPTH_BOUNDS_M[0] < hit.min() and hit.max() < _DEPTH_BOUNDS_M[1]
+  assert len(seq.meta['extrinsics']) == 2 and seq.meta['fps'] == 20.0
+  arr = dataset.load_training_arrays(root, 'black_denim')
+  assert arr.images.shape == (2 * 2 * 4, 32, 32)
+
+  # Interrupt: one sequence gone, a half-written tmp folder left behind.
+  gone = ds.path(first[1])
+  before = seq.depth
+  shutil.rmtree(gone)
+  tmp = os.path.join(root, 'gray_interlock', '.tmp-0001-abcd1234')
+  os.makedirs(os.path.join(tmp, 'cam0'))
+  kept = _mtimes(root)
+  s2 = gd.run(_SMOKE, root)
+  assert s2['sequences_written'] == 1
+  assert s2['counts']['gray_interlock'] == {
+    'existing': 1,
+    'written': 1,
+    'valid': 2,
+    'invalid': 0,
+  }
+  after = _mtimes(root)
+  assert all(after[p] == t for p, t in kept.items())  # not rewritten
+  assert gone in after and not os.path.exists(tmp)
+  # same seed, same batch: the rewritten sequence is the same, bit for bit
+  np.testing.assert_array_equal(dataset.read_sequence(gone).depth, before)
+
+  with pytest.raises(ValueError, match='different config.*frames'):
+    gd.run(dataclasses.replace(_SMOKE, frames=5), root)
+
+
+def test_invalid_world_recorded_without_frames(tmp_path, monkeypatch):
+  real = physsim.simulate
+
+  def first_blows_up(*a, **k):
+    out = real(*a, **k)
+    valid = out.valid.copy()
+    valid[0] = False
+    pos = out.positions.copy()
+    pos[0] = np.nan
+    return out._replace(valid=valid, positions=pos)
+
+  monkeypatch.setattr(gd.physsim, 'simulate', first_blows_up)
+  cfg = dataclasses.replace(_SMOKE, materials=('red_violet',))
+  root = str(tmp_path / 'ds')
+  s = gd.run(cfg, root)
+  assert s['counts']['red_violet']['invalid'] == 1
+  ds = dataset.open_dataset(root)
+  bad = ds.filter(valid=False).rows
+  assert [r['seq_id'] for r in bad] == ['0000']
+  path = ds.path(bad[0])
+  assert sorted(os.listdir(path)) == ['meta.json']
+  with open(os.path.join(path, 'meta.json')) as f:
+    assert json.load(f)['has_depth'] is False
+  arr = dataset.load_training_arrays(root, 'red_violet')
+  assert set(arr.seq_ids) == {'0001'}
+
+
+def test_flags_override_preset():
+  from absl import flags
+
+  flags.FLAGS(['prog', '--preset=smoke', '--frames=7', '--materials=red_violet'])
+  try:
+    cfg = gd.config_from_flags()
+  finally:
+    flags.FLAGS.unparse_flags()
+  assert cfg.frames == 7 and cfg.materials == ('red_violet',)
+  assert cfg.cameras == gd.PRESETS['smoke'].cameras
+
+
+def test_rgb_and_sensor_noise(tmp_path):
+  cfg = dataclasses.replace(
+    _SMOKE, materials=('pink_nylon',), sequences=1, batch_size=1, rgb=True, noise=True
+  )
+  clean_cfg = dataclasses.replace(cfg, rgb=False, noise=False)
+  gd.run(cfg, str(tmp_path / 'noisy'))
+  gd.run(clean_cfg, str(tmp_path / 'clean'))
+  noisy = dataset.read_sequence(str(tmp_path / 'noisy' / 'pink_nylon' / '0000'))
+  clean = dataset.read_sequence(str(tmp_path / 'clean' / 'pink_nylon' / '0000'))
+  assert noisy.rgb.shape == (*noisy.depth.shape, 3) and noisy.rgb.max() > 0
+  assert clean.rgb is None
+  # noise only removes or perturbs pixels the clean render hit
+  assert not np.any((noisy.depth > 0) & (clean.depth == 0))
+  both = (noisy.depth > 0) & (clean.depth > 0)
+  assert both.any() and np.any(noisy.depth[both] != clean.depth[both])
