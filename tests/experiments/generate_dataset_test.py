@@ -112,6 +112,7 @@ def test_invalid_world_recorded_without_frames(tmp_path, monkeypatch):
 def test_flags_override_preset():
   from absl import flags
 
+  gd.define_flags()
   flags.FLAGS(['prog', '--preset=smoke', '--frames=7', '--materials=red_violet'])
   try:
     cfg = gd.config_from_flags()
