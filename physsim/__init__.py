@@ -12,7 +12,7 @@ Public API::
   depth = render(out.positions, poses)           # (B, C, T, H, W) metres, 0 = none
 """
 
-from physsim import camera, params, render
+from physsim import camera, params, render, sensor
 from physsim.camera import (
   Intrinsics,
   Pose,
@@ -37,6 +37,7 @@ from physsim.render import (
   shade_rgb,
 )
 from physsim.rollout import Rollout, Wind, simulate
+from physsim.sensor import SensorNoise, apply_noise
 
 __all__ = [
   'FABRICS',
@@ -53,8 +54,10 @@ __all__ = [
   'PoseRanges',
   'Rollout',
   'SearchSpace',
+  'SensorNoise',
   'SimConfig',
   'Wind',
+  'apply_noise',
   'build',
   'camera',
   'depth_image',
@@ -75,6 +78,7 @@ __all__ = [
   'sample_gusts',
   'sample_poses',
   'search_space',
+  'sensor',
   'shade_rgb',
   'simulate',
   'square',
