@@ -15,7 +15,7 @@ Public API::
   v = physsim.load_depth_video('capture/', source_fps=24)  # real depth video
 """
 
-from physsim import camera, dataset, motion, params, render, video
+from physsim import camera, dataset, motion, params, render, sensor, video
 from physsim.camera import (
   Intrinsics,
   Pose,
@@ -40,6 +40,7 @@ from physsim.render import (
   shade_rgb,
 )
 from physsim.rollout import Rollout, Wind, simulate
+from physsim.sensor import SensorNoise, apply_noise
 from physsim.video import DepthVideo, load_depth_video
 
 __all__ = [
@@ -58,8 +59,10 @@ __all__ = [
   'PoseRanges',
   'Rollout',
   'SearchSpace',
+  'SensorNoise',
   'SimConfig',
   'Wind',
+  'apply_noise',
   'build',
   'camera',
   'dataset',
@@ -83,6 +86,7 @@ __all__ = [
   'sample_gusts',
   'sample_poses',
   'search_space',
+  'sensor',
   'shade_rgb',
   'simulate',
   'square',

@@ -17,6 +17,10 @@ _MUJOCO_DEPTH_TOL = 2e-4  # metres: OpenGL depth buffer precision (measured 2e-6
 _MUJOCO_AGREE = 0.99  # fraction of interior pixels within _MUJOCO_DEPTH_TOL
 _EDGE_MARGIN = 1e-3  # pixels: skip analytic pixels this close to a boundary
 
+_STATIC = ('intrinsics', 'method', 'fragments_per_pass')
+_depth = jax.jit(render.depth_image, static_argnames=_STATIC)
+_shade = jax.jit(render.shade_rgb, static_argnames=_STATIC)
+
 
 def _quad(half_w, half_h):
   """Two triangles spanning [-w, w] x [-h, h] in the x-z plane around z = 1."""
@@ -45,7 +49,7 @@ def test_fronto_parallel_plane(method):
   d = 1.7
   pose = camera.look_at([0.0, -d, 1.0], [0.0, 0.0, 1.0])
   verts, faces = _quad(0.4, 0.25)
-  z = np.asarray(render.depth_image(verts, faces, intr, pose, method=method))
+  z = np.asarray(_depth(verts, faces, intr, pose, method=method))
   assert z.shape == (32, 48) and z.dtype == np.float32
   hit = _rays(intr)[..., :2] * d  # camera x (= world x), camera y (= -world z)
   inside = (np.abs(hit[..., 0]) < 0.4) & (np.abs(hit[..., 1]) < 0.25)
@@ -84,7 +88,7 @@ def test_tilted_plane_matches_float64_ray_plane_intersection(method):
   s, q = m.vertices[:, 0], m.vertices[:, 2] - (1.5 - 0.4)
   verts = origin + s[:, None] * a + q[:, None] * b
   pose = camera.look_at([0.5, -1.6, 1.4], [0.0, 0.1, 1.0], roll_deg=10.0)
-  z = np.asarray(render.depth_image(verts, m.faces, intr, pose, method=method))
+  z = np.asarray(_depth(verts, m.faces, intr, pose, method=method))
   ref, clear = _tilted_plane_reference(intr, pose, origin, a, b, 0.4)
   assert (ref > 0).sum() > 200 and (ref == 0).sum() > 50
   np.testing.assert_allclose(z[clear], ref[clear], atol=_DEPTH_TOL)
@@ -105,12 +109,12 @@ def test_brute_and_raster_agree_on_folded_cloth_and_many_passes():
   intr = camera.Intrinsics(64, 48)
   verts, faces = _crumpled_cloth()
   pose = camera.look_at([0.6, -1.8, 1.3], [0.0, 0.0, 1.0], roll_deg=-8.0)
-  brute = np.asarray(render.depth_image(verts, faces, intr, pose, method='brute'))
+  brute = np.asarray(_depth(verts, faces, intr, pose, method='brute'))
   # A small pass size forces many while-loop passes and boxes split across passes.
   raster = np.asarray(
-    render.depth_image(verts, faces, intr, pose, method='raster', fragments_per_pass=97)
+    _depth(verts, faces, intr, pose, method='raster', fragments_per_pass=97)
   )
-  default = np.asarray(render.depth_image(verts, faces, intr, pose))
+  default = np.asarray(_depth(verts, faces, intr, pose))
   assert (brute > 0).mean() > 0.2
   np.testing.assert_allclose(raster, brute, atol=_DEPTH_TOL)
   np.testing.assert_allclose(default, brute, atol=_DEPTH_TOL)
@@ -121,12 +125,12 @@ def test_empty_views_and_cameras_behind():
   verts, faces = _quad(0.4, 0.25)
   away = camera.look_at([0.0, -2.0, 1.0], [0.0, -4.0, 1.0])  # looking away
   for method in render.METHODS:
-    z = render.depth_image(verts, faces, intr, away, method=method)
+    z = _depth(verts, faces, intr, away, method=method)
     assert np.all(np.asarray(z) == 0.0)
   with pytest.raises(ValueError, match='method'):
-    render.depth_image(verts, faces, intr, away, method='zbuffer')
+    _depth(verts, faces, intr, away, method='zbuffer')
   with pytest.raises(ValueError, match='faces'):
-    render.depth_image(verts, faces[:, :2], intr, away)
+    _depth(verts, faces[:, :2], intr, away)
 
 
 def test_shade_rgb_two_sided_lambert():
@@ -137,21 +141,17 @@ def test_shade_rgb_two_sided_lambert():
     pose = camera.look_at([0.0, 2.0 * side, 1.0], [0.0, 0.0, 1.0])
     rgb = {
       m: np.asarray(
-        render.shade_rgb(
-          verts, faces, intr, pose, color=color, light_dir=(0, side, 0), method=m
-        )
+        _shade(verts, faces, intr, pose, color=color, light_dir=(0, side, 0), method=m)
       )
       for m in render.METHODS
     }
     np.testing.assert_array_equal(rgb['raster'], rgb['brute'])
-    z = np.asarray(render.depth_image(verts, faces, intr, pose))
+    z = np.asarray(_depth(verts, faces, intr, pose))
     lit = rgb['raster'][z > 0]
     np.testing.assert_allclose(lit, np.broadcast_to(color, lit.shape), atol=1e-6)
     assert np.all(rgb['raster'][z == 0] == 0.0)
   # Light grazing the plane: only the ambient part remains.
-  dim = np.asarray(
-    render.shade_rgb(verts, faces, intr, pose, color=color, light_dir=(1, 0, 0))
-  )
+  dim = np.asarray(_shade(verts, faces, intr, pose, color=color, light_dir=(1, 0, 0)))
   np.testing.assert_allclose(
     dim[z > 0], render._AMBIENT * np.broadcast_to(color, dim[z > 0].shape), atol=1e-6
   )
@@ -165,7 +165,6 @@ def test_batched_renderer_matches_loop_and_does_not_recompile():
   positions = verts + 0.05 * rng.normal(size=(b, t) + verts.shape)
   keys = jax.random.split(jax.random.key(0), b)
   poses = jax.vmap(lambda k: camera.sample_poses(k, c))(keys)
-  one = jax.jit(render.depth_image, static_argnames=('intrinsics', 'method'))
   for method in render.METHODS:
     fn = render.make_depth_renderer(faces, intr, method=method, chunk=5)
     out = np.asarray(fn(positions, poses))
@@ -174,7 +173,7 @@ def test_batched_renderer_matches_loop_and_does_not_recompile():
       for j in range(c):
         for k in range(t):
           pose = camera.Pose(poses.rotation[i, j], poses.position[i, j])
-          ref = one(positions[i, k], faces, intr, pose, method=method)
+          ref = _depth(positions[i, k], faces, intr, pose, method=method)
           np.testing.assert_allclose(out[i, j, k], ref, atol=_DEPTH_TOL)
     fn(positions + 0.01, poses).block_until_ready()
     assert fn._cache_size() == 1
@@ -259,7 +258,7 @@ def test_depth_matches_mujoco_opengl_renderer():
   finally:
     renderer.close()
   ref = np.where(ref < 0.9 * 20.0, ref, 0.0)  # the far plane is background
-  ours = np.asarray(render.depth_image(v, m.faces, intr, pose))
+  ours = np.asarray(_depth(v, m.faces, intr, pose))
   valid = (ref > 0) & (ours > 0)
   interior = valid.copy()
   for axis in (0, 1):  # erode by 1 px so silhouette pixels are left out
