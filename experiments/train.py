@@ -134,7 +134,9 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
   """Trains every requested network; returns ``{run name: last eval row}``."""
   index = dataset.open_dataset(root)
   materials = config.materials or index.materials
-  groups = [('all', materials)] if config.all_materials else [(m, [m]) for m in materials]
+  groups = (
+    [('all', materials)] if config.all_materials else [(m, [m]) for m in materials]
+  )
   out = {}
   for name, mats in groups:
     x, y, g = load_inputs(config, root, mats)
