@@ -86,10 +86,22 @@ def _shift(a, dy: int, dx: int, fill):
   return p[abs(dy) + dy : abs(dy) + dy + h, abs(dx) + dx : abs(dx) + dx + w]
 
 
-def edge_mask(depth, config: SensorNoise = SensorNoise()) -> jax.Array:
-  """(H, W) bool: valid pixels near a depth jump (or the silhouette)."""
+def edge_mask(
+  depth, config: SensorNoise = SensorNoise(), intrinsics: Intrinsics | None = None
+) -> jax.Array:
+  """(H, W) bool: valid pixels near a depth jump (or the silhouette).
+
+  With ``intrinsics``, a jump must also exceed what a continuous surface seen at
+  the largest kept incidence angle spans between the two pixels
+  (``d z tan(max_incidence) / f`` for ``d`` pixels apart): otherwise, at low
+  resolutions or far away, a merely tilted cloth would count as an edge.
+  """
   valid = depth > 0
   r = config.edge_radius
+  slope = 0.0
+  if intrinsics is not None:
+    tan = math.tan(math.radians(min(config.max_incidence_deg, 89.0)))
+    slope = tan / min(intrinsics.fx, intrinsics.fy)
   edge = jnp.zeros(depth.shape, bool)
   for dy in range(-r, r + 1):
     for dx in range(-r, r + 1):
@@ -97,7 +109,10 @@ def edge_mask(depth, config: SensorNoise = SensorNoise()) -> jax.Array:
         continue
       n = _shift(depth, dy, dx, 0.0)
       n_valid = n > 0
-      jump = n_valid & (jnp.abs(n - depth) > config.edge_threshold)
+      limit = jnp.maximum(
+        config.edge_threshold, slope * math.hypot(dy, dx) * jnp.maximum(n, depth)
+      )
+      jump = n_valid & (jnp.abs(n - depth) > limit)
       if config.drop_silhouette:
         jump = jump | ~n_valid
       edge = edge | jump
@@ -159,7 +174,7 @@ def apply_noise(
     )
   keep = depth > 0
   if config.edge_radius > 0:
-    keep = keep & ~edge_mask(depth, config)
+    keep = keep & ~edge_mask(depth, config, intrinsics)
   if config.max_incidence_deg < 90:
     cos_max = math.cos(math.radians(config.max_incidence_deg))
     keep = keep & (incidence_cos(depth, intrinsics) >= cos_max)

@@ -85,6 +85,25 @@ def test_edges_and_silhouette_are_dropped():
   np.testing.assert_allclose(out[10, 1:22], 1.0, atol=_QUANT_TOL)
 
 
+def test_tilted_surface_far_away_is_not_an_edge():
+  # At 3 m and 48 px a pixel spans ~7 cm, so a plane tilted 60 degrees steps
+  # ~12 cm between neighbours: more than the 5 cm jump threshold, but no edge.
+  config = sensor.SensorNoise(dropout_rate=0.0, sigma_a=0.0, sigma_b=0.0)
+  depth = _plane(3.0, 60.0)
+  assert np.abs(np.diff(depth, axis=1)).max() > config.edge_threshold
+  # Columns 17-30: rays within ~10 degrees of the axis, incidence <= ~70 degrees
+  # (further out, rays graze the plane and the incidence rule drops them).
+  edges = np.asarray(sensor.edge_mask(jnp.asarray(depth), config, _INTR))
+  assert not edges[1:-1, 17:31].any()
+  # Without intrinsics the fixed threshold alone would drop it all.
+  assert np.asarray(sensor.edge_mask(jnp.asarray(depth), config))[1:-1, 17:31].all()
+  # A real occlusion step at that distance is still an edge.
+  step = np.full((48, 48), 3.0, np.float32)
+  step[:, 24:] = 3.6
+  edges = np.asarray(sensor.edge_mask(jnp.asarray(step), config, _INTR))
+  assert edges[5:-5, 23:25].all() and not edges[5:-5, 2:20].any()
+
+
 @pytest.mark.parametrize('tilt, dropped', [(55.0, False), (80.0, True)])
 def test_grazing_pixels_are_dropped(tilt, dropped):
   config = sensor.SensorNoise(dropout_rate=0.0, sigma_a=0.0, sigma_b=0.0, edge_radius=0)
