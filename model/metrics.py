@@ -1,5 +1,6 @@
 """Evaluation of an embedding: triplet accuracy, k-NN label accuracy, batched embedding."""
 
+import functools
 from collections.abc import Callable
 
 import jax
@@ -54,11 +55,15 @@ def triplet_accuracy(
     The accuracy in [0, 1].
   """
   labels = jnp.asarray(triplets.check_labels(labels))
-  e = jnp.asarray(embeddings)
+  return float(_triplet_accuracy(key, jnp.asarray(embeddings), labels, num_triplets))
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _triplet_accuracy(key, e, labels, num_triplets):
   t = triplets.sample_triplets(key, labels, num_triplets)
   d_ap = jnp.sum((e[t.anchor] - e[t.positive]) ** 2, axis=-1)
   d_an = jnp.sum((e[t.anchor] - e[t.negative]) ** 2, axis=-1)
-  return float(jnp.mean(d_ap < d_an))
+  return jnp.mean(d_ap < d_an)
 
 
 def knn_accuracy(
@@ -86,13 +91,22 @@ def knn_accuracy(
   if not 1 <= k <= len(ref_labels):
     raise ValueError(f'k must be in [1, {len(ref_labels)}], got {k}.')
   classes, ref_ids = np.unique(ref_labels, return_inverse=True)
-  d2 = triplets.squared_distances(
-    jnp.asarray(query_embeddings), jnp.asarray(ref_embeddings)
+  pred = _knn_predict(
+    jnp.asarray(ref_embeddings),
+    jnp.asarray(ref_ids),
+    jnp.asarray(query_embeddings),
+    k,
+    classes.size,
   )
+  return float(np.mean(classes[np.asarray(pred)] == np.asarray(query_labels)))
+
+
+@functools.partial(jax.jit, static_argnums=(3, 4))
+def _knn_predict(ref, ref_ids, query, k, num_classes):
+  d2 = triplets.squared_distances(query, ref)
   _, nearest = jax.lax.top_k(-d2, k)  # (Q, k), nearest first
-  votes = jax.nn.one_hot(jnp.asarray(ref_ids)[nearest], classes.size)  # (Q, k, L)
+  votes = jax.nn.one_hot(ref_ids[nearest], num_classes)  # (Q, k, L)
   # Count decides (steps of 2); the nearest member's rank term, in (0, 1], breaks ties.
   nearness = 1.0 - jnp.arange(k)[None, :, None] / k
   scores = 2.0 * jnp.sum(votes, axis=1) + jnp.max(votes * nearness, axis=1)
-  pred = classes[np.asarray(jnp.argmax(scores, axis=1))]
-  return float(np.mean(pred == np.asarray(query_labels)))
+  return jnp.argmax(scores, axis=1)

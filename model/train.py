@@ -280,7 +280,7 @@ def make_train_step(
     out = {
       'loss': loss,
       'active': active,
-      'grad_norm': optax.global_norm(grads),
+      'grad_norm': optax.tree.norm(grads),
       'lr': schedule(state.step),
     }
     return new, out
@@ -458,12 +458,13 @@ def fit(
   epoch_steps = steps_per_epoch(config, train_idx.size)
   optimizer, schedule = make_optimizer(config, epoch_steps)
   stats = physnet.compute_stats(train_images)
-  state = init_state(network, optimizer, k_state, stats)
-  history = []
+  init = lambda key: init_state(network, optimizer, key, stats)
   with checkpoint.manager(workdir, config.max_to_keep) as mngr:
-    restored = checkpoint.restore(mngr, jax.eval_shape(lambda: state))
-    if restored is not None:
-      state = restored
+    # An existing checkpoint wins; the target is only shapes, so nothing is initialised.
+    state = checkpoint.restore(mngr, jax.eval_shape(init, k_state))
+    if state is None:
+      state, history = jax.jit(init)(k_state), []
+    else:
       history = _read_history(workdir, int(state.step))
     train_step = jax.jit(
       make_train_step(network, optimizer, schedule, config), donate_argnums=0
@@ -491,7 +492,8 @@ def fit(
         window = m if window is None else jax.tree.map(jnp.add, window, m)
         count += 1
         bar.update(1)
-        if (step + 1) % config.log_every == 0 or step + 1 == total:
+        # Windows also end at epoch ends, so a resumed run logs the same rows.
+        if (step + 1) % config.log_every == 0 or (step + 1) % epoch_steps == 0:
           m = {k: float(v) / count for k, v in window.items()}
           window, count = None, 0
           bar.set_postfix(loss=f'{m["loss"]:.4f}')
