@@ -134,5 +134,30 @@ class ContrastiveTest(absltest.TestCase):
     self.assertTrue(0.3 < float(np.mean(p.same)) < 0.7)
 
 
+class SDNTrainStepTest(absltest.TestCase):
+  def test_contrastive_step_on_clips(self):
+    from model import train
+
+    cfg = train.TrainConfig(
+      network='sdn',
+      sdn=sdn.SDNConfig(num_frames=8, num_components=2, trunk=_TRUNK),
+      loss='contrastive',
+      batch_size=4,
+    )
+    network = train.make_network(cfg)
+    optimizer, schedule = train.make_optimizer(cfg, 5)
+    state = jax.jit(lambda k: train.init_state(network, optimizer, k))(
+      jax.random.PRNGKey(0)
+    )
+    clips = np.asarray(jax.random.normal(jax.random.PRNGKey(1), (6, 8, 16, 16, 1)))
+    labels = np.array([0, 0, 1, 1, 2, 2])
+    idx = train.make_sampler(cfg, labels, 1)(state.key, 0)
+    new, m = jax.jit(train.make_train_step(network, optimizer, schedule, cfg))(
+      state, train._gather(clips, labels, idx)
+    )
+    self.assertTrue(np.isfinite(float(m['loss'])))
+    self.assertEqual(int(new.step), 1)
+
+
 if __name__ == '__main__':
   absltest.main()
