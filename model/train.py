@@ -1,0 +1,591 @@
+"""Training: config, TrainState, the jitted train step and the resumable ``fit`` loop.
+
+Defaults follow the original code: Adam (PyTorch's betas and eps equal
+optax's), batch 32 triplets, StepLR (x0.1 every 8 epochs), 30 epochs, margin 1,
+and lr 1e-3. The paper's text says lr 1e-2 while its code used 1e-3;
+``select_lr`` trains both on a by-simulation validation split of the training
+data and keeps the one with the higher validation triplet accuracy.
+
+An epoch visits every training image once as an anchor (a permutation drawn
+from ``fold_in(key, epoch)``); positives and negatives (or pairs, or the P x K
+batch of batch-hard mining) come from ``fold_in(key, step)``. A run therefore
+resumed from a checkpoint draws exactly the batches the uninterrupted run
+would have drawn.
+
+Workdir layout: ``config.json`` (enough to rebuild the network),
+``checkpoints/<step>/`` (orbax, TrainState incl. the input stats) and
+``metrics.jsonl`` (one JSON object per log or evaluation).
+"""
+
+import dataclasses
+import json
+import os
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from tqdm import tqdm
+
+from model import (
+  checkpoint,
+  config_io,
+  contrastive,
+  metrics,
+  physnet,
+  sdn,
+  splits,
+  triplets,
+)
+from model.physnet import PhySNetConfig
+from model.sdn import SDNConfig
+
+NETWORKS = ('physnet', 'sdn')
+LOSSES = ('triplet', 'batch_hard', 'contrastive')
+CONFIG_FILE = 'config.json'
+METRICS_FILE = 'metrics.jsonl'
+# Fields that may change when resuming a run (they do not change what has been done).
+_RESUMABLE_FIELDS = ('epochs', 'log_every', 'max_to_keep')
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+  """Everything ``fit`` needs; written to ``workdir/config.json``.
+
+  Attributes:
+    network: 'physnet' (items ``(H, W, C)``) or 'sdn' (items ``(T, H, W, C)``).
+    physnet: PhySNet architecture (used when ``network == 'physnet'``).
+    sdn: SDN settings (used when ``network == 'sdn'``).
+    loss: 'triplet' (random triplets), 'batch_hard' or 'contrastive' (pairs).
+    margin: loss margin.
+    learning_rate: Adam's initial learning rate.
+    lr_step_epochs: StepLR step size in epochs.
+    lr_gamma: StepLR decay factor.
+    batch_size: triplets (or pairs, or P*K images) per step.
+    per_label: K images per label for 'batch_hard' (P = batch_size // K).
+    epochs: number of epochs.
+    split: 'simulation' (held-out groups), 'random' (per image) or 'none'.
+    test_fraction: held-out fraction for the split.
+    seed: the only seed.
+    eval_triplets: triplets sampled for the test triplet accuracy.
+    knn_k: neighbours for the k-NN accuracy (random split only).
+    eval_batch_size: batch size when embedding for evaluation.
+    log_every: steps between training-metric log rows.
+    max_to_keep: checkpoints kept.
+  """
+
+  network: str = 'physnet'
+  physnet: PhySNetConfig = PhySNetConfig()
+  sdn: SDNConfig = SDNConfig()
+  loss: str = 'triplet'
+  margin: float = 1.0
+  learning_rate: float = 1e-3
+  lr_step_epochs: int = 8
+  lr_gamma: float = 0.1
+  batch_size: int = 32
+  per_label: int = 4
+  epochs: int = 30
+  split: str = 'simulation'
+  test_fraction: float = 0.2
+  seed: int = 0
+  eval_triplets: int = 10_000
+  knn_k: int = 5
+  eval_batch_size: int = 256
+  log_every: int = 50
+  max_to_keep: int = 2
+
+  def __post_init__(self):
+    for name, allowed in (
+      ('network', NETWORKS),
+      ('loss', LOSSES),
+      ('split', splits.SPLITS),
+    ):
+      if getattr(self, name) not in allowed:
+        raise ValueError(
+          f'TrainConfig.{name} must be one of {allowed}, got {getattr(self, name)!r}'
+        )
+    for name in ('batch_size', 'epochs', 'lr_step_epochs', 'per_label', 'log_every'):
+      if int(getattr(self, name)) < 1:
+        raise ValueError(f'TrainConfig.{name} must be >= 1, got {getattr(self, name)}')
+    if self.loss == 'batch_hard' and (
+      self.batch_size % self.per_label or self.batch_size // self.per_label < 2
+    ):
+      raise ValueError(
+        f'TrainConfig.batch_size ({self.batch_size}) must be a multiple of per_label '
+        f'({self.per_label}) with at least two labels per batch for batch_hard.'
+      )
+    if self.learning_rate <= 0:
+      raise ValueError(
+        f'TrainConfig.learning_rate must be > 0, got {self.learning_rate}'
+      )
+
+
+@flax.struct.dataclass
+class TrainState:
+  """Training state (a pytree; checkpointed whole).
+
+  Attributes:
+    params: ``{'net': flax params, 'stats': InputStats}``.
+    opt_state: optax state of ``params['net']``.
+    step: ``()`` int32 number of steps taken.
+    key: ``(2,)`` uint32 base key; batches use ``fold_in`` of it.
+  """
+
+  params: Any
+  opt_state: Any
+  step: jax.Array
+  key: jax.Array
+
+
+class FitResult(NamedTuple):
+  """What ``fit`` returns.
+
+  Attributes:
+    state: the final TrainState.
+    network: the network pair.
+    train_idx: ``(N_train,)`` indices of the training images.
+    test_idx: ``(N_test,)`` indices of the held-out images.
+    history: the rows written to ``metrics.jsonl`` (all of them, resumed ones too).
+  """
+
+  state: TrainState
+  network: physnet.Network
+  train_idx: np.ndarray
+  test_idx: np.ndarray
+  history: list[dict]
+
+
+def make_network(config: TrainConfig) -> physnet.Network:
+  """The network named by ``config.network``."""
+  if config.network == 'sdn':
+    return sdn.make_sdn(config.sdn)
+  return physnet.make_physnet(config.physnet)
+
+
+def item_shape(config: TrainConfig) -> tuple[int, ...]:
+  """Shape of one dataset item: ``(H, W, C)`` or ``(T, H, W, C)`` for SDN."""
+  if config.network == 'sdn':
+    c = config.sdn
+    return (c.num_frames, *c.trunk.image_size, c.in_channels)
+  return (*config.physnet.image_size, config.physnet.in_channels)
+
+
+def steps_per_epoch(config: TrainConfig, n_train: int) -> int:
+  """Steps in one epoch: ``n_train // batch_size`` (at least one)."""
+  return max(1, n_train // config.batch_size)
+
+
+def make_optimizer(
+  config: TrainConfig, epoch_steps: int
+) -> tuple[optax.GradientTransformation, optax.Schedule]:
+  """Adam with a StepLR schedule.
+
+  Args:
+    config: training config.
+    epoch_steps: steps per epoch (the schedule counts steps).
+
+  Returns:
+    (optimizer, schedule).
+  """
+  schedule = optax.exponential_decay(
+    config.learning_rate,
+    transition_steps=config.lr_step_epochs * epoch_steps,
+    decay_rate=config.lr_gamma,
+    staircase=True,
+  )
+  return optax.adam(schedule), schedule
+
+
+def init_state(
+  network: physnet.Network,
+  optimizer: optax.GradientTransformation,
+  key: jax.Array,
+  stats: physnet.InputStats | None = None,
+) -> TrainState:
+  """A fresh TrainState.
+
+  Args:
+    network: the network pair.
+    optimizer: the optax optimizer.
+    key: ``(2,)`` uint32 key; split into the init key and the batch key.
+    stats: input statistics (identity if None).
+
+  Returns:
+    The state at step 0.
+  """
+  k_init, k_train = jax.random.split(key)
+  params = network.init(k_init)
+  if stats is not None:
+    params = physnet.with_stats(params, stats)
+  return TrainState(
+    params, optimizer.init(params['net']), jnp.zeros((), jnp.int32), k_train
+  )
+
+
+def _loss_fn(network: physnet.Network, config: TrainConfig) -> Callable:
+  """``loss(net_params, stats, batch) -> (loss, frac_active)`` for ``config.loss``."""
+
+  def loss(net, stats, batch):
+    params = {'net': net, 'stats': stats}
+    if config.loss == 'triplet':
+      x = jnp.concatenate([batch['anchor'], batch['positive'], batch['negative']])
+      a, p, n = jnp.split(network.apply(params, x), 3)  # one pass for all three
+      return triplets.triplet_loss(a, p, n, config.margin)
+    if config.loss == 'batch_hard':
+      emb = network.apply(params, batch['images'])
+      return triplets.batch_hard_loss(emb, batch['labels'], config.margin)
+    x = jnp.concatenate([batch['first'], batch['second']])
+    e1, e2 = jnp.split(network.apply(params, x), 2)
+    return contrastive.contrastive_loss(e1, e2, batch['same'], config.margin)
+
+  return loss
+
+
+def make_train_step(
+  network: physnet.Network,
+  optimizer: optax.GradientTransformation,
+  schedule: optax.Schedule,
+  config: TrainConfig,
+) -> Callable[[TrainState, dict], tuple[TrainState, dict]]:
+  """The (unjitted) train step; jit it once at the call site with ``donate_argnums=0``.
+
+  Args:
+    network: the network pair.
+    optimizer: from ``make_optimizer``.
+    schedule: from ``make_optimizer`` (for logging the lr).
+    config: training config (``loss`` and ``margin``).
+
+  Returns:
+    ``train_step(state, batch) -> (state, metrics)``; ``batch`` holds images
+    ``{'anchor', 'positive', 'negative'}`` each ``(B, *item)`` for 'triplet',
+    ``{'images' (B, *item), 'labels' (B,)}`` for 'batch_hard', ``{'first',
+    'second' (B, *item), 'same' (B,)}`` for 'contrastive'. ``metrics`` has
+    scalar 'loss', 'active' (fraction of nonzero hinges), 'grad_norm', 'lr'
+    (``fit`` logs their means over each ``log_every`` window).
+  """
+  loss_fn = _loss_fn(network, config)
+
+  def train_step(state, batch):
+    net, stats = state.params['net'], state.params['stats']
+    (loss, active), grads = jax.value_and_grad(loss_fn, has_aux=True)(net, stats, batch)
+    updates, opt_state = optimizer.update(grads, state.opt_state, net)
+    net = optax.apply_updates(net, updates)
+    new = state.replace(
+      params={'net': net, 'stats': stats}, opt_state=opt_state, step=state.step + 1
+    )
+    out = {
+      'loss': loss,
+      'active': active,
+      'grad_norm': optax.tree.norm(grads),
+      'lr': schedule(state.step),
+    }
+    return new, out
+
+  return train_step
+
+
+def make_sampler(config: TrainConfig, labels: np.ndarray, epoch_steps: int) -> Callable:
+  """``sample(key, step) -> dict of index arrays`` for ``config.loss`` (pure, jittable).
+
+  Args:
+    config: training config.
+    labels: ``(N_train,)`` int labels of the training set.
+    epoch_steps: steps per epoch.
+
+  Returns:
+    The sampler; indices point into the training set.
+  """
+  labels = jnp.asarray(labels, jnp.int32)
+  unique = jnp.asarray(np.unique(np.asarray(labels)), jnp.int32)
+  n, b = labels.shape[0], config.batch_size
+
+  def sample(key, step):
+    epoch, i = step // epoch_steps, step % epoch_steps
+    k_step = jax.random.fold_in(jax.random.fold_in(key, 1), step)
+    if config.loss == 'batch_hard':
+      p = b // config.per_label
+      return {'images': triplets.pk_batch(k_step, labels, unique, p, config.per_label)}
+    perm = jax.random.permutation(
+      jax.random.fold_in(jax.random.fold_in(key, 0), epoch), n
+    )
+    # An epoch shorter than one batch (tiny sets) wraps around the permutation.
+    anchors = jnp.take(perm, (i * b + jnp.arange(b)) % n)
+    if config.loss == 'triplet':
+      return triplets.random_triplets(k_step, labels, anchors)._asdict()
+    return contrastive.random_pairs(k_step, labels, anchors)._asdict()
+
+  return sample
+
+
+def _gather(images: np.ndarray, labels: np.ndarray, idx: dict) -> dict:
+  """Host gather of the batch images named by sampler indices."""
+  idx = {k: np.asarray(v) for k, v in idx.items()}
+  if 'images' in idx:
+    return {'images': images[idx['images']], 'labels': labels[idx['images']]}
+  if 'anchor' in idx:
+    return {k: images[idx[k]] for k in ('anchor', 'positive', 'negative')}
+  return {
+    'first': images[idx['first']],
+    'second': images[idx['second']],
+    'same': idx['same'],
+  }
+
+
+def _check_data(images, labels, groups, config: TrainConfig):
+  images = np.asarray(images, dtype=np.float32)
+  want = item_shape(config)
+  if images.ndim != len(want) + 1 or images.shape[1:] != want:
+    raise ValueError(
+      f'images must have shape (N, {", ".join(map(str, want))}) for this config, got {images.shape}.'
+    )
+  labels = triplets.check_labels(labels)
+  groups = labels if groups is None else np.asarray(groups)
+  if labels.shape[0] != images.shape[0] or groups.shape != labels.shape:
+    raise ValueError(
+      f'images ({images.shape[0]}), labels {labels.shape} and groups {groups.shape} disagree in length.'
+    )
+  if not np.all(np.isfinite(images)):
+    raise ValueError('images contain NaN or inf.')
+  return images, labels, groups
+
+
+def _prepare_workdir(workdir: str, config: TrainConfig) -> None:
+  """Writes config.json; refuses a workdir whose run used a different config."""
+  os.makedirs(workdir, exist_ok=True)
+  path = os.path.join(workdir, CONFIG_FILE)
+  if os.path.exists(path):
+    old = config_io.to_dict(
+      config_io.from_dict(TrainConfig, config_io.read_json(path), path)
+    )
+    new = config_io.to_dict(config)
+    diff = sorted(k for k in new if k not in _RESUMABLE_FIELDS and new[k] != old.get(k))
+    if diff:
+      raise ValueError(
+        f'{path} belongs to a run with different {diff}; use a new workdir.'
+      )
+  config_io.write_json(path, config_io.to_dict(config))
+
+
+def _read_history(workdir: str, max_step: int) -> list[dict]:
+  """Rows of metrics.jsonl up to ``max_step``; rewrites the file without later rows."""
+  path = os.path.join(workdir, METRICS_FILE)
+  if not os.path.exists(path):
+    return []
+  with open(path) as f:
+    rows = [json.loads(line) for line in f if line.strip()]
+  rows = [r for r in rows if r.get('step', 0) <= max_step]
+  tmp = path + '.tmp'
+  with open(tmp, 'w') as f:
+    f.writelines(json.dumps(r) + '\n' for r in rows)
+  os.replace(tmp, path)
+  return rows
+
+
+def evaluate(
+  network: physnet.Network,
+  params,
+  images: np.ndarray,
+  labels: np.ndarray,
+  train_idx: np.ndarray,
+  test_idx: np.ndarray,
+  config: TrainConfig,
+) -> dict:
+  """Held-out metrics: triplet accuracy on the test set; k-NN accuracy under the random split.
+
+  Args:
+    network: the network pair.
+    params: its params.
+    images: ``(N, *item)`` all images.
+    labels: ``(N,)``.
+    train_idx: training indices (k-NN reference set).
+    test_idx: held-out indices.
+    config: training config (seed, eval sizes, split).
+
+  Returns:
+    ``{'test_triplet_accuracy', 'test_knn_accuracy'}`` (the latter only for
+    the random split; a metric is left out when the test set cannot support it).
+  """
+  out = {}
+  if test_idx.size == 0:
+    return out
+  key = jax.random.fold_in(jax.random.PRNGKey(config.seed), 7)
+  emb = metrics.embed(network.apply, params, images[test_idx], config.eval_batch_size)
+  if np.unique(labels[test_idx]).size >= 2:
+    out['test_triplet_accuracy'] = metrics.triplet_accuracy(
+      key, emb, labels[test_idx], config.eval_triplets
+    )
+  if config.split == 'random':
+    ref = metrics.embed(
+      network.apply, params, images[train_idx], config.eval_batch_size
+    )
+    k = min(config.knn_k, train_idx.size)
+    out['test_knn_accuracy'] = metrics.knn_accuracy(
+      ref, labels[train_idx], emb, labels[test_idx], k
+    )
+  return out
+
+
+def fit(
+  images, labels, groups, config: TrainConfig, workdir: str, *, progress: bool = True
+) -> FitResult:
+  """Trains (or resumes training) a network and evaluates it after every epoch.
+
+  Args:
+    images: ``(N, H, W, C)`` float32 (``(N, T, H, W, C)`` clips for SDN).
+    labels: ``(N,)`` int: one simulation's parameter set.
+    groups: ``(N,)`` int group ids for the 'simulation' split (None: labels).
+    config: training config.
+    workdir: run folder; an existing checkpoint there is resumed.
+    progress: show a tqdm bar.
+
+  Returns:
+    ``FitResult``.
+  """
+  images, labels, groups = _check_data(images, labels, groups, config)
+  _prepare_workdir(workdir, config)
+  k_split, k_state = jax.random.split(jax.random.PRNGKey(config.seed))
+  train_idx, test_idx = splits.split(
+    k_split, config.split, labels, groups, config.test_fraction
+  )
+  train_images, train_labels = images[train_idx], labels[train_idx]
+  triplets.check_labels(train_labels, 'training labels')
+
+  network = make_network(config)
+  epoch_steps = steps_per_epoch(config, train_idx.size)
+  optimizer, schedule = make_optimizer(config, epoch_steps)
+  stats = physnet.compute_stats(train_images)
+  init = lambda key: init_state(network, optimizer, key, stats)
+  with checkpoint.manager(workdir, config.max_to_keep) as mngr:
+    # An existing checkpoint wins; the target is only shapes, so nothing is initialised.
+    state = checkpoint.restore(mngr, jax.eval_shape(init, k_state))
+    if state is None:
+      state, history = jax.jit(init)(k_state), []
+    else:
+      history = _read_history(workdir, int(state.step))
+    train_step = jax.jit(
+      make_train_step(network, optimizer, schedule, config), donate_argnums=0
+    )
+    sample = jax.jit(make_sampler(config, train_labels, epoch_steps))
+    total = config.epochs * epoch_steps
+    log_path = os.path.join(workdir, METRICS_FILE)
+    t0 = time.perf_counter()
+    with (
+      open(log_path, 'a') as log,
+      tqdm(
+        total=total, initial=int(state.step), disable=not progress, desc='fit'
+      ) as bar,
+    ):
+
+      def write(row):
+        history.append(row)
+        log.write(json.dumps(row) + '\n')
+        log.flush()
+
+      window, count = None, 0  # running sums on device: no host sync per step
+      for step in range(int(state.step), total):
+        batch = _gather(train_images, train_labels, sample(state.key, step))
+        state, m = train_step(state, batch)
+        window = m if window is None else jax.tree.map(jnp.add, window, m)
+        count += 1
+        bar.update(1)
+        # Windows also end at epoch ends, so a resumed run logs the same rows.
+        if (step + 1) % config.log_every == 0 or (step + 1) % epoch_steps == 0:
+          m = {k: float(v) / count for k, v in window.items()}
+          window, count = None, 0
+          bar.set_postfix(loss=f'{m["loss"]:.4f}')
+          row = {'step': step + 1, 'epoch': (step + 1) / epoch_steps}
+          write({**row, 'time': time.perf_counter() - t0, **m})
+        if (step + 1) % epoch_steps == 0:
+          row = evaluate(
+            network, state.params, images, labels, train_idx, test_idx, config
+          )
+          write(
+            {'step': step + 1, 'epoch': (step + 1) // epoch_steps, 'eval': True, **row}
+          )
+          checkpoint.save(mngr, step + 1, state)
+  return FitResult(state, network, train_idx, test_idx, history)
+
+
+def select_lr(
+  images,
+  labels,
+  groups,
+  config: TrainConfig,
+  workdir: str,
+  candidates: Sequence[float] = (1e-2, 1e-3),
+  *,
+  progress: bool = True,
+) -> tuple[float, dict[float, float]]:
+  """Chooses the learning rate by validation triplet accuracy on held-out simulations.
+
+  Pass the *training* portion only: each candidate is trained with ``fit`` on
+  a by-simulation split of it (``groups``; use labels to hold out whole
+  simulations) in ``workdir/lr_<lr>``, and scored by its last validation
+  triplet accuracy.
+
+  Args:
+    images: training images.
+    labels: their labels.
+    groups: their group ids.
+    config: base config (its ``learning_rate`` and ``split`` are overridden).
+    workdir: parent folder of the candidate runs.
+    candidates: learning rates to try (default: the paper's and the code's).
+    progress: show progress bars.
+
+  Returns:
+    (best lr, {lr: validation triplet accuracy}).
+  """
+  scores = {}
+  for lr in candidates:
+    cfg = dataclasses.replace(config, learning_rate=float(lr), split='simulation')
+    result = fit(
+      images,
+      labels,
+      groups,
+      cfg,
+      os.path.join(workdir, f'lr_{lr:g}'),
+      progress=progress,
+    )
+    evals = [r for r in result.history if 'test_triplet_accuracy' in r]
+    if not evals:
+      raise ValueError('select_lr: the validation split has fewer than two labels.')
+    scores[float(lr)] = evals[-1]['test_triplet_accuracy']
+  return max(scores, key=scores.get), scores
+
+
+def load_network(
+  workdir: str, step: int | None = None
+) -> tuple[physnet.Network, Any, TrainConfig]:
+  """Rebuilds the network from ``config.json`` and restores its params.
+
+  Args:
+    workdir: a ``fit`` run folder.
+    step: checkpoint step (the latest if None).
+
+  Returns:
+    (network, params incl. input stats, config).
+  """
+  path = os.path.join(workdir, CONFIG_FILE)
+  if not os.path.exists(path):
+    raise ValueError(f'{path} does not exist: not a fit workdir.')
+  config = config_io.from_dict(TrainConfig, config_io.read_json(path), path)
+  network = make_network(config)
+  optimizer, _ = make_optimizer(config, 1)  # the schedule's values are not in the state
+  channels = (
+    config.sdn.in_channels if config.network == 'sdn' else config.physnet.in_channels
+  )
+  stats = physnet.identity_stats(channels)
+  target = jax.eval_shape(
+    lambda: init_state(network, optimizer, jax.random.PRNGKey(0), stats)
+  )
+  with checkpoint.manager(workdir, None) as mngr:
+    state = checkpoint.restore(mngr, target, step)
+  if state is None:
+    raise ValueError(
+      f'no checkpoint under {os.path.join(workdir, checkpoint.CHECKPOINT_DIR)}.'
+    )
+  return network, state.params, config
