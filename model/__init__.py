@@ -9,6 +9,7 @@ from model import (
   checkpoint,
   config_io,
   contrastive,
+  inputs,
   metrics,
   physnet,
   psd,
@@ -18,6 +19,7 @@ from model import (
   triplets,
 )
 from model.contrastive import Pairs, contrastive_loss, random_pairs
+from model.inputs import depth_input
 from model.metrics import embed, knn_accuracy, triplet_accuracy
 from model.physnet import (
   InputStats,
@@ -76,12 +78,14 @@ __all__ = [
   'config_io',
   'contrastive',
   'contrastive_loss',
+  'depth_input',
   'embed',
   'energy_distance',
   'evaluate',
   'feature_map_size',
   'fit',
   'init_state',
+  'inputs',
   'knn_accuracy',
   'load_network',
   'make_network',

@@ -1,0 +1,48 @@
+"""Depth frames to network inputs: one definition for training and estimation.
+
+Depth comes in metres with 0 where nothing was measured (renderer, loader and
+sensor model agree on that). Absolute depth mostly encodes where the camera
+stood, which differs between training cameras and a user's recording, so the
+default input is depth relative to the frame's median surface depth: the
+cloth's shape and motion, in metres, independent of the camera's distance.
+
+Modes (background is always 0, so the network sees the silhouette):
+  * ``'relative'``: ``1 + z - median(z)`` on valid pixels (about 0.5-1.5).
+  * ``'metric'``: ``z`` itself.
+  * ``'minmax'``: the paper's per-frame normalisation, ``0.25 + 0.75 (zmax - z)
+    / (zmax - zmin)`` (near is bright), for recordings that lost absolute depth.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+MODES = ('relative', 'metric', 'minmax')
+
+
+def depth_input(depth: jax.Array, mode: str = 'relative') -> jax.Array:
+  """Maps depth frames (..., H, W) in metres to inputs (..., H, W, 1).
+
+  Args:
+    depth: depth frames, 0 (or NaN) where invalid.
+    mode: one of ``MODES``.
+
+  Returns:
+    float32 inputs with a trailing channel axis; 0 on invalid pixels.
+  """
+  if mode not in MODES:
+    raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
+  z = jnp.asarray(depth, jnp.float32)
+  valid = jnp.isfinite(z) & (z > 0)
+  z = jnp.where(valid, z, 0.0)
+  if mode == 'metric':
+    out = z
+  elif mode == 'relative':
+    med = jnp.nanmedian(jnp.where(valid, z, jnp.nan), axis=(-2, -1), keepdims=True)
+    out = 1.0 + z - jnp.nan_to_num(med)
+  else:
+    lo = jnp.min(jnp.where(valid, z, jnp.inf), axis=(-2, -1), keepdims=True)
+    hi = jnp.max(jnp.where(valid, z, -jnp.inf), axis=(-2, -1), keepdims=True)
+    out = 0.25 + 0.75 * (hi - z) / jnp.maximum(hi - lo, 1e-6)
+  return jnp.where(valid, out, 0.0)[..., None]

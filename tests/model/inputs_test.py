@@ -1,0 +1,39 @@
+"""Tests for model.inputs: depth frames to network inputs."""
+
+import numpy as np
+import pytest
+
+from model import inputs
+
+_TOL = 1e-6
+
+
+def _frame():
+  z = np.zeros((2, 8, 8), np.float32)
+  z[:, 2:6, 2:6] = np.linspace(1.9, 2.2, 16).reshape(4, 4)
+  z[1, 3, 3] = np.nan  # a NaN pixel is invalid, like a 0
+  return z
+
+
+def test_relative_ignores_camera_distance_and_keeps_background_zero():
+  z = _frame()
+  a = np.asarray(inputs.depth_input(z, 'relative'))
+  b = np.asarray(inputs.depth_input(np.where(z > 0, z + 0.7, 0), 'relative'))
+  assert a.shape == (2, 8, 8, 1)
+  np.testing.assert_allclose(a, b, atol=_TOL)
+  assert np.all(a[:, :2] == 0) and a[1, 3, 3, 0] == 0
+  # frame 0's median of 16 evenly spaced values is their mean (2.05 m)
+  assert a[0, 2, 2, 0] == pytest.approx(1 + 1.9 - 2.05, abs=1e-5)
+
+
+def test_minmax_and_metric_by_hand():
+  z = _frame()
+  mm = np.asarray(inputs.depth_input(z, 'minmax'))[0, ..., 0]
+  assert mm[2, 2] == pytest.approx(1.0) and mm[5, 5] == pytest.approx(0.25)
+  met = np.asarray(inputs.depth_input(z, 'metric'))[0, ..., 0]
+  np.testing.assert_allclose(met, z[0], atol=_TOL)
+
+
+def test_bad_mode():
+  with pytest.raises(ValueError, match='mode must be one of'):
+    inputs.depth_input(np.zeros((4, 4)), 'log')
