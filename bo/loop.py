@@ -128,6 +128,7 @@ def minimize(
   kernel: str = 'matern52',
   stop_rel_change: float | None = None,
   stop_window: int = 3,
+  stop_min_iter: int = 0,
   state_path: str | None = None,
   config_overrides: dict[str, Any] | None = None,
 ) -> Result:
@@ -158,6 +159,8 @@ def minimize(
       this fraction of each dimension's range (``hi - lo``) over the last
       ``stop_window`` iterations (the paper: 0.1 over 3).
     stop_window: iterations in the stopping rule.
+    stop_min_iter: the rule is not checked before this many iterations (a
+      large initial design often holds the best point for a while).
     state_path: if set, the full state is written here (npz, atomically)
       after the initial design and after every iteration, and an existing
       file is resumed from; a resumed run ends as an uninterrupted one would.
@@ -270,8 +273,10 @@ def minimize(
         info = IterationInfo(it - 1, x_new, y_new, x_best, y_best, seconds)
         if callback(info):
           stopped = True
-      if stop_rel_change is not None and _stop_rule(
-        history, width, stop_rel_change, stop_window
+      if (
+        stop_rel_change is not None
+        and it >= stop_min_iter
+        and _stop_rule(history, width, stop_rel_change, stop_window)
       ):
         stopped = True
   x_best, y_best = _best(X, Y)

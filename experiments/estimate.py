@@ -37,6 +37,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import bo  # noqa: E402
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
+from experiments import train as train_lib  # noqa: E402
 from physsim import video  # noqa: E402
 
 
@@ -59,6 +60,7 @@ class EstimateConfig:
     n_init: initial design size (the first point is the range centre).
     max_iter: most BO iterations.
     stop_rel_change, stop_window: the paper's stopping rule.
+    min_iter: iterations before the rule is checked.
     distance: PSD between frame-embedding sets ('energy', 'centroid').
     backend: 'auto' (MJX on GPU, else C), 'mjx' or 'c'.
     seed: all randomness (design, gusts, cameras).
@@ -78,6 +80,7 @@ class EstimateConfig:
   max_iter: int = 30
   stop_rel_change: float = 0.1
   stop_window: int = 3
+  min_iter: int = 5
   distance: str = 'energy'
   backend: str = 'auto'
   seed: int = 0
@@ -217,7 +220,7 @@ def make_objective(
   def distances(frames):  # (q, C, T, H, W) -> (q,)
     q = frames.shape[0]
     pts = embed(frames).reshape(q, -1, rec_points.shape[-1])
-    return jax.vmap(lambda p: model_lib.psd(p, rec_points, config.distance))(pts)
+    return jax.vmap(lambda p: model_lib.psd.psd(p, rec_points, config.distance))(pts)
 
   def simulate_frames(u):
     p = physsim.from_unit(np.asarray(u), space)
@@ -298,8 +301,8 @@ def estimate(
     The result dict written to ``estimate.json``.
   """
   os.makedirs(workdir, exist_ok=True)
-  network, net_params, train_config = model_lib.load_network(model_dir)
-  input_mode = getattr(train_config, 'input_mode', 'relative')
+  network, net_params, _ = model_lib.load_network(model_dir)
+  input_mode = train_lib.input_mode(model_dir)
   t_start = time.time()
   obj = make_objective(config, network, net_params, input_mode, recording)
   sim_seconds = []
@@ -333,6 +336,7 @@ def estimate(
     callback=callback,
     stop_rel_change=config.stop_rel_change,
     stop_window=config.stop_window,
+    stop_min_iter=config.min_iter,
     state_path=os.path.join(workdir, 'bo_state.npz'),
   )
   if not np.isfinite(res.y_best):
@@ -455,9 +459,10 @@ PRESETS = {
 
 
 def main(argv):
-  from absl import flags
+  from absl import flags, logging
 
   del argv
+  logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   f = flags.FLAGS
   config = dataclasses.replace(
     PRESETS[f.preset],

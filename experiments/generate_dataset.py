@@ -29,7 +29,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from absl import app, flags  # noqa: E402
+from absl import app, flags, logging  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import physsim  # noqa: E402
@@ -498,6 +498,7 @@ def config_from_flags() -> Config:
 
 def main(argv):
   del argv
+  logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   config = config_from_flags()
   t0 = time.time()
   s = run(config, FLAGS.out)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from absl import app, flags
+from absl import app, flags, logging
 
 from experiments import generate_dataset as gen
 
@@ -70,6 +70,7 @@ def configs(smoke: bool = False, **overrides) -> dict[str, gen.Config]:
 
 def main(argv):
   del argv
+  logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   overrides = dict(
     sequences=FLAGS.sequences, resolution=FLAGS.resolution, backend=FLAGS.backend
   )

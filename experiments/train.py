@@ -17,7 +17,7 @@ import json
 import os
 
 import numpy as np
-from absl import app, flags
+from absl import app, flags, logging
 
 import model as model_lib
 from physsim import dataset
@@ -186,6 +186,7 @@ def define_flags() -> None:
 
 def main(argv):
   del argv
+  logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   over = {
     k: getattr(FLAGS, k)
     for k in (

@@ -92,6 +92,11 @@ class MinimizeTest(absltest.TestCase):
     )  # fmt: skip
     self.assertTrue(res.stopped_early)
     self.assertLess(res.n_iter, 20)
+    later = bo.minimize(
+      quadratic, _BOUNDS, n_init=4, n_iter=20, seed=0, config_overrides=_FAST,
+      stop_rel_change=0.1, stop_window=3, stop_min_iter=res.n_iter + 2,
+    )  # fmt: skip
+    self.assertGreaterEqual(later.n_iter, res.n_iter + 2)
 
   def test_resume_matches_uninterrupted(self):
     kw = dict(n_init=4, n_iter=6, seed=5, config_overrides=_FAST)
