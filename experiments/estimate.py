@@ -50,7 +50,8 @@ class EstimateConfig:
     garment: '' for the 1 m square, else a ``physsim.GARMENTS`` name.
     cloth_resolution: square cloth vertices per side.
     garment_spacing: garment grid spacing, metres.
-    frames: simulated frames compared with the recording (at ``fps``).
+    frames: most frames compared (at ``fps``); a longer recording is cut, a
+      shorter one sets how many frames are simulated.
     fps: frame rate the recording is resampled to.
     warmup: simulated seconds before the first frame.
     gusts: RMS gust intensity of the simulated wind.
@@ -119,7 +120,7 @@ def load_recording(
   *,
   fps: float,
   size: tuple[int, int],
-  frames: int,
+  frames: int | None = None,
   camera_json: str | None = None,
 ) -> Recording:
   """Loads a recording in any format ``physsim.video`` reads.
@@ -137,9 +138,9 @@ def load_recording(
   frames_path, source_fps = path, None
   if meta is not None and os.path.isdir(os.path.join(path, 'cam0')):
     frames_path, source_fps = os.path.join(path, 'cam0'), meta.get('fps')
-  vid = video.load_depth_video(
-    frames_path, source_fps=source_fps, fps=fps, size=size, frames=frames
-  )
+  vid = video.load_depth_video(frames_path, source_fps=source_fps, fps=fps, size=size)
+  if frames is not None:
+    vid = vid._replace(depth=vid.depth[:frames])
   if vid.normalised:
     raise ValueError(
       f'{path}: normalised (8-bit) depth has no absolute scale; the estimate '
@@ -227,7 +228,7 @@ def make_objective(
     out = physsim.simulate(
       cloth,
       p,
-      frames=config.frames,
+      frames=recording.depth.shape[0],
       fps=config.fps,
       warmup=config.warmup,
       wind=physsim.Wind(gust_intensity=config.gusts),
