@@ -480,7 +480,10 @@ def fit(
     # An existing checkpoint wins; the target is only shapes, so nothing is initialised.
     state = checkpoint.restore(mngr, jax.eval_shape(init, k_state))
     if state is None:
-      state, history = jax.jit(init)(k_state), []
+      # Eager, not jitted: op-by-op compiles are cached across fits, while a
+      # jitted init recompiles for every new network (2-3 s each on a CPU); the
+      # values are the same bits.
+      state, history = init(k_state), []
     else:
       history = _read_history(workdir, int(state.step))
     train_step = jax.jit(
