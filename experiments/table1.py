@@ -26,8 +26,9 @@ Each table cell is ``A / B`` in percent, both from the last evaluation row that
 * B, ``test_knn_accuracy`` under the paper's 'random' split: ``test_fraction``
   of the items are held out at random, so test items come from simulations
   seen in training; each test item gets the majority label of its ``knn_k``
-  (5) nearest training embeddings (Euclidean; ties to the nearer neighbour),
-  and B is the share labelled right. Chance is about 1 / (number of labels).
+  (5; fewer if the training set is smaller) nearest training embeddings
+  (Euclidean; ties to the nearer neighbour), and B is the share labelled
+  right. Chance is about 1 / (number of labels).
   This is the closest reading of the paper's (undefined) "clustering accuracy".
 
 Items are single frames for PhySNet and ``sdn_frames``-frame clips of one
@@ -200,6 +201,7 @@ def format_table(results: dict, root: str, config: Config) -> str:
   """The markdown of Table 1 (ours, the metric definitions, and the paper's)."""
   names = [COLUMN_NAMES[c] for c in COLUMNS]
   t = config.train
+  knn_k = model_lib.TrainConfig().knn_k
   lines = [
     f'# Table 1: clustering accuracy (dataset `{root}`)',
     '',
@@ -216,8 +218,9 @@ def format_table(results: dict, root: str, config: Config) -> str:
     'the share with |e_a - e_p|^2 < |e_a - e_n|^2 (ties wrong). Chance 50%.',
     f'- k-NN accuracy (second number): random per-item split, {t.test_fraction:g} '
     'held out (test items come from simulations seen in training); each test '
-    'item takes the majority label of its 5 nearest training embeddings; the share '
-    'labelled right. Chance about 1 / number of labels.',
+    f'item takes the majority label of its k = min({knn_k}, training items) nearest '
+    'training embeddings (ties: the nearer); the share labelled right. Chance '
+    'about 1 / number of labels.',
     '- Items: frames for PhySNet, '
     f'{t.sdn_frames}-frame single-camera clips for SDN; last epoch '
     f'({t.epochs}) of each run. n/a: the test set could not support the metric.',
