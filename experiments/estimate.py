@@ -301,6 +301,11 @@ def estimate(
   Returns:
     The result dict written to ``estimate.json``.
   """
+  if train_lib.modality(model_dir) != 'depth':
+    raise ValueError(
+      f'{model_dir}: trained on {train_lib.modality(model_dir)} frames; the '
+      'estimate compares depth videos, so it needs a depth network'
+    )
   os.makedirs(workdir, exist_ok=True)
   network, net_params, _ = model_lib.load_network(model_dir)
   input_mode = train_lib.input_mode(model_dir)
