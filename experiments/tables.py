@@ -1,0 +1,321 @@
+"""Reproduce the paper's Table 2 (fabrics) and Table 3 (garments), with baselines.
+
+Every recording of a real-like evaluation set (``experiments.make_eval_set``)
+is estimated with each requested network (trained by ``experiments.table1``,
+simulation split: ``<models>/<net>_<modality>/simulation/<fabric>``); garments
+use the network of their fabric, as in the paper. For each fabric or garment
+the tables give the mean percent error of wind speed and area weight and the
+bending-scale error as a factor (which the paper could not measure), beside the
+error of the trivial estimate (the centre of the search range) and the paper's
+PhySNet-depth numbers. Failed estimates are marked F.
+
+  python -m experiments.tables --eval=data/eval --models=out/table1 \
+      --workdir=out/tables [--jobs=4]
+
+Writes ``tables.md``, ``tables.json`` and ``bending_surfaces.png`` (the
+paper's Figure 4: true and estimated 3x5 bending matrices). Each estimate runs
+in its own process (``--jobs`` at once; on a GPU each gets a share of its
+memory) and resumes from its own folder.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from absl import app, flags, logging  # noqa: E402
+
+import physsim  # noqa: E402
+from experiments import make_eval_set, table1  # noqa: E402
+from physsim import dataset  # noqa: E402
+
+# The paper's PhySNet-depth results (percent error of wind speed, area weight).
+PAPER = {
+  'white_tablecloth': (6.5, 8.6),
+  'gray_interlock': (9.6, 19.6),
+  'black_denim': (5.4, 5.5),
+  'ponte_roma': (35.0, 0.4),
+  'sparkle_fleece': (34.6, 0.0),
+  'red_violet': (16.7, 6.3),
+  'pink_nylon': (12.6, 2.6),
+  'tshirt': (3.1, 17.1),
+  'shirt': (34.2, 1.5),
+  'jeans': (21.7, 0.6),
+}
+METHODS = ('physnet_depth',)  # what experiments.estimate supports today
+ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor')
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+  methods: tuple[str, ...] = METHODS
+  preset: str = 'default'  # experiments.estimate preset
+  backend: str = 'auto'
+  jobs: int = 1
+  seed: int = 0
+
+
+def recordings(eval_root: str) -> list[dict]:
+  """Every valid recording of the evaluation set, with its set and fabric."""
+  out = []
+  for name in ['fabrics', *make_eval_set.GARMENT_FABRICS]:
+    root = os.path.join(eval_root, name)
+    if not os.path.isdir(root):
+      continue
+    index = dataset.open_dataset(root)
+    for r in index.filter(valid=True).rows:
+      out.append(
+        {
+          'set': name,
+          'fabric': r['material'],
+          'garment': '' if name == 'fabrics' else name,
+          'seq_id': r['seq_id'],
+          'path': index.path(r),
+        }
+      )
+  if not out:
+    raise ValueError(f'{eval_root}: no recordings (run experiments.make_eval_set)')
+  return out
+
+
+def _model_dir(models: str, method: str, fabric: str) -> str:
+  net, modality = method.split('_')
+  return table1.run_dir(models, net, modality, 'simulation', fabric)
+
+
+def _job(rec: dict, method: str, models: str, workdir: str, config: Config, env):
+  """Runs one estimate in a subprocess; returns (key, result dict or error)."""
+  name = rec['garment'] or rec['fabric']
+  out = os.path.join(workdir, method, rec['set'], f'{name}-{rec["seq_id"]}')
+  key = (method, rec['set'], name, rec['seq_id'])
+  done = os.path.join(out, 'estimate.json')
+  if not os.path.isfile(done):
+    cmd = [
+      sys.executable,
+      '-m',
+      'experiments.estimate',
+      f'--recording={rec["path"]}',
+      f'--material={rec["fabric"]}',
+      f'--garment={rec["garment"]}',
+      f'--model={_model_dir(models, method, rec["fabric"])}',
+      f'--workdir={out}',
+      f'--preset={config.preset}',
+      f'--backend={config.backend}',
+      f'--seed={config.seed}',
+    ]
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, 'log.txt'), 'w') as log:
+      rc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env).returncode
+    if rc != 0:
+      return key, {'failed': f'exit {rc}; see {out}/log.txt'}
+  with open(done) as f:
+    return key, json.load(f)
+
+
+def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
+  """Runs (or reuses) every estimate; returns {key: result}."""
+  for m in config.methods:
+    if m not in METHODS:
+      raise ValueError(f'method {m!r}: the estimate supports {METHODS} today')
+  recs = recordings(eval_root)
+  env = dict(os.environ)
+  if config.jobs > 1:  # processes share one GPU: split its memory
+    env.setdefault('XLA_PYTHON_CLIENT_MEM_FRACTION', f'{0.9 / config.jobs:.2f}')
+  results = {}
+  with concurrent.futures.ThreadPoolExecutor(config.jobs) as pool:
+    futures = [
+      pool.submit(_job, r, m, models, workdir, config, env)
+      for m in config.methods
+      for r in recs
+    ]
+    for i, f in enumerate(concurrent.futures.as_completed(futures)):
+      key, res = f.result()
+      results[key] = res
+      status = res.get('failed') or ', '.join(
+        f'{k} {v:.3g}' for k, v in res['errors']['estimate'].items()
+      )
+      print(f'[{i + 1}/{len(futures)}] {"/".join(key)}: {status}', flush=True)
+  return results
+
+
+def _mean(rows, source, err):
+  vals = [r['errors'][source][err] for r in rows]
+  if err == 'bending_factor':  # a factor: geometric mean
+    return float(np.exp(np.mean(np.log(vals))))
+  return float(np.mean(vals))
+
+
+def summarise(results: dict, methods) -> dict:
+  """{(method, set name): {'n', 'failed', estimate/range_centre means}}."""
+  groups = {}
+  for (method, _, name, _), res in results.items():
+    groups.setdefault((method, name), []).append(res)
+  out = {}
+  for (method, name), rows in sorted(groups.items()):
+    ok = [r for r in rows if 'errors' in r]
+    s = {'n': len(rows), 'failed': len(rows) - len(ok)}
+    for source in ('estimate', 'range_centre'):
+      s[source] = {e: _mean(ok, source, e) for e in ERRORS} if ok else None
+    out[(method, name)] = s
+  return out
+
+
+def _fmt(s, source):
+  if s[source] is None:
+    return 'F | F | F'
+  v = s[source]
+  return (
+    f'{v["wind_speed_pct"]:.1f} | {v["area_weight_pct"]:.1f} | '
+    f'x{v["bending_factor"]:.2f}'
+  )
+
+
+def format_tables(summary: dict, methods) -> str:
+  lines = []
+  sets = (
+    ('Table 2: fabrics', [f for f in physsim.FABRICS]),
+    ('Table 3: garments', list(make_eval_set.GARMENT_FABRICS)),
+  )
+  for title, names in sets:
+    names = [n for n in names if any((m, n) in summary for m in methods)]
+    if not names:
+      continue
+    lines += [f'### {title}', '']
+    head = '| | ' + ' | '.join(
+      f'{m}: wind % | area weight % | bending factor' for m in methods
+    )
+    head += ' | range centre: wind % | area weight % | bending factor'
+    head += ' | paper PhySNet-depth: wind % | area weight % |'
+    lines.append(head)
+    lines.append('|---' * (1 + 3 * len(methods) + 3 + 2) + '|')
+    for n in names:
+      cells = []
+      centre = None
+      for m in methods:
+        s = summary.get((m, n))
+        if s is None:
+          cells.append('- | - | -')
+          continue
+        tag = f' ({s["failed"]}/{s["n"]} F)' if s['failed'] else ''
+        cells.append(_fmt(s, 'estimate') + tag)
+        centre = centre or (s if s['range_centre'] else None)
+      pw, pa = PAPER.get(n, (float('nan'),) * 2)
+      lines.append(
+        f'| {n} | '
+        + ' | '.join(cells)
+        + f' | {_fmt(centre, "range_centre") if centre else "- | - | -"}'
+        + f' | {pw} | {pa} |'
+      )
+    lines.append('')
+  lines.append(
+    "Mean over each fabric's or garment's recordings: percent error |est - true| / "
+    'true of wind speed and area weight; bending as the factor exp|log(est / true)| '
+    '(>= 1, geometric mean). "range centre" is the trivial estimate at the centre of '
+    'the search box (log-centre for bending). F: every candidate blew up or the run '
+    'failed.'
+  )
+  return '\n'.join(lines)
+
+
+def bending_surfaces(results: dict, method: str, path: str) -> None:
+  """The paper's Figure 4: true and estimated 3x5 bending matrices per fabric."""
+  fabrics = sorted(
+    {k[2] for k in results if k[0] == method and k[1] == 'fabrics'},
+    key=list(physsim.FABRICS).index,
+  )
+  if not fabrics:
+    return
+  cols = min(4, len(fabrics))
+  rows = -(-len(fabrics) // cols)
+  fig = plt.figure(figsize=(4 * cols, 3.4 * rows))
+  ang = physsim.materials.BENDING_ANGLES
+  curv = np.arange(5) * 5.0  # ArcSim samples, 1/m
+  gx, gy = np.meshgrid(curv, ang)
+  for i, fab in enumerate(fabrics):
+    ax = fig.add_subplot(rows, cols, i + 1, projection='3d')
+    base = physsim.load_material(physsim.fabric(fab).material).bending
+    res = [
+      r
+      for k, r in results.items()
+      if k[:3] == (method, 'fabrics', fab) and 'truth' in r
+    ][:1]
+    if not res:
+      continue
+    r = res[0]
+    true = base * r['truth']['bending_scale']
+    est = np.asarray(r['bending_matrix_Nm'])
+    ax.plot_wireframe(gx, gy, np.log10(true), color='k', lw=0.8, label='true')
+    ax.plot_surface(gx, gy, np.log10(est), alpha=0.6, cmap='viridis')
+    ax.set(
+      title=fab, xlabel='curvature (1/m)', ylabel='angle (deg)', zlabel='log10 N m'
+    )
+    ax.title.set_fontsize(9)
+  fig.suptitle(f'bending matrices, true (wire) vs estimated (surface), {method}')
+  fig.tight_layout()
+  tmp = path + '.tmp.png'
+  fig.savefig(tmp, dpi=90)
+  plt.close(fig)
+  os.replace(tmp, path)
+
+
+def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
+  os.makedirs(workdir, exist_ok=True)
+  results = run_all(config, eval_root, models, workdir)
+  summary = summarise(results, config.methods)
+  md = format_tables(summary, config.methods)
+  dataset.write_text_atomic(os.path.join(workdir, 'tables.md'), md + '\n')
+  dataset.write_json_atomic(
+    os.path.join(workdir, 'tables.json'),
+    {
+      'config': dataclasses.asdict(config),
+      'summary': {'/'.join(k): v for k, v in summary.items()},
+      'estimates': {'/'.join(k): v for k, v in results.items()},
+    },
+  )
+  for m in config.methods:
+    bending_surfaces(results, m, os.path.join(workdir, f'bending_surfaces_{m}.png'))
+  print(md)
+  return md
+
+
+FLAGS = flags.FLAGS
+
+
+def define_flags() -> None:
+  if 'eval' in FLAGS:
+    return
+  flags.DEFINE_string('eval', 'data/eval', 'evaluation set (make_eval_set --out)')
+  flags.DEFINE_string('models', 'out/table1', 'networks (table1 --workdir)')
+  flags.DEFINE_string('workdir', 'out/tables', 'estimates and tables')
+  flags.DEFINE_list('methods', list(METHODS), 'networks to evaluate')
+  flags.DEFINE_string('preset', 'default', 'experiments.estimate preset')
+  flags.DEFINE_string('backend', 'auto', "'auto', 'mjx' or 'c'")
+  flags.DEFINE_integer('jobs', 1, 'estimates at once (processes)')
+  flags.DEFINE_integer('seed', 0, 'estimate seed')
+
+
+def main(argv):
+  del argv
+  logging.set_verbosity(logging.WARNING)
+  config = Config(
+    methods=tuple(FLAGS.methods),
+    preset=FLAGS.preset,
+    backend=FLAGS.backend,
+    jobs=FLAGS.jobs,
+    seed=FLAGS.seed,
+  )
+  run(config, FLAGS.eval, FLAGS.models, FLAGS.workdir)
+
+
+if __name__ == '__main__':
+  define_flags()
+  app.run(main)
