@@ -207,12 +207,17 @@ class Objective(NamedTuple):
     simulate_frames: (q, 3) unit points -> ((q, C, T, H, W) depth, (q,) valid).
     space: the material's search space.
     cloth: the compiled cloth.
+    mesh: its rest mesh.
+    evaluate: (q, 3) unit points -> ((q,) PSD as ``fun``, (q, T, V, 3)
+      simulated positions, (q,) valid), for studies that also need the motion.
   """
 
   fun: object
   simulate_frames: object
   space: physsim.SearchSpace
   cloth: physsim.ClothModel
+  mesh: physsim.Mesh | None = None
+  evaluate: object = None
 
 
 def _backend(name: str) -> str:
@@ -268,11 +273,10 @@ def make_objective(
     pts = embed(frames).reshape(q, -1, rec_points.shape[-1])
     return jax.vmap(lambda p: model_lib.psd.psd(p, rec_points, config.distance))(pts)
 
-  def simulate_frames(u):
-    p = physsim.from_unit(np.asarray(u), space)
+  def simulate(u):  # (q, 3) -> ((q, T, V, 3) positions, (q,) valid)
     out = physsim.simulate(
       cloth,
-      p,
+      physsim.from_unit(np.asarray(u), space),
       frames=config.frames,
       fps=config.fps,
       warmup=config.warmup,
@@ -282,19 +286,29 @@ def make_objective(
       space=space,
       workers=config.workers or None,
     )
-    q = out.positions.shape[0]
-    pos = np.where(out.valid[:, None, None, None], out.positions, mesh.vertices)
+    return out.positions, out.valid
+
+  def render_frames(positions, valid):
+    q = positions.shape[0]
+    pos = np.where(valid[:, None, None, None], positions, mesh.vertices)
     batch_poses = jax.tree.map(
       lambda a: jnp.broadcast_to(a, (q, *a.shape)), poses
     )  # (q, C, ...)
-    return render(jnp.asarray(pos), batch_poses), out.valid
+    return render(jnp.asarray(pos), batch_poses)
+
+  def simulate_frames(u):
+    positions, valid = simulate(u)
+    return render_frames(positions, valid), valid
+
+  def evaluate(u):
+    positions, valid = simulate(u)
+    d = np.asarray(distances(render_frames(positions, valid)), np.float64)
+    return np.where(valid & np.isfinite(d), d, np.nan), positions, valid
 
   def fun(u):
-    frames, valid = simulate_frames(u)
-    d = np.asarray(distances(frames), np.float64)
-    return np.where(valid & np.isfinite(d), d, np.nan)
+    return evaluate(u)[0]
 
-  return Objective(fun, simulate_frames, space, cloth)
+  return Objective(fun, simulate_frames, space, cloth, mesh, evaluate)
 
 
 # ------------------------------------------------------------------- estimate

@@ -1,17 +1,7 @@
 """Tests for experiments.estimate: recovery, stopping rule, resume, bad input.
 
-The network is hand-made, not trained: a PhySNet with 1x1 convolutions and one
-dense layer whose weights are set so that a frame's embedding is (silhouette
-area share, mean metric depth over the image), each scaled to about unit
-spread. It is saved as a ``model.fit`` workdir (config.json, an orbax
-checkpoint, inputs.json) so ``estimate`` loads it like a trained run. Training
-even a tiny PhySNet here would cost most of the time budget and make the
-recovery test depend on how well an optimiser converged; a fixed embedding
-keeps the test about the estimate loop.
-
-The recording is simulated with the estimate's own settings (mesh, frames, gust
-key, camera) and written as a dataset sequence folder (16-bit mm PNGs and
-meta.json), so the truth's PSD is zero up to the mm quantisation.
+The model and recording come from ``estimate_fixtures`` (a hand-made
+embedding, not a trained network; see there why).
 """
 
 from __future__ import annotations
@@ -22,147 +12,19 @@ import os
 import shutil
 
 import cv2
-import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import model as model_lib
 import physsim
 from experiments import estimate as est
-from experiments import train as train_lib
-from model import checkpoint, config_io
-from physsim import dataset
-
-_SIZE = 32
-_MATERIAL = 'gray_interlock'
-# Truth: well away from the range centre in wind and area weight.
-_TRUTH = dict(bending_scale=1.0, wind_speed=4.5, area_weight=0.17)
-_CONFIG = est.EstimateConfig(
-  material=_MATERIAL,
-  cloth_resolution=6,
-  frames=8,
-  fps=20.0,
-  warmup=0.5,
-  gusts=0.2,
-  cameras=1,
-  # n_init + q * max_iter <= 16 keeps every run in one GP buffer size, so the
-  # proposal step compiles once for the whole file.
-  q=4,
-  n_init=4,
-  max_iter=3,
-  min_iter=3,  # the recovery run does not stop early
-  backend='c',
-  workers=1,  # spawning C workers costs more than 6x6 cloths
-  seed=0,
+from tests.experiments.estimate_fixtures import (
+  CONFIG,
+  TRUTH,
+  load,
+  write_hand_made_model,
+  write_recording,
 )
-# Embedding scales: area share and mean depth move by ~0.1 and ~0.2 m between
-# far-apart parameter sets at this size; these bring both to about unit spread.
-_AREA_SCALE = 10.0
-_DEPTH_SCALE = 5.0
-# A valid pixel's metric input is >= 0.5 m; 1 - 4 x is then clipped to 0.
-_VALID_GAIN = 4.0
-
-
-def _hand_made_params(config: model_lib.PhySNetConfig) -> dict:
-  """PhySNet weights that embed a frame as (area share, mean depth), scaled."""
-  hw = config.image_size[0] * config.image_size[1]
-  conv0 = {
-    'kernel': np.array([1.0, -_VALID_GAIN], np.float32).reshape(1, 1, 1, 2),
-    'bias': np.array([0.0, 1.0], np.float32),
-  }  # (x, relu(1 - g x)): depth and "invalid"
-  conv1 = {
-    'kernel': np.array([[1.0, 0.0], [0.0, -1.0]], np.float32).reshape(1, 1, 2, 2),
-    'bias': np.array([0.0, 1.0], np.float32),
-  }  # (x, 1 - invalid) = (depth, valid)
-  dense = np.zeros((hw, 2, 2), np.float32)  # flatten order: (pixel, channel)
-  dense[:, 1, 0] = _AREA_SCALE / hw
-  dense[:, 0, 1] = _DEPTH_SCALE / hw
-  zero = np.zeros((), np.float32)
-  return {
-    'Conv_0': conv0,
-    'PReLU_0': {'negative_slope': zero},  # ReLU
-    'Conv_1': conv1,
-    'PReLU_1': {'negative_slope': zero},
-    'Dense_0': {'kernel': dense.reshape(hw * 2, 2), 'bias': np.zeros(2, np.float32)},
-  }
-
-
-def write_hand_made_model(workdir: str) -> str:
-  """Writes a model workdir ``estimate`` loads like a trained run."""
-  trunk = model_lib.PhySNetConfig(
-    image_size=(_SIZE, _SIZE),
-    conv_features=(2, 2),
-    kernel_size=1,
-    pool=1,
-    dense_features=(),
-  )
-  config = model_lib.TrainConfig(network='physnet', physnet=trunk, epochs=1)
-  network = model_lib.make_network(config)
-  optimizer, _ = model_lib.make_optimizer(config, 1)
-  state = model_lib.init_state(network, optimizer, jax.random.key(0))
-  net = jax.tree.map(jnp.asarray, _hand_made_params(trunk))
-  assert jax.tree.structure(net) == jax.tree.structure(state.params['net'])
-  state = state.replace(params={**state.params, 'net': net})
-  os.makedirs(workdir, exist_ok=True)
-  config_io.write_json(os.path.join(workdir, 'config.json'), config_io.to_dict(config))
-  with checkpoint.manager(workdir) as mngr:
-    checkpoint.save(mngr, 1, state)
-  dataset.write_json_atomic(
-    os.path.join(workdir, train_lib.INPUTS_FILE), {'input_mode': 'metric'}
-  )
-  return workdir
-
-
-def _pose() -> physsim.Pose:
-  """A camera 2 m in front of the cloth and to its side, looking at its middle."""
-  return physsim.look_at((0.6, -1.8, 1.0), (0.0, 0.1, 0.9))
-
-
-def write_recording(root: str, truth: dict, config=_CONFIG) -> str:
-  """Simulates ``truth`` with the estimate's settings; writes a sequence folder."""
-  mesh = physsim.square(config.cloth_resolution)
-  cloth = physsim.build(mesh, config.material)
-  space = physsim.search_space(config.material)
-  out = physsim.simulate(
-    cloth,
-    physsim.params.make(**truth),
-    frames=config.frames,
-    fps=config.fps,
-    warmup=config.warmup,
-    wind=physsim.Wind(gust_intensity=config.gusts),
-    key=jax.random.fold_in(jax.random.key(config.seed), 2)[None],  # as estimate
-    backend='c',
-    space=space,
-    workers=1,
-  )
-  assert out.valid.all()
-  intr = physsim.Intrinsics(width=_SIZE, height=_SIZE)
-  pose = _pose()
-  render = physsim.make_depth_renderer(mesh.faces, intr)
-  poses = jax.tree.map(lambda a: jnp.asarray(a)[None, None], pose)  # (1, 1, ...)
-  depth = np.asarray(render(jnp.asarray(out.positions), poses))  # (1, 1, T, H, W)
-  seq = os.path.join(root, 'seq')
-  os.makedirs(os.path.join(seq, 'cam0'))
-  mm = dataset.depth_to_mm(depth[0, 0])
-  for t, frame in enumerate(mm):
-    cv2.imwrite(os.path.join(seq, 'cam0', f'{t:04d}.png'), frame)
-  meta = dict(
-    truth,
-    fps=config.fps,
-    intrinsics=intr.to_dict(),
-    extrinsics=[physsim.pose_to_dict(pose)],
-  )
-  with open(os.path.join(seq, 'meta.json'), 'w') as f:
-    json.dump(meta, f)
-  return seq
-
-
-def load(seq: str, config=_CONFIG, **kw) -> est.Recording:
-  return est.load_recording(
-    seq, fps=config.fps, size=(_SIZE, _SIZE), frames=config.frames, **kw
-  )
-
 
 # ----------------------------------------------------------------- fixtures
 
@@ -171,7 +33,7 @@ def load(seq: str, config=_CONFIG, **kw) -> est.Recording:
 def env(tmp_path_factory):
   root = str(tmp_path_factory.mktemp('estimate'))
   model_dir = write_hand_made_model(os.path.join(root, 'model'))
-  seq = write_recording(root, _TRUTH)
+  seq = write_recording(root, TRUTH)
   return dict(root=root, model=model_dir, seq=seq, rec=load(seq))
 
 
@@ -210,7 +72,7 @@ def _state(workdir: str) -> dict:
 @pytest.fixture(scope='module')
 def recovery(env):
   workdir = os.path.join(env['root'], 'full')
-  result = est.estimate(_CONFIG, env['rec'], env['model'], workdir, progress=False)
+  result = est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
   return result, _state(workdir)
 
 
@@ -226,16 +88,15 @@ _REPEAT_TOLERANCE = 1e-6
 def test_recovers_known_parameters(env, recovery):
   result, state = recovery
   net, params, _ = model_lib.load_network(env['model'])
-  obj = est.make_objective(_CONFIG, net, params, 'metric', env['rec'])
-  u_truth = physsim.to_unit(physsim.params.make(**_TRUTH), obj.space)
+  obj = est.make_objective(CONFIG, net, params, 'metric', env['rec'])
+  u_truth = physsim.to_unit(physsim.params.make(**TRUTH), obj.space)
   psd_truth, psd_centre = obj.fun(np.stack([u_truth, np.zeros(3)]))
   assert psd_truth < _TRUTH_PSD_TOLERANCE
   # the first evaluation is the range centre, scored as here
   np.testing.assert_allclose(state['Y'][0], psd_centre, rtol=_REPEAT_TOLERANCE)
-  assert result['evaluations'] == _CONFIG.n_init + _CONFIG.q * _CONFIG.max_iter
+  assert result['evaluations'] == CONFIG.n_init + CONFIG.q * CONFIG.max_iter
   assert result['failed_evaluations'] == 0
-  assert result['truth'] == _TRUTH
-  print(json.dumps(result['errors']), result['psd_best'], psd_centre)
+  assert result['truth'] == TRUTH
   err = result['errors']
   assert result['psd_best'] < 0.5 * psd_centre
   assert err['estimate']['wind_speed_pct'] < err['range_centre']['wind_speed_pct']
@@ -247,7 +108,7 @@ def test_stopping_rule_and_min_iter(env, monkeypatch):
   # A rule that holds after any second iteration (nothing moves a whole range)
   # may only stop the run at min_iter, before max_iter.
   config = dataclasses.replace(
-    _CONFIG, stop_rel_change=1.0, stop_window=1, min_iter=3, max_iter=4
+    CONFIG, stop_rel_change=1.0, stop_window=1, min_iter=3, max_iter=4
   )
   workdir = os.path.join(env['root'], 'stop')
   result = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
@@ -269,13 +130,13 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
   done = 2  # the initial design and the first iteration
   monkeypatch.setattr(est, 'make_objective', _Counting(fail_after=done))
   with pytest.raises(_Interrupted):
-    est.estimate(_CONFIG, env['rec'], env['model'], workdir, progress=False)
-  assert len(_state(workdir)['Y']) == _CONFIG.n_init + _CONFIG.q
+    est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+  assert len(_state(workdir)['Y']) == CONFIG.n_init + CONFIG.q
 
   counting = _Counting()
   monkeypatch.setattr(est, 'make_objective', counting)
-  resumed = est.estimate(_CONFIG, env['rec'], env['model'], workdir, progress=False)
-  assert counting.calls == 1 + _CONFIG.max_iter - done  # finished batches not redone
+  resumed = est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+  assert counting.calls == 1 + CONFIG.max_iter - done  # finished batches not redone
   np.testing.assert_array_equal(_state(workdir)['X'], state['X'])
   np.testing.assert_allclose(_state(workdir)['Y'], state['Y'], rtol=_REPEAT_TOLERANCE)
   assert resumed['estimate'] == result['estimate']
@@ -283,11 +144,11 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
 
 
 def test_resume_refuses_another_run(env, recovery):
-  other = dataclasses.replace(_CONFIG, gusts=0.3)
+  other = dataclasses.replace(CONFIG, gusts=0.3)
   with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
     est.estimate(other, env['rec'], env['model'], os.path.join(env['root'], 'full'))
   # the C worker count does not change results: it may differ on resume
-  workers = dataclasses.replace(_CONFIG, workers=2)
+  workers = dataclasses.replace(CONFIG, workers=2)
   est._check_run(os.path.join(env['root'], 'full'), workers, env['rec'], env['model'])
 
 
@@ -359,7 +220,7 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
   empty = str(tmp_path / 'empty')
   os.makedirs(empty)
   with pytest.raises(ValueError, match='not a fit workdir'):
-    est.estimate(_CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
+    est.estimate(CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
   untrained = str(tmp_path / 'untrained')
   os.makedirs(untrained)
   with open(os.path.join(env['model'], 'config.json')) as f:
@@ -367,10 +228,10 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
   with open(os.path.join(untrained, 'config.json'), 'w') as f:
     f.write(text)
   with pytest.raises(ValueError, match='no checkpoint'):
-    est.estimate(_CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
+    est.estimate(CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
   small = env['rec']._replace(depth=env['rec'].depth[:, :16, :16])
   with pytest.raises(ValueError, match=r'takes \(32, 32\)'):
-    est.estimate(_CONFIG, small, env['model'], str(tmp_path / 'w3'))
+    est.estimate(CONFIG, small, env['model'], str(tmp_path / 'w3'))
 
 
 def _blow_up(monkeypatch, worlds):
@@ -388,8 +249,8 @@ def _blow_up(monkeypatch, worlds):
 
 
 def test_every_candidate_blowing_up_names_the_recording(env, tmp_path, monkeypatch):
-  _blow_up(monkeypatch, range(_CONFIG.q))
-  config = dataclasses.replace(_CONFIG, max_iter=1)
+  _blow_up(monkeypatch, range(CONFIG.q))
+  config = dataclasses.replace(CONFIG, max_iter=1)
   with pytest.raises(ValueError, match=f'{env["seq"]}.*blew up'):
     est.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
 
@@ -398,7 +259,7 @@ def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
   env, tmp_path, monkeypatch
 ):
   _blow_up(monkeypatch, [1])
-  config = dataclasses.replace(_CONFIG, max_iter=1, min_iter=1)
+  config = dataclasses.replace(CONFIG, max_iter=1, min_iter=1)
   workdir = str(tmp_path / 'w')
   result = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
   y = _state(workdir)['Y']
