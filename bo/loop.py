@@ -267,7 +267,8 @@ def minimize(
         params_flat = np.asarray(gp.params_to_array(out.params))
       seconds = time.perf_counter() - t0
       x_new = from_unit(u)
-      y_new = _evaluate(fun, x_new)
+      with jax.enable_x64(False):  # the objective runs in its own precision
+        y_new = _evaluate(fun, x_new)
       X = np.concatenate([X, x_new])
       Y = np.concatenate([Y, y_new])
       x_best, y_best = _best(X, Y)

@@ -52,7 +52,8 @@ class EstimateConfig:
     garment: '' for the 1 m square, else a ``physsim.GARMENTS`` name.
     cloth_resolution: square cloth vertices per side.
     garment_spacing: garment grid spacing, metres.
-    frames: simulated frames compared with the recording (at ``fps``).
+    frames: most frames compared (at ``fps``); a longer recording is cut, a
+      shorter one sets how many frames are simulated.
     fps: frame rate the recording is resampled to.
     warmup: simulated seconds before the first frame.
     gusts: RMS gust intensity of the simulated wind.
@@ -157,7 +158,7 @@ def load_recording(
   *,
   fps: float,
   size: tuple[int, int],
-  frames: int,
+  frames: int | None = None,
   camera_json: str | None = None,
 ) -> Recording:
   """Loads a recording in any format ``physsim.video`` reads.
@@ -176,9 +177,9 @@ def load_recording(
   frames_path, source_fps = path, None
   if meta is not None and os.path.isdir(os.path.join(path, 'cam0')):
     frames_path, source_fps = os.path.join(path, 'cam0'), meta.get('fps')
-  vid = video.load_depth_video(
-    frames_path, source_fps=source_fps, fps=fps, size=size, frames=frames
-  )
+  vid = video.load_depth_video(frames_path, source_fps=source_fps, fps=fps, size=size)
+  if frames is not None:
+    vid = vid._replace(depth=vid.depth[:frames])
   if vid.normalised:
     raise ValueError(
       f'{path}: normalised (8-bit) depth has no absolute scale; the estimate '
@@ -277,7 +278,7 @@ def make_objective(
     out = physsim.simulate(
       cloth,
       physsim.from_unit(np.asarray(u), space),
-      frames=config.frames,
+      frames=recording.depth.shape[0],
       fps=config.fps,
       warmup=config.warmup,
       wind=physsim.Wind(gust_intensity=config.gusts),
@@ -416,6 +417,11 @@ def estimate(
       frame size, ``workdir`` holds an estimate of another recording, model or
       config, or every candidate simulation blew up (naming the recording).
   """
+  if train_lib.modality(model_dir) != 'depth':
+    raise ValueError(
+      f'{model_dir}: trained on {train_lib.modality(model_dir)} frames; the '
+      'estimate compares depth videos, so it needs a depth network'
+    )
   network, net_params, net_config = model_lib.load_network(model_dir)
   if net_config.network != 'physnet':
     raise ValueError(

@@ -16,6 +16,7 @@ fixed, and those frames are discarded.
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import json
 import os
@@ -51,9 +52,10 @@ class Config:
     cloth_resolution: cloth vertices per side.
     seed: the only seed.
     backend: ``'auto'`` (MJX on a GPU, else MuJoCo C), ``'mjx'`` or ``'c'``.
-    batch_size: worlds simulated and rendered at once. Sequences are grouped
-      in fixed chunks of this size, and gusts are drawn per chunk, so a resume
-      must use the same batch size (checked).
+    batch_size: worlds simulated and rendered at once. The sequences of all
+      materials, in order, are grouped in fixed chunks of this size (one
+      compiled model serves every material), and gusts are drawn per chunk,
+      so a resume must use the same batch size (checked).
     workers: processes for the C backend (0: all cores).
     gust_intensity: RMS relative wind fluctuation.
     rgb: also write shaded colour frames.
@@ -123,6 +125,9 @@ PRESETS = {
 _FREE_FIELDS = ('workers',)
 
 
+# PNG encoding releases the GIL: sequences of a batch are written in parallel.
+_WRITERS = 8
+
 POSES = {'train': physsim.PoseRanges(), 'evaluation': physsim.PoseRanges.evaluation()}
 
 
@@ -174,6 +179,7 @@ def _identity(config: Config, backend: str) -> dict:
   d = dataclasses.asdict(config)
   d['materials'] = list(config.materials)
   d['backend'] = backend
+  d['batching'] = 'across-materials'  # how gust keys map to sequences
   for k in _FREE_FIELDS:
     d.pop(k)
   return d
@@ -308,8 +314,19 @@ def run(config: Config, workdir: str) -> dict:
   wind = physsim.Wind(gust_intensity=config.gust_intensity)
   root_key = jax.random.key(config.seed)
   bs = config.batch_size
-  n_batches = -(-config.sequences // bs)
-  # First calls include compiles (render once; MJX once per material's model).
+  # One compiled model for every material (bending is scaled per world), so
+  # batches run across materials: jobs are (material index, sequence index).
+  model = physsim.build(mesh, config.materials[0], sim_config)
+  params = {m: material_params(config, m) for m in config.materials}
+  cam_keys = {
+    m: jax.random.fold_in(
+      jax.random.fold_in(root_key, _material_stream(config.seed, m)), 1
+    )
+    for m in config.materials
+  }
+  jobs = [(k, i) for k in range(len(config.materials)) for i in range(config.sequences)]
+  n_batches = -(-len(jobs) // bs)
+  # The first batch's calls include compiles (MJX model and renderer).
   seconds = {
     'simulate': 0.0,
     'simulate_first_batches': 0.0,
@@ -319,29 +336,36 @@ def run(config: Config, workdir: str) -> dict:
   }
   frames_simulated = 0
   n_sim_batches = 0
-  counts = {}
+  counts = {
+    m: {'existing': 0, 'written': 0, 'valid': 0, 'invalid': 0} for m in config.materials
+  }
   frames_rendered = 0
-  bar = tqdm(total=len(config.materials) * config.sequences, unit='seq')
-  for m_idx, material in enumerate(config.materials):
-    space = physsim.search_space(material)
-    params = material_params(config, material)
-    model = physsim.build(mesh, material, sim_config)
-    mkey = jax.random.fold_in(root_key, _material_stream(config.seed, material))
-    cam_key = jax.random.fold_in(mkey, 1)  # batches use fold_in(mkey, 2 + b)
-    c = counts[material] = {'existing': 0, 'written': 0, 'valid': 0, 'invalid': 0}
-    first_batch = True
+  bar = tqdm(total=len(jobs), unit='seq')
+  with concurrent.futures.ThreadPoolExecutor(_WRITERS) as writers:
     for b in range(n_batches):
-      idx = np.arange(b * bs, min((b + 1) * bs, config.sequences))
-      todo = [i for i in idx if not dataset.is_complete(workdir, material, f'{i:04d}')]
-      c['existing'] += len(idx) - len(todo)
-      bar.update(len(idx) - len(todo))
+      chunk = jobs[b * bs : (b + 1) * bs]
+      todo = [
+        (k, i)
+        for k, i in chunk
+        if not dataset.is_complete(workdir, config.materials[k], f'{i:04d}')
+      ]
+      for k, _ in set(chunk) - set(todo):
+        counts[config.materials[k]]['existing'] += 1
+      bar.update(len(chunk) - len(todo))
       if not todo:
         continue
       # Pad the last chunk to the full batch so nothing recompiles.
-      padded = np.concatenate([idx, np.full(bs - len(idx), idx[-1])])
-      p = physsim.Params(*(f[padded] for f in params))
-      bkey = jax.random.fold_in(mkey, 2 + b)
-      k_wind, k_noise = jax.random.split(bkey)
+      padded = chunk + [chunk[-1]] * (bs - len(chunk))
+      names = [config.materials[k] for k, _ in padded]
+      p = physsim.Params(
+        *(
+          np.array(
+            [getattr(params[n], f)[i] for n, (_, i) in zip(names, padded, strict=True)]
+          )
+          for f in physsim.Params._fields
+        )
+      )
+      k_wind, k_noise = jax.random.split(jax.random.fold_in(root_key, 2 + b))
       t0 = time.perf_counter()
       out = physsim.simulate(
         model,
@@ -352,23 +376,25 @@ def run(config: Config, workdir: str) -> dict:
         wind=wind,
         key=k_wind,
         backend=backend,
-        space=space,
         workers=config.workers or None,
+        material=names,
       )
       dt = time.perf_counter() - t0
       n_sim_batches += 1
-      if first_batch:
+      if b == 0:
         seconds['simulate_first_batches'] += dt
-        first_batch = False
       else:
         seconds['simulate'] += dt
         frames_simulated += bs * config.frames
       # Cameras per sequence, independent of batching.
       poses = jax.vmap(
-        lambda i, k=cam_key: physsim.sample_poses(
-          jax.random.fold_in(k, i), config.cameras, POSES[config.poses]
+        lambda key, i: physsim.sample_poses(
+          jax.random.fold_in(key, i), config.cameras, POSES[config.poses]
         )
-      )(jnp.asarray(padded))  # (B, C)
+      )(
+        jnp.stack([cam_keys[n] for n in names]),
+        jnp.asarray([i for _, i in padded]),
+      )  # (B, C)
       # Blown-up worlds render the rest mesh: same shapes, frames discarded.
       positions = np.where(
         out.valid[:, None, None, None], out.positions, mesh.vertices.astype(np.float32)
@@ -384,16 +410,18 @@ def run(config: Config, workdir: str) -> dict:
       depth = np.asarray(depth)
       rgb = None if rgb is None else np.asarray(rgb)
       t0 = time.perf_counter()
-      for j, i in enumerate(idx):
-        if i not in todo:
+      pending = []
+      for j, (k, i) in enumerate(chunk):
+        if (k, i) not in todo:
           continue
+        material = config.materials[k]
         valid = bool(out.valid[j])
         row = dataset.make_row(
           f'{i:04d}',
           material,
-          m_idx * config.sequences + int(i),
-          physsim.Params(*(f[i] for f in params)),
-          space,
+          k * config.sequences + int(i),
+          physsim.Params(*(f[i] for f in params[material])),
+          physsim.search_space(material),
           valid=valid,
           n_cameras=config.cameras,
           n_frames=config.frames,
@@ -405,9 +433,9 @@ def run(config: Config, workdir: str) -> dict:
           'intrinsics': intrinsics.to_dict(),
           'extrinsics': [
             physsim.pose_to_dict(
-              physsim.Pose(poses.rotation[j, k], poses.position[j, k])
+              physsim.Pose(poses.rotation[j, c], poses.position[j, c])
             )
-            for k in range(config.cameras)
+            for c in range(config.cameras)
           ],
           'mesh': mesh.name,
           'garment': config.garment,
@@ -419,13 +447,18 @@ def run(config: Config, workdir: str) -> dict:
           if valid
           else None,
         }
-        dataset.write_sequence(
-          workdir,
-          meta,
-          depth[j] if valid else None,
-          rgb[j] if valid and rgb is not None else None,
+        pending.append(
+          writers.submit(
+            dataset.write_sequence,
+            workdir,
+            meta,
+            depth[j] if valid else None,
+            rgb[j] if valid and rgb is not None else None,
+          )
         )
-        c['written'] += 1
+        counts[material]['written'] += 1
+      for f in concurrent.futures.as_completed(pending):
+        f.result()  # re-raises a failed write
         bar.update(1)
       dataset.rebuild_index(workdir)
       seconds['write'] += time.perf_counter() - t0

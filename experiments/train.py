@@ -2,12 +2,21 @@
 
   python -m experiments.train --dataset=data/sim --workdir=out/train
   python -m experiments.train --dataset=/tmp/ds --workdir=/tmp/tr --preset=smoke
+  python -m experiments.train --dataset=/tmp/ds --workdir=/tmp/tr_rgb \
+    --preset=smoke --modality=rgb   # needs a dataset made with --rgb
 
 One network per material (the paper's setting) under ``<workdir>/<material>``,
 or one for all materials (``--all_materials``) under ``<workdir>/all``. Each
 run folder holds the model's ``config.json``, orbax checkpoints, a
-``metrics.jsonl`` log and ``inputs.json`` (how depth frames were turned into
-inputs, which the estimate must repeat); an interrupted run resumes.
+``metrics.jsonl`` log and ``inputs.json`` (the modality and how depth frames
+were turned into inputs, which the estimate must repeat); an interrupted run
+resumes and a finished one is not retrained.
+
+Inputs: 'depth' frames go through ``model.depth_input`` (one channel); 'rgb'
+frames (the dataset's ``rgb_*.png``) through ``model.rgb_input`` (three
+channels in [0, 1]). Both are resized nearest-neighbour when ``image_size``
+is set. PhySNet items are single frames, SDN items non-overlapping clips of
+``sdn_frames`` frames of one camera.
 """
 
 from __future__ import annotations
@@ -23,6 +32,8 @@ import model as model_lib
 from physsim import dataset
 
 INPUTS_FILE = 'inputs.json'
+MODALITIES = ('depth', 'rgb')
+CHANNELS = {'depth': 1, 'rgb': 3}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,7 +44,8 @@ class Config:
     materials: fabric names; empty = every material in the dataset.
     all_materials: one network for all materials instead of one each.
     network: 'physnet' or 'sdn'.
-    input_mode: depth -> input mapping (``model.inputs.MODES``).
+    modality: 'depth' or 'rgb' frames (rgb needs a dataset made with ``--rgb``).
+    input_mode: depth -> input mapping (``model.inputs.MODES``; unused for rgb).
     image_size: train at this (square) size; 0 = the dataset's.
     conv_features, dense_features: PhySNet widths (the original: 32,64 / 256,256).
     epochs, learning_rate, batch_size, lr_step_epochs: optimisation (the paper's
@@ -47,6 +59,7 @@ class Config:
   materials: tuple[str, ...] = ()
   all_materials: bool = False
   network: str = 'physnet'
+  modality: str = 'depth'
   input_mode: str = 'relative'
   image_size: int = 0
   conv_features: tuple[int, ...] = (32, 64)
@@ -78,7 +91,7 @@ PRESETS = {
 
 
 def _clips(depth_seq: np.ndarray, frames: int) -> np.ndarray:
-  """(C, T, H, W) -> (C * (T // frames), frames, H, W) non-overlapping clips."""
+  """(C, T, H, W, ...) -> (C * (T // frames), frames, H, W, ...) non-overlapping clips."""
   c, t = depth_seq.shape[:2]
   n = t // frames
   if n < 1:
@@ -86,29 +99,93 @@ def _clips(depth_seq: np.ndarray, frames: int) -> np.ndarray:
   return depth_seq[:, : n * frames].reshape(c * n, frames, *depth_seq.shape[2:])
 
 
-def load_inputs(config: Config, root: str, materials) -> tuple:
-  """(inputs, labels, groups) for ``materials`` from the dataset at ``root``."""
+def _resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+  """Nearest-neighbour resize of (..., H, W, 3), as ``dataset.resize_depth`` does depth."""
+  chw = np.moveaxis(rgb, -1, -3)  # (..., 3, H, W)
+  return np.moveaxis(dataset.resize_depth(chw, size), -3, -1)
+
+
+def _frames(config: Config, path: str) -> np.ndarray:
+  """One sequence's network inputs, (C, T, H, W, channels) float32."""
   size = (config.image_size,) * 2 if config.image_size else None
+  seq = dataset.read_sequence(path, rgb=config.modality == 'rgb')
+  if config.modality == 'depth':
+    d = dataset.resize_depth(seq.depth, size) if size else seq.depth
+    return np.asarray(model_lib.depth_input(d, config.input_mode))
+  if seq.rgb is None:
+    raise ValueError(
+      f'{path}: modality=rgb but the sequence has no RGB frames (cam*/rgb_*.png); '
+      'generate the dataset with --rgb'
+    )
+  rgb = _resize_rgb(seq.rgb, size) if size else seq.rgb
+  return np.asarray(model_lib.rgb_input(rgb))
+
+
+def check_config(config: Config) -> None:
+  """Raises ValueError on a field outside its allowed values."""
+  for name, allowed in (
+    ('modality', MODALITIES),
+    ('network', model_lib.train.NETWORKS),
+    ('input_mode', model_lib.inputs.MODES),
+  ):
+    if getattr(config, name) not in allowed:
+      raise ValueError(
+        f'Config.{name} must be one of {allowed}, got {getattr(config, name)!r}'
+      )
+
+
+def load_inputs(config: Config, root: str, materials) -> tuple:
+  """Network inputs of ``materials`` from the dataset at ``root``.
+
+  Args:
+    config: run config (network, modality, input_mode, image_size, sdn_frames).
+    root: dataset root.
+    materials: material names.
+
+  Returns:
+    (inputs, labels, groups): inputs ``(N, H, W, ch)`` float32 frames ordered by
+    sequence, camera, frame (PhySNet) or ``(N, sdn_frames, H, W, ch)`` clips
+    (SDN), ``ch`` = 1 for depth, 3 for rgb; labels ``(N,)`` int64; groups =
+    labels (a simulation is held out whole).
+
+  Raises:
+    ValueError: a material without valid sequences, rgb asked of a dataset
+      without colour frames, or a bad file (named).
+  """
+  check_config(config)
+  index = dataset.open_dataset(root)
   xs, labels = [], []
   for m in materials:
-    if config.network == 'physnet':
-      arr = dataset.load_training_arrays(root, m, size=size)
-      xs.append(np.asarray(model_lib.depth_input(arr.images, config.input_mode)))
-      labels.append(arr.labels)
-      continue
-    index = dataset.open_dataset(root)
-    for r in index.filter(material=m, valid=True).rows:
-      d = dataset.read_sequence(index.path(r)).depth
-      d = dataset.resize_depth(d, size) if size else d
-      clips = _clips(d, config.sdn_frames)  # (N, T, H, W)
-      xs.append(np.asarray(model_lib.depth_input(clips, config.input_mode)))
-      labels.append(np.full(len(clips), r['label'], np.int64))
+    rows = index.filter(material=m, valid=True).rows
+    if not rows:
+      raise ValueError(
+        f'{root}: no valid sequences of material {m!r} '
+        f'(materials: {list(index.materials)})'
+      )
+    for r in rows:
+      x = _frames(config, index.path(r))  # (C, T, H, W, ch)
+      if config.network == 'physnet':
+        x = x.reshape(-1, *x.shape[2:])
+      else:
+        x = _clips(x, config.sdn_frames)
+      xs.append(x)
+      labels.append(np.full(len(x), r['label'], np.int64))
+  shapes = {x.shape[1:] for x in xs}
+  if len(shapes) > 1:
+    raise ValueError(
+      f'{root}: sequences of {list(materials)} differ in frame size {shapes}; '
+      'set image_size'
+    )
   x, y = np.concatenate(xs), np.concatenate(labels)
-  return x, y, y  # group = label: a simulation is held out whole
+  return x, y, y
 
 
 def train_config(config: Config, image_size) -> model_lib.TrainConfig:
+  """The ``model.TrainConfig`` of a run at ``image_size`` (H, W)."""
+  check_config(config)
+  channels = CHANNELS[config.modality]
   trunk = model_lib.PhySNetConfig(
+    in_channels=channels,
     image_size=tuple(image_size),
     conv_features=config.conv_features,
     dense_features=config.dense_features,
@@ -125,13 +202,95 @@ def train_config(config: Config, image_size) -> model_lib.TrainConfig:
   if config.network == 'physnet':
     return model_lib.TrainConfig(network='physnet', physnet=trunk, **common)
   sdn = model_lib.SDNConfig(
-    num_frames=config.sdn_frames, num_components=config.sdn_components, trunk=trunk
+    in_channels=channels,
+    num_frames=config.sdn_frames,
+    num_components=config.sdn_components,
+    trunk=trunk,
   )
   return model_lib.TrainConfig(network='sdn', sdn=sdn, loss='contrastive', **common)
 
 
+def _inputs_record(config: Config, root: str, materials) -> dict:
+  return {
+    'modality': config.modality,
+    'input_mode': config.input_mode,
+    'materials': list(materials),
+    'dataset': root,
+  }
+
+
+def finished_eval(config: Config, root: str, run_dir: str, materials) -> dict | None:
+  """The last eval row of a finished run of this config, else None.
+
+  A run is finished when ``metrics.jsonl`` holds an eval row of epoch
+  ``config.epochs`` (or later) and its ``inputs.json`` and ``config.json``
+  match this config (the image size is taken from ``config.json``, as only the
+  data decides it). Lets callers skip loading data for finished runs.
+
+  Args:
+    config: run config.
+    root: dataset root.
+    run_dir: the run folder.
+    materials: the run's materials.
+
+  Returns:
+    The eval row dict, or None if the run is missing, unfinished or differs.
+  """
+  paths = [
+    os.path.join(run_dir, f)
+    for f in (INPUTS_FILE, model_lib.train.CONFIG_FILE, model_lib.train.METRICS_FILE)
+  ]
+  if not all(os.path.isfile(p) for p in paths):
+    return None
+  with open(paths[0]) as f:
+    if json.load(f) != _inputs_record(config, root, materials):
+      return None
+  saved = model_lib.config_io.from_dict(
+    model_lib.TrainConfig, model_lib.config_io.read_json(paths[1]), paths[1]
+  )
+  trunk = saved.physnet if saved.network == 'physnet' else saved.sdn.trunk
+  want = train_config(config, trunk.image_size)
+  # Fields a resume may change (model.train's) do not make it another run.
+  free = {k: getattr(saved, k) for k in ('epochs', 'log_every', 'max_to_keep')}
+  if dataclasses.replace(want, **free) != saved:
+    return None
+  with open(paths[2]) as f:
+    evals = [r for r in map(json.loads, filter(str.strip, f)) if r.get('eval')]
+  if not evals or evals[-1]['epoch'] < config.epochs:
+    return None
+  return evals[-1]
+
+
+def fit_run(
+  config: Config, root: str, run_dir: str, materials, data, *, progress: bool = True
+) -> tuple[model_lib.FitResult, dict]:
+  """Trains (or resumes, or just restores) one run on ``data`` from ``load_inputs``.
+
+  Args:
+    config: run config.
+    root: dataset root (recorded in ``inputs.json``).
+    run_dir: the run folder.
+    materials: the run's materials (recorded).
+    data: (inputs, labels, groups).
+    progress: show a tqdm bar.
+
+  Returns:
+    (the ``model.fit`` result, its last eval row or {}).
+  """
+  x, y, g = data
+  os.makedirs(run_dir, exist_ok=True)
+  dataset.write_json_atomic(
+    os.path.join(run_dir, INPUTS_FILE), _inputs_record(config, root, materials)
+  )
+  tc = train_config(config, x.shape[-3:-1])
+  result = model_lib.fit(x, y, g, tc, run_dir, progress=progress)
+  evals = [r for r in result.history if r.get('eval')]
+  return result, (evals[-1] if evals else {})
+
+
 def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> dict:
   """Trains every requested network; returns ``{run name: last eval row}``."""
+  check_config(config)
   index = dataset.open_dataset(root)
   materials = config.materials or index.materials
   groups = (
@@ -140,29 +299,29 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
   out = {}
   for name, mats in groups:
     x, y, g = load_inputs(config, root, mats)
-    image_size = x.shape[-3:-1]
-    run_dir = os.path.join(workdir, name)
-    os.makedirs(run_dir, exist_ok=True)
-    dataset.write_json_atomic(
-      os.path.join(run_dir, INPUTS_FILE),
-      {'input_mode': config.input_mode, 'materials': list(mats), 'dataset': root},
-    )
     print(f'{name}: {len(x)} inputs of shape {x.shape[1:]}, {len(set(y))} labels')
-    result = model_lib.fit(x, y, g, train_config(config, image_size), run_dir,
-                           progress=progress)  # fmt: skip
-    evals = [r for r in result.history if r.get('eval')]
-    out[name] = evals[-1] if evals else {}
+    run_dir = os.path.join(workdir, name)
+    _, out[name] = fit_run(config, root, run_dir, mats, (x, y, g), progress=progress)
     print(f'{name}: {json.dumps(out[name])}')
   return out
 
 
-def input_mode(run_dir: str) -> str:
-  """The input mode a run was trained with (``relative`` if unrecorded)."""
+def _recorded(run_dir: str, key: str, default: str) -> str:
   path = os.path.join(run_dir, INPUTS_FILE)
   if not os.path.isfile(path):
-    return 'relative'
+    return default
   with open(path) as f:
-    return json.load(f)['input_mode']
+    return json.load(f).get(key, default)
+
+
+def input_mode(run_dir: str) -> str:
+  """The input mode a run was trained with (``relative`` if unrecorded)."""
+  return _recorded(run_dir, 'input_mode', 'relative')
+
+
+def modality(run_dir: str) -> str:
+  """The modality a run was trained on (``depth`` if unrecorded: older runs)."""
+  return _recorded(run_dir, 'modality', 'depth')
 
 
 FLAGS = flags.FLAGS
@@ -177,6 +336,7 @@ def define_flags() -> None:
   flags.DEFINE_list('materials', None, 'materials (default: all in the dataset)')
   flags.DEFINE_bool('all_materials', None, 'one network for all materials')
   flags.DEFINE_enum('network', None, ['physnet', 'sdn'], 'which network')
+  flags.DEFINE_enum('modality', None, list(MODALITIES), 'depth or rgb frames')
   flags.DEFINE_integer('epochs', None, 'epochs')
   flags.DEFINE_float('learning_rate', None, 'Adam learning rate')
   flags.DEFINE_enum('split', None, ['simulation', 'random'], 'held-out split')
@@ -193,6 +353,7 @@ def main(argv):
       'materials',
       'all_materials',
       'network',
+      'modality',
       'epochs',
       'learning_rate',
       'split',

@@ -19,7 +19,7 @@ from model import (
   triplets,
 )
 from model.contrastive import Pairs, contrastive_loss, random_pairs
-from model.inputs import depth_input
+from model.inputs import depth_input, rgb_input
 from model.metrics import embed, knn_accuracy, triplet_accuracy
 from model.physnet import (
   InputStats,
@@ -48,6 +48,7 @@ from model.train import (
   make_sampler,
   make_train_step,
   select_lr,
+  split_indices,
 )
 from model.triplets import (
   Triplets,
@@ -102,11 +103,13 @@ __all__ = [
   'psd',
   'random_pairs',
   'random_triplets',
+  'rgb_input',
   'sample_triplets',
   'sdn',
   'select_lr',
   'spectral_features',
   'split_by_group',
+  'split_indices',
   'split_random',
   'splits',
   'train',

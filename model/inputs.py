@@ -1,4 +1,4 @@
-"""Depth frames to network inputs: one definition for training and estimation.
+"""Depth (or colour) frames to network inputs: one definition for training and estimation.
 
 Depth comes in metres with 0 where nothing was measured (renderer, loader and
 sensor model agree on that). Absolute depth mostly encodes where the camera
@@ -46,3 +46,18 @@ def depth_input(depth: jax.Array, mode: str = 'relative') -> jax.Array:
     hi = jnp.max(jnp.where(valid, z, -jnp.inf), axis=(-2, -1), keepdims=True)
     out = 0.25 + 0.75 * (hi - z) / jnp.maximum(hi - lo, 1e-6)
   return jnp.where(valid, out, 0.0)[..., None]
+
+
+def rgb_input(rgb) -> jax.Array:
+  """Maps 8-bit colour frames (..., H, W, 3) to float32 inputs in [0, 1].
+
+  Args:
+    rgb: uint8 (or integer-valued) colour frames.
+
+  Returns:
+    ``rgb / 255`` as float32, shape unchanged (three channels).
+  """
+  x = jnp.asarray(rgb)
+  if x.ndim < 3 or x.shape[-1] != 3:
+    raise ValueError(f'rgb must have shape (..., H, W, 3), got {x.shape}')
+  return x.astype(jnp.float32) / 255.0

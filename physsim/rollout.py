@@ -19,6 +19,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
@@ -28,7 +29,7 @@ import numpy as np
 
 from physsim import forces
 from physsim import params as params_lib
-from physsim.cloth import ClothModel, build
+from physsim.cloth import ClothModel, build, reference_rigidity
 
 # A vertex further than this from its rest position, or faster than this, means
 # the integration blew up (the cloth is 1 m; real flapping is a few m/s).
@@ -378,6 +379,7 @@ def simulate(
   backend: str = 'mjx',
   space: params_lib.SearchSpace | None = None,
   workers: int | None = None,
+  material: str | Sequence[str] | None = None,
 ) -> Rollout:
   """Simulates a batch of parameter sets.
 
@@ -395,6 +397,10 @@ def simulate(
       one world at a time, float64 forces; the oracle and CPU fallback).
     space: allowed parameter ranges (default: the union over the paper's fabrics).
     workers: processes for the C backend (default: all cores).
+    material: the fabric (or one per world) whose measured bending a scale of 1
+      means; default the model's. MuJoCo's bending stencil is linear in the
+      rigidity, so one compiled model simulates every material of the same
+      mesh: worlds of different fabrics share a batch and nothing recompiles.
 
   Returns:
     ``Rollout`` with positions (B, T, V, 3) and validity (B,).
@@ -408,6 +414,13 @@ def simulate(
     raise ValueError(
       f'params must be scalars or 1-D batches, got {params.bending_scale.shape}'
     )
+  if material is not None:
+    b = params.bending_scale.shape[0]
+    names = [material] * b if isinstance(material, str) else list(material)
+    if len(names) != b:
+      raise ValueError(f'material names {len(names)} for a batch of {b} worlds')
+    ratio = np.array([reference_rigidity(n) for n in names]) / model.rigidity
+    params = params._replace(bending_scale=params.bending_scale * ratio)
   wind = wind or Wind()
   substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
   times = np.arange(frames) / fps

@@ -4,6 +4,7 @@ import os
 import tempfile
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from absl.testing import absltest
 
@@ -76,6 +77,19 @@ class MinimizeTest(absltest.TestCase):
     self.assertEqual(infos[0].X_new.shape, (3, 2))
     # Kriging believer spreads the batch out.
     self.assertGreater(np.min(np.ptp(infos[-1].X_new, axis=0)), 0.0)
+
+  def test_objective_runs_in_default_precision(self):
+    # The GP works in float64; a JAX objective (an MJX simulation) must not
+    # be traced in that mode (it failed with int32/int64 mixes on the GPU).
+    seen = []
+
+    def fun(x):
+      seen.append(jnp.zeros(1).dtype)
+      return quadratic(x)
+
+    bo.minimize(fun, _BOUNDS, n_init=3, n_iter=2, seed=0, config_overrides=_FAST)
+    self.assertEqual(set(seen), {jnp.zeros(1).dtype})
+    self.assertEqual(len(seen), 3)
 
   def test_callback_stops(self):
     res = bo.minimize(

@@ -37,3 +37,12 @@ def test_minmax_and_metric_by_hand():
 def test_bad_mode():
   with pytest.raises(ValueError, match='mode must be one of'):
     inputs.depth_input(np.zeros((4, 4)), 'log')
+
+
+def test_rgb_input_by_hand():
+  rgb = np.array([[[0, 128, 255]]], np.uint8)  # (1, 1, 3)
+  out = np.asarray(inputs.rgb_input(rgb))
+  assert out.dtype == np.float32 and out.shape == (1, 1, 3)
+  np.testing.assert_allclose(out[0, 0], [0.0, 128 / 255, 1.0], atol=_TOL)
+  with pytest.raises(ValueError, match=r'\(\.\.\., H, W, 3\)'):
+    inputs.rgb_input(np.zeros((4, 4, 1), np.uint8))

@@ -144,6 +144,22 @@ def test_garments_hang_and_billow(name):
   assert s['mean_deflection_m'] > 0.05
 
 
+def test_one_model_serves_every_material():
+  # MuJoCo's bending stencil is linear in the rigidity, so interlock's model
+  # told to be denim moves exactly like denim's own model.
+  mesh = physsim.square(6, size=0.3)
+  p = physsim.params.make([3.0, 0.3], 2.0, 0.3)
+  kw = dict(frames=4, fps=_FPS, warmup=0.2, backend='c', workers=1)
+  own = sim.simulate(physsim.build(mesh, 'black_denim'), p, **kw)
+  other = physsim.build(mesh, 'gray_interlock')
+  told = sim.simulate(other, p, material=['black_denim'] * 2, **kw)
+  np.testing.assert_allclose(told.positions, own.positions, atol=1e-6)
+  plain = sim.simulate(other, p, **kw)
+  assert np.abs(plain.positions - own.positions).max() > 1e-4
+  with pytest.raises(ValueError, match='material names'):
+    sim.simulate(other, p, material=['black_denim'], **kw)
+
+
 def test_changing_values_does_not_recompile(model, batch, mjx_out):
   fn = sim.mjx_rollout_fn(model, _FRAMES, _FPS, 0.0)
   before = fn._cache_size()

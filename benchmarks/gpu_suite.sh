@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# The GPU measurements behind BENCHMARKS.md, in the order they are run on the
+# device machine (after the wheels of ../shared/tools/device-wheels.sh are in
+# /tmp/site). Each step has its own time limit and log under $OUT; a failing
+# step does not stop the rest.
+#   bash benchmarks/gpu_suite.sh render|motion|dataset|estimate
+set -uo pipefail
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-egl}
+OUT=${OUT:-out/gpu}
+mkdir -p "$OUT"
+step() {  # name seconds command...
+  local name=$1 secs=$2
+  shift 2
+  local t0=$SECONDS
+  timeout "$secs" "$@" >"$OUT/$name.log" 2>&1
+  echo "$name: exit $? in $((SECONDS - t0)) s"
+}
+case ${1:-render} in
+  render)
+    nvidia-smi -L >"$OUT/gpu.txt" 2>&1
+    step render_raster 200 python benchmarks/render_throughput.py \
+      --batch_sizes=1,16,64,210 --methods=raster --mjwarp \
+      --out="$OUT/render_gpu.json"
+    step render_brute 60 python benchmarks/render_throughput.py \
+      --batch_sizes=1 --methods=brute --mujoco_frames=0 \
+      --out="$OUT/render_brute_gpu.json"
+    step train_fp32 150 python benchmarks/train_throughput.py --precision=float32 \
+      --out="$OUT/train_gpu.json"
+    step train_bf16 100 python benchmarks/train_throughput.py --precision=bfloat16 \
+      --out="$OUT/train_gpu_bf16.json"
+    ;;
+  motion)
+    step motion 330 python -m experiments.fabric_motion --workdir="$OUT/motion" \
+      --backend=mjx
+    step dataset 250 python -m experiments.generate_dataset --out=/tmp/ds \
+      --batch_size=210
+    cp /tmp/ds/summary.json "$OUT/dataset_summary.json" 2>/dev/null
+    cp /tmp/ds/montage_*.png "$OUT/" 2>/dev/null
+    ;;
+  estimate)
+    step train 240 python -m experiments.train --dataset=/tmp/ds \
+      --workdir=/tmp/train --materials=gray_interlock --epochs=6
+    cp /tmp/train/gray_interlock/metrics.jsonl "$OUT/train_metrics.jsonl" 2>/dev/null
+    step eval_set 90 python -m experiments.generate_dataset --preset=eval \
+      --out=/tmp/eval --materials=gray_interlock
+    step estimate 220 python -m experiments.estimate \
+      --recording=/tmp/eval/gray_interlock/0000 --material=gray_interlock \
+      --model=/tmp/train/gray_interlock --workdir="$OUT/estimate"
+    ;;
+esac
+tail -n 3 "$OUT"/*.log

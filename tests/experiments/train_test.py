@@ -1,0 +1,133 @@
+"""Tests for experiments.train: depth and RGB runs, inputs.json, restore, resume, bad input."""
+
+import dataclasses
+import json
+import os
+
+import cv2
+import jax
+import numpy as np
+import pytest
+
+import model as model_lib
+from experiments import table1, train
+from physsim import dataset
+
+MATERIAL = 'gray_interlock'
+# Table 1's smoke runs (half the simulations held out: two labels on each side).
+_SMOKE = dataclasses.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
+# 8-bit colour over 255 in float32 against the same in float64.
+_RGB_TOLERANCE = 1e-6
+
+
+def _snapshot(run_dir):
+  """Checkpoint steps and the metrics log's content: what a retrain would change."""
+  steps = sorted(os.listdir(os.path.join(run_dir, 'checkpoints')))
+  with open(os.path.join(run_dir, model_lib.train.METRICS_FILE)) as f:
+    return steps, f.read()
+
+
+@pytest.fixture(scope='module')
+def runs(rgb_dataset, table1_workdir):
+  """{modality: (workdir, run result)} of PhySNet trained on depth and on RGB."""
+  out = {}
+  for modality in train.MODALITIES:
+    # Where table1 keeps these runs, so its test reuses them instead of retraining.
+    run_dir = table1.run_dir(
+      table1_workdir, 'physnet', modality, 'simulation', MATERIAL
+    )
+    workdir = os.path.dirname(run_dir)
+    cfg = dataclasses.replace(_SMOKE, modality=modality)
+    out[modality] = (workdir, train.run(cfg, rgb_dataset, workdir, progress=False))
+  return out
+
+
+@pytest.mark.parametrize('modality', train.MODALITIES)
+def test_run_records_inputs_and_restores(runs, rgb_dataset, modality):
+  workdir, result = runs[modality]
+  run_dir = os.path.join(workdir, MATERIAL)
+  with open(os.path.join(run_dir, train.INPUTS_FILE)) as f:
+    rec = json.load(f)
+  assert rec['modality'] == modality and rec['input_mode'] == _SMOKE.input_mode
+  assert rec['materials'] == [MATERIAL] and rec['dataset'] == rgb_dataset
+  assert train.modality(run_dir) == modality
+  assert train.input_mode(run_dir) == _SMOKE.input_mode
+  assert 0.0 <= result[MATERIAL]['test_triplet_accuracy'] <= 1.0
+
+  network, params, tconfig = model_lib.load_network(run_dir)
+  assert tconfig.physnet.in_channels == train.CHANNELS[modality]
+  cfg = dataclasses.replace(_SMOKE, modality=modality)
+  x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
+  assert x.shape == (4 * 2 * 4, 32, 32, train.CHANNELS[modality])
+  emb = np.asarray(jax.jit(network.apply)(params, x[:5]))
+  assert emb.shape == (5, 2) and np.all(np.isfinite(emb))
+  # the restored net is the trained one: its embedding differs from a fresh init's
+  fresh = network.init(jax.random.PRNGKey(123))
+  assert not np.allclose(emb, np.asarray(network.apply(fresh, x[:5])))
+
+
+@pytest.mark.parametrize('modality', train.MODALITIES)
+def test_rerun_does_not_retrain(runs, rgb_dataset, modality):
+  workdir, result = runs[modality]
+  run_dir = os.path.join(workdir, MATERIAL)
+  before = _snapshot(run_dir)
+  cfg = dataclasses.replace(_SMOKE, modality=modality)
+  again = train.run(cfg, rgb_dataset, workdir, progress=False)
+  assert _snapshot(run_dir) == before
+  assert again == result
+  assert train.finished_eval(cfg, rgb_dataset, run_dir, [MATERIAL]) == result[MATERIAL]
+  # another config is not this run
+  other = dataclasses.replace(cfg, seed=cfg.seed + 1)
+  assert train.finished_eval(other, rgb_dataset, run_dir, [MATERIAL]) is None
+
+
+def test_rgb_inputs_match_the_png_files(rgb_dataset):
+  cfg = dataclasses.replace(_SMOKE, modality='rgb', image_size=0)
+  x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
+  index = dataset.open_dataset(rgb_dataset)
+  rows = index.filter(material=MATERIAL, valid=True).rows
+  # items run over sequence, camera, frame: item 1 * 8 + 1 * 4 + 2 = seq 1, cam 1, t 2
+  path = os.path.join(index.path(rows[1]), 'cam1', 'rgb_0002.png')
+  ref = cv2.imread(path, cv2.IMREAD_COLOR)[..., ::-1].astype(np.float64) / 255.0
+  np.testing.assert_allclose(x[8 + 4 + 2], ref, atol=_RGB_TOLERANCE)
+  assert y[8 + 4 + 2] == rows[1]['label']
+  # resizing is the depth's nearest-neighbour resize, channel by channel
+  small = train.load_inputs(
+    dataclasses.replace(cfg, image_size=16), rgb_dataset, [MATERIAL]
+  )[0]
+  for c in range(3):
+    np.testing.assert_array_equal(
+      small[..., c], dataset.resize_depth(x[..., c], (16, 16))
+    )
+
+
+def test_sdn_rgb_clips(rgb_dataset):
+  cfg = dataclasses.replace(_SMOKE, modality='rgb', network='sdn')
+  x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
+  frames = train.load_inputs(
+    dataclasses.replace(cfg, network='physnet'), rgb_dataset, [MATERIAL]
+  )[0]
+  # 4 frames per camera make one 4-frame clip per camera and sequence
+  assert x.shape == (4 * 2, cfg.sdn_frames, 32, 32, 3)
+  np.testing.assert_array_equal(x[3], frames[12:16])  # seq 1, cam 1
+  tconfig = train.train_config(cfg, x.shape[-3:-1])
+  assert tconfig.sdn.in_channels == 3
+  net = model_lib.make_network(tconfig)
+  emb = net.apply(net.init(jax.random.PRNGKey(0)), x[:2])
+  assert emb.shape == (2, 2)
+
+
+def test_rgb_of_a_depth_only_dataset_is_a_clear_error(depth_only_dataset, tmp_path):
+  cfg = dataclasses.replace(_SMOKE, modality='rgb')
+  with pytest.raises(ValueError, match='no RGB frames') as err:
+    train.run(cfg, depth_only_dataset, str(tmp_path), progress=False)
+  assert depth_only_dataset in str(err.value)
+  with pytest.raises(ValueError, match='modality'):
+    train.load_inputs(
+      dataclasses.replace(cfg, modality='infrared'), depth_only_dataset, [MATERIAL]
+    )
+
+
+def test_unrecorded_run_defaults(tmp_path):
+  assert train.modality(str(tmp_path)) == 'depth'
+  assert train.input_mode(str(tmp_path)) == 'relative'
