@@ -232,8 +232,13 @@ def minimize(
     save(0)
 
   # ---- BO iterations ----
-  stopped = False
   it = it0
+  # A run saved after the iteration in which the rule fired has finished.
+  stopped = (
+    stop_rel_change is not None
+    and it >= stop_min_iter
+    and _stop_rule(history, width, stop_rel_change, stop_window)
+  )
   with jax.enable_x64(True):
     while it < n_iter and not stopped:
       t0 = time.perf_counter()

@@ -20,6 +20,8 @@ best simulation).
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
 import json
 import os
 import tempfile
@@ -64,6 +66,8 @@ class EstimateConfig:
     min_iter: iterations before the rule is checked.
     distance: PSD between frame-embedding sets ('energy', 'centroid').
     backend: 'auto' (MJX on GPU, else C), 'mjx' or 'c'.
+    workers: processes of the C backend (0: one per core); does not change
+      results, so a resumed run may use another value.
     seed: all randomness (design, gusts, cameras).
   """
 
@@ -84,6 +88,7 @@ class EstimateConfig:
   min_iter: int = 5
   distance: str = 'energy'
   backend: str = 'auto'
+  workers: int = 0
   seed: int = 0
 
 
@@ -115,6 +120,39 @@ def _read_json(path: str) -> dict:
     raise ValueError(f'{path}: cannot read JSON ({e})') from e
 
 
+def _camera(cam: dict, where: str, size, *, required: bool):
+  """(intrinsics resized to ``size``, camera-0 pose) of a camera dict, or Nones.
+
+  A camera file must hold intrinsics; a ``meta.json`` without them means an
+  unknown camera. Broken fields are a ValueError naming ``where``.
+  """
+  if not isinstance(cam, dict) or 'intrinsics' not in cam:
+    if required:
+      raise ValueError(
+        f'{where}: no "intrinsics" (want {{"intrinsics", "extrinsics"}})'
+      )
+    return None, None
+  try:
+    intr = physsim.Intrinsics.from_dict(cam['intrinsics'])
+    intr = dataclasses.replace(intr, width=size[1], height=size[0])
+    pose = None
+    ext = cam.get('extrinsics')
+    if ext is not None:
+      if isinstance(ext, list):
+        if not ext:
+          raise ValueError('empty extrinsics list')
+        ext = ext[0]
+      p = physsim.pose_from_dict(ext)
+      pose = physsim.Pose(p.rotation.reshape(3, 3), p.position.reshape(3))
+      if not (
+        np.all(np.isfinite(pose.rotation)) and np.all(np.isfinite(pose.position))
+      ):
+        raise ValueError('non-finite pose')
+  except (ValueError, TypeError, AttributeError) as e:
+    raise ValueError(f'{where}: bad camera ({e})') from e
+  return intr, pose
+
+
 def load_recording(
   path: str,
   *,
@@ -131,7 +169,8 @@ def load_recording(
   ``meta.json``) gives or overrides the camera of any other recording.
 
   Raises:
-    ValueError: a bad recording or camera file, named.
+    ValueError: a bad recording or camera file (or a camera file without
+      intrinsics), named.
   """
   meta_path = os.path.join(path, 'meta.json')
   meta = _read_json(meta_path) if os.path.isfile(meta_path) else None
@@ -146,15 +185,12 @@ def load_recording(
       f'{path}: normalised (8-bit) depth has no absolute scale; the estimate '
       'needs metric depth (16-bit mm PNG, .npy/.npz in metres)'
     )
-  cam = _read_json(camera_json) if camera_json else meta
-  intr = pose = None
-  if cam is not None and 'intrinsics' in cam:
-    intr = physsim.Intrinsics.from_dict(cam['intrinsics'])
-    ext = cam.get('extrinsics')
-    if ext is not None:
-      p = physsim.pose_from_dict(ext[0] if isinstance(ext, list) else ext)
-      pose = physsim.Pose(p.rotation.reshape(3, 3), p.position.reshape(3))
-    intr = dataclasses.replace(intr, width=size[1], height=size[0])
+  if camera_json:
+    intr, pose = _camera(_read_json(camera_json), camera_json, size, required=True)
+  elif meta is not None:
+    intr, pose = _camera(meta, meta_path, size, required=False)
+  else:
+    intr = pose = None
   truth = None
   if meta is not None and 'wind_speed' in meta:
     truth = {k: float(meta[k]) for k in ('bending_scale', 'wind_speed', 'area_weight')}
@@ -172,18 +208,31 @@ class Objective(NamedTuple):
     simulate_frames: (q, 3) unit points -> ((q, C, T, H, W) depth, (q,) valid).
     space: the material's search space.
     cloth: the compiled cloth.
+    mesh: its rest mesh.
+    evaluate: (q, 3) unit points -> ((q,) PSD as ``fun``, (q, T, V, 3)
+      simulated positions, (q,) valid), for studies that also need the motion.
   """
 
   fun: object
   simulate_frames: object
   space: physsim.SearchSpace
   cloth: physsim.ClothModel
+  mesh: physsim.Mesh | None = None
+  evaluate: object = None
 
 
 def _backend(name: str) -> str:
   if name == 'auto':
     return 'mjx' if jax.default_backend() == 'gpu' else 'c'
   return name
+
+
+@functools.lru_cache(maxsize=8)
+def _renderer(garment: str, spacing: float, resolution: int, intr):
+  """One jitted renderer per mesh and camera, so that estimates of several
+  recordings in one process compile it once."""
+  mesh = physsim.garment(garment, spacing) if garment else physsim.square(resolution)
+  return physsim.make_depth_renderer(mesh.faces, intr)
 
 
 def make_objective(
@@ -200,13 +249,15 @@ def make_objective(
   cloth = physsim.build(mesh, fab.name)
   h, w = recording.depth.shape[1:]
   key = jax.random.key(config.seed)
+  # A known field of view is used even when the pose is unknown.
+  intr = recording.intrinsics or physsim.Intrinsics(width=w, height=h)
   if recording.pose is not None:
-    intr = recording.intrinsics
     poses = jax.tree.map(lambda a: jnp.asarray(a)[None], recording.pose)  # (1, ...)
   else:
-    intr = physsim.Intrinsics(width=w, height=h)
     poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
-  render = physsim.make_depth_renderer(mesh.faces, intr)
+  render = _renderer(
+    config.garment, config.garment_spacing, config.cloth_resolution, intr
+  )
   gust_key = jax.random.fold_in(key, 2)  # common random numbers for all candidates
   backend = _backend(config.backend)
 
@@ -223,32 +274,42 @@ def make_objective(
     pts = embed(frames).reshape(q, -1, rec_points.shape[-1])
     return jax.vmap(lambda p: model_lib.psd.psd(p, rec_points, config.distance))(pts)
 
-  def simulate_frames(u):
-    p = physsim.from_unit(np.asarray(u), space)
+  def simulate(u):  # (q, 3) -> ((q, T, V, 3) positions, (q,) valid)
     out = physsim.simulate(
       cloth,
-      p,
+      physsim.from_unit(np.asarray(u), space),
       frames=recording.depth.shape[0],
       fps=config.fps,
       warmup=config.warmup,
       wind=physsim.Wind(gust_intensity=config.gusts),
-      key=gust_key,
+      key=jnp.broadcast_to(gust_key, np.shape(u)[:1]),  # the same for every world
       backend=backend,
       space=space,
+      workers=config.workers or None,
     )
-    q = out.positions.shape[0]
-    pos = np.where(out.valid[:, None, None, None], out.positions, mesh.vertices)
+    return out.positions, out.valid
+
+  def render_frames(positions, valid):
+    q = positions.shape[0]
+    pos = np.where(valid[:, None, None, None], positions, mesh.vertices)
     batch_poses = jax.tree.map(
       lambda a: jnp.broadcast_to(a, (q, *a.shape)), poses
     )  # (q, C, ...)
-    return render(jnp.asarray(pos), batch_poses), out.valid
+    return render(jnp.asarray(pos), batch_poses)
+
+  def simulate_frames(u):
+    positions, valid = simulate(u)
+    return render_frames(positions, valid), valid
+
+  def evaluate(u):
+    positions, valid = simulate(u)
+    d = np.asarray(distances(render_frames(positions, valid)), np.float64)
+    return np.where(valid & np.isfinite(d), d, np.nan), positions, valid
 
   def fun(u):
-    frames, valid = simulate_frames(u)
-    d = np.asarray(distances(frames), np.float64)
-    return np.where(valid & np.isfinite(d), d, np.nan)
+    return evaluate(u)[0]
 
-  return Objective(fun, simulate_frames, space, cloth)
+  return Objective(fun, simulate_frames, space, cloth, mesh, evaluate)
 
 
 # ------------------------------------------------------------------- estimate
@@ -265,6 +326,56 @@ def _atomic_write(path: str, write) -> None:
     if os.path.exists(tmp):
       os.remove(tmp)
     raise
+
+
+def _write_json(path: str, obj) -> None:
+  def write(p):
+    with open(p, 'w') as f:
+      json.dump(obj, f, indent=1)
+
+  _atomic_write(path, write)
+
+
+RUN_FILE = 'run.json'
+# Config fields that do not change what an estimate computes.
+_RESUMABLE_FIELDS = ('workers',)
+
+
+def _check_run(workdir: str, config, recording: Recording, model_dir: str) -> None:
+  """Writes what defines the run; refuses a workdir holding another run.
+
+  ``bo_state.npz`` alone only knows the optimiser's settings, so without this
+  a rerun with another recording, model or material would silently continue
+  the old search.
+  """
+  run = {
+    'config': {
+      k: v for k, v in dataclasses.asdict(config).items() if k not in _RESUMABLE_FIELDS
+    },
+    'recording_sha1': hashlib.sha1(
+      np.ascontiguousarray(recording.depth, np.float32).tobytes()
+    ).hexdigest(),
+    'model_dir': os.path.abspath(model_dir),
+  }
+  run = json.loads(json.dumps(run))  # tuples -> lists, as read back
+  path = os.path.join(workdir, RUN_FILE)
+  if os.path.exists(path):
+    old = _read_json(path)
+    diff = sorted(
+      k for k in set(run) | set(old) if k != 'config' and run.get(k) != old.get(k)
+    )
+    diff += sorted(
+      f'config.{k}'
+      for k in set(run['config']) | set(old.get('config', {}))
+      if run['config'].get(k) != old.get('config', {}).get(k)
+    )
+    if diff:
+      raise ValueError(
+        f'{path}: the workdir holds an estimate with different {diff}; use a '
+        'new workdir'
+      )
+    return
+  _write_json(path, run)
 
 
 def _summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
@@ -300,15 +411,32 @@ def estimate(
 
   Returns:
     The result dict written to ``estimate.json``.
+
+  Raises:
+    ValueError: ``model_dir`` is not a trained PhySNet run or takes another
+      frame size, ``workdir`` holds an estimate of another recording, model or
+      config, or every candidate simulation blew up (naming the recording).
   """
   if train_lib.modality(model_dir) != 'depth':
     raise ValueError(
       f'{model_dir}: trained on {train_lib.modality(model_dir)} frames; the '
       'estimate compares depth videos, so it needs a depth network'
     )
-  os.makedirs(workdir, exist_ok=True)
-  network, net_params, _ = model_lib.load_network(model_dir)
+  network, net_params, net_config = model_lib.load_network(model_dir)
+  if net_config.network != 'physnet':
+    raise ValueError(
+      f'{model_dir}: a {net_config.network!r} run; the estimate embeds single '
+      'frames with a PhySNet run'
+    )
+  size = tuple(net_config.physnet.image_size)
+  if tuple(recording.depth.shape[1:]) != size:
+    raise ValueError(
+      f'{recording.source}: frames of {recording.depth.shape[1:]} but the network '
+      f'in {model_dir} takes {size}; load the recording at that size'
+    )
   input_mode = train_lib.input_mode(model_dir)
+  os.makedirs(workdir, exist_ok=True)
+  _check_run(workdir, config, recording, model_dir)
   t_start = time.time()
   obj = make_objective(config, network, net_params, input_mode, recording)
   sim_seconds = []
@@ -320,7 +448,9 @@ def estimate(
     return y
 
   def callback(info: bo.IterationInfo):
-    if progress:
+    if progress and not np.isfinite(info.y_best):
+      print(f'iter {info.iteration:3d}: every simulation so far blew up', flush=True)
+    elif progress:
       p = physsim.from_unit(info.x_best, obj.space)
       print(
         f'iter {info.iteration:3d}: best PSD {info.y_best:.4g} at bending '
@@ -370,10 +500,7 @@ def estimate(
   if recording.truth is not None:
     result['truth'] = recording.truth
     result['errors'] = errors(best, recording.truth, obj.space)
-  _atomic_write(
-    os.path.join(workdir, 'estimate.json'),
-    lambda p: open(p, 'w').write(json.dumps(result, indent=1)),
-  )
+  _write_json(os.path.join(workdir, 'estimate.json'), result)
   plot_trace(res, obj.space, recording.truth, os.path.join(workdir, 'trace.png'))
   frames, _ = obj.simulate_frames(res.x_best[None])
   plot_montage(

@@ -132,9 +132,16 @@ def _world_inputs(model, params, wind: Wind, key, dtype):
   if wind.gust_intensity > 0 and key is None:
     raise ValueError('gusty wind needs a PRNG key (simulate(..., key=...))')
   key = jax.random.key(0) if key is None else key
+  typed = jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
+  if key.ndim == (1 if typed else 2):  # one key per world, used as given
+    if key.shape[0] != b:
+      raise ValueError(f'got {key.shape[0]} gust keys for {b} worlds')
+    keys = key
+  else:
+    keys = jax.random.split(key, b)
   gusts = jax.vmap(
     lambda k: forces.sample_gusts(k, wind.gust_intensity, wind.gust_modes)
-  )(jax.random.split(key, b))
+  )(keys)
   return {
     'speed': jnp.asarray(params.wind_speed, dtype),
     'direction': jnp.asarray(direction / norm, dtype),
@@ -383,7 +390,9 @@ def simulate(
     fps: frame rate (the paper: 20 Hz); 1/fps must be a multiple of the timestep.
     warmup: seconds simulated from rest before the first recorded frame.
     wind: direction and gusts; default steady wind normal to the cloth.
-    key: PRNG key for the gusts (one sub-key per world).
+    key: PRNG key for the gusts, split into one sub-key per world; or a
+      batch of B keys, one per world (the same key for every world gives
+      every world the same gusts: common random numbers).
     backend: ``'mjx'`` (MuJoCo Warp through MJX, batched) or ``'c'`` (MuJoCo C,
       one world at a time, float64 forces; the oracle and CPU fallback).
     space: allowed parameter ranges (default: the union over the paper's fabrics).

@@ -1,0 +1,162 @@
+"""Shared fixtures of the estimate and landscape tests: a hand-made embedding
+saved as a model workdir, and a simulated recording with known truth.
+
+The network is hand-made, not trained: a PhySNet with 1x1 convolutions and one
+dense layer whose weights are set so that a frame's embedding is (silhouette
+area share, mean metric depth over the image), each scaled to about unit
+spread. It is saved as a ``model.fit`` workdir (config.json, an orbax
+checkpoint, inputs.json) so ``estimate`` loads it like a trained run. Training
+even a tiny PhySNet here would cost most of the time budget and make the
+recovery test depend on how well an optimiser converged; a fixed embedding
+keeps the tests about the estimate loop.
+
+The recording is simulated with the estimate's own settings (mesh, frames, gust
+key, camera) and written as a dataset sequence folder (16-bit mm PNGs and
+meta.json), so the truth's PSD is zero up to the mm quantisation.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import cv2
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import model as model_lib
+import physsim
+from experiments import estimate as est
+from experiments import train as train_lib
+from model import checkpoint, config_io
+from physsim import dataset
+
+SIZE = 32
+MATERIAL = 'gray_interlock'
+# Truth: well away from the range centre in wind and area weight.
+TRUTH = dict(bending_scale=1.0, wind_speed=4.5, area_weight=0.17)
+CONFIG = est.EstimateConfig(
+  material=MATERIAL,
+  cloth_resolution=6,
+  frames=8,
+  fps=20.0,
+  warmup=0.5,
+  gusts=0.2,
+  cameras=1,
+  # n_init + q * max_iter <= 16 keeps every run in one GP buffer size, so the
+  # proposal step compiles once for the whole file.
+  q=4,
+  n_init=4,
+  max_iter=3,
+  min_iter=3,  # the recovery run does not stop early
+  backend='c',
+  workers=1,  # spawning C workers costs more than 6x6 cloths
+  seed=0,
+)
+# Embedding scales: area share and mean depth move by ~0.1 and ~0.2 m between
+# far-apart parameter sets at this size; these bring both to about unit spread.
+_AREA_SCALE = 10.0
+_DEPTH_SCALE = 5.0
+# A valid pixel's metric input is >= 0.5 m; 1 - 4 x is then clipped to 0.
+_VALID_GAIN = 4.0
+
+
+def _hand_made_params(config: model_lib.PhySNetConfig) -> dict:
+  """PhySNet weights that embed a frame as (area share, mean depth), scaled."""
+  hw = config.image_size[0] * config.image_size[1]
+  conv0 = {
+    'kernel': np.array([1.0, -_VALID_GAIN], np.float32).reshape(1, 1, 1, 2),
+    'bias': np.array([0.0, 1.0], np.float32),
+  }  # (x, relu(1 - g x)): depth and "invalid"
+  conv1 = {
+    'kernel': np.array([[1.0, 0.0], [0.0, -1.0]], np.float32).reshape(1, 1, 2, 2),
+    'bias': np.array([0.0, 1.0], np.float32),
+  }  # (x, 1 - invalid) = (depth, valid)
+  dense = np.zeros((hw, 2, 2), np.float32)  # flatten order: (pixel, channel)
+  dense[:, 1, 0] = _AREA_SCALE / hw
+  dense[:, 0, 1] = _DEPTH_SCALE / hw
+  zero = np.zeros((), np.float32)
+  return {
+    'Conv_0': conv0,
+    'PReLU_0': {'negative_slope': zero},  # ReLU
+    'Conv_1': conv1,
+    'PReLU_1': {'negative_slope': zero},
+    'Dense_0': {'kernel': dense.reshape(hw * 2, 2), 'bias': np.zeros(2, np.float32)},
+  }
+
+
+def write_hand_made_model(workdir: str) -> str:
+  """Writes a model workdir ``estimate`` loads like a trained run."""
+  trunk = model_lib.PhySNetConfig(
+    image_size=(SIZE, SIZE),
+    conv_features=(2, 2),
+    kernel_size=1,
+    pool=1,
+    dense_features=(),
+  )
+  config = model_lib.TrainConfig(network='physnet', physnet=trunk, epochs=1)
+  network = model_lib.make_network(config)
+  optimizer, _ = model_lib.make_optimizer(config, 1)
+  state = model_lib.init_state(network, optimizer, jax.random.key(0))
+  net = jax.tree.map(jnp.asarray, _hand_made_params(trunk))
+  assert jax.tree.structure(net) == jax.tree.structure(state.params['net'])
+  state = state.replace(params={**state.params, 'net': net})
+  os.makedirs(workdir, exist_ok=True)
+  config_io.write_json(os.path.join(workdir, 'config.json'), config_io.to_dict(config))
+  with checkpoint.manager(workdir) as mngr:
+    checkpoint.save(mngr, 1, state)
+  dataset.write_json_atomic(
+    os.path.join(workdir, train_lib.INPUTS_FILE), {'input_mode': 'metric'}
+  )
+  return workdir
+
+
+def _pose() -> physsim.Pose:
+  """A camera 2 m in front of the cloth and to its side, looking at its middle."""
+  return physsim.look_at((0.6, -1.8, 1.0), (0.0, 0.1, 0.9))
+
+
+def write_recording(root: str, truth: dict, config=CONFIG) -> str:
+  """Simulates ``truth`` with the estimate's settings; writes a sequence folder."""
+  mesh = physsim.square(config.cloth_resolution)
+  cloth = physsim.build(mesh, config.material)
+  space = physsim.search_space(config.material)
+  out = physsim.simulate(
+    cloth,
+    physsim.params.make(**truth),
+    frames=config.frames,
+    fps=config.fps,
+    warmup=config.warmup,
+    wind=physsim.Wind(gust_intensity=config.gusts),
+    key=jax.random.fold_in(jax.random.key(config.seed), 2)[None],  # as estimate
+    backend='c',
+    space=space,
+    workers=1,
+  )
+  assert out.valid.all()
+  intr = physsim.Intrinsics(width=SIZE, height=SIZE)
+  pose = _pose()
+  render = physsim.make_depth_renderer(mesh.faces, intr)
+  poses = jax.tree.map(lambda a: jnp.asarray(a)[None, None], pose)  # (1, 1, ...)
+  depth = np.asarray(render(jnp.asarray(out.positions), poses))  # (1, 1, T, H, W)
+  seq = os.path.join(root, 'seq')
+  os.makedirs(os.path.join(seq, 'cam0'))
+  mm = dataset.depth_to_mm(depth[0, 0])
+  for t, frame in enumerate(mm):
+    cv2.imwrite(os.path.join(seq, 'cam0', f'{t:04d}.png'), frame)
+  meta = dict(
+    truth,
+    fps=config.fps,
+    intrinsics=intr.to_dict(),
+    extrinsics=[physsim.pose_to_dict(pose)],
+  )
+  with open(os.path.join(seq, 'meta.json'), 'w') as f:
+    json.dump(meta, f)
+  return seq
+
+
+def load(seq: str, config=CONFIG, **kw) -> est.Recording:
+  return est.load_recording(
+    seq, fps=config.fps, size=(SIZE, SIZE), frames=config.frames, **kw
+  )

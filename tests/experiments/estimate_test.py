@@ -1,0 +1,270 @@
+"""Tests for experiments.estimate: recovery, stopping rule, resume, bad input.
+
+The model and recording come from ``estimate_fixtures`` (a hand-made
+embedding, not a trained network; see there why).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+import model as model_lib
+import physsim
+from experiments import estimate as est
+from tests.experiments.estimate_fixtures import (
+  CONFIG,
+  TRUTH,
+  load,
+  write_hand_made_model,
+  write_recording,
+)
+
+# ----------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope='module')
+def env(tmp_path_factory):
+  root = str(tmp_path_factory.mktemp('estimate'))
+  model_dir = write_hand_made_model(os.path.join(root, 'model'))
+  seq = write_recording(root, TRUTH)
+  return dict(root=root, model=model_dir, seq=seq, rec=load(seq))
+
+
+_MAKE_OBJECTIVE = est.make_objective  # the real one, whatever is patched later
+
+
+class _Interrupted(Exception):
+  pass
+
+
+class _Counting:
+  """Wraps ``make_objective`` so that ``fun`` counts calls (and may fail)."""
+
+  def __init__(self, fail_after: int | None = None):
+    self.calls = 0
+    self.fail_after = fail_after
+    self._make = _MAKE_OBJECTIVE
+
+  def __call__(self, *args, **kw):
+    obj = self._make(*args, **kw)
+
+    def fun(u):
+      if self.fail_after is not None and self.calls >= self.fail_after:
+        raise _Interrupted(f'after {self.calls} calls')
+      self.calls += 1
+      return obj.fun(u)
+
+    return obj._replace(fun=fun)
+
+
+def _state(workdir: str) -> dict:
+  with np.load(os.path.join(workdir, 'bo_state.npz')) as z:
+    return {k: z[k] for k in z.files}
+
+
+@pytest.fixture(scope='module')
+def recovery(env):
+  workdir = os.path.join(env['root'], 'full')
+  result = est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+  return result, _state(workdir)
+
+
+# ------------------------------------------------------------------- tests
+
+# The truth's PSD is zero but for the mm quantisation of the recording.
+_TRUTH_PSD_TOLERANCE = 1e-3
+# The same candidate scores the same in every objective (common random numbers,
+# deterministic C backend and renderer).
+_REPEAT_TOLERANCE = 1e-6
+
+
+def test_recovers_known_parameters(env, recovery):
+  result, state = recovery
+  net, params, _ = model_lib.load_network(env['model'])
+  obj = est.make_objective(CONFIG, net, params, 'metric', env['rec'])
+  u_truth = physsim.to_unit(physsim.params.make(**TRUTH), obj.space)
+  psd_truth, psd_centre = obj.fun(np.stack([u_truth, np.zeros(3)]))
+  assert psd_truth < _TRUTH_PSD_TOLERANCE
+  # the first evaluation is the range centre, scored as here
+  np.testing.assert_allclose(state['Y'][0], psd_centre, rtol=_REPEAT_TOLERANCE)
+  assert result['evaluations'] == CONFIG.n_init + CONFIG.q * CONFIG.max_iter
+  assert result['failed_evaluations'] == 0
+  assert result['truth'] == TRUTH
+  err = result['errors']
+  assert result['psd_best'] < 0.5 * psd_centre
+  assert err['estimate']['wind_speed_pct'] < err['range_centre']['wind_speed_pct']
+  for name in ('estimate.json', 'trace.png', 'montage.png', est.RUN_FILE):
+    assert os.path.isfile(os.path.join(env['root'], 'full', name))
+
+
+def test_stopping_rule_and_min_iter(env, monkeypatch):
+  # A rule that holds after any second iteration (nothing moves a whole range)
+  # may only stop the run at min_iter, before max_iter.
+  config = dataclasses.replace(
+    CONFIG, stop_rel_change=1.0, stop_window=1, min_iter=3, max_iter=4
+  )
+  workdir = os.path.join(env['root'], 'stop')
+  result = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  assert result['stopped_by_rule']
+  assert result['iterations'] == config.min_iter < config.max_iter
+  assert result['evaluations'] == config.n_init + config.q * config.min_iter
+  # Rerun on the finished workdir: nothing is evaluated again.
+  counting = _Counting()
+  monkeypatch.setattr(est, 'make_objective', counting)
+  again = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  assert counting.calls == 0
+  assert again['estimate'] == result['estimate']
+  assert again['iterations'] == result['iterations'] and again['stopped_by_rule']
+
+
+def test_resume_after_interrupt(env, recovery, monkeypatch):
+  result, state = recovery
+  workdir = os.path.join(env['root'], 'resumed')
+  done = 2  # the initial design and the first iteration
+  monkeypatch.setattr(est, 'make_objective', _Counting(fail_after=done))
+  with pytest.raises(_Interrupted):
+    est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+  assert len(_state(workdir)['Y']) == CONFIG.n_init + CONFIG.q
+
+  counting = _Counting()
+  monkeypatch.setattr(est, 'make_objective', counting)
+  resumed = est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+  assert counting.calls == 1 + CONFIG.max_iter - done  # finished batches not redone
+  np.testing.assert_array_equal(_state(workdir)['X'], state['X'])
+  np.testing.assert_allclose(_state(workdir)['Y'], state['Y'], rtol=_REPEAT_TOLERANCE)
+  assert resumed['estimate'] == result['estimate']
+  assert resumed['evaluations'] == result['evaluations']
+
+
+def test_resume_refuses_another_run(env, recovery):
+  other = dataclasses.replace(CONFIG, gusts=0.3)
+  with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
+    est.estimate(other, env['rec'], env['model'], os.path.join(env['root'], 'full'))
+  # the C worker count does not change results: it may differ on resume
+  workers = dataclasses.replace(CONFIG, workers=2)
+  est._check_run(os.path.join(env['root'], 'full'), workers, env['rec'], env['model'])
+
+
+# -------------------------------------------------------------- bad input
+
+
+def test_missing_recording(env):
+  path = os.path.join(env['root'], 'nowhere')
+  with pytest.raises(ValueError, match='nowhere'):
+    load(path)
+
+
+def test_corrupt_frame_is_named(env, tmp_path):
+  seq = str(tmp_path / 'seq')
+  shutil.copytree(env['seq'], seq)
+  with open(os.path.join(seq, 'cam0', '0003.png'), 'wb') as f:
+    f.write(b'\x89PNG\r\n\x1a\n not really')
+  with pytest.raises(ValueError, match='0003.png'):
+    load(seq)
+
+
+def test_normalised_recording_is_refused(env, tmp_path):
+  frames = str(tmp_path / 'png8')
+  os.makedirs(frames)
+  for t, d in enumerate(env['rec'].depth):
+    valid = d > 0
+    lo, hi = d[valid].min(), d[valid].max()
+    img = np.where(valid, 64 + 191 * (hi - d) / (hi - lo), 0).astype(np.uint8)
+    cv2.imwrite(os.path.join(frames, f'{t:04d}.png'), img)
+  with open(os.path.join(frames, 'fps.txt'), 'w') as f:
+    f.write('20')
+  with pytest.raises(ValueError, match=r'png8.*normalised'):
+    load(frames)
+
+
+def test_camera_json(env, tmp_path):
+  npy = str(tmp_path / 'rec.npy')
+  np.save(npy, env['rec'].depth)
+  with open(str(tmp_path / 'fps.txt'), 'w') as f:
+    f.write('20')
+  # a good file gives the recording's camera
+  good = str(tmp_path / 'cam.json')
+  with open(os.path.join(env['seq'], 'meta.json')) as f:
+    meta = json.load(f)
+  with open(good, 'w') as f:
+    json.dump({k: meta[k] for k in ('intrinsics', 'extrinsics')}, f)
+  rec = load(npy, camera_json=good)
+  np.testing.assert_allclose(rec.pose.position, env['rec'].pose.position)
+  assert rec.truth is None and load(npy).pose is None
+  bad = {
+    'missing.json': None,
+    'broken.json': '{"intrinsics": {"width": 32,',
+    'no_intrinsics.json': json.dumps({'extrinsics': meta['extrinsics']}),
+    'bad_pose.json': json.dumps(
+      {'intrinsics': meta['intrinsics'], 'extrinsics': [{'rotation': [[1, 0]]}]}
+    ),
+    'bad_fov.json': json.dumps({'intrinsics': {'fov_x_deg': 200}}),
+  }
+  for name, text in bad.items():
+    path = str(tmp_path / name)
+    if text is not None:
+      with open(path, 'w') as f:
+        f.write(text)
+    with pytest.raises(ValueError, match=name):
+      load(npy, camera_json=path)
+
+
+def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
+  empty = str(tmp_path / 'empty')
+  os.makedirs(empty)
+  with pytest.raises(ValueError, match='not a fit workdir'):
+    est.estimate(CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
+  untrained = str(tmp_path / 'untrained')
+  os.makedirs(untrained)
+  with open(os.path.join(env['model'], 'config.json')) as f:
+    text = f.read()
+  with open(os.path.join(untrained, 'config.json'), 'w') as f:
+    f.write(text)
+  with pytest.raises(ValueError, match='no checkpoint'):
+    est.estimate(CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
+  small = env['rec']._replace(depth=env['rec'].depth[:, :16, :16])
+  with pytest.raises(ValueError, match=r'takes \(32, 32\)'):
+    est.estimate(CONFIG, small, env['model'], str(tmp_path / 'w3'))
+
+
+def _blow_up(monkeypatch, worlds):
+  """Marks ``worlds`` (indices in each batch) of every simulation invalid."""
+  real = est.physsim.simulate
+
+  def simulate(*args, **kw):
+    out = real(*args, **kw)
+    bad = np.zeros(len(out.valid), bool)
+    bad[[w for w in worlds if w < len(bad)]] = True
+    pos = np.where(bad[:, None, None, None], np.nan, out.positions)
+    return out._replace(positions=pos, valid=out.valid & ~bad)
+
+  monkeypatch.setattr(est.physsim, 'simulate', simulate)
+
+
+def test_every_candidate_blowing_up_names_the_recording(env, tmp_path, monkeypatch):
+  _blow_up(monkeypatch, range(CONFIG.q))
+  config = dataclasses.replace(CONFIG, max_iter=1)
+  with pytest.raises(ValueError, match=f'{env["seq"]}.*blew up'):
+    est.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
+
+
+def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
+  env, tmp_path, monkeypatch
+):
+  _blow_up(monkeypatch, [1])
+  config = dataclasses.replace(CONFIG, max_iter=1, min_iter=1)
+  workdir = str(tmp_path / 'w')
+  result = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  y = _state(workdir)['Y']
+  assert len(y) == config.n_init + config.q
+  failed = np.flatnonzero(np.isnan(y))
+  np.testing.assert_array_equal(failed, [1, config.n_init + 1])  # slot 1 of each
+  assert result['failed_evaluations'] == 2
+  assert np.isfinite(result['psd_best'])
