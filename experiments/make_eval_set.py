@@ -30,11 +30,14 @@ GARMENT_FABRICS = {
 }
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('out', 'data/eval', 'evaluation set root')
-flags.DEFINE_integer('sequences', None, 'recordings per fabric/garment (default 3)')
-flags.DEFINE_integer('resolution', None, 'image size (default 256)')
-flags.DEFINE_bool('smoke', False, 'tiny: 2 fabrics, 1 garment, small images (CPU)')
-flags.DEFINE_string('backend', None, "override 'auto'")
+
+
+def define_flags() -> None:
+  flags.DEFINE_string('out', 'data/eval', 'evaluation set root')
+  flags.DEFINE_integer('sequences', None, 'recordings per fabric/garment (default 3)')
+  flags.DEFINE_integer('resolution', None, 'image size (default 256)')
+  flags.DEFINE_bool('smoke', False, 'tiny: 2 fabrics, 1 garment, small images (CPU)')
+  flags.DEFINE_string('backend', None, "override 'auto'")
 
 
 def configs(smoke: bool = False, **overrides) -> dict[str, gen.Config]:
@@ -82,4 +85,5 @@ def main(argv):
 
 
 if __name__ == '__main__':
+  define_flags()
   app.run(main)
