@@ -1,11 +1,19 @@
-"""Estimate a fabric's bending, area weight and the wind from a depth video.
+"""Estimate a fabric's bending, area weight and the wind from a video.
 
 Each Bayesian-optimisation iteration simulates its q candidates as one batch
 (MJX on a GPU, MuJoCo C processes on a CPU), renders them from the recording's
-camera (or from cameras drawn like the training set's), embeds every frame with
-the material's trained PhySNet and scores each candidate by the physics
-similarity distance (an energy distance between the two sets of 2-D frame
-embeddings, so neither frame order nor flapping phase matters). The run stops by
+camera (or from cameras drawn like the training set's), embeds them with the
+material's trained network and scores each candidate by the physics
+similarity distance (an energy distance between the two sets of 2-D
+embeddings, so neither frame order nor flapping phase matters).
+
+The paper's four methods (``experiments.table1`` trains them) differ only in
+what is embedded: PhySNet embeds every frame, SDN every non-overlapping clip of
+its ``num_frames`` frames (points of all cameras pooled); depth networks see
+``model.depth_input`` of depth frames, RGB networks ``model.rgb_input`` of
+8-bit colour frames (the recording's ``cam0/rgb_*.png``; candidates shaded in
+the fabric's ``physsim.FABRIC_COLORS`` colour and rounded to 8 bits, as
+``experiments.generate_dataset`` writes them). The run stops by
 the paper's rule (the best point moved < 10% of each range over the last three
 iterations) or after ``max_iter`` iterations, and resumes from its saved state.
 
@@ -39,8 +47,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import bo  # noqa: E402
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
+from experiments import generate_dataset as gen_lib  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
-from physsim import video  # noqa: E402
+from physsim import dataset, video  # noqa: E402
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,7 +107,7 @@ class EstimateConfig:
 
 
 class Recording(NamedTuple):
-  """A depth video to estimate from.
+  """A depth (and optionally colour) video to estimate from.
 
   Attributes:
     depth: (T, H, W) float32 metres, 0 invalid.
@@ -107,6 +116,7 @@ class Recording(NamedTuple):
     pose: its camera's ``physsim.Pose`` (one camera) or None.
     source: where it came from.
     truth: ground-truth parameters when known (evaluation sets), else None.
+    rgb: (T, H, W, 3) uint8 colour frames of the same times, or None.
   """
 
   depth: np.ndarray
@@ -115,6 +125,7 @@ class Recording(NamedTuple):
   pose: physsim.Pose | None
   source: str
   truth: dict | None = None
+  rgb: np.ndarray | None = None
 
 
 def _read_json(path: str) -> dict:
@@ -158,6 +169,26 @@ def _camera(cam: dict, where: str, size, *, required: bool):
   return intr, pose
 
 
+def _load_rgb(path: str, meta: dict | None, fps: float, size, n: int) -> np.ndarray:
+  """Camera 0's colour frames of a dataset sequence, resampled and resized like
+  its depth: (n, H, W, 3) uint8."""
+  if meta is None or not os.path.isdir(os.path.join(path, 'cam0')):
+    raise ValueError(
+      f'{path}: no RGB frames: colour frames are read from a dataset sequence '
+      'folder (meta.json, cam0/rgb_*.png)'
+    )
+  if not meta.get('has_rgb'):
+    raise ValueError(
+      f'{path}: no RGB frames (meta.json has_rgb is not true, no cam0/rgb_*.png); '
+      'an RGB network needs them (generate_dataset --rgb, make_eval_set)'
+    )
+  colour = dataset.read_sequence(path, cameras=[0], rgb=True).rgb[0]  # (T0, h, w, 3)
+  pos = video.resample_indices(len(colour), float(meta['fps']), fps)
+  # The nearest source frame, ties to the later one: load_depth_video's rule.
+  nearest = np.minimum(np.floor(pos + 0.5 + 1e-9).astype(int), len(colour) - 1)
+  return train_lib.resize_rgb(colour[nearest[:n]], size)
+
+
 def load_recording(
   path: str,
   *,
@@ -165,6 +196,7 @@ def load_recording(
   size: tuple[int, int],
   frames: int | None = None,
   camera_json: str | None = None,
+  rgb: bool = False,
 ) -> Recording:
   """Loads a recording in any format ``physsim.video`` reads.
 
@@ -173,9 +205,19 @@ def load_recording(
   ``camera_json`` (``{"intrinsics": ..., "extrinsics": ...}``, as in
   ``meta.json``) gives or overrides the camera of any other recording.
 
+  Args:
+    path: the recording.
+    fps: frame rate to resample to.
+    size: (H, W) to resize to (nearest neighbour).
+    frames: keep at most this many frames.
+    camera_json: optional camera file.
+    rgb: also load camera 0's colour frames (a dataset sequence with
+      ``cam0/rgb_*.png``), resampled and resized as ``experiments.train``
+      resizes them, for RGB networks.
+
   Raises:
     ValueError: a bad recording or camera file (or a camera file without
-      intrinsics), named.
+      intrinsics), or ``rgb`` asked of a recording without colour frames, named.
   """
   meta_path = os.path.join(path, 'meta.json')
   meta = _read_json(meta_path) if os.path.isfile(meta_path) else None
@@ -199,7 +241,12 @@ def load_recording(
   truth = None
   if meta is not None and 'wind_speed' in meta:
     truth = {k: float(meta[k]) for k in ('bending_scale', 'wind_speed', 'area_weight')}
-  return Recording(vid.depth, fps, intr, pose, path, truth)
+  colour = _load_rgb(path, meta, fps, size, len(vid.depth)) if rgb else None
+  if colour is not None and len(colour) != len(vid.depth):
+    raise ValueError(
+      f'{path}: {len(colour)} colour frames but {len(vid.depth)} depth frames'
+    )
+  return Recording(vid.depth, fps, intr, pose, path, truth, colour)
 
 
 # ------------------------------------------------------------------ objective
@@ -210,7 +257,8 @@ class Objective(NamedTuple):
 
   Attributes:
     fun: (q, 3) unit-cube points -> (q,) PSD, NaN for blown-up simulations.
-    simulate_frames: (q, 3) unit points -> ((q, C, T, H, W) depth, (q,) valid).
+    simulate_frames: (q, 3) unit points -> ((q, C, T, H, W) depth or
+      (q, C, T, H, W, 3) uint8 colour, as the network sees, (q,) valid).
     space: the material's search space.
     cloth: the compiled cloth.
     mesh: its rest mesh.
@@ -233,11 +281,66 @@ def _backend(name: str) -> str:
 
 
 @functools.lru_cache(maxsize=8)
-def _renderer(garment: str, spacing: float, resolution: int, intr):
-  """One jitted renderer per mesh and camera, so that estimates of several
+def _renderer(garment: str, spacing: float, resolution: int, intr, color=None):
+  """One jitted renderer per mesh, camera and modality (``color`` None: depth,
+  else 8-bit colour frames in that colour), so that estimates of several
   recordings in one process compile it once."""
   mesh = physsim.garment(garment, spacing) if garment else physsim.square(resolution)
-  return physsim.make_depth_renderer(mesh.faces, intr)
+  if color is None:
+    return physsim.make_depth_renderer(mesh.faces, intr)
+  faces = np.asarray(mesh.faces, np.int32)
+
+  @jax.jit
+  def render(positions, poses):  # (B, T, V, 3), (B, C) -> (B, C, T, H, W, 3) uint8
+    rgb = physsim.render_rgb(positions, faces, intr, poses, color=color)
+    return jnp.round(rgb * 255).astype(jnp.uint8)  # as generate_dataset writes
+
+  return render
+
+
+def network_inputs(frames, modality: str, input_mode: str = 'relative') -> jax.Array:
+  """Frames to network inputs, as ``experiments.train`` makes them.
+
+  Args:
+    frames: (..., H, W) depth in metres ('depth') or (..., H, W, 3) uint8
+      colour ('rgb').
+    modality: 'depth' or 'rgb'.
+    input_mode: ``model.depth_input`` mode (depth only).
+
+  Returns:
+    (..., H, W, channels) float32.
+  """
+  if modality == 'depth':
+    return model_lib.depth_input(frames, input_mode)
+  if modality == 'rgb':
+    return model_lib.rgb_input(frames)
+  raise ValueError(f'modality must be one of {train_lib.MODALITIES}, got {modality!r}')
+
+
+def embed_video(network, params, inputs, clip_frames: int = 0) -> jax.Array:
+  """Embeds videos frame by frame (PhySNet) or clip by clip (SDN).
+
+  Args:
+    network: a ``model.Network``.
+    params: its params.
+    inputs: (S, T, H, W, ch) network inputs of S videos.
+    clip_frames: 0: every frame is one point; else every non-overlapping clip
+      of this many frames is one point (the last ``T % clip_frames`` frames
+      are dropped, as ``experiments.train`` clips sequences).
+
+  Returns:
+    (S, N, D) points, N = T or T // clip_frames.
+  """
+  s, t = inputs.shape[:2]
+  if not clip_frames:
+    return network.apply(params, inputs.reshape(s * t, *inputs.shape[2:])).reshape(
+      s, t, -1
+    )
+  n = t // clip_frames
+  if n < 1:
+    raise ValueError(f'videos of {t} frames are shorter than a clip of {clip_frames}')
+  clips = inputs[:, : n * clip_frames].reshape(s * n, clip_frames, *inputs.shape[2:])
+  return network.apply(params, clips).reshape(s, n, -1)
 
 
 @functools.lru_cache(maxsize=8)
@@ -255,9 +358,46 @@ def _sensor(intr):
 
 
 def make_objective(
-  config: EstimateConfig, network, net_params, input_mode: str, recording: Recording
+  config: EstimateConfig,
+  network,
+  net_params,
+  input_mode: str,
+  recording: Recording,
+  *,
+  modality: str = 'depth',
+  clip_frames: int = 0,
 ) -> Objective:
-  """Builds the PSD objective of one recording (see module docstring)."""
+  """Builds the PSD objective of one recording (see module docstring).
+
+  Args:
+    config: settings.
+    network, net_params: the embedding network and its params.
+    input_mode: ``model.depth_input`` mode of a depth network.
+    recording: the recording (with ``rgb`` for an RGB network).
+    modality: 'depth' or 'rgb': which frames the network embeds.
+    clip_frames: 0 for a frame network (PhySNet), else the SDN's clip length.
+
+  Raises:
+    ValueError: an RGB objective of a recording without colour frames, or a
+      recording shorter than one clip, naming the recording.
+  """
+  if modality not in train_lib.MODALITIES:
+    raise ValueError(
+      f'modality must be one of {train_lib.MODALITIES}, got {modality!r}'
+    )
+  rec_frames = recording.rgb if modality == 'rgb' else recording.depth
+  if rec_frames is None:
+    raise ValueError(
+      f'{recording.source}: no RGB frames, but the network embeds colour frames '
+      '(load_recording(..., rgb=True) of a sequence with cam0/rgb_*.png)'
+    )
+  n_frames = rec_frames.shape[0]
+  if clip_frames and n_frames < clip_frames:
+    raise ValueError(
+      f'{recording.source}: {n_frames} frames at {recording.fps} fps, shorter '
+      f'than one SDN clip of {clip_frames} frames; use a longer recording (and '
+      'EstimateConfig.frames >= the clip)'
+    )
   fab = physsim.fabric(config.material)
   space = physsim.search_space(config.material)
   mesh = (
@@ -274,31 +414,34 @@ def make_objective(
     poses = jax.tree.map(lambda a: jnp.asarray(a)[None], recording.pose)  # (1, ...)
   else:
     poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
+  color = (
+    tuple(map(float, gen_lib.rgb_color(config.material))) if modality == 'rgb' else None
+  )
   render = _renderer(
-    config.garment, config.garment_spacing, config.cloth_resolution, intr
+    config.garment, config.garment_spacing, config.cloth_resolution, intr, color
   )
   gust_key = jax.random.fold_in(key, 2)  # common random numbers for all candidates
   noise_key = jax.random.fold_in(key, 3)  # likewise: every candidate, the same noise
   backend = _backend(config.backend)
 
-  @jax.jit
-  def embed(frames):  # (..., H, W) -> (N, 2)
-    x = model_lib.depth_input(frames.reshape(-1, h, w), input_mode)
-    return network.apply(net_params, x)
+  def embed(frames):  # (S, T, H, W[, 3]) -> (S, N, D)
+    x = network_inputs(frames, modality, input_mode)
+    return embed_video(network, net_params, x, clip_frames)
 
-  rec_points = embed(jnp.asarray(recording.depth))
+  rec_points = jax.jit(embed)(jnp.asarray(rec_frames)[None])[0]
 
   @jax.jit
-  def distances(frames):  # (q, C, T, H, W) -> (q,)
+  def distances(frames):  # (q, C, T, H, W[, 3]) -> (q,)
     q = frames.shape[0]
-    pts = embed(frames).reshape(q, -1, rec_points.shape[-1])
+    pts = embed(frames.reshape(-1, *frames.shape[2:]))  # cameras pooled
+    pts = pts.reshape(q, -1, rec_points.shape[-1])
     return jax.vmap(lambda p: model_lib.psd.psd(p, rec_points, config.distance))(pts)
 
   def simulate(u):  # (q, 3) -> ((q, T, V, 3) positions, (q,) valid)
     out = physsim.simulate(
       cloth,
       physsim.from_unit(np.asarray(u), space),
-      frames=recording.depth.shape[0],
+      frames=n_frames,
       fps=config.fps,
       warmup=config.warmup,
       wind=physsim.Wind(gust_intensity=config.gusts),
@@ -364,7 +507,9 @@ RUN_FILE = 'run.json'
 _RESUMABLE_FIELDS = ('workers',)
 
 
-def _check_run(workdir: str, config, recording: Recording, model_dir: str) -> None:
+def _check_run(
+  workdir: str, config, recording: Recording, model_dir: str, modality: str = 'depth'
+) -> None:
   """Writes what defines the run; refuses a workdir holding another run.
 
   ``bo_state.npz`` alone only knows the optimiser's settings, so without this
@@ -380,6 +525,10 @@ def _check_run(workdir: str, config, recording: Recording, model_dir: str) -> No
     ).hexdigest(),
     'model_dir': os.path.abspath(model_dir),
   }
+  if modality == 'rgb':  # depth runs keep their old run.json (they resume)
+    run['recording_rgb_sha1'] = hashlib.sha1(
+      np.ascontiguousarray(recording.rgb).tobytes()
+    ).hexdigest()
   run = json.loads(json.dumps(run))  # tuples -> lists, as read back
   path = os.path.join(workdir, RUN_FILE)
   if os.path.exists(path):
@@ -415,6 +564,50 @@ def _summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
   return out
 
 
+class EmbeddingNet(NamedTuple):
+  """A trained run as the estimate uses it.
+
+  Attributes:
+    network, params: the ``model.Network`` and its params.
+    modality: 'depth' or 'rgb'.
+    input_mode: its ``model.depth_input`` mode.
+    clip_frames: 0 for PhySNet (frames), the clip length for SDN.
+    image_size: (H, W) its inputs have.
+  """
+
+  network: object
+  params: object
+  modality: str
+  input_mode: str
+  clip_frames: int
+  image_size: tuple[int, int]
+
+
+def load_embedding(model_dir: str) -> EmbeddingNet:
+  """Loads any of ``experiments.table1``'s runs (PhySNet or SDN, depth or RGB).
+
+  Raises:
+    ValueError: not a trained run, or an unknown modality, naming ``model_dir``.
+  """
+  modality = train_lib.modality(model_dir)
+  if modality not in train_lib.MODALITIES:
+    raise ValueError(
+      f'{model_dir}/{train_lib.INPUTS_FILE}: modality {modality!r} is none of '
+      f'{train_lib.MODALITIES}'
+    )
+  network, params, cfg = model_lib.load_network(model_dir)
+  sdn = cfg.network == 'sdn'
+  trunk = cfg.sdn.trunk if sdn else cfg.physnet
+  return EmbeddingNet(
+    network,
+    params,
+    modality,
+    train_lib.input_mode(model_dir),
+    cfg.sdn.num_frames if sdn else 0,
+    tuple(trunk.image_size),
+  )
+
+
 def estimate(
   config: EstimateConfig,
   recording: Recording,
@@ -427,8 +620,10 @@ def estimate(
 
   Args:
     config: settings.
-    recording: the depth video (``load_recording``).
-    model_dir: a ``model.fit`` workdir of this material's network.
+    recording: the video (``load_recording``; with ``rgb=True`` for an RGB
+      network).
+    model_dir: a ``model.fit`` workdir of this material's network (PhySNet or
+      SDN, depth or RGB).
     workdir: where state, JSON and pictures go.
     progress: print one line per iteration.
 
@@ -436,32 +631,36 @@ def estimate(
     The result dict written to ``estimate.json``.
 
   Raises:
-    ValueError: ``model_dir`` is not a trained PhySNet run or takes another
-      frame size, ``workdir`` holds an estimate of another recording, model or
-      config, or every candidate simulation blew up (naming the recording).
+    ValueError: ``model_dir`` is not a trained run or takes another frame
+      size, an RGB network and a recording without colour frames, a recording
+      shorter than an SDN clip, ``workdir`` holds an estimate of another
+      recording, model or config, or every candidate simulation blew up
+      (naming the recording).
   """
-  if train_lib.modality(model_dir) != 'depth':
-    raise ValueError(
-      f'{model_dir}: trained on {train_lib.modality(model_dir)} frames; the '
-      'estimate compares depth videos, so it needs a depth network'
-    )
-  network, net_params, net_config = model_lib.load_network(model_dir)
-  if net_config.network != 'physnet':
-    raise ValueError(
-      f'{model_dir}: a {net_config.network!r} run; the estimate embeds single '
-      'frames with a PhySNet run'
-    )
-  size = tuple(net_config.physnet.image_size)
+  net = load_embedding(model_dir)
+  size = net.image_size
   if tuple(recording.depth.shape[1:]) != size:
     raise ValueError(
       f'{recording.source}: frames of {recording.depth.shape[1:]} but the network '
       f'in {model_dir} takes {size}; load the recording at that size'
     )
-  input_mode = train_lib.input_mode(model_dir)
+  if net.modality == 'rgb' and recording.rgb is None:
+    raise ValueError(
+      f'{recording.source}: no RGB frames, but {model_dir} is an RGB network; '
+      'load the recording with rgb=True (a sequence with cam0/rgb_*.png)'
+    )
   os.makedirs(workdir, exist_ok=True)
-  _check_run(workdir, config, recording, model_dir)
   t_start = time.time()
-  obj = make_objective(config, network, net_params, input_mode, recording)
+  obj = make_objective(
+    config,
+    net.network,
+    net.params,
+    net.input_mode,
+    recording,
+    modality=net.modality,
+    clip_frames=net.clip_frames,
+  )
+  _check_run(workdir, config, recording, model_dir, net.modality)
   sim_seconds = []
 
   def fun(u):
@@ -527,7 +726,9 @@ def estimate(
   plot_trace(res, obj.space, recording.truth, os.path.join(workdir, 'trace.png'))
   frames, _ = obj.simulate_frames(res.x_best[None])
   plot_montage(
-    recording.depth, np.asarray(frames[0, 0]), os.path.join(workdir, 'montage.png')
+    recording.rgb if net.modality == 'rgb' else recording.depth,
+    np.asarray(frames[0, 0]),
+    os.path.join(workdir, 'montage.png'),
   )
   return result
 
@@ -581,8 +782,10 @@ def plot_trace(res: bo.Result, space, truth, path: str) -> None:
 
 
 def plot_montage(recorded: np.ndarray, simulated: np.ndarray, path: str, n=6) -> None:
-  """Rows: the recording and the best simulation, ``n`` frames each."""
+  """Rows: the recording and the best simulation, ``n`` frames each; (T, H, W)
+  depth or (T, H, W, 3) uint8 colour."""
   idx = np.linspace(0, min(len(recorded), len(simulated)) - 1, n).astype(int)
+  colour = recorded.ndim == 4
   valid = recorded[recorded > 0]
   lo, hi = np.quantile(valid, [0.01, 0.99]) if valid.size else (0, 1)
   fig, axes = plt.subplots(2, n, figsize=(2 * n, 4.3))
@@ -591,9 +794,12 @@ def plot_montage(recorded: np.ndarray, simulated: np.ndarray, path: str, n=6) ->
   ):
     for c, t in enumerate(idx):
       ax = axes[r, c]
-      ax.imshow(
-        np.where(frames[t] > 0, frames[t], np.nan), cmap='turbo', vmin=lo, vmax=hi
-      )
+      if colour:
+        ax.imshow(frames[t])
+      else:
+        ax.imshow(
+          np.where(frames[t] > 0, frames[t], np.nan), cmap='turbo', vmin=lo, vmax=hi
+        )
       ax.set_xticks([])
       ax.set_yticks([])
       if c == 0:
@@ -628,14 +834,14 @@ def main(argv):
       if f[k].present
     },
   )
-  network_config = model_lib.load_network(f.model)[2]
-  size = tuple(network_config.physnet.image_size)
+  net = load_embedding(f.model)
   rec = load_recording(
     f.recording,
     fps=config.fps,
-    size=size,
+    size=net.image_size,
     frames=config.frames,
     camera_json=f.camera_json,
+    rgb=net.modality == 'rgb',
   )
   result = estimate(config, rec, f.model, f.workdir)
   est = result['estimate']

@@ -58,7 +58,8 @@ class Config:
       so a resume must use the same batch size (checked).
     workers: processes for the C backend (0: all cores).
     gust_intensity: RMS relative wind fluctuation.
-    rgb: also write shaded colour frames.
+    rgb: also write shaded colour frames, each material in its
+      ``physsim.FABRIC_COLORS`` colour (as ``experiments.estimate`` renders).
     noise: apply ``physsim.sensor`` depth-camera noise to the depth frames.
     render_method: ``'raster'`` or ``'brute'`` (``physsim.render``).
     garment: '' for the square cloth, else a ``physsim.GARMENTS`` name.
@@ -180,6 +181,8 @@ def _identity(config: Config, backend: str) -> dict:
   d['materials'] = list(config.materials)
   d['backend'] = backend
   d['batching'] = 'across-materials'  # how gust keys map to sequences
+  if config.rgb:  # older RGB datasets were all one grey
+    d['rgb_colors'] = 'fabric'
   for k in _FREE_FIELDS:
     d.pop(k)
   return d
@@ -212,8 +215,14 @@ def _open_workdir(workdir: str, config: Config, backend: str) -> dict:
   )
 
 
+def rgb_color(material: str) -> tuple[float, float, float]:
+  """The colour (RGB in [0, 1]) a material's cloth is rendered in."""
+  return physsim.FABRIC_COLORS.get(material, physsim.FABRIC_COLORS['default'])
+
+
 def _renderer(faces, intrinsics, config: Config):
-  """The jitted per-batch render stage: (positions, poses, key) -> depth[, rgb]."""
+  """The jitted per-batch render stage: (positions, poses, key, (B, 3) colours)
+  -> depth[, rgb]."""
   noise = None
   if config.noise:
     try:
@@ -224,7 +233,7 @@ def _renderer(faces, intrinsics, config: Config):
   faces = jnp.asarray(faces, jnp.int32)
 
   @jax.jit
-  def render(positions, poses, key):
+  def render(positions, poses, key, colors):
     depth = physsim.render_depth(
       positions, faces, intrinsics, poses, method=config.render_method
     )  # (B, C, T, H, W)
@@ -237,10 +246,18 @@ def _renderer(faces, intrinsics, config: Config):
       depth = flat.reshape(depth.shape)
     rgb = None
     if config.rgb:
-      rgb = physsim.render_rgb(
-        positions, faces, intrinsics, poses, method=config.render_method
+      # A batch mixes materials: shade in white, then tint each world (the
+      # shading is lambert * colour on a black background).
+      white = physsim.render_rgb(
+        positions,
+        faces,
+        intrinsics,
+        poses,
+        color=(1.0, 1.0, 1.0),
+        method=config.render_method,
       )  # (B, C, T, H, W, 3)
-      rgb = jnp.round(rgb * 255).astype(jnp.uint8)
+      rgb = white * colors[:, None, None, None, None, :]
+      rgb = jnp.round(jnp.clip(rgb, 0.0, 1.0) * 255).astype(jnp.uint8)
     return depth, rgb
 
   return render
@@ -400,7 +417,8 @@ def run(config: Config, workdir: str) -> dict:
         out.valid[:, None, None, None], out.positions, mesh.vertices.astype(np.float32)
       )
       t0 = time.perf_counter()
-      depth, rgb = jax.block_until_ready(render(positions, poses, k_noise))
+      colors = jnp.asarray([rgb_color(n) for n in names], jnp.float32)
+      depth, rgb = jax.block_until_ready(render(positions, poses, k_noise, colors))
       dt = time.perf_counter() - t0
       if seconds['first_render_call'] is None:
         seconds['first_render_call'] = dt  # includes the compile
@@ -443,6 +461,7 @@ def run(config: Config, workdir: str) -> dict:
           'backend': backend,
           'gust_intensity': config.gust_intensity,
           'noise': config.noise,
+          **({'rgb_color': list(rgb_color(material))} if config.rgb else {}),
           'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))
           if valid
           else None,

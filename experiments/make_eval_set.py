@@ -4,6 +4,8 @@ The paper's recordings are not public, so we make recordings that differ from
 the training data the way reality does (``generate_dataset``'s ``eval``
 preset: finer mesh, depth-sensor noise, 24 fps for 2.5 s, camera poses the
 training set never used, gustier wind, one camera) and keep their ground truth.
+Each recording also has colour frames (``cam0/rgb_*.png``, the fabric's colour,
+no noise), so one set serves the depth and the RGB methods.
 Garments follow the paper: a T-shirt of interlock, a shirt of tablecloth and
 jeans of denim, each later estimated with the network of its fabric.
 
@@ -42,7 +44,7 @@ def define_flags() -> None:
 
 def configs(smoke: bool = False, **overrides) -> dict[str, gen.Config]:
   """Subfolder name -> dataset config of the evaluation set."""
-  base = gen.PRESETS['eval']
+  base = dataclasses.replace(gen.PRESETS['eval'], rgb=True)
   if smoke:
     base = dataclasses.replace(
       base,

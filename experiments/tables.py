@@ -7,7 +7,10 @@ use the network of their fabric, as in the paper. For each fabric or garment
 the tables give the mean percent error of wind speed and area weight and the
 bending-scale error as a factor (which the paper could not measure), beside the
 error of the trivial estimate (the centre of the search range) and the paper's
-PhySNet-depth numbers. Failed estimates are marked F.
+PhySNet-depth numbers. Failed estimates are marked F; a method without a trained
+network for a fabric (no ``config.json`` in its run folder) is skipped there and
+shown as '-'. RGB methods need an evaluation set with colour frames (what
+``make_eval_set`` writes).
 
   python -m experiments.tables --eval=data/eval --models=out/table1 \
       --workdir=out/tables [--jobs=4]
@@ -51,7 +54,8 @@ PAPER = {
   'shirt': (34.2, 1.5),
   'jeans': (21.7, 0.6),
 }
-METHODS = ('physnet_depth',)  # what experiments.estimate supports today
+# The paper's four methods, as <network>_<modality> run folders of table1.
+METHODS = ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
 ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor')
 
 
@@ -125,18 +129,23 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
   """Runs (or reuses) every estimate; returns {key: result}."""
   for m in config.methods:
     if m not in METHODS:
-      raise ValueError(f'method {m!r}: the estimate supports {METHODS} today')
+      raise ValueError(f'method {m!r}: the estimate supports {METHODS}')
   recs = recordings(eval_root)
+  jobs, missing = [], set()
+  for m in config.methods:
+    for r in recs:
+      model_dir = _model_dir(models, m, r['fabric'])
+      if os.path.isfile(os.path.join(model_dir, 'config.json')):
+        jobs.append((r, m))
+      elif model_dir not in missing:
+        missing.add(model_dir)
+        print(f'{m}: no network at {model_dir}; its cells stay -', flush=True)
   env = dict(os.environ)
   if config.jobs > 1:  # processes share one GPU: split its memory
     env.setdefault('XLA_PYTHON_CLIENT_MEM_FRACTION', f'{0.9 / config.jobs:.2f}')
   results = {}
   with concurrent.futures.ThreadPoolExecutor(config.jobs) as pool:
-    futures = [
-      pool.submit(_job, r, m, models, workdir, config, env)
-      for m in config.methods
-      for r in recs
-    ]
+    futures = [pool.submit(_job, r, m, models, workdir, config, env) for r, m in jobs]
     for i, f in enumerate(concurrent.futures.as_completed(futures)):
       key, res = f.result()
       results[key] = res

@@ -99,7 +99,7 @@ def _clips(depth_seq: np.ndarray, frames: int) -> np.ndarray:
   return depth_seq[:, : n * frames].reshape(c * n, frames, *depth_seq.shape[2:])
 
 
-def _resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+def resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
   """Nearest-neighbour resize of (..., H, W, 3), as ``dataset.resize_depth`` does depth."""
   chw = np.moveaxis(rgb, -1, -3)  # (..., 3, H, W)
   return np.moveaxis(dataset.resize_depth(chw, size), -3, -1)
@@ -117,7 +117,7 @@ def _frames(config: Config, path: str) -> np.ndarray:
       f'{path}: modality=rgb but the sequence has no RGB frames (cam*/rgb_*.png); '
       'generate the dataset with --rgb'
     )
-  rgb = _resize_rgb(seq.rgb, size) if size else seq.rgb
+  rgb = resize_rgb(seq.rgb, size) if size else seq.rgb
   return np.asarray(model_lib.rgb_input(rgb))
 
 

@@ -12,7 +12,12 @@ keeps the tests about the estimate loop.
 
 The recording is simulated with the estimate's own settings (mesh, frames, gust
 key, camera) and written as a dataset sequence folder (16-bit mm PNGs and
-meta.json), so the truth's PSD is zero up to the mm quantisation.
+meta.json), so the truth's PSD is zero up to the mm quantisation; with
+``rgb=True`` it also holds 8-bit colour frames shaded in the fabric's colour.
+
+For the other three methods (PhySNet-RGB, SDN-depth, SDN-RGB),
+``write_random_model`` saves an untrained (randomly initialised) tiny network
+the same way: those tests check that the estimate runs, not what it recovers.
 """
 
 from __future__ import annotations
@@ -112,13 +117,50 @@ def write_hand_made_model(workdir: str) -> str:
   return workdir
 
 
+# SDN clip length of the tiny SDNs (CONFIG.frames = 8 holds two clips).
+CLIP_FRAMES = 4
+
+
+def write_random_model(workdir: str, network: str, modality: str, seed: int = 0):
+  """Writes an untrained tiny PhySNet or SDN run on depth or RGB frames."""
+  channels = train_lib.CHANNELS[modality]
+  trunk = model_lib.PhySNetConfig(
+    in_channels=channels,
+    image_size=(SIZE, SIZE),
+    conv_features=(4,),
+    kernel_size=3,
+    pool=4,
+    dense_features=(8,),
+  )
+  if network == 'physnet':
+    config = model_lib.TrainConfig(network='physnet', physnet=trunk, epochs=1)
+  else:
+    sdn = model_lib.SDNConfig(
+      in_channels=channels, num_frames=CLIP_FRAMES, num_components=2, trunk=trunk
+    )
+    config = model_lib.TrainConfig(network='sdn', sdn=sdn, loss='contrastive', epochs=1)
+  net = model_lib.make_network(config)
+  optimizer, _ = model_lib.make_optimizer(config, 1)
+  state = model_lib.init_state(net, optimizer, jax.random.key(seed))
+  os.makedirs(workdir, exist_ok=True)
+  config_io.write_json(os.path.join(workdir, 'config.json'), config_io.to_dict(config))
+  with checkpoint.manager(workdir) as mngr:
+    checkpoint.save(mngr, 1, state)
+  dataset.write_json_atomic(
+    os.path.join(workdir, train_lib.INPUTS_FILE),
+    {'modality': modality, 'input_mode': 'relative'},
+  )
+  return workdir
+
+
 def _pose() -> physsim.Pose:
   """A camera 2 m in front of the cloth and to its side, looking at its middle."""
   return physsim.look_at((0.6, -1.8, 1.0), (0.0, 0.1, 0.9))
 
 
-def write_recording(root: str, truth: dict, config=CONFIG) -> str:
-  """Simulates ``truth`` with the estimate's settings; writes a sequence folder."""
+def write_recording(root: str, truth: dict, config=CONFIG, rgb: bool = False) -> str:
+  """Simulates ``truth`` with the estimate's settings; writes a sequence folder
+  (with colour frames ``cam0/rgb_*.png`` if ``rgb``)."""
   mesh = physsim.square(config.cloth_resolution)
   cloth = physsim.build(mesh, config.material)
   space = physsim.search_space(config.material)
@@ -151,6 +193,24 @@ def write_recording(root: str, truth: dict, config=CONFIG) -> str:
     intrinsics=intr.to_dict(),
     extrinsics=[physsim.pose_to_dict(pose)],
   )
+  if rgb:
+    colour = physsim.render_rgb(
+      jnp.asarray(out.positions),
+      mesh.faces,
+      intr,
+      poses,
+      color=physsim.FABRIC_COLORS[config.material],
+    )[0, 0]
+    colour = np.asarray(jnp.round(colour * 255).astype(jnp.uint8))
+    for t, frame in enumerate(colour):
+      cv2.imwrite(
+        os.path.join(seq, 'cam0', f'rgb_{t:04d}.png'),
+        cv2.cvtColor(frame, cv2.COLOR_RGB2BGR),
+      )
+    # What dataset.read_sequence needs to find the colour frames.
+    meta.update(
+      n_cameras=1, n_frames=len(colour), height=SIZE, width=SIZE, has_rgb=True
+    )
   with open(os.path.join(seq, 'meta.json'), 'w') as f:
     json.dump(meta, f)
   return seq

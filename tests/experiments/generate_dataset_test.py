@@ -133,6 +133,11 @@ def test_rgb_and_sensor_noise(tmp_path):
   clean = dataset.read_sequence(str(tmp_path / 'clean' / 'pink_nylon' / '0000'))
   assert noisy.rgb.shape == (*noisy.depth.shape, 3) and noisy.rgb.max() > 0
   assert clean.rgb is None
+  # shaded in the fabric's colour: each channel at most (lit fully) its colour
+  color = np.asarray(physsim.FABRIC_COLORS['pink_nylon'])
+  assert noisy.meta['rgb_color'] == list(color)
+  peak = noisy.rgb.reshape(-1, 3).max(axis=0)
+  assert np.all(peak <= np.round(255 * color)) and peak[0] > peak[1] > 0
   # noise only removes or perturbs pixels the clean render hit
   assert not np.any((noisy.depth > 0) & (clean.depth == 0))
   both = (noisy.depth > 0) & (clean.depth > 0)

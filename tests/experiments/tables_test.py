@@ -1,9 +1,11 @@
 """Tests for experiments.tables: summaries and the markdown, on hand-made results."""
 
+import os
+
 import numpy as np
 import pytest
 
-from experiments import tables
+from experiments import table1, tables
 
 
 def _res(wind, weight, factor, centre=(50.0, 5.0, 2.0)):
@@ -37,7 +39,37 @@ def test_summary_means_and_failures():
 
 def test_unsupported_method_and_empty_eval(tmp_path):
   with pytest.raises(ValueError, match='supports'):
-    tables.run_all(tables.Config(methods=('sdn_rgb',)), str(tmp_path), '', '')
+    tables.run_all(tables.Config(methods=('sdn_thermal',)), str(tmp_path), '', '')
   with pytest.raises(ValueError, match='no recordings'):
     tables.recordings(str(tmp_path))
   assert np.isfinite(tables.PAPER['jeans'][0])
+
+
+def test_a_method_without_networks_is_a_dash(tmp_path, monkeypatch):
+  rec = {
+    'set': 'fabrics',
+    'fabric': 'black_denim',
+    'garment': '',
+    'seq_id': '0000',
+    'path': 'unused',
+  }
+  monkeypatch.setattr(tables, 'recordings', lambda root: [rec])
+  models = str(tmp_path / 'models')
+  only = table1.run_dir(models, 'sdn', 'rgb', 'simulation', 'black_denim')
+  os.makedirs(only)
+  open(os.path.join(only, 'config.json'), 'w').close()
+  ran = []
+
+  def job(r, method, *args):
+    ran.append(method)
+    return (method, r['set'], r['fabric'], r['seq_id']), _res(10.0, 2.0, 2.0)
+
+  monkeypatch.setattr(tables, '_job', job)
+  assert tables.METHODS == ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
+  results = tables.run_all(tables.Config(), 'eval', models, str(tmp_path / 'w'))
+  assert ran == ['sdn_rgb']
+  md = tables.format_tables(tables.summarise(results, tables.METHODS), tables.METHODS)
+  row = next(line for line in md.splitlines() if line.startswith('| black_denim'))
+  assert row.startswith(
+    '| black_denim | - | - | - | - | - | - | - | - | - | 10.0 | 2.0'
+  )
