@@ -459,7 +459,7 @@ def make_objective(
       lambda a: jnp.broadcast_to(a, (q, *a.shape)), poses
     )  # (q, C, ...)
     frames = render(jnp.asarray(pos), batch_poses)  # (q, C, T, H, W)
-    if config.sensor_noise:
+    if config.sensor_noise and color is None:  # the sensor model is for depth
       frames = _sensor(intr)(frames, noise_key)
     return frames
 
