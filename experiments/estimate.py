@@ -32,7 +32,6 @@ import functools
 import hashlib
 import json
 import os
-import tempfile
 import time
 from typing import NamedTuple
 
@@ -47,6 +46,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import bo  # noqa: E402
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
+from experiments import files  # noqa: E402
 from experiments import generate_dataset as gen_lib  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 from physsim import dataset, video  # noqa: E402
@@ -481,25 +481,8 @@ def make_objective(
 # ------------------------------------------------------------------- estimate
 
 
-def _atomic_write(path: str, write) -> None:
-  d = os.path.dirname(os.path.abspath(path))
-  fd, tmp = tempfile.mkstemp(dir=d, suffix='.tmp' + os.path.splitext(path)[1])
-  os.close(fd)
-  try:
-    write(tmp)
-    os.replace(tmp, path)
-  except BaseException:
-    if os.path.exists(tmp):
-      os.remove(tmp)
-    raise
-
-
-def _write_json(path: str, obj) -> None:
-  def write(p):
-    with open(p, 'w') as f:
-      json.dump(obj, f, indent=1)
-
-  _atomic_write(path, write)
+_atomic_write = files.write_atomic
+_write_json = files.write_json
 
 
 RUN_FILE = 'run.json'

@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import tempfile
 import time
 
 import jax
@@ -30,6 +29,7 @@ import numpy as np  # noqa: E402
 from absl import app, flags  # noqa: E402
 
 import physsim  # noqa: E402
+from experiments import files  # noqa: E402
 from physsim import motion  # noqa: E402
 
 
@@ -80,14 +80,6 @@ flags.DEFINE_enum('preset', 'full', list(PRESETS), 'sizes')
 flags.DEFINE_enum(
   'backend', None, ['auto', 'mjx', 'c'], "override: 'auto' = MJX on GPU"
 )
-
-
-def _atomic_json(obj, path):
-  with tempfile.NamedTemporaryFile(
-    'w', dir=os.path.dirname(path), delete=False, suffix='.tmp'
-  ) as f:
-    json.dump(obj, f, indent=1)
-  os.replace(f.name, path)
 
 
 def _simulate_group(config: Config, variant: str, winds, bendings):
@@ -157,16 +149,12 @@ def run(config: Config, workdir: str) -> dict:
     n = len(config.fabrics) * len(winds) * len(bendings)
     print(f'{key}: simulating {n} worlds ...', flush=True)
     done[key] = _simulate_group(config, variant, winds, bendings)
-    _atomic_json(
-      {'config': dataclasses.asdict(config), 'groups': done}, path
+    files.write_json(
+      path, {'config': dataclasses.asdict(config), 'groups': done}
     )  # resume point
   plot_sweep(config, done, os.path.join(workdir, 'motion_vs_wind.png'))
   table = settings_table(config, done)
-  with open(os.path.join(workdir, 'settings.md.tmp'), 'w') as f:
-    f.write(table + '\n')
-  os.replace(
-    os.path.join(workdir, 'settings.md.tmp'), os.path.join(workdir, 'settings.md')
-  )
+  files.write_text(os.path.join(workdir, 'settings.md'), table + '\n')
   print(sweep_table(config, done))
   print(table)
   return done
@@ -254,10 +242,8 @@ def plot_sweep(config: Config, done, path: str) -> None:
     fontsize=10,
   )
   fig.tight_layout()
-  tmp = path + '.tmp.png'
-  fig.savefig(tmp, dpi=100)
+  files.savefig(fig, path, dpi=100)
   plt.close(fig)
-  os.replace(tmp, path)
 
 
 def main(argv):

@@ -34,6 +34,7 @@ from absl import app, flags, logging  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import physsim  # noqa: E402
+from experiments import files  # noqa: E402
 from physsim import dataset  # noqa: E402
 
 
@@ -299,10 +300,8 @@ def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str |
   fig.colorbar(im, ax=axes, shrink=0.6, label='depth, m (white: invalid)')
   fig.suptitle(f'{material}, camera 0', fontsize=9)
   path = os.path.join(workdir, f'montage_{material}.png')
-  tmp = os.path.join(workdir, f'{dataset.TMP_PREFIX}montage_{material}.png')
-  fig.savefig(tmp, dpi=110)
+  files.savefig(fig, path, dpi=110)
   plt.close(fig)
-  os.replace(tmp, path)
   return path
 
 

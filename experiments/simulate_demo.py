@@ -22,6 +22,7 @@ import numpy as np  # noqa: E402
 from absl import app, flags  # noqa: E402
 
 import physsim  # noqa: E402
+from experiments import files  # noqa: E402
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', 'out/demo', 'where the PNG and JSON go')
@@ -71,10 +72,8 @@ def filmstrip(models, rollouts, labels, path, n=6):
       )
   fig.suptitle(f'{FLAGS.wind:g} m/s wind from -y, gusts {FLAGS.gusts:g}', fontsize=10)
   fig.tight_layout()
-  tmp = path + '.tmp.png'
-  fig.savefig(tmp, dpi=90)
+  files.savefig(fig, path, dpi=90)
   plt.close(fig)
-  os.replace(tmp, path)
 
 
 def main(argv):

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import tempfile
 
 import matplotlib
 
@@ -54,6 +53,7 @@ import numpy as np  # noqa: E402
 from absl import app, flags, logging  # noqa: E402
 
 import model as model_lib  # noqa: E402
+from experiments import files  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 from physsim import dataset  # noqa: E402
 
@@ -253,17 +253,7 @@ def _to_2d(emb: np.ndarray) -> tuple[np.ndarray, str]:
 
 
 def _savefig_atomic(fig, path: str) -> None:
-  fd, tmp = tempfile.mkstemp(
-    dir=os.path.dirname(os.path.abspath(path)), prefix=dataset.TMP_PREFIX, suffix='.png'
-  )
-  os.close(fd)
-  try:
-    fig.savefig(tmp, dpi=130, format='png')
-    os.replace(tmp, path)
-  except BaseException:
-    if os.path.exists(tmp):
-      os.remove(tmp)
-    raise
+  files.savefig(fig, path, dpi=130)
 
 
 def similarity_map(config: Config, root: str, workdir: str, material: str) -> str:

@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from absl import app, flags, logging  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments import make_eval_set, table1  # noqa: E402
+from experiments import files, make_eval_set, table1  # noqa: E402
 from physsim import dataset  # noqa: E402
 
 # The paper's PhySNet-depth results (percent error of wind speed, area weight).
@@ -270,10 +270,8 @@ def bending_surfaces(results: dict, method: str, path: str) -> None:
     ax.title.set_fontsize(9)
   fig.suptitle(f'bending matrices, true (wire) vs estimated (surface), {method}')
   fig.tight_layout()
-  tmp = path + '.tmp.png'
-  fig.savefig(tmp, dpi=90)
+  files.savefig(fig, path, dpi=90)
   plt.close(fig)
-  os.replace(tmp, path)
 
 
 def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
