@@ -3,9 +3,11 @@
 # device machine (after the wheels of ../shared/tools/device-wheels.sh are in
 # /tmp/site). Each step has its own time limit and log under $OUT; a failing
 # step does not stop the rest.
-#   bash benchmarks/gpu_suite.sh render|motion|dataset|estimate
+#   bash benchmarks/gpu_suite.sh render|motion|estimate|tables
+# The device image had no working EGL: MuJoCo's own renderer is timed on the CPU
+# only (render_throughput.py there), and MUJOCO_GL=glfw lets mujoco import.
 set -uo pipefail
-export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-egl}
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 OUT=${OUT:-out/gpu}
 mkdir -p "$OUT"
 step() {  # name seconds command...
@@ -19,7 +21,7 @@ case ${1:-render} in
   render)
     nvidia-smi -L >"$OUT/gpu.txt" 2>&1
     step render_raster 200 python benchmarks/render_throughput.py \
-      --batch_sizes=1,16,64,210 --methods=raster --mjwarp \
+      --batch_sizes=1,16,64,210 --methods=raster --mjwarp --mujoco_frames=0 \
       --out="$OUT/render_gpu.json"
     step render_brute 60 python benchmarks/render_throughput.py \
       --batch_sizes=1 --methods=brute --mujoco_frames=0 \
@@ -46,6 +48,16 @@ case ${1:-render} in
     step estimate 220 python -m experiments.estimate \
       --recording=/tmp/eval/gray_interlock/0000 --material=gray_interlock \
       --model=/tmp/train/gray_interlock --workdir="$OUT/estimate"
+    ;;
+  tables)  # the partial Table 2 in README (after 'motion' made /tmp/ds)
+    step train 420 python -m experiments.train --dataset=/tmp/ds \
+      --workdir=/tmp/models/physnet_depth/simulation --epochs=5
+    step eval_set 200 python -m experiments.make_eval_set --out=/tmp/eval \
+      --sequences=2
+    # Resumable: rerun until every recording has its estimate.json.
+    step tables 530 python -m experiments.tables --eval=/tmp/eval \
+      --models=/tmp/models --workdir=/tmp/tables --jobs=7 --methods=physnet_depth
+    cp /tmp/tables/tables.md /tmp/tables/tables.json "$OUT/" 2>/dev/null
     ;;
 esac
 tail -n 3 "$OUT"/*.log

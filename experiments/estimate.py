@@ -274,12 +274,6 @@ class Objective(NamedTuple):
   evaluate: object = None
 
 
-def _backend(name: str) -> str:
-  if name == 'auto':
-    return 'mjx' if jax.default_backend() == 'gpu' else 'c'
-  return name
-
-
 @functools.lru_cache(maxsize=8)
 def _renderer(garment: str, spacing: float, resolution: int, intr, color=None):
   """One jitted renderer per mesh, camera and modality (``color`` None: depth,
@@ -345,16 +339,8 @@ def embed_video(network, params, inputs, clip_frames: int = 0) -> jax.Array:
 
 @functools.lru_cache(maxsize=8)
 def _sensor(intr):
-  """Jitted sensor model over a batch of frames (..., H, W), one key each."""
-
-  @jax.jit
-  def apply(frames, key):
-    flat = frames.reshape(-1, *frames.shape[-2:])
-    keys = jax.random.split(key, flat.shape[0])
-    out = jax.vmap(lambda k, d: physsim.apply_noise(k, d, intr))(keys, flat)
-    return out.reshape(frames.shape)
-
-  return apply
+  """The jitted sensor model over a batch of frames: ``(frames, key) -> frames``."""
+  return jax.jit(lambda frames, key: physsim.apply_noise_frames(key, frames, intr))
 
 
 def make_objective(
@@ -422,7 +408,7 @@ def make_objective(
   )
   gust_key = jax.random.fold_in(key, 2)  # common random numbers for all candidates
   noise_key = jax.random.fold_in(key, 3)  # likewise: every candidate, the same noise
-  backend = _backend(config.backend)
+  backend = physsim.resolve_backend(config.backend)
 
   def embed(frames):  # (S, T, H, W[, 3]) -> (S, N, D)
     x = network_inputs(frames, modality, input_mode)
@@ -481,10 +467,6 @@ def make_objective(
 # ------------------------------------------------------------------- estimate
 
 
-_atomic_write = files.write_atomic
-_write_json = files.write_json
-
-
 RUN_FILE = 'run.json'
 # Config fields that do not change what an estimate computes.
 _RESUMABLE_FIELDS = ('workers',)
@@ -530,7 +512,7 @@ def _check_run(
         'new workdir'
       )
     return
-  _write_json(path, run)
+  files.write_json(path, run)
 
 
 def _summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
@@ -705,7 +687,7 @@ def estimate(
   if recording.truth is not None:
     result['truth'] = recording.truth
     result['errors'] = errors(best, recording.truth, obj.space)
-  _write_json(os.path.join(workdir, 'estimate.json'), result)
+  files.write_json(os.path.join(workdir, 'estimate.json'), result)
   plot_trace(res, obj.space, recording.truth, os.path.join(workdir, 'trace.png'))
   frames, _ = obj.simulate_frames(res.x_best[None])
   plot_montage(
@@ -760,7 +742,7 @@ def plot_trace(res: bo.Result, space, truth, path: str) -> None:
       ax.axhline(truth[physsim.Params._fields[i]], color='r', lw=1, label='truth')
       ax.legend(fontsize=8)
   fig.tight_layout()
-  _atomic_write(path, lambda p: fig.savefig(p, dpi=90))
+  files.savefig(fig, path, dpi=90)
   plt.close(fig)
 
 
@@ -788,7 +770,7 @@ def plot_montage(recorded: np.ndarray, simulated: np.ndarray, path: str, n=6) ->
       if c == 0:
         ax.set_ylabel(name)
   fig.tight_layout()
-  _atomic_write(path, lambda p: fig.savefig(p, dpi=80))
+  files.savefig(fig, path, dpi=80)
   plt.close(fig)
 
 

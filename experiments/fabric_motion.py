@@ -98,9 +98,7 @@ def _simulate_group(config: Config, variant: str, winds, bendings):
   names = [config.fabrics[i] for i in f]
   weight = np.array([physsim.fabric(n).real_area_weight for n in names])
   p = physsim.params.make(b, w, weight)
-  backend = config.backend
-  if backend == 'auto':
-    backend = 'mjx' if jax.default_backend() == 'gpu' else 'c'
+  backend = physsim.resolve_backend(config.backend)
   t0 = time.time()
   out = physsim.simulate(
     model,

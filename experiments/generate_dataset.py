@@ -150,14 +150,6 @@ def material_params(config: Config, material: str) -> physsim.Params:
   return physsim.params.sample(rng, config.sequences, physsim.search_space(material))
 
 
-def _resolve_backend(backend: str) -> str:
-  if backend == 'auto':
-    return 'mjx' if jax.default_backend() == 'gpu' else 'c'
-  if backend not in ('mjx', 'c'):
-    raise ValueError(f"backend must be 'auto', 'mjx' or 'c', got {backend!r}")
-  return backend
-
-
 def _check_config(config: Config) -> None:
   unknown = [m for m in config.materials if m not in physsim.FABRICS]
   if unknown or not config.materials:
@@ -239,12 +231,7 @@ def _renderer(faces, intrinsics, config: Config):
       positions, faces, intrinsics, poses, method=config.render_method
     )  # (B, C, T, H, W)
     if noise is not None:
-      flat = depth.reshape(-1, *depth.shape[-2:])
-      keys = jax.random.split(key, flat.shape[0])
-      flat = jax.vmap(lambda k, d: sensor.apply_noise(k, d, intrinsics, noise))(
-        keys, flat
-      )
-      depth = flat.reshape(depth.shape)
+      depth = sensor.apply_noise_frames(key, depth, intrinsics, noise)
     rgb = None
     if config.rgb:
       # A batch mixes materials: shade in white, then tint each world (the
@@ -317,7 +304,7 @@ def run(config: Config, workdir: str) -> dict:
     material, seconds simulating / rendering / writing, frames per second.
   """
   _check_config(config)
-  backend = _resolve_backend(config.backend)
+  backend = physsim.resolve_backend(config.backend)
   _open_workdir(workdir, config, backend)
   intrinsics = physsim.Intrinsics(width=config.resolution, height=config.resolution)
   mesh = _mesh(config)

@@ -40,7 +40,8 @@ from tqdm import tqdm  # noqa: E402
 
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments import estimate as est  # noqa: E402
+from experiments import estimate as est
+from experiments import files  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 
 AIR_DENSITY = 1.0  # kg/m^3, ArcSim's wind model
@@ -187,7 +188,7 @@ def evaluate_points(obj: est.Objective, U, mesh, fps, batch, state_path, signatu
         with open(p, 'wb') as f:
           np.savez(f, signature=signature, done=done, psd=psd, stats=stats)
 
-      est._atomic_write(state_path, write)
+      files.write_atomic(state_path, write)
   return psd, stats
 
 
@@ -271,7 +272,7 @@ def run(config: Config, recording_dir: str, model_dir: str, workdir: str) -> dic
     'config': dataclasses.asdict(config),
     'seconds': time.time() - t0,
   }  # fmt: skip
-  est._write_json(os.path.join(workdir, 'landscape.json'), result)
+  files.write_json(os.path.join(workdir, 'landscape.json'), result)
   plot_lines(lines, space, os.path.join(workdir, 'landscape_1d.png'))
   plot_grid(
     result['grid'], rec.truth, os.path.join(workdir, 'landscape_wind_weight.png')
@@ -298,7 +299,7 @@ def plot_lines(lines: dict, space, path: str) -> None:
       ax.set_xscale('log')
     ax.legend(fontsize=8)
   fig.tight_layout()
-  est._atomic_write(path, lambda p: fig.savefig(p, dpi=90))
+  files.savefig(fig, path, dpi=90)
   plt.close(fig)
 
 
@@ -324,7 +325,7 @@ def plot_grid(grid: dict, truth: dict, path: str) -> None:
          title='PSD; white: $\\rho v^2 / (w g)$')  # fmt: skip
   ax.legend(fontsize=8, loc='upper left')
   fig.tight_layout()
-  est._atomic_write(path, lambda p: fig.savefig(p, dpi=90))
+  files.savefig(fig, path, dpi=90)
   plt.close(fig)
 
 
@@ -339,7 +340,7 @@ def plot_identifiability(ident: dict, wind, truth_ratio: float, path: str) -> No
     ax.set(xscale='log', xlabel='$\\rho v^2 / (w g)$', ylabel=s,
            title=f'R$^2$ ratio {r["r2_ratio"]:.2f}, +wind {r["r2_ratio_and_wind"]:.2f}')  # fmt: skip
   fig.colorbar(sc, ax=axes, label='wind speed (m/s)')
-  est._atomic_write(path, lambda p: fig.savefig(p, dpi=90))
+  files.savefig(fig, path, dpi=90)
   plt.close(fig)
 
 

@@ -79,9 +79,7 @@ def filmstrip(models, rollouts, labels, path, n=6):
 def main(argv):
   del argv
   os.makedirs(FLAGS.workdir, exist_ok=True)
-  backend = FLAGS.backend
-  if backend == 'auto':
-    backend = 'mjx' if jax.default_backend() == 'gpu' else 'c'
+  backend = physsim.resolve_backend(FLAGS.backend)
   models, rollouts, labels, stats = [], [], [], {}
   t0 = time.time()
   for name, scale in zip(FLAGS.fabrics, map(float, FLAGS.bending), strict=True):

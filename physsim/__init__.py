@@ -39,8 +39,8 @@ from physsim.render import (
   render_rgb,
   shade_rgb,
 )
-from physsim.rollout import Rollout, Wind, simulate
-from physsim.sensor import SensorNoise, apply_noise
+from physsim.rollout import Rollout, Wind, resolve_backend, simulate
+from physsim.sensor import SensorNoise, apply_noise, apply_noise_frames
 from physsim.video import DepthVideo, load_depth_video
 
 __all__ = [
@@ -63,6 +63,7 @@ __all__ = [
   'SimConfig',
   'Wind',
   'apply_noise',
+  'apply_noise_frames',
   'build',
   'camera',
   'dataset',
@@ -80,6 +81,7 @@ __all__ = [
   'pose_from_dict',
   'pose_to_dict',
   'reference_rigidity',
+  'resolve_backend',
   'render',
   'render_depth',
   'render_rgb',

@@ -90,19 +90,36 @@ def mm_to_depth(mm) -> np.ndarray:
 # ----------------------------------------------------------------- atomic I/O
 
 
-def write_text_atomic(path: str, text: str) -> None:
-  """Writes ``text`` to ``path`` through a temporary file and ``os.replace``."""
+def write_atomic(path: str, write) -> None:
+  """Calls ``write(tmp)`` on a temporary sibling of ``path``, then renames it.
+
+  The temporary name keeps ``path``'s extension (``np.savez`` and
+  ``savefig`` look at it) and starts with ``TMP_PREFIX`` (ignored by readers,
+  removed by ``clean_tmp``); on any error it is deleted.
+  """
   folder = os.path.dirname(os.path.abspath(path))
   os.makedirs(folder, exist_ok=True)
-  fd, tmp = tempfile.mkstemp(dir=folder, prefix=TMP_PREFIX, suffix='.part')
+  fd, tmp = tempfile.mkstemp(
+    dir=folder, prefix=TMP_PREFIX, suffix=os.path.splitext(path)[1]
+  )
+  os.close(fd)
   try:
-    with os.fdopen(fd, 'w', newline='') as f:
-      f.write(text)
+    write(tmp)
     os.replace(tmp, path)
   except BaseException:
     if os.path.exists(tmp):
       os.remove(tmp)
     raise
+
+
+def write_text_atomic(path: str, text: str) -> None:
+  """Writes ``text`` to ``path`` through a temporary file and ``os.replace``."""
+
+  def write(tmp):
+    with open(tmp, 'w', newline='') as f:
+      f.write(text)
+
+  write_atomic(path, write)
 
 
 def write_json_atomic(path: str, obj: Any) -> None:

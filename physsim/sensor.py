@@ -184,3 +184,16 @@ def apply_noise(
   if config.dropout_rate > 0:
     keep = keep & ~jax.random.bernoulli(k_drop, config.dropout_rate, depth.shape)
   return jnp.where(keep & (z > 0), z, 0.0)
+
+
+def apply_noise_frames(
+  key: jax.Array, frames, intrinsics: Intrinsics, config: SensorNoise = SensorNoise()
+) -> jax.Array:
+  """`apply_noise` over any leading axes of ``frames`` (..., H, W).
+
+  Frame ``i`` of the flattened batch uses ``jax.random.split(key, n)[i]``.
+  """
+  flat = frames.reshape(-1, *frames.shape[-2:])
+  keys = jax.random.split(key, flat.shape[0])
+  out = jax.vmap(lambda k, d: apply_noise(k, d, intrinsics, config))(keys, flat)
+  return out.reshape(frames.shape)
