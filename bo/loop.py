@@ -113,6 +113,205 @@ def _load(path: str) -> dict[str, Any]:
     return {k: z[k] for k in z.files}
 
 
+class State(NamedTuple):
+  """Where one search stands (host arrays; ``Minimizer`` reads and returns it).
+
+  Attributes:
+    X: evaluated points, original units ``(n, d)``.
+    Y: their values ``(n,)``, NaN for failures.
+    iteration: BO iterations finished (0 until the initial design is told).
+    history: the incumbent after each iteration ``(iteration, d)``.
+    params: last fitted GP hyperparameters (flat) or None (warm start).
+    stopped: the stopping rule (or a callback, through ``stop``) ended it.
+  """
+
+  X: np.ndarray
+  Y: np.ndarray
+  iteration: int = 0
+  history: np.ndarray | None = None
+  params: np.ndarray | None = None
+  stopped: bool = False
+
+
+class Minimizer:
+  """``minimize``'s loop one step at a time: ``ask`` for points, ``tell`` values.
+
+  A driver that runs many searches at once (one per recording, say) asks each
+  for its points, evaluates all of them in one batch and tells each its
+  values; every search then goes exactly as ``minimize`` would have run it.
+  The arguments are ``minimize``'s (see there) but for ``fun`` and
+  ``callback``. ``device`` places the GP fit and proposal (default: JAX's
+  default device); its float64 arithmetic runs under ``jax.enable_x64``
+  inside ``ask`` only, so the caller's objective keeps its own precision.
+  """
+
+  def __init__(
+    self,
+    bounds,
+    *,
+    n_init: int,
+    n_iter: int,
+    q: int = 1,
+    x0=None,
+    seed: int = 0,
+    acquisition: str = 'logei',
+    beta: float = 0.1,
+    kernel: str = 'matern52',
+    stop_rel_change: float | None = None,
+    stop_window: int = 3,
+    stop_min_iter: int = 0,
+    state_path: str | None = None,
+    config_overrides: dict[str, Any] | None = None,
+    device=None,
+  ):
+    bounds = np.asarray(bounds, dtype=np.float64)
+    if bounds.ndim != 2 or bounds.shape[1] != 2:
+      raise ValueError(f'bounds must have shape (d, 2), got {bounds.shape}.')
+    if not np.all(bounds[:, 1] > bounds[:, 0]):
+      raise ValueError('bounds need lower < upper in every dimension.')
+    if n_init < 1 or n_iter < 0 or q < 1:
+      raise ValueError('Need n_init >= 1, n_iter >= 0 and q >= 1.')
+    self.bounds = bounds
+    self.d = bounds.shape[0]
+    self.lo, self.hi = bounds[:, 0], bounds[:, 1]
+    self.width = self.hi - self.lo
+    self.n_init, self.n_iter, self.q = n_init, n_iter, q
+    self.seed = seed
+    self.stop_rel_change, self.stop_window = stop_rel_change, stop_window
+    self.stop_min_iter = stop_min_iter
+    self.state_path = state_path
+    self.device = device
+    self.x0 = None
+    if x0 is not None:
+      self.x0 = np.atleast_2d(np.asarray(x0, dtype=np.float64))
+      if self.x0.shape[1] != self.d:
+        raise ValueError(f'x0 must have {self.d} columns, got {self.x0.shape}.')
+    config = propose.ProposeConfig(
+      d=self.d, q=q, acquisition=acquisition, beta=beta, kernel=kernel,
+      **(config_overrides or {}),
+    )  # fmt: skip
+    self.signature = json.dumps(
+      dict(config._asdict(), bounds=bounds.tolist(), n_init=n_init, seed=seed)
+    )
+    self._key = jax.random.PRNGKey(seed)
+    self._step = propose.cached_propose(config)  # Validates before any eval.
+
+  def _to_unit(self, x):
+    return 2.0 * (x - self.lo) / self.width - 1.0
+
+  def _from_unit(self, u):
+    return self.lo + (np.clip(u, -1.0, 1.0) + 1.0) * 0.5 * self.width
+
+  def start(self) -> State:
+    """A fresh state, or the one saved at ``state_path`` (resume)."""
+    empty = State(np.zeros((0, self.d)), np.zeros((0,)), 0, np.zeros((0, self.d)))
+    if self.state_path is None or not os.path.exists(self.state_path):
+      return empty
+    s = _load(self.state_path)
+    if str(s['signature']) != self.signature:
+      raise ValueError(f'{self.state_path} was written by a run with other settings.')
+    state = State(
+      s['X'], s['Y'], int(s['iteration']), s['history'].reshape(-1, self.d),
+      s['params'] if s['params'].size else None,
+    )  # fmt: skip
+    # A run saved after the iteration in which the rule fired has finished.
+    return state._replace(stopped=self._rule(state))
+
+  def done(self, state: State) -> bool:
+    """The initial design is told and the budget or the stopping rule is spent."""
+    return state.X.shape[0] > 0 and (state.stopped or state.iteration >= self.n_iter)
+
+  def ask(self, state: State) -> tuple[np.ndarray, State]:
+    """The next points to evaluate, original units: the initial design while
+    nothing is told, then ``q`` proposals. Returns them and the state with the
+    refitted GP hyperparameters (pass that state to ``tell``)."""
+    if self.done(state):
+      raise ValueError('ask() after the search has finished.')
+    n, d, q = state.X.shape[0], self.d, self.q
+    if n == 0:
+      starts = np.zeros((0, d)) if self.x0 is None else self.x0[: self.n_init]
+      n_rand = self.n_init - starts.shape[0]
+      design = self._from_unit(2.0 * qmc.halton(n_rand, d, seed=self.seed) - 1.0)
+      return np.concatenate([starts, design]), state
+    # Buffers grow in powers of two: O(log n) compiles in all, none while the
+    # data fit the current buffer.
+    cap = _capacity(n + q)
+    mask = np.zeros(cap, bool)
+    mask[:n] = np.isfinite(state.Y)
+    if not mask.any():
+      u = 2.0 * qmc.halton(q, d, seed=self.seed, skip=n) - 1.0
+      return self._from_unit(u), state
+    xb = np.zeros((cap, d))
+    xb[:n] = self._to_unit(state.X)
+    yb = np.zeros(cap)
+    yb[:n] = np.where(mask[:n], state.Y, 0.0)
+    with jax.enable_x64(True), jax.default_device(self.device):
+      if state.params is None:
+        init = gp.default_params(d, jnp.float64)
+      else:
+        init = gp.params_from_array(jnp.asarray(state.params))
+      out = self._step(
+        jnp.asarray(xb), jnp.asarray(yb), jnp.asarray(mask), jnp.int32(n),
+        jax.random.fold_in(self._key, state.iteration), init,
+      )  # fmt: skip
+      u = np.asarray(out.x)
+      params = np.asarray(gp.params_to_array(out.params))
+    return self._from_unit(u), state._replace(params=params)
+
+  def tell(self, state: State, x, y) -> State:
+    """Records the values ``y`` of the asked points ``x`` (non-finite: a
+    failure), saves the state and applies the stopping rule."""
+    x = np.asarray(x, dtype=np.float64).reshape(-1, self.d)
+    y = np.asarray(y, dtype=np.float64).reshape(-1)
+    if y.shape[0] != x.shape[0]:
+      raise ValueError(f'{y.shape[0]} values for {x.shape[0]} points.')
+    y = np.where(np.isfinite(y), y, np.nan)
+    first = state.X.shape[0] == 0
+    state = state._replace(
+      X=np.concatenate([state.X, x]), Y=np.concatenate([state.Y, y])
+    )
+    if not first:
+      x_best, _ = _best(state.X, state.Y)
+      state = state._replace(
+        iteration=state.iteration + 1,
+        history=np.concatenate([state.history, x_best[None]]),
+      )
+    self._save(state)
+    return state._replace(stopped=state.stopped or (not first and self._rule(state)))
+
+  def stop(self, state: State) -> State:
+    """Ends the search (a callback asked to); not saved, as in ``minimize``."""
+    return state._replace(stopped=True)
+
+  def result(self, state: State) -> Result:
+    x_best, y_best = _best(state.X, state.Y)
+    return Result(
+      x_best, y_best, state.X, state.Y, state.X.shape[0], state.iteration, state.stopped
+    )
+
+  def _rule(self, state: State) -> bool:
+    return (
+      self.stop_rel_change is not None
+      and state.iteration >= self.stop_min_iter
+      and _stop_rule(
+        list(state.history), self.width, self.stop_rel_change, self.stop_window
+      )
+    )
+
+  def _save(self, state: State):
+    if self.state_path is None:
+      return
+    _save(
+      self.state_path,
+      dict(
+        X=state.X, Y=state.Y, iteration=np.int64(state.iteration),
+        signature=np.array(self.signature),
+        history=np.asarray(state.history).reshape(-1, self.d),
+        params=np.zeros(0) if state.params is None else np.asarray(state.params),
+      ),
+    )  # fmt: skip
+
+
 def minimize(
   fun: Callable[[np.ndarray], Any],
   bounds,
@@ -131,6 +330,7 @@ def minimize(
   stop_min_iter: int = 0,
   state_path: str | None = None,
   config_overrides: dict[str, Any] | None = None,
+  device=None,
 ) -> Result:
   """Minimises ``fun`` over a box with GP Bayesian optimisation.
 
@@ -165,125 +365,30 @@ def minimize(
       after the initial design and after every iteration, and an existing
       file is resumed from; a resumed run ends as an uninterrupted one would.
     config_overrides: optional ``ProposeConfig`` fields (restarts, iterations).
+    device: where the GP runs (default: JAX's default device).
 
   Returns:
     A ``Result``.
   """
-  bounds = np.asarray(bounds, dtype=np.float64)
-  if bounds.ndim != 2 or bounds.shape[1] != 2:
-    raise ValueError(f'bounds must have shape (d, 2), got {bounds.shape}.')
-  if not np.all(bounds[:, 1] > bounds[:, 0]):
-    raise ValueError('bounds need lower < upper in every dimension.')
-  if n_init < 1 or n_iter < 0 or q < 1:
-    raise ValueError('Need n_init >= 1, n_iter >= 0 and q >= 1.')
-  d = bounds.shape[0]
-  lo, hi = bounds[:, 0], bounds[:, 1]
-  width = hi - lo
-  to_unit = lambda x: 2.0 * (x - lo) / width - 1.0
-  from_unit = lambda u: lo + (np.clip(u, -1.0, 1.0) + 1.0) * 0.5 * width
-
-  config = propose.ProposeConfig(
-    d=d, q=q, acquisition=acquisition, beta=beta, kernel=kernel,
-    **(config_overrides or {}),
+  opt = Minimizer(
+    bounds, n_init=n_init, n_iter=n_iter, q=q, x0=x0, seed=seed,
+    acquisition=acquisition, beta=beta, kernel=kernel,
+    stop_rel_change=stop_rel_change, stop_window=stop_window,
+    stop_min_iter=stop_min_iter, state_path=state_path,
+    config_overrides=config_overrides, device=device,
   )  # fmt: skip
-  signature = json.dumps(
-    dict(config._asdict(), bounds=bounds.tolist(), n_init=n_init, seed=seed)
-  )
-  key = jax.random.PRNGKey(seed)
-  step = propose.cached_propose(config)  # Validates the settings before any eval.
-
-  # ---- state: resume or initial design ----
-  X = np.zeros((0, d))
-  Y = np.zeros((0,))
-  it0 = 0
-  history: list[np.ndarray] = []
-  params_flat = None
-  if state_path is not None and os.path.exists(state_path):
-    s = _load(state_path)
-    if str(s['signature']) != signature:
-      raise ValueError(f'{state_path} was written by a run with other settings.')
-    X, Y, it0 = s['X'], s['Y'], int(s['iteration'])
-    history = list(s['history'])
-    params_flat = s['params'] if s['params'].size else None
-
-  def save(it):
-    if state_path is None:
-      return
-    _save(
-      state_path,
-      dict(
-        X=X, Y=Y, iteration=np.int64(it), signature=np.array(signature),
-        history=np.array(history).reshape(-1, d),
-        params=np.zeros(0) if params_flat is None else np.asarray(params_flat),
-      ),
-    )  # fmt: skip
-
-  if X.shape[0] == 0:
-    starts = np.zeros((0, d))
-    if x0 is not None:
-      starts = np.atleast_2d(np.asarray(x0, dtype=np.float64))
-      if starts.shape[1] != d:
-        raise ValueError(f'x0 must have {d} columns, got {starts.shape}.')
-      starts = starts[:n_init]
-    n_rand = n_init - starts.shape[0]
-    design = from_unit(2.0 * qmc.halton(n_rand, d, seed=seed) - 1.0)
-    X = np.concatenate([starts, design])
-    Y = _evaluate(fun, X)
-    save(0)
-
-  # ---- BO iterations ----
-  it = it0
-  # A run saved after the iteration in which the rule fired has finished.
-  stopped = (
-    stop_rel_change is not None
-    and it >= stop_min_iter
-    and _stop_rule(history, width, stop_rel_change, stop_window)
-  )
-  with jax.enable_x64(True):
-    while it < n_iter and not stopped:
-      t0 = time.perf_counter()
-      n = X.shape[0]
-      # Buffers grow in powers of two: O(log n) compiles in all, none while
-      # the data fit the current buffer.
-      cap = _capacity(n + q)
-      mask = np.zeros(cap, bool)
-      mask[:n] = np.isfinite(Y)
-      if not mask.any():
-        u = 2.0 * qmc.halton(q, d, seed=seed, skip=n) - 1.0
-      else:
-        xb = np.zeros((cap, d))
-        xb[:n] = to_unit(X)
-        yb = np.zeros(cap)
-        yb[:n] = np.where(mask[:n], Y, 0.0)
-        if params_flat is None:
-          init = gp.default_params(d, jnp.float64)
-        else:
-          init = gp.params_from_array(jnp.asarray(params_flat))
-        out = step(
-          jnp.asarray(xb), jnp.asarray(yb), jnp.asarray(mask), jnp.int32(n),
-          jax.random.fold_in(key, it), init,
-        )  # fmt: skip
-        u = np.asarray(out.x)
-        params_flat = np.asarray(gp.params_to_array(out.params))
-      seconds = time.perf_counter() - t0
-      x_new = from_unit(u)
-      with jax.enable_x64(False):  # the objective runs in its own precision
-        y_new = _evaluate(fun, x_new)
-      X = np.concatenate([X, x_new])
-      Y = np.concatenate([Y, y_new])
-      x_best, y_best = _best(X, Y)
-      history.append(x_best)
-      it += 1
-      save(it)
-      if callback is not None:
-        info = IterationInfo(it - 1, x_new, y_new, x_best, y_best, seconds)
-        if callback(info):
-          stopped = True
-      if (
-        stop_rel_change is not None
-        and it >= stop_min_iter
-        and _stop_rule(history, width, stop_rel_change, stop_window)
-      ):
-        stopped = True
-  x_best, y_best = _best(X, Y)
-  return Result(x_best, y_best, X, Y, X.shape[0], it, stopped)
+  state = opt.start()
+  while not opt.done(state):
+    t0 = time.perf_counter()
+    x_new, state = opt.ask(state)
+    seconds = time.perf_counter() - t0
+    initial = state.X.shape[0] == 0
+    state = opt.tell(state, x_new, _evaluate(fun, x_new))
+    if callback is not None and not initial:
+      x_best, y_best = _best(state.X, state.Y)
+      info = IterationInfo(
+        state.iteration - 1, x_new, state.Y[-len(x_new) :], x_best, y_best, seconds
+      )
+      if callback(info):
+        state = opt.stop(state)
+  return opt.result(state)

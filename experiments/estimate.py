@@ -274,7 +274,7 @@ class Objective(NamedTuple):
   evaluate: object = None
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=32)
 def _renderer(garment: str, spacing: float, resolution: int, intr, color=None):
   """One jitted renderer per mesh, camera and modality (``color`` None: depth,
   else 8-bit colour frames in that colour), so that estimates of several
@@ -339,8 +339,258 @@ def embed_video(network, params, inputs, clip_frames: int = 0) -> jax.Array:
 
 @functools.lru_cache(maxsize=8)
 def _sensor(intr):
-  """The jitted sensor model over a batch of frames: ``(frames, key) -> frames``."""
-  return jax.jit(lambda frames, key: physsim.apply_noise_frames(key, frames, intr))
+  """The jitted sensor model: ``(frames (B, C, T, H, W), keys (B,)) -> frames``.
+
+  World ``b`` draws its noise from ``keys[b]`` alone, so a candidate's noise
+  does not depend on the batch it is simulated in, and candidates given the
+  same key get the same noise (common random numbers)."""
+  one = lambda f, k: physsim.apply_noise_frames(k, f, intr)
+  return jax.jit(jax.vmap(one))
+
+
+@functools.lru_cache(maxsize=8)
+def _cloth(garment: str, spacing: float, resolution: int):
+  """One compiled cloth per mesh. Worlds name their fabric (``simulate``'s
+  ``material``), so every fabric of a mesh shares it and its MJX compile."""
+  mesh = physsim.garment(garment, spacing) if garment else physsim.square(resolution)
+  return physsim.build(mesh, 'gray_interlock')
+
+
+_JITTED: dict = {}
+
+
+def _jitted(network, modality: str, input_mode: str, clip_frames: int, distance: str):
+  """Jitted ``(embed, score)`` for one network and setting, cached by the
+  network's identity (params are arguments: every recording of a fabric,
+  and every fabric of one architecture, share the compiles).
+
+  ``embed(params, frames (S, T, H, W[, 3])) -> (S, N, D)`` and
+  ``score(params, frames (q, C, T, H, W[, 3]), rec_points) -> (q,)`` PSD.
+  """
+  k = (id(network), modality, input_mode, clip_frames, distance)
+  if k not in _JITTED:
+
+    def embed(params, frames):
+      x = network_inputs(frames, modality, input_mode)
+      return embed_video(network, params, x, clip_frames)
+
+    def score(params, frames, rec_points):
+      q = frames.shape[0]
+      pts = embed(params, frames.reshape(-1, *frames.shape[2:]))  # cameras pooled
+      pts = pts.reshape(q, -1, rec_points.shape[-1])
+      return jax.vmap(lambda p: model_lib.psd.psd(p, rec_points, distance))(pts)
+
+    # The entry holds the network, so its id stays unique while cached.
+    _JITTED[k] = (network, jax.jit(embed), jax.jit(score))
+  return _JITTED[k][1:]
+
+
+class Problem(NamedTuple):
+  """One recording's objective, in pieces that batch across recordings.
+
+  ``evaluate_problems`` simulates the candidates of every problem of one
+  ``sim_group`` as one batch, renders them from each problem's cameras and
+  scores them against each recording with its own network.
+
+  Attributes:
+    config: its settings.
+    source: the recording's path (for messages).
+    space: the material's search space.
+    mesh: the rest mesh.
+    n_frames: frames simulated (the recording's, at ``config.fps``).
+    intr: camera intrinsics (the recording's or a default field of view).
+    poses: its cameras, a ``physsim.Pose`` with a leading camera axis.
+    color: the fabric's RGB colour for an RGB network, else None (depth).
+    gust_key: the wind-gust key every candidate shares.
+    noise_key: the sensor-noise key every candidate shares.
+    network, params: the embedding network.
+    modality, input_mode, clip_frames: what it embeds (``EmbeddingNet``).
+    rec_points: the recording's embedding ``(N, D)``.
+  """
+
+  config: EstimateConfig
+  source: str
+  space: physsim.SearchSpace
+  mesh: physsim.Mesh
+  n_frames: int
+  intr: physsim.Intrinsics
+  poses: physsim.Pose
+  color: tuple | None
+  gust_key: jax.Array
+  noise_key: jax.Array
+  network: object
+  params: object
+  modality: str
+  input_mode: str
+  clip_frames: int
+  rec_points: jax.Array
+
+  def sim_group(self) -> tuple:
+    """Problems with equal keys simulate in one batch (same mesh and clock)."""
+    c = self.config
+    return (
+      c.garment, c.garment_spacing if c.garment else 0.0,
+      0 if c.garment else c.cloth_resolution, self.n_frames, c.fps, c.warmup,
+      c.gusts, physsim.resolve_backend(c.backend), c.workers,
+    )  # fmt: skip
+
+
+def make_problem(
+  config: EstimateConfig,
+  network,
+  net_params,
+  input_mode: str,
+  recording: Recording,
+  *,
+  modality: str = 'depth',
+  clip_frames: int = 0,
+) -> Problem:
+  """Sets up one recording's objective (arguments as ``make_objective``)."""
+  if modality not in train_lib.MODALITIES:
+    raise ValueError(
+      f'modality must be one of {train_lib.MODALITIES}, got {modality!r}'
+    )
+  rec_frames = recording.rgb if modality == 'rgb' else recording.depth
+  if rec_frames is None:
+    raise ValueError(
+      f'{recording.source}: no RGB frames, but the network embeds colour frames '
+      '(load_recording(..., rgb=True) of a sequence with cam0/rgb_*.png)'
+    )
+  n_frames = rec_frames.shape[0]
+  if clip_frames and n_frames < clip_frames:
+    raise ValueError(
+      f'{recording.source}: {n_frames} frames at {recording.fps} fps, shorter '
+      f'than one SDN clip of {clip_frames} frames; use a longer recording (and '
+      'EstimateConfig.frames >= the clip)'
+    )
+  space = physsim.search_space(config.material)
+  mesh = _cloth(config.garment, config.garment_spacing, config.cloth_resolution).mesh
+  h, w = recording.depth.shape[1:]
+  key = jax.random.key(config.seed)
+  # A known field of view is used even when the pose is unknown.
+  intr = recording.intrinsics or physsim.Intrinsics(width=w, height=h)
+  if recording.pose is not None:
+    poses = jax.tree.map(lambda a: jnp.asarray(a)[None], recording.pose)  # (1, ...)
+  else:
+    poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
+  color = (
+    tuple(map(float, gen_lib.rgb_color(config.material))) if modality == 'rgb' else None
+  )
+  embed, _ = _jitted(network, modality, input_mode, clip_frames, config.distance)
+  rec_points = embed(net_params, jnp.asarray(rec_frames)[None])[0]
+  return Problem(
+    config, recording.source, space, mesh, n_frames, intr, poses, color,
+    jax.random.fold_in(key, 2),  # common random gusts for all candidates
+    jax.random.fold_in(key, 3),  # likewise: every candidate, the same noise
+    network, net_params, modality, input_mode, clip_frames, rec_points,
+  )  # fmt: skip
+
+
+def _pad_rows(n: int) -> int:
+  """Batch size for ``n`` worlds: the next power of two (>= 4), so that a
+  shrinking or growing set of searches recompiles O(log n) times."""
+  return max(4, 1 << max(0, int(np.ceil(np.log2(max(n, 1))))))
+
+
+def simulate_problems(problems, us, *, pad: bool = False):
+  """Simulates and renders every problem's candidates in one batch.
+
+  Args:
+    problems: ``Problem``s of one ``sim_group``.
+    us: per problem, ``(q_i, 3)`` unit-cube candidates (``q_i`` may be 0).
+    pad: round the batch up (``_pad_rows``; the extra worlds repeat the
+      first candidate and are dropped) so that batches of varying size reuse
+      compiles.
+
+  Returns:
+    Per problem: ``(frames (q_i, C, T, H, W[, 3]) as its network sees them,
+    positions (q_i, T, V, 3), valid (q_i,))``.
+  """
+  groups = {p.sim_group() for p in problems}
+  if len(groups) != 1:
+    raise ValueError(f'problems of different simulation groups: {sorted(groups)}')
+  c = problems[0].config
+  counts = [len(u) for u in us]
+  total = sum(counts)
+  if total == 0:
+    return [(None, None, None) for _ in problems]
+  owner = np.repeat(np.arange(len(problems)), counts)
+  n = _pad_rows(total) if pad else total
+  owner = np.concatenate([owner, np.full(n - total, owner[0])])
+  u_all = np.concatenate([np.asarray(u, np.float64).reshape(-1, 3) for u in us])
+  u_all = np.concatenate([u_all, np.repeat(u_all[:1], n - total, axis=0)])
+  fields = np.zeros((3, n))  # each row mapped by its own problem's range
+  for i, p in enumerate(problems):
+    rows = owner == i
+    if rows.any():
+      fields[:, rows] = np.stack(
+        [np.asarray(f) for f in physsim.from_unit(u_all[rows], p.space)]
+      )
+  params = physsim.params.make(*fields)
+  cloth = _cloth(c.garment, c.garment_spacing, c.cloth_resolution)
+  out = physsim.simulate(
+    cloth,
+    params,
+    frames=problems[0].n_frames,
+    fps=c.fps,
+    warmup=c.warmup,
+    wind=physsim.Wind(gust_intensity=c.gusts),
+    key=jnp.stack([problems[i].gust_key for i in owner]),
+    backend=physsim.resolve_backend(c.backend),
+    workers=c.workers or None,
+    material=[physsim.fabric(problems[i].config.material).name for i in owner],
+  )
+  positions, valid = np.asarray(out.positions), np.asarray(out.valid)
+  pos = np.where(valid[:, None, None, None], positions, cloth.mesh.vertices)
+  frames = [None] * len(problems)
+  # One render call per camera model, colour and camera count.
+  views = {}
+  for i, p in enumerate(problems):
+    views.setdefault((p.intr, p.color, p.poses.position.shape[0]), []).append(i)
+  for (intr, color, _), members in views.items():
+    rows = np.flatnonzero(np.isin(owner, members))
+    poses = jax.tree.map(
+      lambda *a: jnp.stack(a), *[problems[i].poses for i in owner[rows]]
+    )  # (b, C, ...)
+    render = _renderer(c.garment, c.garment_spacing, c.cloth_resolution, intr, color)
+    f = render(jnp.asarray(pos[rows]), poses)
+    if color is None:
+      sensed = [i for i in members if problems[i].config.sensor_noise]
+      if sensed:
+        keys = jnp.stack([problems[i].noise_key for i in owner[rows]])
+        noisy = _sensor(intr)(f, keys)
+        use = jnp.asarray(np.isin(owner[rows], sensed))
+        f = jnp.where(use[:, None, None, None, None], noisy, f)
+    for i in members:
+      frames[i] = f[np.flatnonzero(owner[rows] == i)[: counts[i]]]
+  return [
+    (frames[i], positions[owner == i][: counts[i]], valid[owner == i][: counts[i]])
+    for i in range(len(problems))
+  ]
+
+
+def evaluate_problems(problems, us, *, pad: bool = False):
+  """PSD of every problem's candidates, simulated as one batch.
+
+  Args, as ``simulate_problems``.
+
+  Returns:
+    Per problem: ``(psd (q_i,) float64, NaN where the simulation blew up,
+    positions (q_i, T, V, 3), valid (q_i,))``.
+  """
+  out = []
+  for p, (frames, positions, valid) in zip(
+    problems, simulate_problems(problems, us, pad=pad), strict=True
+  ):
+    if frames is None:
+      out.append((np.zeros(0), None, None))
+      continue
+    _, score = _jitted(
+      p.network, p.modality, p.input_mode, p.clip_frames, p.config.distance
+    )
+    d = np.asarray(score(p.params, frames, p.rec_points), np.float64)
+    out.append((np.where(valid & np.isfinite(d), d, np.nan), positions, valid))
+  return out
 
 
 def make_objective(
@@ -367,101 +617,23 @@ def make_objective(
     ValueError: an RGB objective of a recording without colour frames, or a
       recording shorter than one clip, naming the recording.
   """
-  if modality not in train_lib.MODALITIES:
-    raise ValueError(
-      f'modality must be one of {train_lib.MODALITIES}, got {modality!r}'
-    )
-  rec_frames = recording.rgb if modality == 'rgb' else recording.depth
-  if rec_frames is None:
-    raise ValueError(
-      f'{recording.source}: no RGB frames, but the network embeds colour frames '
-      '(load_recording(..., rgb=True) of a sequence with cam0/rgb_*.png)'
-    )
-  n_frames = rec_frames.shape[0]
-  if clip_frames and n_frames < clip_frames:
-    raise ValueError(
-      f'{recording.source}: {n_frames} frames at {recording.fps} fps, shorter '
-      f'than one SDN clip of {clip_frames} frames; use a longer recording (and '
-      'EstimateConfig.frames >= the clip)'
-    )
-  fab = physsim.fabric(config.material)
-  space = physsim.search_space(config.material)
-  mesh = (
-    physsim.garment(config.garment, config.garment_spacing)
-    if config.garment
-    else physsim.square(config.cloth_resolution)
-  )
-  cloth = physsim.build(mesh, fab.name)
-  h, w = recording.depth.shape[1:]
-  key = jax.random.key(config.seed)
-  # A known field of view is used even when the pose is unknown.
-  intr = recording.intrinsics or physsim.Intrinsics(width=w, height=h)
-  if recording.pose is not None:
-    poses = jax.tree.map(lambda a: jnp.asarray(a)[None], recording.pose)  # (1, ...)
-  else:
-    poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
-  color = (
-    tuple(map(float, gen_lib.rgb_color(config.material))) if modality == 'rgb' else None
-  )
-  render = _renderer(
-    config.garment, config.garment_spacing, config.cloth_resolution, intr, color
-  )
-  gust_key = jax.random.fold_in(key, 2)  # common random numbers for all candidates
-  noise_key = jax.random.fold_in(key, 3)  # likewise: every candidate, the same noise
-  backend = physsim.resolve_backend(config.backend)
-
-  def embed(frames):  # (S, T, H, W[, 3]) -> (S, N, D)
-    x = network_inputs(frames, modality, input_mode)
-    return embed_video(network, net_params, x, clip_frames)
-
-  rec_points = jax.jit(embed)(jnp.asarray(rec_frames)[None])[0]
-
-  @jax.jit
-  def distances(frames):  # (q, C, T, H, W[, 3]) -> (q,)
-    q = frames.shape[0]
-    pts = embed(frames.reshape(-1, *frames.shape[2:]))  # cameras pooled
-    pts = pts.reshape(q, -1, rec_points.shape[-1])
-    return jax.vmap(lambda p: model_lib.psd.psd(p, rec_points, config.distance))(pts)
-
-  def simulate(u):  # (q, 3) -> ((q, T, V, 3) positions, (q,) valid)
-    out = physsim.simulate(
-      cloth,
-      physsim.from_unit(np.asarray(u), space),
-      frames=n_frames,
-      fps=config.fps,
-      warmup=config.warmup,
-      wind=physsim.Wind(gust_intensity=config.gusts),
-      key=jnp.broadcast_to(gust_key, np.shape(u)[:1]),  # the same for every world
-      backend=backend,
-      space=space,
-      workers=config.workers or None,
-    )
-    return out.positions, out.valid
-
-  def render_frames(positions, valid):
-    q = positions.shape[0]
-    pos = np.where(valid[:, None, None, None], positions, mesh.vertices)
-    batch_poses = jax.tree.map(
-      lambda a: jnp.broadcast_to(a, (q, *a.shape)), poses
-    )  # (q, C, ...)
-    frames = render(jnp.asarray(pos), batch_poses)  # (q, C, T, H, W)
-    if config.sensor_noise and color is None:  # the sensor model is for depth
-      frames = _sensor(intr)(frames, noise_key)
-    return frames
+  problem = make_problem(
+    config, network, net_params, input_mode, recording,
+    modality=modality, clip_frames=clip_frames,
+  )  # fmt: skip
 
   def simulate_frames(u):
-    positions, valid = simulate(u)
-    return render_frames(positions, valid), valid
+    frames, _, valid = simulate_problems([problem], [np.asarray(u)])[0]
+    return frames, valid
 
   def evaluate(u):
-    positions, valid = simulate(u)
-    d = np.asarray(distances(render_frames(positions, valid)), np.float64)
-    return np.where(valid & np.isfinite(d), d, np.nan), positions, valid
+    return evaluate_problems([problem], [np.asarray(u)])[0]
 
   def fun(u):
     return evaluate(u)[0]
 
-  return Objective(fun, simulate_frames, space, cloth, mesh, evaluate)
+  cloth = _cloth(config.garment, config.garment_spacing, config.cloth_resolution)
+  return Objective(fun, simulate_frames, problem.space, cloth, problem.mesh, evaluate)
 
 
 # ------------------------------------------------------------------- estimate

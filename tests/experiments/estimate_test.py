@@ -113,7 +113,7 @@ def test_candidates_go_through_the_sensor_model(env):
   rec = env['rec']
   noisy = est._sensor(rec.intrinsics)(
     jax.numpy.asarray(rec.depth)[None, None],
-    jax.random.fold_in(jax.random.key(CONFIG.seed), 3),
+    jax.random.fold_in(jax.random.key(CONFIG.seed), 3)[None],
   )[0, 0]
   rec = rec._replace(depth=np.asarray(noisy))
   assert (rec.depth > 0).sum() < (env['rec'].depth > 0).sum()  # pixels dropped
