@@ -774,18 +774,7 @@ def estimate(
       recording, model or config, or every candidate simulation blew up
       (naming the recording).
   """
-  net = load_embedding(model_dir)
-  size = net.image_size
-  if tuple(recording.depth.shape[1:]) != size:
-    raise ValueError(
-      f'{recording.source}: frames of {recording.depth.shape[1:]} but the network '
-      f'in {model_dir} takes {size}; load the recording at that size'
-    )
-  if net.modality == 'rgb' and recording.rgb is None:
-    raise ValueError(
-      f'{recording.source}: no RGB frames, but {model_dir} is an RGB network; '
-      'load the recording with rgb=True (a sequence with cam0/rgb_*.png)'
-    )
+  net = _check_inputs(recording, model_dir)
   os.makedirs(workdir, exist_ok=True)
   t_start = time.time()
   obj = make_objective(
@@ -807,39 +796,102 @@ def estimate(
     return y
 
   def callback(info: bo.IterationInfo):
-    if progress and not np.isfinite(info.y_best):
-      print(f'iter {info.iteration:3d}: every simulation so far blew up', flush=True)
-    elif progress:
-      p = physsim.from_unit(info.x_best, obj.space)
-      print(
-        f'iter {info.iteration:3d}: best PSD {info.y_best:.4g} at bending '
-        f'x{float(p.bending_scale):.3g}, wind {float(p.wind_speed):.2f} m/s, '
-        f'area weight {float(p.area_weight):.3f} kg/m^2',
-        flush=True,
-      )
+    if progress:
+      where = describe(info.x_best, info.y_best, obj.space)
+      print(f'iter {info.iteration:3d}: {where}', flush=True)
 
-  bounds = np.array([[-1.0, 1.0]] * 3)
   res = bo.minimize(
-    fun,
-    bounds,
+    fun, BOUNDS, callback=callback, **minimizer_settings(config, workdir)
+  )
+  if not np.isfinite(res.y_best):
+    raise ValueError(f'{recording.source}: every candidate simulation blew up')
+  frames, _ = obj.simulate_frames(res.x_best[None])
+  return finish(
+    config,
+    recording,
+    net.modality,
+    workdir,
+    res,
+    np.asarray(frames[0, 0]),
+    seconds=time.time() - t_start,
+    seconds_in_objective=float(np.sum(sim_seconds)),
+  )
+
+
+BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
+
+
+def minimizer_settings(config: EstimateConfig, workdir: str) -> dict:
+  """``bo.minimize`` / ``bo.Minimizer`` settings of an estimate."""
+  return dict(
     n_init=config.n_init,
     n_iter=config.max_iter,
     q=config.q,
     x0=np.zeros(3),  # the paper starts from the range centre
     seed=config.seed,
     acquisition='logei',
-    callback=callback,
     stop_rel_change=config.stop_rel_change,
     stop_window=config.stop_window,
     stop_min_iter=config.min_iter,
     state_path=os.path.join(workdir, 'bo_state.npz'),
   )
-  if not np.isfinite(res.y_best):
-    raise ValueError(f'{recording.source}: every candidate simulation blew up')
-  best = physsim.from_unit(res.x_best, obj.space)
-  post = bo.minimizer_samples(res.X, res.Y, bounds, jax.random.key(config.seed))
-  samples = np.stack(list(physsim.from_unit(post.samples, obj.space)), axis=1)
-  seconds = time.time() - t_start
+
+
+def describe(x_best, y_best, space) -> str:
+  """One progress line's worth: the best PSD and its parameters."""
+  if not np.isfinite(y_best):
+    return 'every simulation so far blew up'
+  p = physsim.from_unit(x_best, space)
+  return (
+    f'best PSD {y_best:.4g} at bending x{float(p.bending_scale):.3g}, wind '
+    f'{float(p.wind_speed):.2f} m/s, area weight {float(p.area_weight):.3f} kg/m^2'
+  )
+
+
+def _check_inputs(
+  recording: Recording, model_dir: str, net: EmbeddingNet | None = None
+) -> EmbeddingNet:
+  """Loads the network (unless given) and checks the recording fits it (see
+  ``estimate``)."""
+  net = net or load_embedding(model_dir)
+  size = net.image_size
+  if tuple(recording.depth.shape[1:]) != size:
+    raise ValueError(
+      f'{recording.source}: frames of {recording.depth.shape[1:]} but the network '
+      f'in {model_dir} takes {size}; load the recording at that size'
+    )
+  if net.modality == 'rgb' and recording.rgb is None:
+    raise ValueError(
+      f'{recording.source}: no RGB frames, but {model_dir} is an RGB network; '
+      'load the recording with rgb=True (a sequence with cam0/rgb_*.png)'
+    )
+  return net
+
+
+def finish(
+  config: EstimateConfig,
+  recording: Recording,
+  modality: str,
+  workdir: str,
+  res: bo.Result,
+  best_frames: np.ndarray,
+  **timing,
+) -> dict:
+  """Writes ``estimate.json``, ``trace.png`` and ``montage.png`` of a finished
+  search and returns the result dict.
+
+  Args:
+    config, recording, modality: the estimate's.
+    workdir: where they go.
+    res: the search's result (a finite best value).
+    best_frames: the best candidate's camera-0 frames as its network saw
+      them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
+    **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
+  """
+  space = physsim.search_space(config.material)
+  best = physsim.from_unit(res.x_best, space)
+  post = bo.minimizer_samples(res.X, res.Y, BOUNDS, jax.random.key(config.seed))
+  samples = np.stack(list(physsim.from_unit(post.samples, space)), axis=1)
   material = physsim.load_material(physsim.fabric(config.material).material)
   result = {
     'recording': recording.source,
@@ -852,19 +904,17 @@ def estimate(
     'failed_evaluations': int(np.sum(~np.isfinite(res.Y))),
     'iterations': int(res.n_iter),
     'stopped_by_rule': bool(res.stopped_early),
-    'seconds': seconds,
-    'seconds_in_objective': float(np.sum(sim_seconds)),
+    **{k: float(v) for k, v in timing.items()},
     'config': dataclasses.asdict(config),
   }
   if recording.truth is not None:
     result['truth'] = recording.truth
-    result['errors'] = errors(best, recording.truth, obj.space)
+    result['errors'] = errors(best, recording.truth, space)
   files.write_json(os.path.join(workdir, 'estimate.json'), result)
-  plot_trace(res, obj.space, recording.truth, os.path.join(workdir, 'trace.png'))
-  frames, _ = obj.simulate_frames(res.x_best[None])
+  plot_trace(res, space, recording.truth, os.path.join(workdir, 'trace.png'))
   plot_montage(
-    recording.rgb if net.modality == 'rgb' else recording.depth,
-    np.asarray(frames[0, 0]),
+    recording.rgb if modality == 'rgb' else recording.depth,
+    best_frames,
     os.path.join(workdir, 'montage.png'),
   )
   return result

@@ -1,4 +1,5 @@
-"""Tests for bo.minimize: convergence, failures, batches, stopping, resume."""
+"""Tests for bo.minimize and bo.Minimizer: convergence, failures, batches,
+stopping, resume, ask/tell."""
 
 import os
 import tempfile
@@ -141,6 +142,36 @@ class MinimizeTest(absltest.TestCase):
     bo.minimize(quadratic, _BOUNDS, n_init=4, n_iter=8, config_overrides=_FAST)
     # 4 + 8 points with one point of headroom fit a 16-slot buffer: one program.
     self.assertLessEqual(step._cache_size() - before, 1)
+
+  def test_interleaved_ask_tell_equals_minimize(self):
+    # Two searches stepped in lockstep (as experiments.estimate_many drives
+    # them) each go exactly as minimize runs them alone.
+    other = lambda x: np.sum(np.abs(x - 1.0), axis=-1)
+    kw = dict(n_init=3, n_iter=4, q=2, seed=2, config_overrides=_FAST)
+    alone = [bo.minimize(f, _BOUNDS, **kw) for f in (quadratic, other)]
+    opts = [bo.Minimizer(_BOUNDS, device=jax.devices('cpu')[0], **kw) for _ in alone]
+    states = [o.start() for o in opts]
+    while not all(o.done(s) for o, s in zip(opts, states, strict=True)):
+      for i, f in enumerate((quadratic, other)):
+        if not opts[i].done(states[i]):
+          x, states[i] = opts[i].ask(states[i])
+          states[i] = opts[i].tell(states[i], x, f(x))
+    for o, s, ref in zip(opts, states, alone, strict=True):
+      res = o.result(s)
+      np.testing.assert_allclose(res.X, ref.X, atol=1e-12)
+      np.testing.assert_allclose(res.Y, ref.Y, atol=1e-12)
+      self.assertEqual(res.n_iter, ref.n_iter)
+
+  def test_ask_after_done_and_wrong_tell(self):
+    opt = bo.Minimizer(_BOUNDS, n_init=2, n_iter=0)
+    s = opt.start()
+    x, s = opt.ask(s)
+    with self.assertRaises(ValueError):
+      opt.tell(s, x, np.zeros(3))  # 3 values for 2 points
+    s = opt.tell(s, x, quadratic(x))
+    self.assertTrue(opt.done(s))
+    with self.assertRaises(ValueError):
+      opt.ask(s)
 
   def test_bad_bounds(self):
     with self.assertRaises(ValueError):

@@ -1,0 +1,174 @@
+"""Estimate many recordings at once: one simulation batch per iteration for all.
+
+Every recording keeps its own search (a ``bo.Minimizer`` with the settings
+``experiments.estimate`` uses, its own state file, stopping rule and resume),
+but the searches advance in lockstep: each iteration asks every unfinished
+search for its candidates, simulates all of them as one batch (one per mesh
+and clock, ``estimate.evaluate_problems``), renders and scores each against its
+own recording and network, and tells each search its values. A candidate's
+score does not depend on which batch it was in (per-world gust and sensor keys,
+one compiled cloth per mesh), so each search goes as ``estimate`` would have
+run it alone, up to floating-point summation order in MJX.
+
+Why: MJX on a GPU costs about the same per step for 4 worlds as for ~64
+(BENCHMARKS.md), so a table of 20 recordings x 4 candidates costs about one
+estimate's time instead of twenty.
+
+  from experiments import estimate_many as em
+  results = em.estimate_many([em.Job(config, recording, model_dir, workdir), ...])
+
+``experiments.tables --batched`` runs its evaluation set this way.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+import bo
+from experiments import estimate as est
+
+
+class Job(NamedTuple):
+  """One recording to estimate.
+
+  Attributes:
+    config: its settings (``estimate.EstimateConfig``).
+    recording: the video (``estimate.load_recording``).
+    model_dir: its material's trained network.
+    workdir: where its state, JSON and pictures go.
+  """
+
+  config: est.EstimateConfig
+  recording: est.Recording
+  model_dir: str
+  workdir: str
+
+
+def _cpu():
+  # The GP is tiny (tens of points): on a GPU its L-BFGS loops only wait on
+  # kernel launches, and the accelerator is busy with the simulations.
+  return jax.devices('cpu')[0]
+
+
+def estimate_many(
+  jobs: list[Job], *, progress: bool = True, gp_on_cpu: bool = True
+) -> list[dict | Exception]:
+  """Runs (or resumes) every job's estimate, batching their simulations.
+
+  Args:
+    jobs: the recordings.
+    progress: print one line per iteration.
+    gp_on_cpu: fit the GPs and propose on the CPU.
+
+  Returns:
+    Per job, its ``estimate.json`` dict, or the exception that stopped it (a
+    bad recording or model, another run in its workdir, every candidate blown
+    up): one job's failure does not stop the others.
+  """
+  t_start = time.time()
+  out: list[dict | Exception | None] = [None] * len(jobs)
+  nets: dict[str, est.EmbeddingNet] = {}
+  live = []  # (job index, problem, minimizer, state)
+  for i, job in enumerate(jobs):
+    try:
+      if job.model_dir not in nets:
+        nets[job.model_dir] = est.load_embedding(job.model_dir)
+      net = est._check_inputs(job.recording, job.model_dir, nets[job.model_dir])
+      os.makedirs(job.workdir, exist_ok=True)
+      problem = est.make_problem(
+        job.config, net.network, net.params, net.input_mode, job.recording,
+        modality=net.modality, clip_frames=net.clip_frames,
+      )  # fmt: skip
+      est._check_run(
+        job.workdir, job.config, job.recording, job.model_dir, net.modality
+      )
+      opt = bo.Minimizer(
+        est.BOUNDS,
+        **est.minimizer_settings(job.config, job.workdir),
+        device=_cpu() if gp_on_cpu else None,
+      )
+      live.append([i, problem, opt, opt.start()])
+    except (ValueError, OSError) as e:
+      out[i] = e
+
+  sim_seconds = 0.0
+  it = 0
+  while active := [s for s in live if not s[2].done(s[3])]:
+    t0 = time.time()
+    asked = []
+    for s in active:
+      x, s[3] = s[2].ask(s[3])
+      asked.append(x)
+    t1 = time.time()
+    values = _evaluate(active, asked)
+    t2 = time.time()
+    sim_seconds += t2 - t1
+    for s, x, y in zip(active, asked, values, strict=True):
+      s[3] = s[2].tell(s[3], x, y)
+    if progress:
+      left = sum(not s[2].done(s[3]) for s in live)
+      print(
+        f'step {it:3d}: {len(active)} searches, {sum(map(len, asked))} candidates '
+        f'simulated and scored in {t2 - t1:.1f} s, GP {t1 - t0:.1f} s; '
+        f'{left} still searching',
+        flush=True,
+      )
+    it += 1
+
+  results = {s[0]: s[2].result(s[3]) for s in live}
+  for s in live:
+    if not np.isfinite(results[s[0]].y_best):
+      out[s[0]] = ValueError(
+        f'{jobs[s[0]].recording.source}: every candidate simulation blew up'
+      )
+  done = [s for s in live if out[s[0]] is None]
+  frames = _best_frames(done, [results[s[0]].x_best[None] for s in done])
+  wall = time.time() - t_start
+  for s, f in zip(done, frames, strict=True):
+    job = jobs[s[0]]
+    out[s[0]] = est.finish(
+      job.config, job.recording, s[1].modality, job.workdir, results[s[0]],
+      np.asarray(f[0, 0]), seconds=wall, seconds_in_objective=sim_seconds,
+      recordings_in_batch=len(jobs), seconds_per_recording=wall / max(len(jobs), 1),
+    )  # fmt: skip
+    if progress:
+      print(
+        f'{job.recording.source}: {est.describe(results[s[0]].x_best, results[s[0]].y_best, s[1].space)}',
+        flush=True,
+      )
+  return out
+
+
+def _groups(live):
+  """Indices into ``live`` by simulation group (mesh and clock)."""
+  groups: dict[tuple, list[int]] = {}
+  for k, s in enumerate(live):
+    groups.setdefault(s[1].sim_group(), []).append(k)
+  return groups.values()
+
+
+def _evaluate(active, asked) -> list[np.ndarray]:
+  values: list = [None] * len(active)
+  for members in _groups(active):
+    res = est.evaluate_problems(
+      [active[k][1] for k in members], [asked[k] for k in members], pad=True
+    )
+    for k, (psd, _, _) in zip(members, res, strict=True):
+      values[k] = psd
+  return values
+
+
+def _best_frames(done, xs) -> list:
+  frames: list = [None] * len(done)
+  for members in _groups(done):
+    res = est.simulate_problems(
+      [done[k][1] for k in members], [xs[k] for k in members], pad=True
+    )
+    for k, (f, _, _) in zip(members, res, strict=True):
+      frames[k] = f
+  return frames

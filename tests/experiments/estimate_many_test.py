@@ -1,0 +1,109 @@
+"""Tests for experiments.estimate_many: lockstep batching changes no search.
+
+Recordings and the hand-made embedding come from ``estimate_fixtures``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+import pytest
+
+from experiments import estimate as est
+from experiments import estimate_many as em
+from tests.experiments.estimate_fixtures import (
+  CONFIG,
+  TRUTH,
+  load,
+  write_hand_made_model,
+  write_recording,
+)
+
+OTHER_TRUTH = dict(bending_scale=3.0, wind_speed=2.0, area_weight=0.22)
+# Another simulation group: a different gust intensity is another clock/wind
+# setting, so this job is batched separately.
+GUSTY = dataclasses.replace(CONFIG, gusts=0.3)
+# The C backend and the renderer are deterministic per world, so a candidate
+# scores the same whatever batch it is in, up to float32 rendering.
+_REPEAT_TOLERANCE = 1e-6
+
+
+@pytest.fixture(scope='module')
+def env(tmp_path_factory):
+  root = str(tmp_path_factory.mktemp('many'))
+  model = write_hand_made_model(os.path.join(root, 'model'))
+  specs = [(CONFIG, TRUTH, 'a'), (CONFIG, OTHER_TRUTH, 'b'), (GUSTY, TRUTH, 'c')]
+  recs = []
+  for config, truth, name in specs:
+    seq = write_recording(os.path.join(root, name), truth, config)
+    recs.append((config, load(seq, config)))
+  return dict(root=root, model=model, recs=recs)
+
+
+def _state(workdir):
+  with np.load(os.path.join(workdir, 'bo_state.npz')) as z:
+    return {k: z[k] for k in z.files}
+
+
+def _jobs(env, prefix):
+  return [
+    em.Job(config, rec, env['model'], os.path.join(env['root'], f'{prefix}{i}'))
+    for i, (config, rec) in enumerate(env['recs'])
+  ]
+
+
+@pytest.fixture(scope='module')
+def batched(env):
+  return em.estimate_many(_jobs(env, 'many'), progress=False)
+
+
+def test_lockstep_equals_one_by_one(env, batched):
+  for i, (config, rec) in enumerate(env['recs']):
+    alone_dir = os.path.join(env['root'], f'alone{i}')
+    alone = est.estimate(config, rec, env['model'], alone_dir, progress=False)
+    a, b = _state(alone_dir), _state(os.path.join(env['root'], f'many{i}'))
+    np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
+    np.testing.assert_allclose(b['Y'], a['Y'], rtol=_REPEAT_TOLERANCE)
+    assert batched[i]['estimate'] == alone['estimate']
+    assert batched[i]['recordings_in_batch'] == 3
+    for name in ('estimate.json', 'trace.png', 'montage.png', est.RUN_FILE):
+      assert os.path.isfile(os.path.join(env['root'], f'many{i}', name))
+  # the two fabrics' searches differ: each scored against its own recording
+  assert not np.allclose(batched[0]['psd_best'], batched[1]['psd_best'])
+
+
+def test_a_bad_job_does_not_stop_the_others(env, tmp_path):
+  config, rec = env['recs'][0]
+  jobs = [
+    em.Job(config, rec, str(tmp_path / 'no_model'), str(tmp_path / 'bad')),
+    em.Job(
+      dataclasses.replace(config, max_iter=1), rec, env['model'], str(tmp_path / 'ok')
+    ),
+  ]
+  out = em.estimate_many(jobs, progress=False)
+  assert isinstance(out[0], Exception) and 'no_model' in str(out[0])
+  assert isinstance(out[1], dict) and out[1]['evaluations'] == 8
+
+
+def test_resume_after_interrupt(env, batched, monkeypatch):
+  real = est.evaluate_problems
+  calls = {'n': 0}
+
+  def dying(*a, **kw):
+    if calls['n'] == 3:  # two groups: the initial design and one iteration
+      raise RuntimeError('machine taken back')
+    calls['n'] += 1
+    return real(*a, **kw)
+
+  monkeypatch.setattr(est, 'evaluate_problems', dying)
+  with pytest.raises(RuntimeError):
+    em.estimate_many(_jobs(env, 'resumed'), progress=False)
+  monkeypatch.setattr(est, 'evaluate_problems', real)
+  resumed = em.estimate_many(_jobs(env, 'resumed'), progress=False)
+  for i in range(3):
+    a = _state(os.path.join(env['root'], f'many{i}'))
+    b = _state(os.path.join(env['root'], f'resumed{i}'))
+    np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
+    assert resumed[i]['estimate'] == batched[i]['estimate']
