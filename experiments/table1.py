@@ -89,10 +89,18 @@ class Config:
     train: settings shared by every run (its materials, network, modality and
       split are set per run).
     materials: fabric names; empty = every material in the dataset.
+    columns: '<network>_<modality>' columns to train; empty = all four.
+    splits: splits to train; empty = both. With ``columns`` and ``splits``
+      several processes (one per GPU) share the runs; a last run without
+      them reuses every finished run and writes the table.
+    train_only: train, but write no table or maps (a share of the runs).
   """
 
   train: train_lib.Config = train_lib.PRESETS['paper']
   materials: tuple[str, ...] = ()
+  columns: tuple[str, ...] = ()
+  splits: tuple[str, ...] = ()
+  train_only: bool = False
 
 
 PRESETS = {
@@ -161,9 +169,13 @@ def train_all(
   for m in materials:
     out[m] = {}
     for network, modality in COLUMNS:
+      if config.columns and f'{network}_{modality}' not in config.columns:
+        continue
       name = COLUMN_NAMES[network, modality]
       out[m][name], data = {}, None
       for split in SPLITS:
+        if config.splits and split not in config.splits:
+          continue
         cfg = _run_config(config, m, network, modality, split)
         folder = run_dir(workdir, network, modality, split, m)
         row = train_lib.finished_eval(cfg, root, folder, [m])
@@ -209,7 +221,9 @@ def format_table(results: dict, root: str, config: Config) -> str:
     "under the paper's random split, in percent.",
     '',
   ]
-  lines += _table([(m, [cell(r[n]) for n in names]) for m, r in results.items()])
+  lines += _table(
+    [(m, [cell(r.get(n, {})) for n in names]) for m, r in results.items()]
+  )
   lines += [
     '',
     f'- Triplet accuracy (first number): split by simulation, {t.test_fraction:g} of '
@@ -316,7 +330,15 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
     'maps': {material: png path}}``.
   """
   os.makedirs(workdir, exist_ok=True)
+  for c in config.columns:
+    if c not in {f'{n}_{m}' for n, m in COLUMNS}:
+      raise ValueError(f'column {c!r}: choose from physnet/sdn x depth/rgb')
+  for sp in config.splits:
+    if sp not in SPLITS:
+      raise ValueError(f'split {sp!r}: choose from {SPLITS}')
   results = train_all(config, root, workdir, progress=progress)
+  if config.train_only:
+    return {'results': results, 'markdown': '', 'maps': {}}
   maps = {m: similarity_map(config, root, workdir, m) for m in results}
   text = format_table(results, root, config)
   dataset.write_text_atomic(os.path.join(workdir, TABLE_FILE), text)
@@ -342,6 +364,9 @@ def define_flags() -> None:
   flags.DEFINE_float('test_fraction', None, 'held-out share of both splits')
   flags.DEFINE_integer('image_size', None, 'train at this size (0: dataset)')
   flags.DEFINE_integer('seed', None, 'seed')
+  flags.DEFINE_list('columns', None, 'only these <network>_<modality> columns')
+  flags.DEFINE_list('splits', None, 'only these splits (simulation, random)')
+  flags.DEFINE_bool('train_only', False, 'train only: no table or maps')
 
 
 def main(argv):
@@ -357,6 +382,9 @@ def main(argv):
     config,
     train=dataclasses.replace(config.train, **over),
     materials=tuple(FLAGS.materials or config.materials),
+    columns=tuple(FLAGS.columns or ()),
+    splits=tuple(FLAGS.splits or ()),
+    train_only=FLAGS.train_only,
   )
   run(config, FLAGS.dataset, FLAGS.workdir)
 

@@ -16,9 +16,14 @@ shown as '-'. RGB methods need an evaluation set with colour frames (what
       --workdir=out/tables [--jobs=4]
 
 Writes ``tables.md``, ``tables.json`` and ``bending_surfaces.png`` (the
-paper's Figure 4: true and estimated 3x5 bending matrices). Each estimate runs
-in its own process (``--jobs`` at once; on a GPU each gets a share of its
-memory) and resumes from its own folder.
+paper's Figure 4: true and estimated 3x5 bending matrices). Each estimate
+resumes from its own folder. By default each runs in its own process
+(``--jobs`` at once; on a GPU each gets a share of its memory); with
+``--batched`` one process runs them all in lockstep, simulating every
+recording's candidates of an iteration as one batch
+(``experiments.estimate_many``), which on a GPU costs about what one estimate
+does. ``--shard=i --num_shards=n`` takes the i-th of n contiguous chunks of the
+estimates (one process per GPU); a last run without them writes the tables of everything finished.
 """
 
 from __future__ import annotations
@@ -66,6 +71,9 @@ class Config:
   backend: str = 'auto'
   jobs: int = 1
   seed: int = 0
+  batched: bool = False
+  shard: int = 0
+  num_shards: int = 1
 
 
 def recordings(eval_root: str) -> list[dict]:
@@ -98,9 +106,7 @@ def _model_dir(models: str, method: str, fabric: str) -> str:
 
 def _job(rec: dict, method: str, models: str, workdir: str, config: Config, env):
   """Runs one estimate in a subprocess; returns (key, result dict or error)."""
-  name = rec['garment'] or rec['fabric']
-  out = os.path.join(workdir, method, rec['set'], f'{name}-{rec["seq_id"]}')
-  key = (method, rec['set'], name, rec['seq_id'])
+  out, key = _out_dir(workdir, rec, method), _key(rec, method)
   done = os.path.join(out, 'estimate.json')
   if not os.path.isfile(done):
     cmd = [
@@ -125,25 +131,85 @@ def _job(rec: dict, method: str, models: str, workdir: str, config: Config, env)
     return key, json.load(f)
 
 
+def _out_dir(workdir: str, rec: dict, method: str) -> str:
+  name = rec['garment'] or rec['fabric']
+  return os.path.join(workdir, method, rec['set'], f'{name}-{rec["seq_id"]}')
+
+
+def _key(rec: dict, method: str) -> tuple:
+  return (method, rec['set'], rec['garment'] or rec['fabric'], rec['seq_id'])
+
+
+def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
+  """Runs ``jobs`` (pairs of recording and method) in lockstep in this
+  process; returns {key: result or {'failed': why}}."""
+  from experiments import estimate as est
+  from experiments import estimate_many as em
+
+  base = est.PRESETS[config.preset]
+  results, batch, keys = {}, [], []
+  sizes = {}
+  for rec, method in jobs:
+    key, model_dir = _key(rec, method), _model_dir(models, method, rec['fabric'])
+    ec = dataclasses.replace(
+      base, material=rec['fabric'], garment=rec['garment'], backend=config.backend,
+      seed=config.seed,
+    )  # fmt: skip
+    try:
+      if model_dir not in sizes:
+        net = est.load_embedding(model_dir)
+        sizes[model_dir] = (net.image_size, net.modality)
+      size, modality = sizes[model_dir]
+      recording = est.load_recording(
+        rec['path'], fps=ec.fps, size=size, frames=ec.frames, rgb=modality == 'rgb'
+      )
+    except (ValueError, OSError) as e:
+      results[key] = {'failed': str(e)}
+      continue
+    batch.append(em.Job(ec, recording, model_dir, _out_dir(workdir, rec, method)))
+    keys.append(key)
+  for key, res in zip(keys, em.estimate_many(batch), strict=True):
+    results[key] = res if isinstance(res, dict) else {'failed': str(res)}
+  return results
+
+
 def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
-  """Runs (or reuses) every estimate; returns {key: result}."""
+  """Runs (or reuses) every estimate of this shard; returns {key: result} of
+  every finished or failed one (other shards' unfinished ones are left out)."""
   for m in config.methods:
     if m not in METHODS:
       raise ValueError(f'method {m!r}: the estimate supports {METHODS}')
   recs = recordings(eval_root)
   jobs, missing = [], set()
-  for m in config.methods:
-    for r in recs:
+  for r in recs:  # by set (mesh) first: see the shards below
+    for m in config.methods:
       model_dir = _model_dir(models, m, r['fabric'])
       if os.path.isfile(os.path.join(model_dir, 'config.json')):
         jobs.append((r, m))
       elif model_dir not in missing:
         missing.add(model_dir)
         print(f'{m}: no network at {model_dir}; its cells stay -', flush=True)
+  if not 0 <= config.shard < config.num_shards:
+    raise ValueError(f'shard {config.shard} of {config.num_shards}')
+  results, mine = {}, []
+  for i, (r, m) in enumerate(jobs):
+    done = os.path.join(_out_dir(workdir, r, m), 'estimate.json')
+    if os.path.isfile(done):
+      with open(done) as f:
+        results[_key(r, m)] = json.load(f)
+    elif i * config.num_shards // len(jobs) == config.shard:
+      # Contiguous chunks: jobs come sorted by set, so a shard sees few meshes
+      # (each mesh is a simulation batch of its own per iteration).
+      mine.append((r, m))
+  if config.batched:
+    if mine:
+      print(f'{len(mine)} estimates in lockstep', flush=True)
+      results.update(_batched(mine, models, workdir, config))
+    return results
+  jobs = mine
   env = dict(os.environ)
   if config.jobs > 1:  # processes share one GPU: split its memory
     env.setdefault('XLA_PYTHON_CLIENT_MEM_FRACTION', f'{0.9 / config.jobs:.2f}')
-  results = {}
   with concurrent.futures.ThreadPoolExecutor(config.jobs) as pool:
     futures = [pool.submit(_job, r, m, models, workdir, config, env) for r, m in jobs]
     for i, f in enumerate(concurrent.futures.as_completed(futures)):
@@ -308,6 +374,9 @@ def define_flags() -> None:
   flags.DEFINE_string('backend', 'auto', "'auto', 'mjx' or 'c'")
   flags.DEFINE_integer('jobs', 1, 'estimates at once (processes)')
   flags.DEFINE_integer('seed', 0, 'estimate seed')
+  flags.DEFINE_bool('batched', False, 'all estimates in lockstep in this process')
+  flags.DEFINE_integer('shard', 0, 'this process takes chunk i of num_shards')
+  flags.DEFINE_integer('num_shards', 1, 'processes sharing the estimates')
 
 
 def main(argv):
@@ -319,6 +388,9 @@ def main(argv):
     backend=FLAGS.backend,
     jobs=FLAGS.jobs,
     seed=FLAGS.seed,
+    batched=FLAGS.batched,
+    shard=FLAGS.shard,
+    num_shards=FLAGS.num_shards,
   )
   run(config, FLAGS.eval, FLAGS.models, FLAGS.workdir)
 

@@ -306,6 +306,38 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
   return out
 
 
+def choose_lr(
+  config: Config, root: str, workdir: str, candidates, *, progress: bool = True
+) -> dict:
+  """Picks the learning rate per material by validation (``model.select_lr``).
+
+  Only the training portion of the simulation split is used: the held-out
+  simulations that ``run`` tests on stay unseen. Writes
+  ``<workdir>/<material>/lr_selection.json``.
+
+  Returns:
+    ``{material: {'best': lr, 'validation_triplet_accuracy': {lr: acc}}}``.
+  """
+  check_config(config)
+  index = dataset.open_dataset(root)
+  out = {}
+  for m in config.materials or index.materials:
+    x, y, g = load_inputs(config, root, [m])
+    tc = train_config(dataclasses.replace(config, split='simulation'), x.shape[-3:-1])
+    train_idx, _ = model_lib.split_indices(tc, y, g)
+    best, scores = model_lib.select_lr(
+      x[train_idx], y[train_idx], g[train_idx], tc, os.path.join(workdir, m),
+      candidates, progress=progress,
+    )  # fmt: skip
+    out[m] = {
+      'best': best,
+      'validation_triplet_accuracy': {f'{k:g}': v for k, v in scores.items()},
+    }
+    dataset.write_json_atomic(os.path.join(workdir, m, 'lr_selection.json'), out[m])
+    print(f'{m}: {json.dumps(out[m])}', flush=True)
+  return out
+
+
 def _recorded(run_dir: str, key: str, default: str) -> str:
   path = os.path.join(run_dir, INPUTS_FILE)
   if not os.path.isfile(path):
@@ -342,6 +374,7 @@ def define_flags() -> None:
   flags.DEFINE_enum('split', None, ['simulation', 'random'], 'held-out split')
   flags.DEFINE_integer('image_size', None, 'train at this size (0: dataset)')
   flags.DEFINE_integer('seed', None, 'seed')
+  flags.DEFINE_list('select_lr', None, 'pick the lr among these by validation')
 
 
 def main(argv):
@@ -365,7 +398,10 @@ def main(argv):
   if 'materials' in over:
     over['materials'] = tuple(over['materials'])
   config = dataclasses.replace(PRESETS[FLAGS.preset], **over)
-  run(config, FLAGS.dataset, FLAGS.workdir)
+  if FLAGS.select_lr:
+    choose_lr(config, FLAGS.dataset, FLAGS.workdir, [float(v) for v in FLAGS.select_lr])
+  else:
+    run(config, FLAGS.dataset, FLAGS.workdir)
 
 
 if __name__ == '__main__':

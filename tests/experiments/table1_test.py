@@ -149,3 +149,19 @@ def test_too_few_simulations_is_a_clear_error(rgb_dataset, tmp_path):
       str(tmp_path),
       progress=False,
     )
+
+
+def test_a_share_of_the_runs(rgb_dataset, tmp_path):
+  # One process per GPU trains a share (columns x splits) and writes no table.
+  config = dataclasses.replace(
+    table1.PRESETS['smoke'], columns=('sdn_depth',), splits=('random',),
+    train_only=True,
+  )  # fmt: skip
+  out = table1.run(config, rgb_dataset, str(tmp_path), progress=False)
+  assert list(out['results']['gray_interlock']) == ['SDN (depth)']
+  assert list(out['results']['gray_interlock']['SDN (depth)']) == ['random']
+  assert not os.path.exists(os.path.join(tmp_path, table1.TABLE_FILE))
+  with pytest.raises(ValueError, match='column'):
+    table1.run(
+      dataclasses.replace(config, columns=('sdn_x',)), rgb_dataset, str(tmp_path)
+    )

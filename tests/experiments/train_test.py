@@ -131,3 +131,25 @@ def test_rgb_of_a_depth_only_dataset_is_a_clear_error(depth_only_dataset, tmp_pa
 def test_unrecorded_run_defaults(tmp_path):
   assert train.modality(str(tmp_path)) == 'depth'
   assert train.input_mode(str(tmp_path)) == 'relative'
+
+
+def test_choose_lr_validates_on_the_training_simulations_only(
+  rgb_dataset, tmp_path, monkeypatch
+):
+  seen = {}
+
+  def fake_select(x, y, g, config, workdir, candidates, progress=True):
+    seen.update(groups=set(np.asarray(g).tolist()), lrs=tuple(candidates))
+    return 1e-3, {1e-2: 0.6, 1e-3: 0.7}
+
+  monkeypatch.setattr(model_lib, 'select_lr', fake_select)
+  out = train.choose_lr(_SMOKE, rgb_dataset, str(tmp_path), [1e-2, 1e-3])
+  x, y, g = train.load_inputs(_SMOKE, rgb_dataset, [MATERIAL])
+  tc = train.train_config(_SMOKE, x.shape[-3:-1])
+  train_idx, test_idx = model_lib.split_indices(tc, y, g)
+  assert seen['groups'] == set(g[train_idx].tolist())  # held-out sims stay unseen
+  assert not seen['groups'] & set(g[test_idx].tolist())
+  assert seen['lrs'] == (1e-2, 1e-3)
+  with open(tmp_path / MATERIAL / 'lr_selection.json') as f:
+    assert json.load(f) == out[MATERIAL]
+  assert out[MATERIAL]['best'] == 1e-3
