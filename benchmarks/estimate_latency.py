@@ -1,0 +1,81 @@
+"""One recording's estimate time after compile, for a few settings.
+
+Each setting runs the same estimate twice in one process: the first pays the
+compiles (MJX, renderer, network, GP buffers), the second is timed. Prints a
+table and writes JSON.
+
+  python benchmarks/estimate_latency.py --recording=/tmp/eval/fabrics/gray_interlock/0000 \
+      --material=gray_interlock --model=/tmp/t1/physnet_depth/simulation/gray_interlock \
+      --out=out/estimate_latency.json
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import tempfile
+import time
+
+from absl import app, flags
+
+from experiments import estimate as est
+from experiments import files
+
+SETTINGS = {
+  'default (q=4, n_init=8)': {},
+  'q=8, n_init=16': dict(q=8, n_init=16),
+  'q=8, n_init=16, warm-up 0.5 s': dict(q=8, n_init=16, warmup=0.5),
+}
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('recording', None, 'a dataset sequence folder')
+flags.DEFINE_string('material', 'gray_interlock', 'its fabric')
+flags.DEFINE_string('model', None, 'its trained network')
+flags.DEFINE_string('out', 'out/estimate_latency.json', 'JSON result')
+flags.DEFINE_list('settings', list(SETTINGS), 'which settings')
+
+
+def main(argv):
+  del argv
+  net = est.load_embedding(FLAGS.model)
+  rows = []
+  for name in FLAGS.settings:
+    config = dataclasses.replace(
+      est.EstimateConfig(material=FLAGS.material), **SETTINGS[name]
+    )
+    rec = est.load_recording(
+      FLAGS.recording, fps=config.fps, size=net.image_size, frames=config.frames,
+      rgb=net.modality == 'rgb',
+    )  # fmt: skip
+    times = []
+    for _ in range(2):  # the first run compiles
+      with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        r = est.estimate(config, rec, FLAGS.model, tmp, progress=False)
+        times.append(time.perf_counter() - t0)
+    row = {
+      'setting': name,
+      'first_s': times[0],
+      'after_compile_s': times[1],
+      'objective_s': r['seconds_in_objective'],
+      'evaluations': r['evaluations'],
+      'iterations': r['iterations'],
+      'errors': r.get('errors', {}).get('estimate'),
+    }
+    rows.append(row)
+    print(json.dumps(row), flush=True)
+  print('| setting | first run s | after compile s | in objective s | evals |')
+  print('|---|---:|---:|---:|---:|')
+  for r in rows:
+    print(
+      f'| {r["setting"]} | {r["first_s"]:.1f} | {r["after_compile_s"]:.1f} | '
+      f'{r["objective_s"]:.1f} | {r["evaluations"]} |'
+    )
+  os.makedirs(os.path.dirname(os.path.abspath(FLAGS.out)), exist_ok=True)
+  files.write_json(FLAGS.out, {'recording': FLAGS.recording, 'rows': rows})
+
+
+if __name__ == '__main__':
+  flags.mark_flags_as_required(['recording', 'model'])
+  app.run(main)
