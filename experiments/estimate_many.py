@@ -68,7 +68,9 @@ def estimate_many(
   Returns:
     Per job, its ``estimate.json`` dict, or the exception that stopped it (a
     bad recording or model, another run in its workdir, every candidate blown
-    up): one job's failure does not stop the others.
+    up): one job's failure does not stop the others. Each search's files are
+    written at the end of the step in which it stopped, not at the end of
+    the run; its ``seconds`` are the batch's wall time until then.
   """
   t_start = time.time()
   out: list[dict | Exception | None] = [None] * len(jobs)
@@ -97,6 +99,33 @@ def estimate_many(
       out[i] = e
 
   sim_seconds = 0.0
+
+  def finish(finished):
+    """Writes the results of searches that just ended (one batch re-simulates
+    their best candidates for the montages), so each lands as soon as it can."""
+    res = {s[0]: s[2].result(s[3]) for s in finished}
+    ok = []
+    for s in finished:
+      if np.isfinite(res[s[0]].y_best):
+        ok.append(s)
+      else:
+        out[s[0]] = ValueError(
+          f'{jobs[s[0]].recording.source}: every candidate simulation blew up'
+        )
+    frames = _best_frames(ok, [res[s[0]].x_best[None] for s in ok])
+    wall = time.time() - t_start
+    for s, f in zip(ok, frames, strict=True):
+      job, r = jobs[s[0]], res[s[0]]
+      out[s[0]] = est.finish(
+        job.config, job.recording, s[1].modality, job.workdir, r,
+        np.asarray(f[0, 0]), seconds=wall, seconds_in_objective=sim_seconds,
+        recordings_in_batch=len(jobs),
+      )  # fmt: skip
+      if progress:
+        where = est.describe(r.x_best, r.y_best, s[1].space)
+        print(f'{job.recording.source}: {where}', flush=True)
+
+  finish([s for s in live if s[2].done(s[3])])  # finished before a resume
   it = 0
   while active := [s for s in live if not s[2].done(s[3])]:
     t0 = time.time()
@@ -110,37 +139,16 @@ def estimate_many(
     sim_seconds += t2 - t1
     for s, x, y in zip(active, asked, values, strict=True):
       s[3] = s[2].tell(s[3], x, y)
+    ended = [s for s in active if s[2].done(s[3])]
     if progress:
-      left = sum(not s[2].done(s[3]) for s in live)
       print(
         f'step {it:3d}: {len(active)} searches, {sum(map(len, asked))} candidates '
         f'simulated and scored in {t2 - t1:.1f} s, GP {t1 - t0:.1f} s; '
-        f'{left} still searching',
+        f'{len(active) - len(ended)} still searching',
         flush=True,
       )
+    finish(ended)
     it += 1
-
-  results = {s[0]: s[2].result(s[3]) for s in live}
-  for s in live:
-    if not np.isfinite(results[s[0]].y_best):
-      out[s[0]] = ValueError(
-        f'{jobs[s[0]].recording.source}: every candidate simulation blew up'
-      )
-  done = [s for s in live if out[s[0]] is None]
-  frames = _best_frames(done, [results[s[0]].x_best[None] for s in done])
-  wall = time.time() - t_start
-  for s, f in zip(done, frames, strict=True):
-    job = jobs[s[0]]
-    out[s[0]] = est.finish(
-      job.config, job.recording, s[1].modality, job.workdir, results[s[0]],
-      np.asarray(f[0, 0]), seconds=wall, seconds_in_objective=sim_seconds,
-      recordings_in_batch=len(jobs), seconds_per_recording=wall / max(len(jobs), 1),
-    )  # fmt: skip
-    if progress:
-      print(
-        f'{job.recording.source}: {est.describe(results[s[0]].x_best, results[s[0]].y_best, s[1].space)}',
-        flush=True,
-      )
   return out
 
 

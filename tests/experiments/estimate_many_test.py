@@ -107,3 +107,25 @@ def test_resume_after_interrupt(env, batched, monkeypatch):
     b = _state(os.path.join(env['root'], f'resumed{i}'))
     np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
     assert resumed[i]['estimate'] == batched[i]['estimate']
+
+
+def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
+  (config, rec) = env['recs'][0]
+  short = str(tmp_path / 'short')
+  jobs = [
+    em.Job(config, rec, env['model'], str(tmp_path / 'long')),
+    em.Job(dataclasses.replace(config, max_iter=1), rec, env['model'], short),
+  ]
+  real = est.evaluate_problems
+  seen = []
+
+  def watching(problems, us, **kw):
+    seen.append((len(problems), os.path.isfile(os.path.join(short, 'estimate.json'))))
+    return real(problems, us, **kw)
+
+  monkeypatch.setattr(est, 'evaluate_problems', watching)
+  out = em.estimate_many(jobs, progress=False)
+  # steps: initial design (both), iteration 1 (both; the short one stops),
+  # then the long one alone, with the short one's result already written
+  assert seen == [(2, False), (2, False), (1, True), (1, True)]
+  assert out[1]['evaluations'] == config.n_init + config.q
