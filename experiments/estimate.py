@@ -549,15 +549,16 @@ def simulate_problems(problems, us, *, pad: bool = False):
     views.setdefault((p.intr, p.color, p.poses.position.shape[0]), []).append(i)
   for (intr, color, _), members in views.items():
     rows = np.flatnonzero(np.isin(owner, members))
-    poses = jax.tree.map(
-      lambda *a: jnp.stack(a), *[problems[i].poses for i in owner[rows]]
-    )  # (b, C, ...)
+    # Each world's problem, as an index into ``members``.
+    slot = jnp.asarray(np.searchsorted(members, owner[rows]))
+    stack = lambda *a, slot=slot: jnp.stack(a)[slot]
+    poses = jax.tree.map(stack, *[problems[i].poses for i in members])  # (b, C, ...)
     render = _renderer(c.garment, c.garment_spacing, c.cloth_resolution, intr, color)
     f = render(jnp.asarray(pos[rows]), poses)
     if color is None:
       sensed = [i for i in members if problems[i].config.sensor_noise]
       if sensed:
-        keys = jnp.stack([problems[i].noise_key for i in owner[rows]])
+        keys = stack(*[problems[i].noise_key for i in members])
         noisy = _sensor(intr)(f, keys)
         use = jnp.asarray(np.isin(owner[rows], sensed))
         f = jnp.where(use[:, None, None, None, None], noisy, f)

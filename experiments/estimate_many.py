@@ -56,7 +56,11 @@ def _cpu():
 
 
 def estimate_many(
-  jobs: list[Job], *, progress: bool = True, gp_on_cpu: bool = True
+  jobs: list[Job],
+  *,
+  progress: bool = True,
+  gp_on_cpu: bool = True,
+  nets: dict[str, est.EmbeddingNet] | None = None,
 ) -> list[dict | Exception]:
   """Runs (or resumes) every job's estimate, batching their simulations.
 
@@ -64,6 +68,7 @@ def estimate_many(
     jobs: the recordings.
     progress: print one line per iteration.
     gp_on_cpu: fit the GPs and propose on the CPU.
+    nets: networks the caller has loaded already, by ``model_dir``.
 
   Returns:
     Per job, its ``estimate.json`` dict, or the exception that stopped it (a
@@ -74,7 +79,7 @@ def estimate_many(
   """
   t_start = time.time()
   out: list[dict | Exception | None] = [None] * len(jobs)
-  nets: dict[str, est.EmbeddingNet] = {}
+  nets = dict(nets or {})
   live = []  # (job index, problem, minimizer, state)
   for i, job in enumerate(jobs):
     try:
@@ -112,7 +117,7 @@ def estimate_many(
         out[s[0]] = ValueError(
           f'{jobs[s[0]].recording.source}: every candidate simulation blew up'
         )
-    frames = _best_frames(ok, [res[s[0]].x_best[None] for s in ok])
+    frames = _per_group(est.simulate_problems, ok, [res[s[0]].x_best[None] for s in ok])
     wall = time.time() - t_start
     for s, f in zip(ok, frames, strict=True):
       job, r = jobs[s[0]], res[s[0]]
@@ -134,7 +139,7 @@ def estimate_many(
       x, s[3] = s[2].ask(s[3])
       asked.append(x)
     t1 = time.time()
-    values = _evaluate(active, asked)
+    values = _per_group(est.evaluate_problems, active, asked)
     t2 = time.time()
     sim_seconds += t2 - t1
     for s, x, y in zip(active, asked, values, strict=True):
@@ -152,31 +157,16 @@ def estimate_many(
   return out
 
 
-def _groups(live):
-  """Indices into ``live`` by simulation group (mesh and clock)."""
+def _per_group(call, searches, xs) -> list:
+  """``call`` (``estimate.evaluate_problems`` or ``simulate_problems``) once per
+  simulation group (mesh and clock) of ``searches``; the first item of each
+  search's result, in ``searches`` order."""
   groups: dict[tuple, list[int]] = {}
-  for k, s in enumerate(live):
+  for k, s in enumerate(searches):
     groups.setdefault(s[1].sim_group(), []).append(k)
-  return groups.values()
-
-
-def _evaluate(active, asked) -> list[np.ndarray]:
-  values: list = [None] * len(active)
-  for members in _groups(active):
-    res = est.evaluate_problems(
-      [active[k][1] for k in members], [asked[k] for k in members], pad=True
-    )
-    for k, (psd, _, _) in zip(members, res, strict=True):
-      values[k] = psd
-  return values
-
-
-def _best_frames(done, xs) -> list:
-  frames: list = [None] * len(done)
-  for members in _groups(done):
-    res = est.simulate_problems(
-      [done[k][1] for k in members], [xs[k] for k in members], pad=True
-    )
-    for k, (f, _, _) in zip(members, res, strict=True):
-      frames[k] = f
-  return frames
+  out: list = [None] * len(searches)
+  for members in groups.values():
+    res = call([searches[k][1] for k in members], [xs[k] for k in members], pad=True)
+    for k, r in zip(members, res, strict=True):
+      out[k] = r[0]
+  return out

@@ -148,7 +148,7 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
 
   base = est.PRESETS[config.preset]
   results, batch, keys = {}, [], []
-  sizes = {}
+  nets = {}
   for rec, method in jobs:
     key, model_dir = _key(rec, method), _model_dir(models, method, rec['fabric'])
     ec = dataclasses.replace(
@@ -156,19 +156,19 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
       seed=config.seed,
     )  # fmt: skip
     try:
-      if model_dir not in sizes:
-        net = est.load_embedding(model_dir)
-        sizes[model_dir] = (net.image_size, net.modality)
-      size, modality = sizes[model_dir]
+      if model_dir not in nets:
+        nets[model_dir] = est.load_embedding(model_dir)
+      net = nets[model_dir]
       recording = est.load_recording(
-        rec['path'], fps=ec.fps, size=size, frames=ec.frames, rgb=modality == 'rgb'
-      )
+        rec['path'], fps=ec.fps, size=net.image_size, frames=ec.frames,
+        rgb=net.modality == 'rgb',
+      )  # fmt: skip
     except (ValueError, OSError) as e:
       results[key] = {'failed': str(e)}
       continue
     batch.append(em.Job(ec, recording, model_dir, _out_dir(workdir, rec, method)))
     keys.append(key)
-  for key, res in zip(keys, em.estimate_many(batch), strict=True):
+  for key, res in zip(keys, em.estimate_many(batch, nets=nets), strict=True):
     results[key] = res if isinstance(res, dict) else {'failed': str(res)}
   return results
 
