@@ -54,6 +54,9 @@ class Config:
     test_fraction: held-out share.
     seed: the only seed.
     sdn_frames, sdn_components: SDN clip length and kept frequency bins.
+    val_fraction, patience: model selection (``model.TrainConfig``): hold out
+      this share of the training simulations, ship the best validation
+      epoch's params, stop after ``patience`` epochs without a better one.
   """
 
   materials: tuple[str, ...] = ()
@@ -73,6 +76,8 @@ class Config:
   seed: int = 0
   sdn_frames: int = 16
   sdn_components: int = 4
+  val_fraction: float = 0.0
+  patience: int = 0
 
 
 PRESETS = {
@@ -198,6 +203,8 @@ def train_config(config: Config, image_size) -> model_lib.TrainConfig:
     split=config.split,
     test_fraction=config.test_fraction,
     seed=config.seed,
+    val_fraction=config.val_fraction,
+    patience=config.patience,
   )
   if config.network == 'physnet':
     return model_lib.TrainConfig(network='physnet', physnet=trunk, **common)
@@ -220,10 +227,11 @@ def _inputs_record(config: Config, root: str, materials) -> dict:
 
 
 def finished_eval(config: Config, root: str, run_dir: str, materials) -> dict | None:
-  """The last eval row of a finished run of this config, else None.
+  """The selected eval row (``model.selected_eval``) of a finished run of
+  this config, else None.
 
   A run is finished when ``metrics.jsonl`` holds an eval row of epoch
-  ``config.epochs`` (or later) and its ``inputs.json`` and ``config.json``
+  ``config.epochs`` (or later), or it stopped early, and its ``inputs.json`` and ``config.json``
   match this config (the image size is taken from ``config.json``, as only the
   data decides it). Lets callers skip loading data for finished runs.
 
@@ -251,14 +259,17 @@ def finished_eval(config: Config, root: str, run_dir: str, materials) -> dict | 
   trunk = saved.physnet if saved.network == 'physnet' else saved.sdn.trunk
   want = train_config(config, trunk.image_size)
   # Fields a resume may change (model.train's) do not make it another run.
-  free = {k: getattr(saved, k) for k in ('epochs', 'log_every', 'max_to_keep')}
+  free = {k: getattr(saved, k) for k in model_lib.train.RESUMABLE_FIELDS}
   if dataclasses.replace(want, **free) != saved:
     return None
   with open(paths[2]) as f:
     evals = [r for r in map(json.loads, filter(str.strip, f)) if r.get('eval')]
-  if not evals or evals[-1]['epoch'] < config.epochs:
+  if not evals or (
+    evals[-1]['epoch'] < config.epochs
+    and not model_lib.stopped_early(evals, config.patience)
+  ):
     return None
-  return evals[-1]
+  return model_lib.selected_eval(evals)
 
 
 def fit_run(
@@ -275,7 +286,8 @@ def fit_run(
     progress: show a tqdm bar.
 
   Returns:
-    (the ``model.fit`` result, its last eval row or {}).
+    (the ``model.fit`` result, its selected eval row (``model.selected_eval``:
+    the best validation epoch's, else the last) or {}).
   """
   x, y, g = data
   os.makedirs(run_dir, exist_ok=True)
@@ -284,12 +296,11 @@ def fit_run(
   )
   tc = train_config(config, x.shape[-3:-1])
   result = model_lib.fit(x, y, g, tc, run_dir, progress=progress)
-  evals = [r for r in result.history if r.get('eval')]
-  return result, (evals[-1] if evals else {})
+  return result, model_lib.selected_eval(result.history)
 
 
 def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> dict:
-  """Trains every requested network; returns ``{run name: last eval row}``."""
+  """Trains every requested network; returns ``{run name: selected eval row}``."""
   check_config(config)
   index = dataset.open_dataset(root)
   materials = config.materials or index.materials
@@ -375,6 +386,12 @@ def define_flags() -> None:
   flags.DEFINE_integer('image_size', None, 'train at this size (0: dataset)')
   flags.DEFINE_integer('seed', None, 'seed')
   flags.DEFINE_list('select_lr', None, 'pick the lr among these by validation')
+  flags.DEFINE_float(
+    'val_fraction', None, 'training simulations held out to pick the epoch'
+  )
+  flags.DEFINE_integer(
+    'patience', None, 'stop after this many epochs without a better one'
+  )
 
 
 def main(argv):
@@ -392,6 +409,8 @@ def main(argv):
       'split',
       'image_size',
       'seed',
+      'val_fraction',
+      'patience',
     )
     if getattr(FLAGS, k) is not None
   }

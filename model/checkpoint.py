@@ -8,17 +8,20 @@ import orbax.checkpoint as ocp
 CHECKPOINT_DIR = 'checkpoints'
 
 
-def manager(workdir: str, max_to_keep: int | None = 2) -> ocp.CheckpointManager:
-  """A checkpoint manager for ``workdir/checkpoints`` (created if missing).
+def manager(
+  workdir: str, max_to_keep: int | None = 2, subdir: str = CHECKPOINT_DIR
+) -> ocp.CheckpointManager:
+  """A checkpoint manager for ``workdir/<subdir>`` (created if missing).
 
   Args:
     workdir: run folder.
     max_to_keep: number of newest checkpoints kept (None keeps all).
+    subdir: the folder under ``workdir``.
 
   Returns:
     The manager; close it (or use it as a context manager) when done.
   """
-  path = os.path.join(os.path.abspath(workdir), CHECKPOINT_DIR)
+  path = os.path.join(os.path.abspath(workdir), subdir)
   options = ocp.CheckpointManagerOptions(max_to_keep=max_to_keep, create=True)
   return ocp.CheckpointManager(path, options=options)
 

@@ -6,6 +6,15 @@ and lr 1e-3. The paper's text says lr 1e-2 while its code used 1e-3;
 ``select_lr`` trains both on a by-simulation validation split of the training
 data and keeps the one with the higher validation triplet accuracy.
 
+Model selection (off by default, the paper had none): ``val_fraction`` holds
+part of the training simulations out as a validation set (split the way the
+test set is); after every epoch the validation triplet accuracy is logged and
+the best epoch's params are kept in ``best/``, which ``load_network`` returns.
+``patience`` ends the run once that many epochs pass without a better one.
+Why: on held-out simulations PhySNet peaks after one or two epochs and then
+overfits its two dozen training simulations (BENCHMARKS.md), so "the last of
+30 epochs" is the wrong network to ship.
+
 An epoch visits every training image once as an anchor (a permutation drawn
 from ``fold_in(key, epoch)``); positives and negatives (or pairs, or the P x K
 batch of batch-hard mining) come from ``fold_in(key, step)``. A run therefore
@@ -13,10 +22,12 @@ resumed from a checkpoint draws exactly the batches the uninterrupted run
 would have drawn.
 
 Workdir layout: ``config.json`` (enough to rebuild the network),
-``checkpoints/<step>/`` (orbax, TrainState incl. the input stats) and
-``metrics.jsonl`` (one JSON object per log or evaluation).
+``checkpoints/<step>/`` (orbax, TrainState incl. the input stats),
+``best/<step>/`` (params of the best validation epoch, with ``val_fraction``)
+and ``metrics.jsonl`` (one JSON object per log or evaluation).
 """
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -49,7 +60,8 @@ LOSSES = ('triplet', 'batch_hard', 'contrastive')
 CONFIG_FILE = 'config.json'
 METRICS_FILE = 'metrics.jsonl'
 # Fields that may change when resuming a run (they do not change what has been done).
-_RESUMABLE_FIELDS = ('epochs', 'log_every', 'max_to_keep')
+RESUMABLE_FIELDS = ('epochs', 'log_every', 'max_to_keep', 'patience')
+BEST_DIR = 'best'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +88,10 @@ class TrainConfig:
     eval_batch_size: batch size when embedding for evaluation.
     log_every: steps between training-metric log rows.
     max_to_keep: checkpoints kept.
+    val_fraction: share of the training part held out for validation (whole
+      simulations unless ``split == 'random'``); 0 = no validation.
+    patience: with validation, stop after this many epochs without a better
+      validation triplet accuracy; 0 = run every epoch.
   """
 
   network: str = 'physnet'
@@ -97,6 +113,8 @@ class TrainConfig:
   eval_batch_size: int = 256
   log_every: int = 50
   max_to_keep: int = 2
+  val_fraction: float = 0.0
+  patience: int = 0
 
   def __post_init__(self):
     for name, allowed in (
@@ -117,6 +135,15 @@ class TrainConfig:
       raise ValueError(
         f'TrainConfig.batch_size ({self.batch_size}) must be a multiple of per_label '
         f'({self.per_label}) with at least two labels per batch for batch_hard.'
+      )
+    if not 0.0 <= self.val_fraction < 1.0:
+      raise ValueError(
+        f'TrainConfig.val_fraction must be in [0, 1), got {self.val_fraction}'
+      )
+    if self.patience < 0 or (self.patience and not self.val_fraction):
+      raise ValueError(
+        f'TrainConfig.patience ({self.patience}) must be >= 0, and needs '
+        'val_fraction > 0 (it counts epochs without a better validation score)'
       )
     if self.learning_rate <= 0:
       raise ValueError(
@@ -147,9 +174,10 @@ class FitResult(NamedTuple):
   Attributes:
     state: the final TrainState.
     network: the network pair.
-    train_idx: ``(N_train,)`` indices of the training images.
+    train_idx: ``(N_train,)`` indices of the images trained on.
     test_idx: ``(N_test,)`` indices of the held-out images.
     history: the rows written to ``metrics.jsonl`` (all of them, resumed ones too).
+    val_idx: ``(N_val,)`` indices of the validation images (empty without).
   """
 
   state: TrainState
@@ -157,6 +185,7 @@ class FitResult(NamedTuple):
   train_idx: np.ndarray
   test_idx: np.ndarray
   history: list[dict]
+  val_idx: np.ndarray = np.zeros((0,), np.int64)
 
 
 def make_network(config: TrainConfig) -> physnet.Network:
@@ -362,7 +391,7 @@ def _prepare_workdir(workdir: str, config: TrainConfig) -> None:
       config_io.from_dict(TrainConfig, config_io.read_json(path), path)
     )
     new = config_io.to_dict(config)
-    diff = sorted(k for k in new if k not in _RESUMABLE_FIELDS and new[k] != old.get(k))
+    diff = sorted(k for k in new if k not in RESUMABLE_FIELDS and new[k] != old.get(k))
     if diff:
       raise ValueError(
         f'{path} belongs to a run with different {diff}; use a new workdir.'
@@ -448,6 +477,79 @@ def split_indices(
   return splits.split(k_split, config.split, labels, groups, config.test_fraction)
 
 
+def validation_split(
+  config: TrainConfig, labels, groups, train_idx
+) -> tuple[np.ndarray, np.ndarray]:
+  """(fit, validation) indices: ``val_fraction`` of the training part held out.
+
+  The validation set is drawn from ``train_idx`` only, the way the test set
+  was drawn (whole groups, or single images under the 'random' split), so
+  choosing an epoch by it never looks at the test set.
+
+  Args:
+    config: training config (``seed``, ``split``, ``val_fraction``).
+    labels: ``(N,)`` int labels of all images.
+    groups: ``(N,)`` group ids (None: labels).
+    train_idx: the training part of ``split_indices``.
+
+  Returns:
+    (fit, validation) sorted index arrays into ``labels``; validation is
+    empty when ``val_fraction`` is 0.
+  """
+  train_idx = np.asarray(train_idx)
+  if not config.val_fraction:
+    return train_idx, np.zeros((0,), np.int64)
+  labels = np.asarray(labels)
+  groups = labels if groups is None else np.asarray(groups)
+  kind = 'random' if config.split == 'random' else 'simulation'
+  key = jax.random.fold_in(jax.random.PRNGKey(config.seed), 11)
+  fit_part, val_part = splits.split(
+    key, kind, labels[train_idx], groups[train_idx], config.val_fraction
+  )
+  fit_idx, val_idx = train_idx[fit_part], train_idx[val_part]
+  if np.unique(labels[val_idx]).size < 2:
+    raise ValueError(
+      f'val_fraction={config.val_fraction} leaves '
+      f'{np.unique(labels[val_idx]).size} label(s) for validation; triplets need '
+      '>= 2 (more simulations or a larger val_fraction)'
+    )
+  return fit_idx, val_idx
+
+
+def best_epoch(history: Sequence[dict]) -> dict | None:
+  """The eval row with the best validation triplet accuracy (the first of
+  equals: the one whose params are in ``best/``), or None without validation."""
+  rows = [r for r in history if 'val_triplet_accuracy' in r]
+  return max(rows, key=lambda r: r['val_triplet_accuracy']) if rows else None
+
+
+def selected_eval(history: Sequence[dict]) -> dict:
+  """The eval row of the params ``load_network`` returns: the best validation
+  epoch's with validation, else the last epoch's ({} before any)."""
+  best = best_epoch(history)
+  if best is not None:
+    return best
+  evals = [r for r in history if r.get('eval')]
+  return evals[-1] if evals else {}
+
+
+def stopped_early(history: Sequence[dict], patience: int) -> bool:
+  """Whether ``patience`` epochs have passed since the best validation epoch."""
+  best = best_epoch(history)
+  if not patience or best is None:
+    return False
+  last = max(r['epoch'] for r in history if r.get('eval'))
+  return last - best['epoch'] >= patience
+
+
+def _val_accuracy(network, params, images, labels, val_idx, config) -> float:
+  key = jax.random.fold_in(jax.random.PRNGKey(config.seed), 13)
+  emb = metrics.embed(network.apply, params, images[val_idx], config.eval_batch_size)
+  return float(
+    metrics.triplet_accuracy(key, emb, labels[val_idx], config.eval_triplets)
+  )
+
+
 def fit(
   images, labels, groups, config: TrainConfig, workdir: str, *, progress: bool = True
 ) -> FitResult:
@@ -468,6 +570,7 @@ def fit(
   _prepare_workdir(workdir, config)
   k_state = jax.random.split(jax.random.PRNGKey(config.seed))[1]
   train_idx, test_idx = split_indices(config, labels, groups)
+  train_idx, val_idx = validation_split(config, labels, groups, train_idx)
   train_images, train_labels = images[train_idx], labels[train_idx]
   triplets.check_labels(train_labels, 'training labels')
 
@@ -476,7 +579,14 @@ def fit(
   optimizer, schedule = make_optimizer(config, epoch_steps)
   stats = physnet.compute_stats(train_images)
   init = lambda key: init_state(network, optimizer, key, stats)
-  with checkpoint.manager(workdir, config.max_to_keep) as mngr:
+  with (
+    checkpoint.manager(workdir, config.max_to_keep) as mngr,
+    (
+      checkpoint.manager(workdir, 1, BEST_DIR)
+      if val_idx.size
+      else contextlib.nullcontext()
+    ) as best_mngr,
+  ):
     # An existing checkpoint wins; the target is only shapes, so nothing is initialised.
     state = checkpoint.restore(mngr, jax.eval_shape(init, k_state))
     if state is None:
@@ -491,13 +601,13 @@ def fit(
     )
     sample = jax.jit(make_sampler(config, train_labels, epoch_steps))
     total = config.epochs * epoch_steps
+    # A run that already stopped early (and is called again) does nothing.
+    start = total if stopped_early(history, config.patience) else int(state.step)
     log_path = os.path.join(workdir, METRICS_FILE)
     t0 = time.perf_counter()
     with (
       open(log_path, 'a') as log,
-      tqdm(
-        total=total, initial=int(state.step), disable=not progress, desc='fit'
-      ) as bar,
+      tqdm(total=total, initial=start, disable=not progress, desc='fit') as bar,
     ):
 
       def write(row):
@@ -506,7 +616,7 @@ def fit(
         log.flush()
 
       window, count = None, 0  # running sums on device: no host sync per step
-      for step in range(int(state.step), total):
+      for step in range(start, total):
         batch = _gather(train_images, train_labels, sample(state.key, step))
         state, m = train_step(state, batch)
         window = m if window is None else jax.tree.map(jnp.add, window, m)
@@ -523,11 +633,20 @@ def fit(
           row = evaluate(
             network, state.params, images, labels, train_idx, test_idx, config
           )
+          if val_idx.size:
+            acc = _val_accuracy(network, state.params, images, labels, val_idx, config)
+            row['val_triplet_accuracy'] = acc
+            best = best_epoch(history)
+            if best is None or acc > best['val_triplet_accuracy']:
+              # Before the row: a crash in between redoes this epoch and saves again.
+              checkpoint.save(best_mngr, step + 1, state.params)
           write(
             {'step': step + 1, 'epoch': (step + 1) // epoch_steps, 'eval': True, **row}
           )
           checkpoint.save(mngr, step + 1, state)
-  return FitResult(state, network, train_idx, test_idx, history)
+          if stopped_early(history, config.patience):
+            break
+  return FitResult(state, network, train_idx, test_idx, history, val_idx)
 
 
 def select_lr(
@@ -561,7 +680,10 @@ def select_lr(
   """
   scores = {}
   for lr in candidates:
-    cfg = dataclasses.replace(config, learning_rate=float(lr), split='simulation')
+    cfg = dataclasses.replace(
+      config, learning_rate=float(lr), split='simulation', val_fraction=0.0,
+      patience=0,
+    )  # fmt: skip
     result = fit(
       images,
       labels,
@@ -578,13 +700,15 @@ def select_lr(
 
 
 def load_network(
-  workdir: str, step: int | None = None
+  workdir: str, step: int | None = None, *, best: bool = True
 ) -> tuple[physnet.Network, Any, TrainConfig]:
   """Rebuilds the network from ``config.json`` and restores its params.
 
   Args:
     workdir: a ``fit`` run folder.
-    step: checkpoint step (the latest if None).
+    step: checkpoint step (None: the best validation epoch's params if the run
+      kept them and ``best``, else the latest).
+    best: see ``step``.
 
   Returns:
     (network, params incl. input stats, config).
@@ -602,6 +726,11 @@ def load_network(
   target = jax.eval_shape(
     lambda: init_state(network, optimizer, jax.random.PRNGKey(0), stats)
   )
+  if step is None and best and os.path.isdir(os.path.join(workdir, BEST_DIR)):
+    with checkpoint.manager(workdir, None, BEST_DIR) as mngr:
+      params = checkpoint.restore(mngr, target.params)
+    if params is not None:
+      return network, params, config
   with checkpoint.manager(workdir, None) as mngr:
     state = checkpoint.restore(mngr, target, step)
   if state is None:

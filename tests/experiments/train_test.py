@@ -153,3 +153,28 @@ def test_choose_lr_validates_on_the_training_simulations_only(
   with open(tmp_path / MATERIAL / 'lr_selection.json') as f:
     assert json.load(f) == out[MATERIAL]
   assert out[MATERIAL]['best'] == 1e-3
+
+
+def test_model_selection_run_reports_the_shipped_epoch(rgb_dataset, tmp_path):
+  # The smoke set has four simulations: the per-image split leaves all four
+  # labels on every side, so validation works there.
+  cfg = dataclasses.replace(
+    _SMOKE, split='random', epochs=4, val_fraction=0.25, patience=1
+  )
+  workdir = str(tmp_path)
+  row = train.run(cfg, rgb_dataset, workdir, progress=False)[MATERIAL]
+  run_dir = os.path.join(workdir, MATERIAL)
+  with open(os.path.join(run_dir, model_lib.train.METRICS_FILE)) as f:
+    evals = [r for r in map(json.loads, f) if r.get('eval')]
+  best = model_lib.best_epoch(evals)
+  assert row == best and 'test_knn_accuracy' in row
+  assert evals[-1]['epoch'] == min(cfg.epochs, best['epoch'] + cfg.patience)
+  assert os.path.isdir(os.path.join(run_dir, model_lib.train.BEST_DIR))
+  before = _snapshot(run_dir)
+  assert train.finished_eval(cfg, rgb_dataset, run_dir, [MATERIAL]) == best
+  assert train.run(cfg, rgb_dataset, workdir, progress=False)[MATERIAL] == best
+  assert _snapshot(run_dir) == before
+  # A larger patience is the same run resumed, and it is no longer finished.
+  longer = dataclasses.replace(cfg, patience=10)
+  if evals[-1]['epoch'] < cfg.epochs:
+    assert train.finished_eval(longer, rgb_dataset, run_dir, [MATERIAL]) is None

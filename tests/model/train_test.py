@@ -193,6 +193,70 @@ class CheckpointTest(absltest.TestCase):
           progress=False,
         )
 
+  def test_validation_split_holds_out_training_simulations(self):
+    _, labels = toy_set(per_label=2)
+    config = dataclasses.replace(_CONFIG, val_fraction=0.34)
+    train_idx, test_idx = model.split_indices(config, labels)
+    fit_idx, val_idx = model.validation_split(config, labels, None, train_idx)
+    # 8 labels: 2 held out for test, then 2 of the other 6 for validation.
+    parts = [set(labels[i]) for i in (fit_idx, val_idx, test_idx)]
+    self.assertEqual([len(p) for p in parts], [4, 2, 2])
+    self.assertEqual(
+      parts[0] & parts[1] | parts[0] & parts[2] | parts[1] & parts[2], set()
+    )
+    np.testing.assert_array_equal(np.sort(np.r_[fit_idx, val_idx]), train_idx)
+    none = model.validation_split(_CONFIG, labels, None, train_idx)
+    np.testing.assert_array_equal(none[0], train_idx)
+    self.assertEqual(none[1].size, 0)
+    with self.assertRaisesRegex(ValueError, 'patience'):
+      dataclasses.replace(_CONFIG, patience=2)
+    with self.assertRaisesRegex(ValueError, 'val_fraction'):
+      dataclasses.replace(_CONFIG, val_fraction=1.0)
+
+  def test_selection_rules_on_a_written_history(self):
+    rows = [
+      {'step': 1, 'epoch': 1, 'eval': True, 'val_triplet_accuracy': 0.7},
+      {'step': 2, 'epoch': 2, 'eval': True, 'val_triplet_accuracy': 0.8},
+      {'step': 3, 'epoch': 3, 'eval': True, 'val_triplet_accuracy': 0.8},
+      {'step': 4, 'epoch': 4, 'eval': True, 'val_triplet_accuracy': 0.6},
+    ]
+    self.assertEqual(model.best_epoch(rows)['epoch'], 2)  # the first of equals
+    self.assertIs(model.selected_eval(rows), rows[1])
+    self.assertFalse(model.stopped_early(rows[:3], 2))
+    self.assertTrue(model.stopped_early(rows, 2))
+    self.assertFalse(model.stopped_early(rows, 0))
+    plain = [{k: v for k, v in r.items() if k != 'val_triplet_accuracy'} for r in rows]
+    self.assertIsNone(model.best_epoch(plain))
+    self.assertEqual(model.selected_eval(plain)['epoch'], 4)
+
+  def test_fit_keeps_the_best_validation_epoch_and_stops_early(self):
+    images, labels = toy_set(per_label=6)
+    config = dataclasses.replace(
+      _CONFIG, epochs=6, val_fraction=0.34, patience=2, max_to_keep=None
+    )
+    with tempfile.TemporaryDirectory() as wd:
+      result = model.fit(images, labels, labels, config, wd, progress=False)
+      evals = [r for r in result.history if r.get('eval')]
+      self.assertTrue(all('val_triplet_accuracy' in r for r in evals))
+      best = model.best_epoch(result.history)
+      # It ran until `patience` epochs passed without a better score, or to the end.
+      self.assertEqual(evals[-1]['epoch'], min(config.epochs, best['epoch'] + 2))
+      # No image of a validation or test simulation was trained on.
+      seen = set(labels[result.train_idx])
+      self.assertEqual(seen & set(labels[result.val_idx]), set())
+      self.assertEqual(seen & set(labels[result.test_idx]), set())
+      # load_network returns the best epoch's params, step= the latest.
+      _, params, _ = model.load_network(wd)
+      with checkpoint.manager(wd, None) as mngr:
+        at_best = checkpoint.restore(mngr, result.state, best['step'])
+      self.assertTrue(_tree_equal(params, at_best.params))
+      _, latest, _ = model.load_network(wd, best=False)
+      self.assertTrue(_tree_equal(latest, result.state.params))
+      # Called again, a stopped run does not train on.
+      again = model.fit(images, labels, labels, config, wd, progress=False)
+      self.assertEqual(int(again.state.step), int(result.state.step))
+      self.assertLen(again.history, len(result.history))
+
   def test_fit_rejects_bad_data(self):
     images, labels = toy_set(n_labels=2, per_label=2)
     with tempfile.TemporaryDirectory() as wd:
