@@ -17,15 +17,16 @@ import os
 import tempfile
 import time
 
-from absl import app, flags
+from absl import app, flags, logging
 
 from experiments import estimate as est
 from experiments import files
 
+# name -> EstimateConfig overrides (names without commas: --settings is a list).
 SETTINGS = {
-  'default (q=4, n_init=8)': {},
-  'q=8, n_init=16': dict(q=8, n_init=16),
-  'q=8, n_init=16, warm-up 0.5 s': dict(q=8, n_init=16, warmup=0.5),
+  'default': {},  # q=4, n_init=8
+  'q8': dict(q=8, n_init=16),
+  'q8_warmup0.5': dict(q=8, n_init=16, warmup=0.5),
 }
 
 FLAGS = flags.FLAGS
@@ -34,16 +35,20 @@ flags.DEFINE_string('material', 'gray_interlock', 'its fabric')
 flags.DEFINE_string('model', None, 'its trained network')
 flags.DEFINE_string('out', 'out/estimate_latency.json', 'JSON result')
 flags.DEFINE_list('settings', list(SETTINGS), 'which settings')
+flags.DEFINE_enum('preset', 'default', list(est.PRESETS), 'base estimate settings')
+flags.DEFINE_string('backend', 'auto', "'auto', 'mjx' or 'c'")
 
 
 def main(argv):
   del argv
+  logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint at INFO
   net = est.load_embedding(FLAGS.model)
   rows = []
   for name in FLAGS.settings:
     config = dataclasses.replace(
-      est.EstimateConfig(material=FLAGS.material), **SETTINGS[name]
-    )
+      est.PRESETS[FLAGS.preset], material=FLAGS.material, backend=FLAGS.backend,
+      **SETTINGS[name],
+    )  # fmt: skip
     rec = est.load_recording(
       FLAGS.recording, fps=config.fps, size=net.image_size, frames=config.frames,
       rgb=net.modality == 'rgb',
@@ -56,6 +61,7 @@ def main(argv):
         times.append(time.perf_counter() - t0)
     row = {
       'setting': name,
+      'overrides': SETTINGS[name],
       'first_s': times[0],
       'after_compile_s': times[1],
       'objective_s': r['seconds_in_objective'],
@@ -73,7 +79,11 @@ def main(argv):
       f'{r["objective_s"]:.1f} | {r["evaluations"]} |'
     )
   os.makedirs(os.path.dirname(os.path.abspath(FLAGS.out)), exist_ok=True)
-  files.write_json(FLAGS.out, {'recording': FLAGS.recording, 'rows': rows})
+  files.write_json(
+    FLAGS.out,
+    {'recording': FLAGS.recording, 'preset': FLAGS.preset, 'backend': FLAGS.backend,
+     'rows': rows},
+  )  # fmt: skip
 
 
 if __name__ == '__main__':

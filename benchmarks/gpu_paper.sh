@@ -1,17 +1,43 @@
 #!/usr/bin/env bash
 # The paper-size pipeline on every GPU of one machine, as one background job:
-# paper dataset (depth + RGB) and the real-like evaluation set, Table 1's
-# networks (four columns x two splits x seven fabrics; one share per GPU),
-# the learning-rate choice, Tables 2 and 3 for the four methods (lockstep
-# estimates, one shard per GPU), the tables, and one recording's estimate time.
+#   1. the paper dataset (depth + RGB) and the real-like evaluation set;
+#   2. Table 1's simulation-split networks (four columns x seven fabrics), as a
+#      queue of small tasks the GPUs pull from, longest first; meanwhile one
+#      GPU trains PhySNet-depth for gray interlock alone and times one estimate
+#      with it after compile (benchmarks/estimate_latency.py);
+#   3. Tables 2 and 3 for the four methods in the same run: every recording x
+#      method in lockstep, SHARDS_PER_GPU processes per GPU (contiguous chunks
+#      by set, so each process simulates few meshes per step);
+#   4. the tables, Table 1 and the similarity maps; then, while time is left,
+#      the random-split runs of Table 1's k-NN column.
 #   setsid bash benchmarks/gpu_paper.sh /tmp/run >/tmp/run.log 2>&1 &
-# Progress: /tmp/run/status.txt. Every step resumes: rerun after an interruption.
+# Progress: $R/status.txt. Every step resumes: rerun after an interruption.
+# Training defaults: at most EPOCHS epochs, the epoch chosen on VAL of the
+# training simulations, stopping after PATIENCE epochs without a better one.
+# A CPU smoke run of the scheduling (tiny data, fake GPUs):
+#   NG=2 SMOKE=1 bash benchmarks/gpu_paper.sh /tmp/gp_smoke
 set -uo pipefail
 R=${1:-/tmp/run}
-EPOCHS=${EPOCHS:-12}
-export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
-mkdir -p "$R/logs"
-NG=$(nvidia-smi -L | wc -l)
+EPOCHS=${EPOCHS:-30}
+VAL=${VAL:-0.2}
+PATIENCE=${PATIENCE:-4}
+SHARDS_PER_GPU=${SHARDS_PER_GPU:-2}
+LATENCY=${LATENCY:-1}
+export PYTHONPATH=${PYTHONPATH:-/tmp/site:$PWD} PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
+NG=${NG:-$(nvidia-smi -L | wc -l)}
+FABRICS=(white_tablecloth gray_interlock black_denim sparkle_fleece pink_nylon ponte_roma red_violet)
+DS_ARGS="--rgb --batch_size=210"
+EVAL_ARGS="--sequences=3"
+T1_ARGS="--epochs=$EPOCHS --val_fraction=$VAL --patience=$PATIENCE"
+EST_ARGS=""
+if [ -n "${SMOKE:-}" ]; then  # tiny everything, MuJoCo C, for checking this script on a CPU
+  FABRICS=(gray_interlock black_denim)
+  DS_ARGS="--preset=smoke --rgb --sequences=10 --materials=gray_interlock,black_denim"
+  EVAL_ARGS="--smoke"
+  T1_ARGS="--preset=smoke --epochs=3 --val_fraction=$VAL --patience=1 --test_fraction=0.2"
+  EST_ARGS="--preset=smoke --backend=c"
+fi
+mkdir -p "$R/logs" "$R/queue"
 T0=$SECONDS
 note() { echo "$((SECONDS - T0)) s: $*" >>"$R/status.txt"; }
 step() {  # gpu name seconds command...
@@ -24,56 +50,89 @@ step() {  # gpu name seconds command...
   return $rc
 }
 wait_for() { while [ ! -e "$1" ]; do sleep 5; done; }
-T1="python -m experiments.table1 --dataset=$R/ds --workdir=$R/t1 --epochs=$EPOCHS --train_only"
-note "start: $NG GPUs, $EPOCHS epochs"
+T1="python -m experiments.table1 --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --train_only"
+note "start: $NG GPUs; table1 $T1_ARGS"
 
-lane() {  # gpu: its share of the work
-  local g=$1  # (step runs on GPU g % NG)
-  case $g in
-    0) step $g dataset 600 python -m experiments.generate_dataset --out="$R/ds" --rgb \
-         --batch_size=210 && touch "$R/ds.done"
-       step $g t1_physnet_depth_sim 1500 $T1 --columns=physnet_depth --splits=simulation
-       touch "$R/physnet_depth.done"
-       step $g select_lr 900 python -m experiments.train --dataset="$R/ds" \
-         --workdir="$R/lr" --materials=gray_interlock --epochs=$EPOCHS --select_lr=1e-2,1e-3 ;;
-    1) step $g eval_set 600 python -m experiments.make_eval_set --out="$R/eval" --sequences=3 \
-         && touch "$R/eval.done"
-       wait_for "$R/ds.done"
-       step $g t1_physnet_depth_random 1500 $T1 --columns=physnet_depth --splits=random
-       step $g t1_sdn_depth_sim 900 $T1 --columns=sdn_depth --splits=simulation
-       touch "$R/sdn_depth.done" ;;
-    2) wait_for "$R/ds.done"
-       step $g t1_physnet_rgb_sim 1500 $T1 --columns=physnet_rgb --splits=simulation
-       touch "$R/physnet_rgb.done"
-       step $g t1_sdn_rgb_sim 900 $T1 --columns=sdn_rgb --splits=simulation
-       touch "$R/sdn_rgb.done" ;;
-    3) wait_for "$R/ds.done"
-       step $g t1_physnet_rgb_random 1500 $T1 --columns=physnet_rgb --splits=random
-       step $g t1_sdn_random 900 $T1 --columns=sdn_depth,sdn_rgb --splits=random ;;
-  esac
+# The queue: "name columns split materials" per line, longest tasks first.
+pairs() { local i; for ((i = 0; i < ${#FABRICS[@]}; i += $1)); do
+  local s=("${FABRICS[@]:i:$1}"); (IFS=,; echo "${s[*]}"); done; }
+make_queue() {  # $1: split
+  local m
+  for m in $(pairs 1); do echo "sdn_rgb_$1_$m sdn_rgb $1 $m"; done
+  for m in $(pairs 2); do echo "sdn_depth_$1_${m//,/_} sdn_depth $1 $m"; done
+  for m in $(pairs 2); do echo "physnet_rgb_$1_${m//,/_} physnet_rgb $1 $m"; done
+  for m in $(pairs 3); do echo "physnet_depth_$1_${m//,/_} physnet_depth $1 $m"; done
+}
+make_queue simulation >"$R/queue/simulation.txt"
+make_queue random >"$R/queue/random.txt"
+pop() {  # $1: queue; prints the next task's line (empty when none is left)
+  (
+    flock 9
+    local n line
+    n=$(cat "$R/queue/$1.next" 2>/dev/null || echo 1)
+    line=$(sed -n "${n}p" "$R/queue/$1.txt")
+    [ -n "$line" ] && echo $((n + 1)) >"$R/queue/$1.next"
+    echo "$line"
+  ) 9>"$R/queue/$1.lock"
+}
+drain() {  # gpu queue timeout: run tasks until the queue is empty
+  local g=$1 q=$2 secs=$3 line name cols split mats
+  while line=$(pop "$q") && [ -n "$line" ]; do
+    read -r name cols split mats <<<"$line"
+    step "$g" "t1_$name" "$secs" $T1 --columns="$cols" --splits="$split" \
+      --materials="$mats" && touch "$R/queue/$name.done"
+    touch "$R/queue/$name.ended"
+  done
+}
+all_ended() {  # queue: wait until every task of it has ended
+  local name
+  for name in $(cut -d' ' -f1 "$R/queue/$1.txt"); do wait_for "$R/queue/$name.ended"; done
 }
 
-shard() {  # gpu: its chunk of Tables 2 and 3 (every simulation-split network)
+lane() {
   local g=$1
-  for f in eval physnet_depth physnet_rgb sdn_depth sdn_rgb; do wait_for "$R/$f.done"; done
-  step "$g" "tables_shard$g" 1500 python -m experiments.tables --eval="$R/eval" \
-    --models="$R/t1" --workdir="$R/tables" --batched --shard="$g" --num_shards=4
+  case $g in
+    0) step "$g" dataset 600 python -m experiments.generate_dataset --out="$R/ds" $DS_ARGS \
+         && touch "$R/ds.done" ;;
+    1) step "$g" eval_set 600 python -m experiments.make_eval_set --out="$R/eval" $EVAL_ARGS \
+         && touch "$R/eval.done" ;;
+  esac
+  wait_for "$R/ds.done"
+  if [ "$g" -eq $((NG - 1)) ] && [ "$NG" -gt 1 ] && [ "$LATENCY" = 1 ]; then  # alone on its GPU
+    local gi=${FABRICS[1]}
+    step "$g" t1_latency_net 900 $T1 --columns=physnet_depth --splits=simulation --materials="$gi"
+    wait_for "$R/eval.done"
+    step "$g" latency 900 python benchmarks/estimate_latency.py \
+      --recording="$R/eval/fabrics/$gi/0000" --material="$gi" $EST_ARGS \
+      --model="$R/t1/physnet_depth/simulation/$gi" --out="$R/latency.json" \
+      --settings=default,q8_warmup0.5
+  fi
+  drain "$g" simulation 1500
+  all_ended simulation
+  wait_for "$R/eval.done"
+  local s pids=()
+  for ((s = g * SHARDS_PER_GPU; s < (g + 1) * SHARDS_PER_GPU; s++)); do
+    XLA_PYTHON_CLIENT_MEM_FRACTION=$(awk "BEGIN { print 0.9 / $SHARDS_PER_GPU }") \
+      step "$g" "tables_shard$s" 1500 python -m experiments.tables --eval="$R/eval" \
+      --models="$R/t1" --workdir="$R/tables" --batched --shard="$s" \
+      --num_shards=$((NG * SHARDS_PER_GPU)) $EST_ARGS &
+    pids+=($!)
+  done
+  wait "${pids[@]}"
+  touch "$R/estimates_gpu$g.done"
+  if [ "$g" -eq 0 ]; then
+    for ((s = 0; s < NG; s++)); do wait_for "$R/estimates_gpu$s.done"; done
+    step 0 tables 600 python -m experiments.tables --eval="$R/eval" --models="$R/t1" \
+      --workdir="$R/tables" $EST_ARGS
+    step 0 table1 900 python -m experiments.table1 --dataset="$R/ds" --workdir="$R/t1" \
+      $T1_ARGS --splits=simulation
+    touch "$R/tables.done"
+  fi
+  drain "$g" random 1500
 }
 
-if [ "$NG" -lt 4 ]; then  # fewer GPUs: the same steps one after another on GPU 0
-  for g in 0 1 2 3; do lane "$g"; done
-  for g in 0 1 2 3; do shard "$g"; done
-else
-  for g in 0 1 2 3; do (lane "$g"; shard "$g") & done
-  wait
-fi
-step 0 table1 900 python -m experiments.table1 --dataset="$R/ds" --workdir="$R/t1" \
-  --epochs=$EPOCHS &
-step 1 tables 300 python -m experiments.tables --eval="$R/eval" --models="$R/t1" \
-  --workdir="$R/tables" &
-step 2 latency 900 python benchmarks/estimate_latency.py \
-  --recording="$R/eval/fabrics/gray_interlock/0000" --material=gray_interlock \
-  --model="$R/t1/physnet_depth/simulation/gray_interlock" --out="$R/latency.json" &
+for ((g = 0; g < NG; g++)); do lane "$g" & done
 wait
+step 0 table1_all 900 python -m experiments.table1 --dataset="$R/ds" --workdir="$R/t1" $T1_ARGS
 note "all done"
 touch "$R/all.done"
