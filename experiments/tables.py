@@ -74,6 +74,7 @@ class Config:
   batched: bool = False
   shard: int = 0
   num_shards: int = 1
+  report_only: bool = False  # tables of what has finished; run nothing
 
 
 def recordings(eval_root: str) -> list[dict]:
@@ -201,6 +202,9 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
       # Contiguous chunks: jobs come sorted by set, so a shard sees few meshes
       # (each mesh is a simulation batch of its own per iteration).
       mine.append((r, m))
+  if config.report_only:
+    print(f'{len(mine)} estimates unfinished (not run: --report_only)', flush=True)
+    return results
   if config.batched:
     if mine:
       print(f'{len(mine)} estimates in lockstep', flush=True)
@@ -377,6 +381,7 @@ def define_flags() -> None:
   flags.DEFINE_bool('batched', False, 'all estimates in lockstep in this process')
   flags.DEFINE_integer('shard', 0, 'this process takes chunk i of num_shards')
   flags.DEFINE_integer('num_shards', 1, 'processes sharing the estimates')
+  flags.DEFINE_bool('report_only', False, 'tables of the finished estimates only')
 
 
 def main(argv):
@@ -391,6 +396,7 @@ def main(argv):
     batched=FLAGS.batched,
     shard=FLAGS.shard,
     num_shards=FLAGS.num_shards,
+    report_only=FLAGS.report_only,
   )
   run(config, FLAGS.eval, FLAGS.models, FLAGS.workdir)
 

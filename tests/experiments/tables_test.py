@@ -115,6 +115,11 @@ def test_shards_split_the_pending_estimates_and_batched_runs_them_once(
   assert seen == {'0001', '0002', '0003', '0004'}
   with pytest.raises(ValueError, match='shard'):
     tables.run_all(tables.Config(shard=2, num_shards=2), 'eval', models, workdir)
+  # --report_only reads what has finished and runs nothing.
+  fresh = str(tmp_path / 'fresh')
+  report = tables.Config(methods=('physnet_depth',), batched=True, report_only=True)
+  assert tables.run_all(report, 'eval', models, fresh) == {}
+  assert len(calls) == 2
 
 
 def test_batched_runs_real_estimates(tmp_path):
