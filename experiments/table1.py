@@ -383,12 +383,7 @@ def define_flags() -> None:
   flags.DEFINE_list('columns', None, 'only these <network>_<modality> columns')
   flags.DEFINE_list('splits', None, 'only these splits (simulation, random)')
   flags.DEFINE_bool('train_only', False, 'train only: no table or maps')
-  flags.DEFINE_float(
-    'val_fraction', None, 'training simulations held out to pick the epoch'
-  )
-  flags.DEFINE_integer(
-    'patience', None, 'stop after this many epochs without a better one'
-  )
+  train_lib.define_selection_flags()
 
 
 def main(argv):

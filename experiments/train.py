@@ -386,6 +386,11 @@ def define_flags() -> None:
   flags.DEFINE_integer('image_size', None, 'train at this size (0: dataset)')
   flags.DEFINE_integer('seed', None, 'seed')
   flags.DEFINE_list('select_lr', None, 'pick the lr among these by validation')
+  define_selection_flags()
+
+
+def define_selection_flags() -> None:
+  """``--val_fraction`` and ``--patience`` (model selection), shared with table1."""
   flags.DEFINE_float(
     'val_fraction', None, 'training simulations held out to pick the epoch'
   )
