@@ -545,9 +545,7 @@ def stopped_early(history: Sequence[dict], patience: int) -> bool:
 def _val_accuracy(network, params, images, labels, val_idx, config) -> float:
   key = jax.random.fold_in(jax.random.PRNGKey(config.seed), 13)
   emb = metrics.embed(network.apply, params, images[val_idx], config.eval_batch_size)
-  return float(
-    metrics.triplet_accuracy(key, emb, labels[val_idx], config.eval_triplets)
-  )
+  return metrics.triplet_accuracy(key, emb, labels[val_idx], config.eval_triplets)
 
 
 def fit(
