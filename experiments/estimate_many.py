@@ -26,7 +26,6 @@ import os
 import time
 from typing import NamedTuple
 
-import jax
 import numpy as np
 
 import bo
@@ -47,12 +46,6 @@ class Job(NamedTuple):
   recording: est.Recording
   model_dir: str
   workdir: str
-
-
-def _cpu():
-  # The GP is tiny (tens of points): on a GPU its L-BFGS loops only wait on
-  # kernel launches, and the accelerator is busy with the simulations.
-  return jax.devices('cpu')[0]
 
 
 def estimate_many(
@@ -80,7 +73,7 @@ def estimate_many(
   t_start = time.time()
   out: list[dict | Exception | None] = [None] * len(jobs)
   nets = dict(nets or {})
-  live = []  # (job index, problem, minimizer, state)
+  live = []  # (job index, problem, minimizer, state, best seen)
   for i, job in enumerate(jobs):
     try:
       if job.model_dir not in nets:
@@ -97,17 +90,18 @@ def estimate_many(
       opt = bo.Minimizer(
         est.BOUNDS,
         **est.minimizer_settings(job.config, job.workdir),
-        device=_cpu() if gp_on_cpu else None,
+        device=est.gp_device() if gp_on_cpu else None,
       )
-      live.append([i, problem, opt, opt.start()])
+      live.append([i, problem, opt, opt.start(), est.BestSeen()])
     except (ValueError, OSError) as e:
       out[i] = e
 
   sim_seconds = 0.0
 
   def finish(finished):
-    """Writes the results of searches that just ended (one batch re-simulates
-    their best candidates for the montages), so each lands as soon as it can."""
+    """Writes the results of searches that just ended, so each lands as soon
+    as it can. Their best candidates' frames (for the montages) were kept while
+    scoring; one batch re-simulates those found before a resume."""
     res = {s[0]: s[2].result(s[3]) for s in finished}
     ok = []
     for s in finished:
@@ -117,13 +111,18 @@ def estimate_many(
         out[s[0]] = ValueError(
           f'{jobs[s[0]].recording.source}: every candidate simulation blew up'
         )
-    frames = _per_group(est.simulate_problems, ok, [res[s[0]].x_best[None] for s in ok])
+    frames = {s[0]: s[4].frames_of(res[s[0]].x_best) for s in ok}
+    redo = [s for s in ok if frames[s[0]] is None]
+    sims = _per_group(
+      est.simulate_problems, redo, [res[s[0]].x_best[None] for s in redo]
+    )
+    frames.update({s[0]: np.asarray(f[0, 0]) for s, f in zip(redo, sims, strict=True)})
     wall = time.time() - t_start
-    for s, f in zip(ok, frames, strict=True):
+    for s in ok:
       job, r = jobs[s[0]], res[s[0]]
       out[s[0]] = est.finish(
         job.config, job.recording, s[1].modality, job.workdir, r,
-        np.asarray(f[0, 0]), seconds=wall, seconds_in_objective=sim_seconds,
+        frames[s[0]], seconds=wall, seconds_in_objective=sim_seconds,
         recordings_in_batch=len(jobs),
       )  # fmt: skip
       if progress:
@@ -139,7 +138,7 @@ def estimate_many(
       x, s[3] = s[2].ask(s[3])
       asked.append(x)
     t1 = time.time()
-    values = _per_group(est.evaluate_problems, active, asked)
+    values = _per_group(est.evaluate_problems, active, asked, keep_best=True)
     t2 = time.time()
     sim_seconds += t2 - t1
     for s, x, y in zip(active, asked, values, strict=True):
@@ -157,16 +156,20 @@ def estimate_many(
   return out
 
 
-def _per_group(call, searches, xs) -> list:
+def _per_group(call, searches, xs, *, keep_best: bool = False) -> list:
   """``call`` (``estimate.evaluate_problems`` or ``simulate_problems``) once per
   simulation group (mesh and clock) of ``searches``; the first item of each
-  search's result, in ``searches`` order."""
+  search's result, in ``searches`` order. ``keep_best`` passes each search's
+  ``BestSeen`` to ``evaluate_problems``."""
   groups: dict[tuple, list[int]] = {}
   for k, s in enumerate(searches):
     groups.setdefault(s[1].sim_group(), []).append(k)
   out: list = [None] * len(searches)
   for members in groups.values():
-    res = call([searches[k][1] for k in members], [xs[k] for k in members], pad=True)
+    kw = dict(best=[searches[k][4] for k in members]) if keep_best else {}
+    res = call(
+      [searches[k][1] for k in members], [xs[k] for k in members], pad=True, **kw
+    )
     for k, r in zip(members, res, strict=True):
       out[k] = r[0]
   return out

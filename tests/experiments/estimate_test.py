@@ -167,6 +167,45 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
   assert resumed['evaluations'] == result['evaluations']
 
 
+def test_montage_frames_are_kept_not_resimulated(env, tmp_path, monkeypatch):
+  # The best candidate's frames come from its scoring batch: no simulation
+  # beyond the search's own batches, and the frames are what a fresh
+  # simulation of the best candidate gives.
+  config = dataclasses.replace(CONFIG, max_iter=1)
+  sims, kept = [], []
+  real_sim, real_finish = est.simulate_problems, est.finish
+  monkeypatch.setattr(
+    est, 'simulate_problems', lambda *a, **kw: sims.append(1) or real_sim(*a, **kw)
+  )
+  monkeypatch.setattr(
+    est, 'finish', lambda *a, **kw: kept.append(a[5]) or real_finish(*a, **kw)
+  )
+  result = est.estimate(config, env['rec'], env['model'], str(tmp_path), progress=False)
+  assert len(sims) == 1 + config.max_iter  # the design and one iteration
+  net, params, _ = model_lib.load_network(env['model'])
+  obj = _MAKE_OBJECTIVE(config, net, params, 'metric', env['rec'])
+  x_best = _state(str(tmp_path))['X'][np.argmin(_state(str(tmp_path))['Y'])]
+  fresh, _ = obj.simulate_frames(x_best[None])
+  np.testing.assert_allclose(kept[0], np.asarray(fresh[0, 0]), atol=_REPEAT_TOLERANCE)
+  assert result['evaluations'] == config.n_init + config.q
+
+
+def test_best_seen():
+  best = est.BestSeen()
+  assert best.frames_of(np.zeros(3)) is None  # nothing seen (a resumed search)
+  u = np.arange(9.0).reshape(3, 3)
+  frames = np.arange(3 * 2 * 4).reshape(3, 2, 4)  # (q, C, T)
+  best.update(u, np.array([np.nan, 2.0, 1.0]), frames)
+  np.testing.assert_array_equal(best.frames_of(u[2]), frames[2, 0])
+  assert best.frames_of(u[1]) is None
+  best.update(u[:2], np.array([1.0, np.nan]), frames[:2])  # not better: kept
+  np.testing.assert_array_equal(best.frames_of(u[2]), frames[2, 0])
+  best.update(u[:1], np.array([0.5]), frames[:1])
+  np.testing.assert_array_equal(best.frames_of(u[0]), frames[0, 0])
+  best.update(u, np.full(3, np.nan), frames)  # all failed: kept
+  assert best.y == 0.5
+
+
 def test_resume_refuses_another_run(env, recovery):
   other = dataclasses.replace(CONFIG, gusts=0.3)
   with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
