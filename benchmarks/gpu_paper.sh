@@ -39,56 +39,12 @@ if [ -n "${SMOKE:-}" ]; then  # tiny everything, MuJoCo C, for checking this scr
 fi
 mkdir -p "$R/logs" "$R/queue"
 T0=$SECONDS
-note() { echo "$((SECONDS - T0)) s: $*" >>"$R/status.txt"; }
-step() {  # gpu name seconds command...
-  local gpu=$1 name=$2 secs=$3
-  shift 3
-  local t=$SECONDS
-  CUDA_VISIBLE_DEVICES=$((gpu % NG)) timeout "$secs" "$@" >"$R/logs/$name.log" 2>&1
-  local rc=$?
-  note "$name (gpu $((gpu % NG))): exit $rc in $((SECONDS - t)) s"
-  return $rc
-}
-wait_for() { while [ ! -e "$1" ]; do sleep 5; done; }
+. "$(dirname "$0")/gpu_lib.sh"
 T1="python -m experiments.table1 --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --train_only"
 note "start: $NG GPUs; table1 $T1_ARGS"
 
-# The queue: "name columns split materials" per line, longest tasks first.
-pairs() { local i; for ((i = 0; i < ${#FABRICS[@]}; i += $1)); do
-  local s=("${FABRICS[@]:i:$1}"); (IFS=,; echo "${s[*]}"); done; }
-make_queue() {  # $1: split
-  local m
-  for m in $(pairs 1); do echo "sdn_rgb_$1_$m sdn_rgb $1 $m"; done
-  for m in $(pairs 2); do echo "sdn_depth_$1_${m//,/_} sdn_depth $1 $m"; done
-  for m in $(pairs 2); do echo "physnet_rgb_$1_${m//,/_} physnet_rgb $1 $m"; done
-  for m in $(pairs 3); do echo "physnet_depth_$1_${m//,/_} physnet_depth $1 $m"; done
-}
 make_queue simulation >"$R/queue/simulation.txt"
 make_queue random >"$R/queue/random.txt"
-pop() {  # $1: queue; prints the next task's line (empty when none is left)
-  (
-    flock 9
-    local n line
-    n=$(cat "$R/queue/$1.next" 2>/dev/null || echo 1)
-    line=$(sed -n "${n}p" "$R/queue/$1.txt")
-    [ -n "$line" ] && echo $((n + 1)) >"$R/queue/$1.next"
-    echo "$line"
-  ) 9>"$R/queue/$1.lock"
-}
-drain() {  # gpu queue timeout: run tasks until the queue is empty
-  local g=$1 q=$2 secs=$3 line name cols split mats
-  while line=$(pop "$q") && [ -n "$line" ]; do
-    read -r name cols split mats <<<"$line"
-    step "$g" "t1_$name" "$secs" $T1 --columns="$cols" --splits="$split" \
-      --materials="$mats" && touch "$R/queue/$name.done"
-    touch "$R/queue/$name.ended"
-  done
-}
-all_ended() {  # queue: wait until every task of it has ended
-  local name
-  for name in $(cut -d' ' -f1 "$R/queue/$1.txt"); do wait_for "$R/queue/$name.ended"; done
-}
-
 lane() {
   local g=$1
   case $g in

@@ -343,7 +343,8 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
 
   Returns:
     ``{'results': {material: {column: {split: eval row}}}, 'markdown': str,
-    'maps': {material: png path}}``.
+    'maps': {material: png path}}``; the maps need the PhySNet (depth)
+    simulation-split column, and are empty without it.
   """
   os.makedirs(workdir, exist_ok=True)
   for c in config.columns:
@@ -355,7 +356,9 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
   results = train_all(config, root, workdir, progress=progress)
   if config.train_only:
     return {'results': results, 'markdown': '', 'maps': {}}
-  maps = {m: similarity_map(config, root, workdir, m) for m in results}
+  # The maps show the PhySNet (depth) simulation-split runs: only when trained here.
+  has_maps = 'physnet_depth' in config.columns and 'simulation' in config.splits
+  maps = {m: similarity_map(config, root, workdir, m) for m in results if has_maps}
   text = format_table(results, root, config)
   dataset.write_text_atomic(os.path.join(workdir, TABLE_FILE), text)
   dataset.write_json_atomic(

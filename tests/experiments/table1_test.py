@@ -161,6 +161,13 @@ def test_a_share_of_the_runs(rgb_dataset, tmp_path):
   assert list(out['results']['gray_interlock']) == ['SDN (depth)']
   assert list(out['results']['gray_interlock']['SDN (depth)']) == ['random']
   assert not os.path.exists(os.path.join(tmp_path, table1.TABLE_FILE))
+  # The share's own table reuses its run; no PhySNet (depth) run, so no maps.
+  table = table1.run(
+    dataclasses.replace(config, train_only=False), rgb_dataset, str(tmp_path),
+    progress=False,
+  )  # fmt: skip
+  assert table['maps'] == {} and 'SDN (depth)' in table['markdown']
+  assert os.path.isfile(os.path.join(tmp_path, table1.TABLE_FILE))
   with pytest.raises(ValueError, match='column'):
     table1.run(
       dataclasses.replace(config, columns=('sdn_x',)), rgb_dataset, str(tmp_path)
