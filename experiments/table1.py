@@ -46,6 +46,7 @@ frames.
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 
 import matplotlib
@@ -332,6 +333,73 @@ def similarity_map(config: Config, root: str, workdir: str, material: str) -> st
   return path
 
 
+def collect(config: Config, workdir: str) -> tuple[dict, list[str]]:
+  """The runs under ``workdir`` as they stand, training and loading nothing.
+
+  For collecting a run cut short (a device budget, a crash): every run folder
+  with an eval row gives its selected row (``model.selected_eval``); a run
+  that neither reached its own ``config.json``'s epochs nor stopped early is
+  listed as cut.
+
+  Returns:
+    ``({material: {column name: {split: eval row}}}, ['<material> / <column> /
+    <split>: cut at epoch E of N', ...])``.
+  """
+  results: dict = {}
+  cut = []
+  for network, modality in COLUMNS:
+    if config.columns and f'{network}_{modality}' not in config.columns:
+      continue
+    name = COLUMN_NAMES[network, modality]
+    for split in SPLITS:
+      if config.splits and split not in config.splits:
+        continue
+      base = os.path.dirname(run_dir(workdir, network, modality, split, 'x'))
+      for m in sorted(os.listdir(base)) if os.path.isdir(base) else []:
+        folder = os.path.join(base, m)
+        log = os.path.join(folder, model_lib.train.METRICS_FILE)
+        if (config.materials and m not in config.materials) or not os.path.isfile(log):
+          continue
+        with open(log) as f:
+          evals = [r for r in map(json.loads, filter(str.strip, f)) if r.get('eval')]
+        if not evals:
+          continue
+        saved = model_lib.config_io.read_json(
+          os.path.join(folder, model_lib.train.CONFIG_FILE)
+        )
+        last = evals[-1]['epoch']
+        if last < saved['epochs'] and not model_lib.stopped_early(
+          evals, saved.get('patience', 0)
+        ):
+          cut.append(
+            f'{m} / {name} / {split}: cut at epoch {last} of {saved["epochs"]}'
+          )
+        results.setdefault(m, {}).setdefault(name, {})[split] = model_lib.selected_eval(
+          evals
+        )
+  return dict(sorted(results.items())), cut
+
+
+def report(config: Config, root: str, workdir: str) -> dict:
+  """Writes ``table1.md`` and ``table1.json`` of the runs as they stand
+  (``collect``), cut runs marked; trains nothing and draws no maps."""
+  results, cut = collect(config, workdir)
+  if not results:
+    raise ValueError(f'{workdir}: no run with an eval row')
+  text = format_table(results, root, config)
+  if cut:
+    text += '\nRuns cut short (their best epoch so far is shown):\n\n' + ''.join(
+      f'- {c}\n' for c in cut
+    )
+  dataset.write_text_atomic(os.path.join(workdir, TABLE_FILE), text)
+  dataset.write_json_atomic(
+    os.path.join(workdir, JSON_FILE),
+    {'dataset': root, 'results': results, 'cut': cut, 'paper': PAPER_TABLE1},
+  )
+  print(text)
+  return {'results': results, 'markdown': text, 'cut': cut}
+
+
 def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> dict:
   """Trains what is missing, writes ``table1.md``, ``table1.json`` and the maps.
 
@@ -357,7 +425,9 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
   if config.train_only:
     return {'results': results, 'markdown': '', 'maps': {}}
   # The maps show the PhySNet (depth) simulation-split runs: only when trained here.
-  has_maps = 'physnet_depth' in config.columns and 'simulation' in config.splits
+  has_maps = 'physnet_depth' in (config.columns or ['physnet_depth']) and (
+    'simulation' in (config.splits or SPLITS)
+  )
   maps = {m: similarity_map(config, root, workdir, m) for m in results if has_maps}
   text = format_table(results, root, config)
   dataset.write_text_atomic(os.path.join(workdir, TABLE_FILE), text)
@@ -386,6 +456,9 @@ def define_flags() -> None:
   flags.DEFINE_list('columns', None, 'only these <network>_<modality> columns')
   flags.DEFINE_list('splits', None, 'only these splits (simulation, random)')
   flags.DEFINE_bool('train_only', False, 'train only: no table or maps')
+  flags.DEFINE_bool(
+    'report_only', False, 'the table of the runs as they stand (cut ones marked)'
+  )
   train_lib.define_selection_flags()
 
 
@@ -413,7 +486,10 @@ def main(argv):
     splits=tuple(FLAGS.splits or ()),
     train_only=FLAGS.train_only,
   )
-  run(config, FLAGS.dataset, FLAGS.workdir)
+  if FLAGS.report_only:
+    report(config, FLAGS.dataset, FLAGS.workdir)
+  else:
+    run(config, FLAGS.dataset, FLAGS.workdir)
 
 
 if __name__ == '__main__':

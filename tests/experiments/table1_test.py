@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import os
+import shutil
 
 import cv2
 import numpy as np
@@ -172,3 +173,33 @@ def test_a_share_of_the_runs(rgb_dataset, tmp_path):
     table1.run(
       dataclasses.replace(config, columns=('sdn_x',)), rgb_dataset, str(tmp_path)
     )
+
+
+def test_report_of_runs_as_they_stand(result, rgb_dataset, table1_workdir, tmp_path):
+  # Finished runs: the report's cells are the run's, and nothing is cut.
+  config = table1.PRESETS['smoke']
+  work = str(tmp_path / 't1')
+  shutil.copytree(table1_workdir, work)
+  out = table1.report(config, rgb_dataset, work)
+  assert out['cut'] == [] and out['results'] == json.loads(
+    json.dumps(result['results'])
+  )
+  # A run cut after its first epoch is reported at that epoch and listed.
+  folder = table1.run_dir(work, 'physnet', 'depth', 'random', MATERIAL)
+  log = os.path.join(folder, model_lib.train.METRICS_FILE)
+  with open(log) as f:
+    rows = [json.loads(x) for x in f if x.strip()]
+  first = [r for r in rows if r.get('eval')][0]
+  assert first['epoch'] < config.train.epochs
+  with open(log, 'w') as f:
+    f.writelines(json.dumps(r) + '\n' for r in rows[: rows.index(first) + 1])
+  out = table1.report(config, rgb_dataset, work)
+  assert out['cut'] == [
+    f'{MATERIAL} / PhySNet (depth) / random: cut at epoch {first["epoch"]} of '
+    f'{config.train.epochs}'
+  ]
+  assert out['results'][MATERIAL]['PhySNet (depth)']['random'] == first
+  with open(os.path.join(work, table1.TABLE_FILE)) as f:
+    assert 'cut at epoch' in f.read()
+  with pytest.raises(ValueError, match='no run'):
+    table1.report(config, rgb_dataset, str(tmp_path / 'empty'))
