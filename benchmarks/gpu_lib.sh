@@ -1,7 +1,22 @@
-# Helpers of the multi-GPU job scripts (sourced; they set R, T0, NG, FABRICS
-# and T1 first): status lines, timed steps per GPU, and a task queue that the
-# GPUs pull from.
+# Shared by the multi-GPU job scripts (sourced after setting R; they set T1
+# before using the queue): training defaults, status lines, timed steps per
+# GPU, and a task queue that the GPUs pull from.
 # shellcheck shell=bash
+# Training defaults: at most EPOCHS epochs, the epoch chosen on VAL of the
+# training simulations, stopping after PATIENCE epochs without a better one.
+EPOCHS=${EPOCHS:-30}
+VAL=${VAL:-0.2}
+PATIENCE=${PATIENCE:-4}
+export PYTHONPATH=${PYTHONPATH:-/tmp/site:$PWD} PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
+NG=${NG:-$(nvidia-smi -L | wc -l)}
+FABRICS=(white_tablecloth gray_interlock black_denim sparkle_fleece pink_nylon ponte_roma red_violet)
+T1_ARGS="--epochs=$EPOCHS --val_fraction=$VAL --patience=$PATIENCE"
+if [ -n "${SMOKE:-}" ]; then  # tiny settings for checking a script on a CPU
+  FABRICS=(gray_interlock black_denim)
+  T1_ARGS="--preset=smoke --epochs=3 --val_fraction=$VAL --patience=1 --test_fraction=0.2"
+fi
+mkdir -p "$R/logs" "$R/queue"
+T0=$SECONDS
 note() { echo "$((SECONDS - T0)) s: $*" >>"$R/status.txt"; }
 step() {  # gpu name seconds command...
   local gpu=$1 name=$2 secs=$3

@@ -18,28 +18,17 @@
 #   NG=2 SMOKE=1 bash benchmarks/gpu_paper.sh /tmp/gp_smoke
 set -uo pipefail
 R=${1:-/tmp/run}
-EPOCHS=${EPOCHS:-30}
-VAL=${VAL:-0.2}
-PATIENCE=${PATIENCE:-4}
+. "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS (and their SMOKE versions)
 SHARDS_PER_GPU=${SHARDS_PER_GPU:-2}
 LATENCY=${LATENCY:-1}
-export PYTHONPATH=${PYTHONPATH:-/tmp/site:$PWD} PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
-NG=${NG:-$(nvidia-smi -L | wc -l)}
-FABRICS=(white_tablecloth gray_interlock black_denim sparkle_fleece pink_nylon ponte_roma red_violet)
 DS_ARGS="--rgb --batch_size=210"
 EVAL_ARGS="--sequences=3"
-T1_ARGS="--epochs=$EPOCHS --val_fraction=$VAL --patience=$PATIENCE"
 EST_ARGS=""
 if [ -n "${SMOKE:-}" ]; then  # tiny everything, MuJoCo C, for checking this script on a CPU
-  FABRICS=(gray_interlock black_denim)
   DS_ARGS="--preset=smoke --rgb --sequences=10 --materials=gray_interlock,black_denim"
   EVAL_ARGS="--smoke"
-  T1_ARGS="--preset=smoke --epochs=3 --val_fraction=$VAL --patience=1 --test_fraction=0.2"
   EST_ARGS="--preset=smoke --backend=c"
 fi
-mkdir -p "$R/logs" "$R/queue"
-T0=$SECONDS
-. "$(dirname "$0")/gpu_lib.sh"
 T1="python -m experiments.table1 --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --train_only"
 note "start: $NG GPUs; table1 $T1_ARGS"
 

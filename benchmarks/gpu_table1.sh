@@ -8,25 +8,12 @@
 # On a CPU, NG=2 SMOKE=1 checks the script with tiny settings (MuJoCo C).
 set -u
 R=${1:-/tmp/t1run}
+. "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS (and their SMOKE versions)
 COLUMNS=${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth}
 SPLITS=${SPLITS:-random}
-EPOCHS=${EPOCHS:-30}
-VAL=${VAL:-0.2}
-PATIENCE=${PATIENCE:-4}
-export PYTHONPATH=${PYTHONPATH:-/tmp/site:$PWD} PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
-NG=${NG:-$(nvidia-smi -L | wc -l)}
-FABRICS=(white_tablecloth gray_interlock black_denim sparkle_fleece pink_nylon ponte_roma red_violet)
 DS_ARGS="--batch_size=210"
-T1_ARGS="--epochs=$EPOCHS --val_fraction=$VAL --patience=$PATIENCE"
-if [ -n "${SMOKE:-}" ]; then
-  FABRICS=(gray_interlock black_denim)
-  DS_ARGS="--preset=smoke --sequences=10 --materials=gray_interlock,black_denim"
-  T1_ARGS="--preset=smoke --epochs=3 --val_fraction=$VAL --patience=1 --test_fraction=0.2"
-fi
+[ -n "${SMOKE:-}" ] && DS_ARGS="--preset=smoke --sequences=10 --materials=gray_interlock,black_denim"
 [[ $COLUMNS == *rgb* ]] && DS_ARGS="$DS_ARGS --rgb"
-mkdir -p "$R/logs" "$R/queue"
-T0=$SECONDS
-. "$(dirname "$0")/gpu_lib.sh"
 T1="python -m experiments.table1 --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --train_only"
 note "start: $NG GPUs; columns $COLUMNS; splits $SPLITS; table1 $T1_ARGS"
 for s in ${SPLITS//,/ }; do make_queue "$s"; done >"$R/queue/t1.txt"
