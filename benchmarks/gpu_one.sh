@@ -41,5 +41,5 @@ step train_fp32 300 python benchmarks/train_throughput.py --precision=float32 \
   --out="$R/train_fp32.json"
 step latency 1200 python benchmarks/estimate_latency.py --recording="$REC" \
   --material=$GI --model="$R/t1/physnet_depth/simulation/$GI" \
-  --settings="$SETTINGS" --out="$R/latency.json"
+  --settings="$SETTINGS" --repeats="${REPEATS:-2}" --out="$R/latency.json"
 note done
