@@ -15,14 +15,22 @@ Modes (background is always 0, so the network sees the silhouette):
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 MODES = ('relative', 'metric', 'minmax')
 
 
 def depth_input(depth: jax.Array, mode: str = 'relative') -> jax.Array:
   """Maps depth frames (..., H, W) in metres to inputs (..., H, W, 1).
+
+  A NumPy array is mapped with NumPy (a NumPy array back), anything else with
+  jax.numpy, by the same formula: the training loader maps whole sequences on
+  the host, where NumPy's partition-based median is ~10x faster than XLA's
+  sort-based one, and the estimate maps inside its jitted embedding.
 
   Args:
     depth: depth frames, 0 (or NaN) where invalid.
@@ -33,19 +41,23 @@ def depth_input(depth: jax.Array, mode: str = 'relative') -> jax.Array:
   """
   if mode not in MODES:
     raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
-  z = jnp.asarray(depth, jnp.float32)
-  valid = jnp.isfinite(z) & (z > 0)
-  z = jnp.where(valid, z, 0.0)
+  xp = np if isinstance(depth, np.ndarray) else jnp
+  f32 = xp.float32
+  z = xp.asarray(depth, f32)
+  valid = xp.isfinite(z) & (z > 0)
+  z = xp.where(valid, z, f32(0.0))
   if mode == 'metric':
     out = z
   elif mode == 'relative':
-    med = jnp.nanmedian(jnp.where(valid, z, jnp.nan), axis=(-2, -1), keepdims=True)
-    out = 1.0 + z - jnp.nan_to_num(med)
+    with warnings.catch_warnings():  # a frame with no valid pixel: NaN -> 0 below
+      warnings.simplefilter('ignore', RuntimeWarning)
+      med = xp.nanmedian(xp.where(valid, z, f32(np.nan)), axis=(-2, -1), keepdims=True)
+    out = 1.0 + z - xp.nan_to_num(med)
   else:
-    lo = jnp.min(jnp.where(valid, z, jnp.inf), axis=(-2, -1), keepdims=True)
-    hi = jnp.max(jnp.where(valid, z, -jnp.inf), axis=(-2, -1), keepdims=True)
-    out = 0.25 + 0.75 * (hi - z) / jnp.maximum(hi - lo, 1e-6)
-  return jnp.where(valid, out, 0.0)[..., None]
+    lo = xp.min(xp.where(valid, z, f32(np.inf)), axis=(-2, -1), keepdims=True)
+    hi = xp.max(xp.where(valid, z, f32(-np.inf)), axis=(-2, -1), keepdims=True)
+    out = 0.25 + 0.75 * (hi - z) / xp.maximum(hi - lo, f32(1e-6))
+  return xp.where(valid, out, f32(0.0)).astype(f32)[..., None]
 
 
 def rgb_input(rgb) -> jax.Array:

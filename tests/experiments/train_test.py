@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import os
+import shutil
 
 import cv2
 import jax
@@ -99,6 +100,27 @@ def test_rgb_inputs_match_the_png_files(rgb_dataset):
     np.testing.assert_array_equal(
       small[..., c], dataset.resize_depth(x[..., c], (16, 16))
     )
+
+
+def test_threaded_reading_matches_one_thread(rgb_dataset, tmp_path):
+  # Sequences are read by a thread pool; order and values do not depend on it.
+  cfg = dataclasses.replace(_SMOKE, image_size=0)
+  one = train.load_inputs(cfg, rgb_dataset, [MATERIAL], workers=1)
+  many = train.load_inputs(cfg, rgb_dataset, [MATERIAL], workers=3)
+  for a, b in zip(one, many, strict=True):
+    np.testing.assert_array_equal(a, b)
+  # a corrupt frame in a later sequence is still named
+  root = str(tmp_path / 'ds')
+  shutil.copytree(rgb_dataset, root)
+  index = dataset.open_dataset(root)
+  bad = os.path.join(
+    index.path(index.filter(material=MATERIAL, valid=True).rows[-1]), 'cam0'
+  )
+  name = sorted(f for f in os.listdir(bad) if not f.startswith('rgb'))[0]
+  with open(os.path.join(bad, name), 'wb') as f:
+    f.write(b'not a png')
+  with pytest.raises(ValueError, match=name):
+    train.load_inputs(cfg, root, [MATERIAL], workers=3)
 
 
 def test_sdn_rgb_clips(rgb_dataset):

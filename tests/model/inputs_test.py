@@ -1,5 +1,7 @@
 """Tests for model.inputs: depth frames to network inputs."""
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -32,6 +34,29 @@ def test_minmax_and_metric_by_hand():
   assert mm[2, 2] == pytest.approx(1.0) and mm[5, 5] == pytest.approx(0.25)
   met = np.asarray(inputs.depth_input(z, 'metric'))[0, ..., 0]
   np.testing.assert_allclose(met, z[0], atol=_TOL)
+
+
+# NumPy and XLA may round the float32 arithmetic differently (fused multiply-add).
+_BACKEND_TOL = 1e-6
+
+
+@pytest.mark.parametrize('mode', inputs.MODES)
+def test_numpy_and_jax_paths_agree(mode):
+  # The loader maps NumPy frames with NumPy, the estimate maps traced frames
+  # with jax.numpy: one formula, compared here, holes and an empty frame included.
+  rng = np.random.default_rng(0)
+  z = rng.uniform(1.5, 2.5, (3, 2, 16, 16)).astype(np.float32)
+  z[rng.random(z.shape) < 0.3] = 0.0
+  z[0, 1, 4, 4] = np.nan
+  z[2, 0] = 0.0  # nothing measured
+  host = inputs.depth_input(z, mode)
+  dev = inputs.depth_input(jnp.asarray(z), mode)
+  assert isinstance(host, np.ndarray) and isinstance(dev, jax.Array)
+  assert host.dtype == np.float32 and host.shape == (3, 2, 16, 16, 1)
+  np.testing.assert_allclose(host, np.asarray(dev), atol=_BACKEND_TOL)
+  assert np.all(host[2, 0] == 0)
+  jitted = jax.jit(inputs.depth_input, static_argnames='mode')(z, mode=mode)
+  np.testing.assert_allclose(host, np.asarray(jitted), atol=_BACKEND_TOL)
 
 
 def test_bad_mode():
