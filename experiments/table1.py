@@ -221,7 +221,8 @@ def _epoch_note(t: train_lib.Config) -> str:
   )
   return (
     f'Epoch of each run (at most {t.epochs}) chosen by triplet accuracy on '
-    f'{t.val_fraction:g} of its training simulations held out for validation{stop}.'
+    f'{t.val_fraction:g} of its training part held out for validation the way its '
+    f'test set was (whole simulations, or random items under the random split){stop}.'
   )
 
 
