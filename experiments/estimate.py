@@ -619,9 +619,10 @@ def evaluate_problems(problems, us, *, pad: bool = False, best=None):
     Per problem: ``(psd (q_i,) float64, NaN where the simulation blew up,
     positions (q_i, T, V, 3), valid (q_i,))``.
   """
+  best = best or [None] * len(problems)
   out = []
-  for p, u, (frames, positions, valid) in zip(
-    problems, us, simulate_problems(problems, us, pad=pad), strict=True
+  for p, u, seen, (frames, positions, valid) in zip(
+    problems, us, best, simulate_problems(problems, us, pad=pad), strict=True
   ):
     if frames is None:
       out.append((np.zeros(0), None, None))
@@ -631,8 +632,8 @@ def evaluate_problems(problems, us, *, pad: bool = False, best=None):
     )
     d = np.asarray(score(p.params, frames, p.rec_points), np.float64)
     d = np.where(valid & np.isfinite(d), d, np.nan)
-    if best is not None and best[len(out)] is not None:
-      best[len(out)].update(np.asarray(u), d, frames)
+    if seen is not None:
+      seen.update(np.asarray(u), d, frames)
     out.append((d, positions, valid))
   return out
 

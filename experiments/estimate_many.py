@@ -22,6 +22,7 @@ estimate's time instead of twenty.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from typing import NamedTuple
@@ -30,6 +31,20 @@ import numpy as np
 
 import bo
 from experiments import estimate as est
+
+
+@dataclasses.dataclass
+class _Search:
+  """One job's search as it advances (``state`` and ``best`` change)."""
+
+  index: int  # into ``jobs``
+  problem: est.Problem
+  opt: bo.Minimizer
+  state: bo.State
+  best: est.BestSeen
+
+  def done(self) -> bool:
+    return self.opt.done(self.state)
 
 
 class Job(NamedTuple):
@@ -73,7 +88,7 @@ def estimate_many(
   t_start = time.time()
   out: list[dict | Exception | None] = [None] * len(jobs)
   nets = dict(nets or {})
-  live = []  # (job index, problem, minimizer, state, best seen)
+  live: list[_Search] = []
   for i, job in enumerate(jobs):
     try:
       if job.model_dir not in nets:
@@ -92,7 +107,7 @@ def estimate_many(
         **est.minimizer_settings(job.config, job.workdir),
         device=est.gp_device() if gp_on_cpu else None,
       )
-      live.append([i, problem, opt, opt.start(), est.BestSeen()])
+      live.append(_Search(i, problem, opt, opt.start(), est.BestSeen()))
     except (ValueError, OSError) as e:
       out[i] = e
 
@@ -102,48 +117,50 @@ def estimate_many(
     """Writes the results of searches that just ended, so each lands as soon
     as it can. Their best candidates' frames (for the montages) were kept while
     scoring; one batch re-simulates those found before a resume."""
-    res = {s[0]: s[2].result(s[3]) for s in finished}
+    res = {s.index: s.opt.result(s.state) for s in finished}
     ok = []
     for s in finished:
-      if np.isfinite(res[s[0]].y_best):
+      if np.isfinite(res[s.index].y_best):
         ok.append(s)
       else:
-        out[s[0]] = ValueError(
-          f'{jobs[s[0]].recording.source}: every candidate simulation blew up'
+        out[s.index] = ValueError(
+          f'{jobs[s.index].recording.source}: every candidate simulation blew up'
         )
-    frames = {s[0]: s[4].frames_of(res[s[0]].x_best) for s in ok}
-    redo = [s for s in ok if frames[s[0]] is None]
+    frames = {s.index: s.best.frames_of(res[s.index].x_best) for s in ok}
+    redo = [s for s in ok if frames[s.index] is None]
     sims = _per_group(
-      est.simulate_problems, redo, [res[s[0]].x_best[None] for s in redo]
+      est.simulate_problems, redo, [res[s.index].x_best[None] for s in redo]
     )
-    frames.update({s[0]: np.asarray(f[0, 0]) for s, f in zip(redo, sims, strict=True)})
+    frames.update(
+      {s.index: np.asarray(f[0, 0]) for s, f in zip(redo, sims, strict=True)}
+    )
     wall = time.time() - t_start
     for s in ok:
-      job, r = jobs[s[0]], res[s[0]]
-      out[s[0]] = est.finish(
-        job.config, job.recording, s[1].modality, job.workdir, r,
-        frames[s[0]], seconds=wall, seconds_in_objective=sim_seconds,
+      job, r = jobs[s.index], res[s.index]
+      out[s.index] = est.finish(
+        job.config, job.recording, s.problem.modality, job.workdir, r,
+        frames[s.index], seconds=wall, seconds_in_objective=sim_seconds,
         recordings_in_batch=len(jobs),
       )  # fmt: skip
       if progress:
-        where = est.describe(r.x_best, r.y_best, s[1].space)
+        where = est.describe(r.x_best, r.y_best, s.problem.space)
         print(f'{job.recording.source}: {where}', flush=True)
 
-  finish([s for s in live if s[2].done(s[3])])  # finished before a resume
+  finish([s for s in live if s.done()])  # finished before a resume
   it = 0
-  while active := [s for s in live if not s[2].done(s[3])]:
+  while active := [s for s in live if not s.done()]:
     t0 = time.time()
     asked = []
     for s in active:
-      x, s[3] = s[2].ask(s[3])
+      x, s.state = s.opt.ask(s.state)
       asked.append(x)
     t1 = time.time()
     values = _per_group(est.evaluate_problems, active, asked, keep_best=True)
     t2 = time.time()
     sim_seconds += t2 - t1
     for s, x, y in zip(active, asked, values, strict=True):
-      s[3] = s[2].tell(s[3], x, y)
-    ended = [s for s in active if s[2].done(s[3])]
+      s.state = s.opt.tell(s.state, x, y)
+    ended = [s for s in active if s.done()]
     if progress:
       print(
         f'step {it:3d}: {len(active)} searches, {sum(map(len, asked))} candidates '
@@ -156,19 +173,19 @@ def estimate_many(
   return out
 
 
-def _per_group(call, searches, xs, *, keep_best: bool = False) -> list:
+def _per_group(call, searches: list[_Search], xs, *, keep_best: bool = False) -> list:
   """``call`` (``estimate.evaluate_problems`` or ``simulate_problems``) once per
   simulation group (mesh and clock) of ``searches``; the first item of each
   search's result, in ``searches`` order. ``keep_best`` passes each search's
   ``BestSeen`` to ``evaluate_problems``."""
   groups: dict[tuple, list[int]] = {}
   for k, s in enumerate(searches):
-    groups.setdefault(s[1].sim_group(), []).append(k)
+    groups.setdefault(s.problem.sim_group(), []).append(k)
   out: list = [None] * len(searches)
   for members in groups.values():
-    kw = dict(best=[searches[k][4] for k in members]) if keep_best else {}
+    kw = dict(best=[searches[k].best for k in members]) if keep_best else {}
     res = call(
-      [searches[k][1] for k in members], [xs[k] for k in members], pad=True, **kw
+      [searches[k].problem for k in members], [xs[k] for k in members], pad=True, **kw
     )
     for k, r in zip(members, res, strict=True):
       out[k] = r[0]

@@ -46,7 +46,6 @@ frames.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 
 import matplotlib
@@ -116,10 +115,14 @@ PRESETS = {
 }
 
 
+def _split_dir(workdir: str, network: str, modality: str, split: str) -> str:
+  return os.path.join(workdir, f'{network}_{modality}', split)
+
+
 def run_dir(
   workdir: str, network: str, modality: str, split: str, material: str
 ) -> str:
-  return os.path.join(workdir, f'{network}_{modality}', split, material)
+  return os.path.join(_split_dir(workdir, network, modality, split), material)
 
 
 def _check_labels(config: Config, index: dataset.DatasetIndex, material: str) -> None:
@@ -355,25 +358,19 @@ def collect(config: Config, workdir: str) -> tuple[dict, list[str]]:
     for split in SPLITS:
       if config.splits and split not in config.splits:
         continue
-      base = os.path.dirname(run_dir(workdir, network, modality, split, 'x'))
+      base = _split_dir(workdir, network, modality, split)
       for m in sorted(os.listdir(base)) if os.path.isdir(base) else []:
         folder = os.path.join(base, m)
-        log = os.path.join(folder, model_lib.train.METRICS_FILE)
-        if (config.materials and m not in config.materials) or not os.path.isfile(log):
-          continue
-        with open(log) as f:
-          evals = [r for r in map(json.loads, filter(str.strip, f)) if r.get('eval')]
-        if not evals:
+        evals = model_lib.read_evals(folder)
+        if (config.materials and m not in config.materials) or not evals:
           continue
         saved = model_lib.config_io.read_json(
           os.path.join(folder, model_lib.train.CONFIG_FILE)
         )
-        last = evals[-1]['epoch']
-        if last < saved['epochs'] and not model_lib.stopped_early(
-          evals, saved.get('patience', 0)
-        ):
+        if not model_lib.ended(evals, saved['epochs'], saved.get('patience', 0)):
           cut.append(
-            f'{m} / {name} / {split}: cut at epoch {last} of {saved["epochs"]}'
+            f'{m} / {name} / {split}: cut at epoch {evals[-1]["epoch"]} of '
+            f'{saved["epochs"]}'
           )
         results.setdefault(m, {}).setdefault(name, {})[split] = model_lib.selected_eval(
           evals

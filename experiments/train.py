@@ -274,12 +274,8 @@ def finished_eval(config: Config, root: str, run_dir: str, materials) -> dict | 
   free = {k: getattr(saved, k) for k in model_lib.train.RESUMABLE_FIELDS}
   if dataclasses.replace(want, **free) != saved:
     return None
-  with open(paths[2]) as f:
-    evals = [r for r in map(json.loads, filter(str.strip, f)) if r.get('eval')]
-  if not evals or (
-    evals[-1]['epoch'] < config.epochs
-    and not model_lib.stopped_early(evals, config.patience)
-  ):
+  evals = model_lib.read_evals(run_dir)
+  if not model_lib.ended(evals, config.epochs, config.patience):
     return None
   return model_lib.selected_eval(evals)
 

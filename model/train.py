@@ -542,6 +542,23 @@ def stopped_early(history: Sequence[dict], patience: int) -> bool:
   return last - best['epoch'] >= patience
 
 
+def read_evals(workdir: str) -> list[dict]:
+  """The eval rows of a run's ``metrics.jsonl`` ([] without the file); reads only."""
+  path = os.path.join(workdir, METRICS_FILE)
+  if not os.path.isfile(path):
+    return []
+  with open(path) as f:
+    return [r for r in map(json.loads, filter(str.strip, f)) if r.get('eval')]
+
+
+def ended(evals: Sequence[dict], epochs: int, patience: int) -> bool:
+  """Whether a run with these eval rows is over: it reached ``epochs`` or
+  stopped early."""
+  return bool(evals) and (
+    evals[-1]['epoch'] >= epochs or stopped_early(evals, patience)
+  )
+
+
 def _val_accuracy(network, params, images, labels, val_idx, config) -> float:
   key = jax.random.fold_in(jax.random.PRNGKey(config.seed), 13)
   emb = metrics.embed(network.apply, params, images[val_idx], config.eval_batch_size)
