@@ -33,6 +33,7 @@ Params = dict[str, Any]
 # PyTorch's nn.PReLU default slope.
 PRELU_INIT = 0.25
 INITS = ('torch', 'flax')
+POOL_IMPLS = ('blocks', 'window')
 # Variance scale 1/3 with a uniform law gives PyTorch's bound 1/sqrt(fan_in).
 _TORCH_KERNEL_INIT = nn.initializers.variance_scaling(1.0 / 3.0, 'fan_in', 'uniform')
 _MIN_STD = 1e-6
@@ -55,6 +56,13 @@ class PhySNetConfig:
     init: 'torch' (PyTorch's default: weights and biases uniform in
       +-1/sqrt(fan_in), as the original network was initialised) or 'flax'
       (LeCun normal weights, zero biases).
+    pool_impl: how the max-pool is computed; both give the same forward pass.
+      'blocks' reshapes into non-overlapping p x p blocks and reduces them: its
+      gradient is an elementwise mask that XLA fuses (where several entries of a
+      block tie for the maximum it is shared among them). 'window' is
+      ``flax.linen.max_pool``, whose gradient is XLA's select-and-scatter (the
+      whole gradient to one of the tied entries), a slow memory-bound kernel on
+      GPUs (``benchmarks/train_throughput.py --pool_impls`` times both).
   """
 
   in_channels: int = 1
@@ -66,10 +74,15 @@ class PhySNetConfig:
   embed_dim: int = 2
   compute_dtype: str = 'float32'
   init: str = 'torch'
+  pool_impl: str = 'blocks'
 
   def __post_init__(self):
     if self.init not in INITS:
       raise ValueError(f'PhySNetConfig.init must be one of {INITS}, got {self.init!r}')
+    if self.pool_impl not in POOL_IMPLS:
+      raise ValueError(
+        f'PhySNetConfig.pool_impl must be one of {POOL_IMPLS}, got {self.pool_impl!r}'
+      )
     for name in ('in_channels', 'kernel_size', 'pool', 'embed_dim'):
       if int(getattr(self, name)) < 1:
         raise ValueError(
@@ -137,7 +150,7 @@ class PhySNet(nn.Module):
       init = self._inits(k * k * x.shape[-1])
       x = nn.Conv(feats, (k, k), padding='VALID', dtype=dtype, **init)(x)
       x = nn.PReLU(negative_slope_init=PRELU_INIT)(x)
-      x = nn.max_pool(x, (p, p), strides=(p, p))
+      x = max_pool(x, p, cfg.pool_impl)
     x = x.reshape(x.shape[0], -1)
     for feats in cfg.dense_features:
       x = nn.Dense(feats, dtype=dtype, **self._inits(x.shape[-1]))(x)
@@ -155,6 +168,20 @@ class PhySNet(nn.Module):
       return jax.random.uniform(key, shape, dtype, -bound, bound)
 
     return {'kernel_init': _TORCH_KERNEL_INIT, 'bias_init': bias_init}
+
+
+def max_pool(x: jax.Array, p: int, impl: str = 'blocks') -> jax.Array:
+  """Non-overlapping p x p max-pool of ``(N, H, W, C)``, VALID (trailing rows dropped).
+
+  ``impl`` is ``PhySNetConfig.pool_impl``: same values either way; only the
+  gradient at tied maxima and the speed differ.
+  """
+  if impl == 'window':
+    return nn.max_pool(x, (p, p), strides=(p, p))
+  n, h, w, c = x.shape
+  h, w = h // p, w // p
+  blocks = x[:, : h * p, : w * p].reshape(n, h, p, w, p, c)
+  return jnp.max(blocks, axis=(2, 4))
 
 
 def identity_stats(channels: int) -> InputStats:

@@ -1,5 +1,7 @@
 """Tests for model.physnet: exact original shapes and parameter count, init, normalisation."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -99,6 +101,39 @@ class PhySNetTest(absltest.TestCase):
       )
     with self.assertRaisesRegex(ValueError, 'image_size'):
       physnet.PhySNetConfig(image_size=(8, 8))
+
+  def test_block_pool_matches_window_pool_and_numpy(self):
+    # Odd sizes: VALID pooling drops the trailing row and column.
+    x = np.random.default_rng(6).normal(size=(2, 7, 9, 3)).astype(np.float32)
+    want = x[:, :6, :8].reshape(2, 3, 2, 4, 2, 3).max(axis=(2, 4))
+    for impl in physnet.POOL_IMPLS:
+      np.testing.assert_array_equal(physnet.max_pool(jnp.asarray(x), 2, impl), want)
+
+    def grad(impl):
+      return jax.grad(lambda v: jnp.sum(physnet.max_pool(v, 2, impl) ** 2))(x)
+
+    # No ties: the gradient is 2*max at each block's argmax, zero elsewhere,
+    # and nothing reaches the dropped row and column.
+    np.testing.assert_allclose(grad('blocks'), grad('window'), atol=_TOLERANCE)
+    self.assertEqual(float(jnp.abs(grad('blocks')[:, 6:, 8:]).max()), 0.0)
+    # A tie: 'window' gives the whole gradient to one entry, 'blocks' shares it.
+    tie = jnp.ones((1, 2, 2, 1))
+    g = jax.grad(lambda v: jnp.sum(physnet.max_pool(v, 2, 'blocks')))(tie)
+    np.testing.assert_allclose(g.ravel(), [0.25] * 4)
+    g = jax.grad(lambda v: jnp.sum(physnet.max_pool(v, 2, 'window')))(tie)
+    self.assertEqual(sorted(np.asarray(g).ravel().tolist()), [0.0, 0.0, 0.0, 1.0])
+
+  def test_networks_with_either_pool_agree(self):
+    x = jax.random.normal(jax.random.PRNGKey(7), (3, 32, 32, 1))
+    nets = [
+      physnet.make_physnet(dataclasses.replace(_SMALL, pool_impl=impl))
+      for impl in physnet.POOL_IMPLS
+    ]
+    params = nets[0].init(jax.random.PRNGKey(8))
+    outs = [net.apply(params, x) for net in nets]
+    np.testing.assert_allclose(outs[0], outs[1], atol=_TOLERANCE)
+    with self.assertRaisesRegex(ValueError, 'pool_impl'):
+      physnet.PhySNetConfig(pool_impl='avg')
 
   def test_bfloat16_compute_keeps_float32_params(self):
     cfg = physnet.PhySNetConfig(
