@@ -140,6 +140,8 @@ def _check_labels(config: Config, index: dataset.DatasetIndex, material: str) ->
 
 
 def _run_config(config: Config, material: str, network: str, modality: str, split: str):
+  # Retrieval needs held-out simulations: random-split runs select by triplets.
+  select_by = 'triplet' if split == 'random' else config.train.select_by
   return dataclasses.replace(
     config.train,
     materials=(material,),
@@ -147,6 +149,7 @@ def _run_config(config: Config, material: str, network: str, modality: str, spli
     network=network,
     modality=modality,
     split=split,
+    select_by=select_by,
   )
 
 
@@ -222,8 +225,13 @@ def _epoch_note(t: train_lib.Config) -> str:
   stop = (
     f', stopping after {t.patience} epochs without a better one' if t.patience else ''
   )
+  by = (
+    'triplet accuracy'
+    if t.select_by == 'triplet'
+    else 'parameter retrieval (simulation split; triplet accuracy under the random split)'
+  )
   return (
-    f'Epoch of each run (at most {t.epochs}) chosen by triplet accuracy on '
+    f'Epoch of each run (at most {t.epochs}) chosen by {by} on '
     f'{t.val_fraction:g} of its training part held out for validation the way its '
     f'test set was (whole simulations, or random items under the random split){stop}.'
   )
@@ -471,8 +479,7 @@ def main(argv):
       'test_fraction',
       'image_size',
       'seed',
-      'val_fraction',
-      'patience',
+      *train_lib.SELECTION_FLAGS,
     )
     if getattr(FLAGS, k) is not None
   }

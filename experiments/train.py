@@ -31,6 +31,7 @@ from absl import app, flags, logging
 
 import model as model_lib
 from physsim import dataset
+from physsim import params as params_lib
 
 INPUTS_FILE = 'inputs.json'
 MODALITIES = ('depth', 'rgb')
@@ -58,6 +59,9 @@ class Config:
     val_fraction, patience: model selection (``model.TrainConfig``): hold out
       this share of the training simulations, ship the best validation
       epoch's params, stop after ``patience`` epochs without a better one.
+    select_by: what "best" means there: 'triplet' (validation triplet
+      accuracy) or 'retrieval' (least parameter-retrieval error of the
+      validation simulations, ``model.retrieval``).
   """
 
   materials: tuple[str, ...] = ()
@@ -79,6 +83,7 @@ class Config:
   sdn_components: int = 4
   val_fraction: float = 0.0
   patience: int = 0
+  select_by: str = 'triplet'
 
 
 PRESETS = {
@@ -197,6 +202,34 @@ def load_inputs(config: Config, root: str, materials, *, workers: int = 0) -> tu
   return x, y, y
 
 
+def video_info(config: Config, root: str, materials) -> model_lib.Videos:
+  """Clip id, camera and true parameters of each item ``load_inputs`` returns.
+
+  Read from the dataset index alone (no frames): items come in the same order,
+  sequence by sequence, camera by camera. A clip is one sequence seen by one
+  camera; the parameters are ``physsim.params.FIELDS`` (bending scale, wind
+  speed, area weight).
+  """
+  index = dataset.open_dataset(root)
+  video, camera, params = [], [], []
+  for m in materials:
+    for r in index.filter(material=m, valid=True).rows:
+      c, t = r['n_cameras'], r['n_frames']
+      per_camera = t if config.network == 'physnet' else t // config.sdn_frames
+      first = len(video) and video[-1][-1] + 1
+      video.append(first + np.repeat(np.arange(c), per_camera))
+      camera.append(np.repeat(np.arange(c), per_camera))
+      params.append(np.tile([r[f] for f in params_lib.FIELDS], (c * per_camera, 1)))
+  if not video:
+    raise ValueError(f'{root}: no valid sequences of {list(materials)}')
+  return model_lib.Videos(
+    np.concatenate(video),
+    np.concatenate(camera),
+    np.concatenate(params).astype(np.float64),
+    tuple(params_lib.FIELDS),
+  )
+
+
 def train_config(config: Config, image_size) -> model_lib.TrainConfig:
   """The ``model.TrainConfig`` of a run at ``image_size`` (H, W)."""
   check_config(config)
@@ -217,6 +250,7 @@ def train_config(config: Config, image_size) -> model_lib.TrainConfig:
     seed=config.seed,
     val_fraction=config.val_fraction,
     patience=config.patience,
+    select_by=config.select_by,
   )
   if config.network == 'physnet':
     return model_lib.TrainConfig(network='physnet', physnet=trunk, **common)
@@ -303,7 +337,13 @@ def fit_run(
     os.path.join(run_dir, INPUTS_FILE), _inputs_record(config, root, materials)
   )
   tc = train_config(config, x.shape[-3:-1])
-  result = model_lib.fit(x, y, g, tc, run_dir, progress=progress)
+  videos = video_info(config, root, materials)
+  if len(videos.video) != len(x):
+    raise ValueError(
+      f'{root}: the index lists {len(videos.video)} items of {list(materials)} '
+      f'but {len(x)} were loaded (was a sequence rewritten?)'
+    )
+  result = model_lib.fit(x, y, g, tc, run_dir, progress=progress, videos=videos)
   return result, model_lib.selected_eval(result.history)
 
 
@@ -397,13 +437,22 @@ def define_flags() -> None:
   define_selection_flags()
 
 
+SELECTION_FLAGS = ('val_fraction', 'patience', 'select_by')
+
+
 def define_selection_flags() -> None:
-  """``--val_fraction`` and ``--patience`` (model selection), shared with table1."""
+  """``SELECTION_FLAGS`` (model selection), shared with table1."""
   flags.DEFINE_float(
     'val_fraction', None, 'training simulations held out to pick the epoch'
   )
   flags.DEFINE_integer(
     'patience', None, 'stop after this many epochs without a better one'
+  )
+  flags.DEFINE_enum(
+    'select_by',
+    None,
+    list(model_lib.train.SELECT_BY),
+    'pick the epoch by validation triplet accuracy or by parameter retrieval',
   )
 
 
@@ -422,8 +471,7 @@ def main(argv):
       'split',
       'image_size',
       'seed',
-      'val_fraction',
-      'patience',
+      *SELECTION_FLAGS,
     )
     if getattr(FLAGS, k) is not None
   }

@@ -2,7 +2,8 @@
 
 ``make_physnet`` / ``make_sdn`` build pure ``Network(init, apply)`` pairs;
 ``fit`` trains one with triplets (or pairs) and resumable orbax checkpoints;
-``psd`` measures how far apart two videos' frame embeddings lie.
+``psd`` measures how far apart two videos' frame embeddings lie; ``retrieval``
+asks whether PSD-near videos have near parameters (the estimate's need).
 """
 
 from model import (
@@ -13,6 +14,7 @@ from model import (
   metrics,
   physnet,
   psd,
+  retrieval,
   sdn,
   splits,
   train,
@@ -33,6 +35,7 @@ from model.physnet import (
   with_stats,
 )
 from model.psd import centroid_distance, energy_distance, paired_distance
+from model.retrieval import Videos
 from model.sdn import SDNConfig, make_sdn, spectral_features
 from model.splits import split_by_group, split_random
 from model.train import (
@@ -77,6 +80,7 @@ __all__ = [
   'TrainConfig',
   'TrainState',
   'Triplets',
+  'Videos',
   'batch_hard_indices',
   'batch_hard_loss',
   'best_epoch',
@@ -109,6 +113,7 @@ __all__ = [
   'physnet',
   'pk_batch',
   'psd',
+  'retrieval',
   'random_pairs',
   'random_triplets',
   'read_evals',

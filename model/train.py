@@ -48,6 +48,7 @@ from model import (
   contrastive,
   metrics,
   physnet,
+  retrieval,
   sdn,
   splits,
   triplets,
@@ -57,6 +58,7 @@ from model.sdn import SDNConfig
 
 NETWORKS = ('physnet', 'sdn')
 LOSSES = ('triplet', 'batch_hard', 'contrastive')
+SELECT_BY = ('triplet', 'retrieval')
 CONFIG_FILE = 'config.json'
 METRICS_FILE = 'metrics.jsonl'
 # Fields that may change when resuming a run (they do not change what has been done).
@@ -91,7 +93,11 @@ class TrainConfig:
     val_fraction: share of the training part held out for validation (whole
       simulations unless ``split == 'random'``); 0 = no validation.
     patience: with validation, stop after this many epochs without a better
-      validation triplet accuracy; 0 = run every epoch.
+      validation score; 0 = run every epoch.
+    select_by: the validation score that picks the epoch (and stops early):
+      'triplet' (triplet accuracy) or 'retrieval' (least parameter-retrieval
+      error of the validation simulations, ``model.retrieval``; needs
+      ``fit(videos=...)``, the 'simulation' split and ``val_fraction``).
   """
 
   network: str = 'physnet'
@@ -115,12 +121,14 @@ class TrainConfig:
   max_to_keep: int = 2
   val_fraction: float = 0.0
   patience: int = 0
+  select_by: str = 'triplet'
 
   def __post_init__(self):
     for name, allowed in (
       ('network', NETWORKS),
       ('loss', LOSSES),
       ('split', splits.SPLITS),
+      ('select_by', SELECT_BY),
     ):
       if getattr(self, name) not in allowed:
         raise ValueError(
@@ -148,6 +156,14 @@ class TrainConfig:
     if self.learning_rate <= 0:
       raise ValueError(
         f'TrainConfig.learning_rate must be > 0, got {self.learning_rate}'
+      )
+    if self.select_by == 'retrieval' and (
+      self.split != 'simulation' or not self.val_fraction
+    ):
+      raise ValueError(
+        "TrainConfig.select_by='retrieval' needs split='simulation' and "
+        f'val_fraction > 0 (got split={self.split!r}, val_fraction={self.val_fraction}): '
+        'it retrieves held-out simulations'
       )
 
 
@@ -516,11 +532,28 @@ def validation_split(
   return fit_idx, val_idx
 
 
+def _selection_score(row: dict, config: TrainConfig) -> float:
+  """The validation score of an eval row under ``config.select_by`` (higher is better)."""
+  if config.select_by == 'triplet':
+    return row['val_triplet_accuracy']
+  if 'val_retrieval' not in row:
+    raise ValueError(
+      "select_by='retrieval': no validation clip has a training clip of its camera"
+    )
+  return -row['val_retrieval']['error']
+
+
+def _val_score(row: dict) -> float | None:
+  # Runs logged before 'val_score' existed selected by triplet accuracy.
+  return row.get('val_score', row.get('val_triplet_accuracy'))
+
+
 def best_epoch(history: Sequence[dict]) -> dict | None:
-  """The eval row with the best validation triplet accuracy (the first of
-  equals: the one whose params are in ``best/``), or None without validation."""
-  rows = [r for r in history if 'val_triplet_accuracy' in r]
-  return max(rows, key=lambda r: r['val_triplet_accuracy']) if rows else None
+  """The eval row with the best validation score (``TrainConfig.select_by``;
+  the first of equals: the one whose params are in ``best/``), or None without
+  validation."""
+  rows = [r for r in history if _val_score(r) is not None]
+  return max(rows, key=_val_score) if rows else None
 
 
 def selected_eval(history: Sequence[dict]) -> dict:
@@ -565,8 +598,33 @@ def _val_accuracy(network, params, images, labels, val_idx, config) -> float:
   return metrics.triplet_accuracy(key, emb, labels[val_idx], config.eval_triplets)
 
 
+def evaluate_retrieval(
+  network, params, images, videos: retrieval.Videos, fit_idx, val_idx, test_idx, config
+) -> dict:
+  """Parameter retrieval of the validation and test simulations among the
+  training ones (``model.retrieval``): ``{'val_retrieval': summary,
+  'test_retrieval': summary}``, each left out without queries."""
+  used = np.concatenate([fit_idx, val_idx, test_idx])
+  part = metrics.embed(network.apply, params, images[used], config.eval_batch_size)
+  emb = np.zeros((len(images), part.shape[1]), np.float32)
+  emb[used] = part
+  out = {}
+  for name, idx in (('val', val_idx), ('test', test_idx)):
+    lr = retrieval.retrieval_log_ratios(emb, videos, idx, fit_idx)
+    if len(lr):
+      out[f'{name}_retrieval'] = retrieval.summary(lr, videos.names)
+  return out
+
+
 def fit(
-  images, labels, groups, config: TrainConfig, workdir: str, *, progress: bool = True
+  images,
+  labels,
+  groups,
+  config: TrainConfig,
+  workdir: str,
+  *,
+  progress: bool = True,
+  videos: retrieval.Videos | None = None,
 ) -> FitResult:
   """Trains (or resumes training) a network and evaluates it after every epoch.
 
@@ -577,11 +635,19 @@ def fit(
     config: training config.
     workdir: run folder; an existing checkpoint there is resumed.
     progress: show a tqdm bar.
+    videos: clip ids, cameras and true parameters of the items; with the
+      'simulation' split, every eval row then also holds the parameter
+      retrieval of the validation and test simulations (``evaluate_retrieval``).
+      Needed by ``select_by='retrieval'``.
 
   Returns:
     ``FitResult``.
   """
   images, labels, groups = _check_data(images, labels, groups, config)
+  if videos is not None:
+    videos = retrieval.check_videos(videos, len(images))
+  if config.select_by == 'retrieval' and videos is None:
+    raise ValueError("TrainConfig.select_by='retrieval' needs fit(videos=...)")
   _prepare_workdir(workdir, config)
   k_state = jax.random.split(jax.random.PRNGKey(config.seed))[1]
   train_idx, test_idx = split_indices(config, labels, groups)
@@ -648,11 +714,19 @@ def fit(
           row = evaluate(
             network, state.params, images, labels, train_idx, test_idx, config
           )
+          if videos is not None and config.split == 'simulation':
+            row.update(
+              evaluate_retrieval(
+                network, state.params, images, videos, train_idx, val_idx,
+                test_idx, config,
+              )
+            )  # fmt: skip
           if val_idx.size:
             acc = _val_accuracy(network, state.params, images, labels, val_idx, config)
             row['val_triplet_accuracy'] = acc
+            row['val_score'] = _selection_score(row, config)
             best = best_epoch(history)
-            if best is None or acc > best['val_triplet_accuracy']:
+            if best is None or row['val_score'] > _val_score(best):
               # Before the row: a crash in between redoes this epoch and saves again.
               checkpoint.save(best_mngr, step + 1, state.params)
           write(

@@ -200,3 +200,33 @@ def test_model_selection_run_reports_the_shipped_epoch(rgb_dataset, tmp_path):
   longer = dataclasses.replace(cfg, patience=10)
   if evals[-1]['epoch'] < cfg.epochs:
     assert train.finished_eval(longer, rgb_dataset, run_dir, [MATERIAL]) is None
+
+
+@pytest.mark.parametrize('network', ['physnet', 'sdn'])
+def test_video_info_lines_up_with_the_loaded_items(rgb_dataset, network):
+  cfg = dataclasses.replace(_SMOKE, network=network)
+  x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
+  videos = model_lib.retrieval.check_videos(
+    train.video_info(cfg, rgb_dataset, [MATERIAL]), len(x)
+  )
+  rows = dataset.open_dataset(rgb_dataset).filter(material=MATERIAL, valid=True).rows
+  cams = rows[0]['n_cameras']
+  assert len(np.unique(videos.video)) == len(rows) * cams
+  for r in rows:  # each label's items carry its index row's parameters
+    got = videos.params[y == r['label']]
+    want = [r[f] for f in videos.names]
+    np.testing.assert_array_equal(got, np.tile(want, (len(got), 1)))
+    assert sorted(set(videos.camera[y == r['label']].tolist())) == list(range(cams))
+  # A clip never spans two simulations.
+  for v in np.unique(videos.video):
+    assert len(set(y[videos.video == v].tolist())) == 1
+
+
+def test_simulation_split_runs_log_parameter_retrieval(runs, rgb_dataset):
+  workdir, _ = runs['depth']
+  evals = model_lib.read_evals(os.path.join(workdir, MATERIAL))
+  rows = dataset.open_dataset(rgb_dataset).filter(material=MATERIAL, valid=True).rows
+  held_out = round(len(rows) * _SMOKE.test_fraction)
+  for r in evals:  # every held-out simulation, from every camera
+    assert r['test_retrieval']['queries'] == held_out * rows[0]['n_cameras']
+    assert set(r['test_retrieval']) >= {'error', 'wind_speed', 'area_weight'}

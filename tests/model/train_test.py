@@ -257,6 +257,39 @@ class CheckpointTest(absltest.TestCase):
       self.assertEqual(int(again.state.step), int(result.state.step))
       self.assertLen(again.history, len(result.history))
 
+  def test_fit_logs_retrieval_and_selects_by_it(self):
+    images, labels = toy_set(per_label=6)
+    # Each label is one simulation seen by two cameras (3 images each); its
+    # parameters follow the blob's grid position.
+    camera = np.tile(np.repeat([0, 1], 3), 8)
+    params = np.stack([1.5 ** (labels % 4), 2.0 ** (labels // 4)], axis=1)
+    videos = model.Videos(2 * labels + camera, camera, params, ('x', 'y'))
+    config = dataclasses.replace(
+      _CONFIG, epochs=3, val_fraction=0.34, select_by='retrieval'
+    )
+    with tempfile.TemporaryDirectory() as wd:
+      result = model.fit(
+        images, labels, labels, config, wd, progress=False, videos=videos
+      )
+      evals = [r for r in result.history if r.get('eval')]
+      self.assertLen(evals, 3)
+      n_val = len(set(labels[result.val_idx]))
+      for r in evals:
+        self.assertEqual(r['val_retrieval']['queries'], 2 * n_val)
+        self.assertEqual(r['test_retrieval']['queries'], 2 * 2)
+        self.assertEqual(r['val_score'], -r['val_retrieval']['error'])
+        self.assertGreaterEqual(r['test_retrieval']['error'], 0.0)
+        self.assertSameElements(r['test_retrieval'], ['queries', 'error', 'x', 'y'])
+      errors = [r['val_retrieval']['error'] for r in evals]
+      self.assertEqual(
+        model.best_epoch(result.history)['epoch'], 1 + int(np.argmin(errors))
+      )
+    with self.assertRaisesRegex(ValueError, 'needs fit.videos'):
+      with tempfile.TemporaryDirectory() as wd:
+        model.fit(images, labels, labels, config, wd, progress=False)
+    with self.assertRaisesRegex(ValueError, "needs split='simulation'"):
+      dataclasses.replace(config, split='random')
+
   def test_fit_rejects_bad_data(self):
     images, labels = toy_set(n_labels=2, per_label=2)
     with tempfile.TemporaryDirectory() as wd:
