@@ -315,7 +315,14 @@ def finished_eval(config: Config, root: str, run_dir: str, materials) -> dict | 
 
 
 def fit_run(
-  config: Config, root: str, run_dir: str, materials, data, *, progress: bool = True
+  config: Config,
+  root: str,
+  run_dir: str,
+  materials,
+  data,
+  *,
+  progress: bool = True,
+  max_to_keep: int | None = model_lib.TrainConfig.max_to_keep,
 ) -> tuple[model_lib.FitResult, dict]:
   """Trains (or resumes, or just restores) one run on ``data`` from ``load_inputs``.
 
@@ -326,6 +333,7 @@ def fit_run(
     materials: the run's materials (recorded).
     data: (inputs, labels, groups).
     progress: show a tqdm bar.
+    max_to_keep: checkpoints kept (None: every epoch's, for studies of epochs).
 
   Returns:
     (the ``model.fit`` result, its selected eval row (``model.selected_eval``:
@@ -336,7 +344,9 @@ def fit_run(
   dataset.write_json_atomic(
     os.path.join(run_dir, INPUTS_FILE), _inputs_record(config, root, materials)
   )
-  tc = train_config(config, x.shape[-3:-1])
+  tc = dataclasses.replace(
+    train_config(config, x.shape[-3:-1]), max_to_keep=max_to_keep
+  )
   videos = video_info(config, root, materials)
   if len(videos.video) != len(x):
     raise ValueError(

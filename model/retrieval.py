@@ -14,7 +14,10 @@ error when small, the log of a factor for bending.
 It is a grid version of the estimate: the references are a few dozen sampled
 parameter sets where the optimiser searches continuously, so its floor is the
 spacing of the references (``oracle_log_ratios``: the reference nearest in
-parameters).
+parameters) and its ceiling a reference drawn at random (``chance_errors``).
+``summary`` scores each parameter against that chance value, so that a
+parameter the videos do not reveal (bending, on a large sheet) does not drown
+the ones they do.
 """
 
 from __future__ import annotations
@@ -136,32 +139,61 @@ def retrieval_log_ratios(
   return np.asarray(out, np.float64).reshape(len(out), videos.params.shape[1])
 
 
-def oracle_log_ratios(videos: Videos, query_idx, ref_idx) -> np.ndarray:
-  """The floor of ``retrieval_log_ratios``: each query retrieves the reference
-  clip of its camera nearest in parameters (least mean ``|log ratio|``)."""
+def _per_query(videos: Videos, query_idx, ref_idx, pick) -> np.ndarray:
+  """``pick(log ratios (R, P) of the same-camera references) -> (P,)`` per query clip."""
   queries, refs = _clips(videos, query_idx), _clips(videos, ref_idx)
   out = []
   for items in queries.values():
     cam, truth = videos.camera[items[0]], videos.params[items[0]]
     cands = [r[0] for r in refs.values() if videos.camera[r[0]] == cam]
-    if not cands:
-      continue
-    lr = np.log(videos.params[cands] / truth)
-    out.append(lr[int(np.argmin(np.abs(lr).mean(axis=1)))])
+    if cands:
+      out.append(pick(np.log(videos.params[cands] / truth)))
   return np.asarray(out, np.float64).reshape(len(out), videos.params.shape[1])
 
 
-def summary(log_ratios: np.ndarray, names) -> dict:
-  """``{'error': mean |log ratio| over queries and parameters, name: its mean per
-  parameter, 'queries': Q}`` (empty without queries)."""
+def oracle_log_ratios(videos: Videos, query_idx, ref_idx) -> np.ndarray:
+  """The floor of ``retrieval_log_ratios``: each query retrieves the reference
+  clip of its camera nearest in parameters (least mean ``|log ratio|``)."""
+  return _per_query(
+    videos, query_idx, ref_idx, lambda lr: lr[int(np.argmin(np.abs(lr).mean(axis=1)))]
+  )
+
+
+def chance_errors(videos: Videos, query_idx, ref_idx) -> np.ndarray:
+  """``(Q, P)`` expected ``|log ratio|`` of a reference of the query's camera
+  drawn at random: what an embedding that knows nothing would score."""
+  return _per_query(videos, query_idx, ref_idx, lambda lr: np.abs(lr).mean(axis=0))
+
+
+def summary(log_ratios: np.ndarray, chance: np.ndarray, names) -> dict:
+  """Retrieval scores of a set of query clips (empty without queries).
+
+  Args:
+    log_ratios: ``(Q, P)`` from ``retrieval_log_ratios``.
+    chance: ``(Q, P)`` from ``chance_errors`` for the same queries.
+    names: the P parameter names.
+
+  Returns:
+    ``{'queries': Q, 'error': mean over parameters of (mean |log ratio|) /
+    (its chance value), name: mean |log ratio| per parameter, 'chance':
+    {name: chance mean |log ratio|}}``. ``error`` weighs the parameters alike
+    whatever their ranges: 0 = every query retrieves its own parameters, 1 =
+    no better than a random reference (a parameter the embedding cannot see,
+    such as bending on a large sheet, sits near 1).
+  """
   lr = np.abs(np.asarray(log_ratios, np.float64))
+  chance = np.asarray(chance, np.float64)
   if lr.size == 0:
     return {}
   names = list(names)
-  if len(names) != lr.shape[1]:
-    raise ValueError(f'{len(names)} names for {lr.shape[1]} parameters.')
+  if len(names) != lr.shape[1] or chance.shape != lr.shape:
+    raise ValueError(
+      f'{len(names)} names, log ratios {lr.shape} and chance {chance.shape} disagree.'
+    )
+  err, base = lr.mean(axis=0), chance.mean(axis=0)
   return {
     'queries': int(lr.shape[0]),
-    'error': float(lr.mean()),
-    **{n: float(v) for n, v in zip(names, lr.mean(axis=0), strict=True)},
+    'error': float(np.mean(err / np.maximum(base, 1e-12))),
+    **{n: float(v) for n, v in zip(names, err, strict=True)},
+    'chance': {n: float(v) for n, v in zip(names, base, strict=True)},
   }

@@ -612,7 +612,8 @@ def evaluate_retrieval(
   for name, idx in (('val', val_idx), ('test', test_idx)):
     lr = retrieval.retrieval_log_ratios(emb, videos, idx, fit_idx)
     if len(lr):
-      out[f'{name}_retrieval'] = retrieval.summary(lr, videos.names)
+      chance = retrieval.chance_errors(videos, idx, fit_idx)
+      out[f'{name}_retrieval'] = retrieval.summary(lr, chance, videos.names)
   return out
 
 

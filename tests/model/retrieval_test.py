@@ -93,18 +93,29 @@ class RetrievalTest(absltest.TestCase):
     # The oracle picks B (mean |log| = log(2)/2) over A (log(4)/2); C is camera 1.
     oracle = retrieval.oracle_log_ratios(videos, q, refs)
     np.testing.assert_allclose(oracle, [[0.0, np.log(0.5)]], atol=_TOLERANCE)
-    s = retrieval.summary(np.concatenate([got, oracle]), ('b', 'w'))
+    # A random camera-0 reference: A or B, |log ratios| (log 4, 0) or (0, log 2).
+    chance = retrieval.chance_errors(videos, q, refs)
+    np.testing.assert_allclose(
+      chance, [[np.log(4) / 2, np.log(2) / 2]], atol=_TOLERANCE
+    )
+    both = np.concatenate([got, oracle])
+    s = retrieval.summary(both, np.repeat(chance, 2, 0), 'bw')
     self.assertEqual(s['queries'], 2)
     np.testing.assert_allclose(s['b'], np.log(4.0) / 2, atol=_TOLERANCE)
     np.testing.assert_allclose(s['w'], np.log(2.0) / 2, atol=_TOLERANCE)
-    np.testing.assert_allclose(
-      s['error'], (np.log(4.0) + np.log(2.0)) / 4, atol=_TOLERANCE
-    )
+    # Each parameter's mean error equals its chance value here: 1 = chance.
+    np.testing.assert_allclose(s['error'], 1.0, atol=_TOLERANCE)
+    np.testing.assert_allclose(s['chance']['w'], np.log(2) / 2, atol=_TOLERANCE)
+    # Retrieving A: bending at twice its chance error, wind exact.
+    s = retrieval.summary(got, chance, 'bw')
+    np.testing.assert_allclose(s['error'], (2.0 + 0.0) / 2, atol=_TOLERANCE)
     self.assertEqual(videos.names, ('p0', 'p1'))
     # No reference of the query's camera: the query is left out.
     none = retrieval.retrieval_log_ratios(emb, videos, np.arange(6, 8), np.arange(0, 6))
     self.assertEqual(none.shape, (0, 2))
-    self.assertEqual(retrieval.summary(none, ('b', 'w')), {})
+    self.assertEqual(retrieval.summary(none, none, ('b', 'w')), {})
+    with self.assertRaisesRegex(ValueError, 'disagree'):
+      retrieval.summary(got, chance[:, :1], 'bw')
 
   def test_ragged_references_agree_with_equal_ones(self):
     emb, videos = _random_set(seed=1)

@@ -279,7 +279,9 @@ class CheckpointTest(absltest.TestCase):
         self.assertEqual(r['test_retrieval']['queries'], 2 * 2)
         self.assertEqual(r['val_score'], -r['val_retrieval']['error'])
         self.assertGreaterEqual(r['test_retrieval']['error'], 0.0)
-        self.assertSameElements(r['test_retrieval'], ['queries', 'error', 'x', 'y'])
+        self.assertSameElements(
+          r['test_retrieval'], ['queries', 'error', 'x', 'y', 'chance']
+        )
       errors = [r['val_retrieval']['error'] for r in evals]
       self.assertEqual(
         model.best_epoch(result.history)['epoch'], 1 + int(np.argmin(errors))

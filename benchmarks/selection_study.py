@@ -1,0 +1,226 @@
+"""Study: which epoch to ship, by triplet accuracy or by parameter retrieval?
+
+Table 1's metric (triplet accuracy) picked epoch-1 networks whose estimates of
+bending were worse (README, second paper-size run). ``model.retrieval`` scores
+an epoch by what the estimate needs instead: do PSD-near simulations have near
+parameters? This script checks, on the demo's small setting (a CPU is enough),
+whether that choice gives better estimates:
+
+1. the demo's training set; one PhySNet trained for ``--epochs`` with a quarter
+   of the training simulations held out for validation, every epoch kept, each
+   evaluated (validation triplet accuracy, validation and test retrieval);
+2. the epochs each criterion picks on the validation simulations, and the
+   last epoch;
+3. ``--recordings`` real-like recordings (the demo's recording settings:
+   finer mesh, sensor noise, 24 fps, an unseen camera, gusts), each estimated
+   with each picked epoch (``experiments.estimate``, the demo's settings).
+
+Prints a table and writes ``<workdir>/selection_study.json``. Everything
+resumes from ``--workdir``.
+
+  PYTHONPATH=. python benchmarks/selection_study.py --workdir=out/selection \
+      --sequences=32 --epochs=10 --recordings=4
+"""
+
+import dataclasses
+import json
+import os
+import shutil
+import sys
+import time
+
+import numpy as np
+from absl import app, flags, logging
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import model as model_lib  # noqa: E402
+import physsim  # noqa: E402
+from experiments import demo  # noqa: E402
+from experiments import estimate as estimate_lib  # noqa: E402
+from experiments import generate_dataset as gen  # noqa: E402
+from experiments import train as train_lib  # noqa: E402
+from model import checkpoint  # noqa: E402
+
+# --workdir, --material, --sequences and --backend are experiments.demo's flags.
+FLAGS = flags.FLAGS
+_EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs (every one is kept)')
+_RECORDINGS = flags.DEFINE_integer('recordings', 4, 'real-like recordings')
+_ALL_EPOCHS = flags.DEFINE_bool(
+  'all_epochs', True, 'estimate with every epoch (else only the picked ones)'
+)
+
+
+def train_all_epochs(workdir: str, material: str, sequences: int, epochs: int, backend):
+  """Trains the demo's network with validation, keeping every epoch; returns
+  (run folder, eval rows)."""
+  data_cfg, _, train_cfg, _ = demo.configs(material, sequences, 0, backend)
+  root = os.path.join(workdir, 'data')
+  gen.run(data_cfg, root)
+  cfg = dataclasses.replace(
+    train_cfg, epochs=epochs, val_fraction=0.25, materials=(material,)
+  )
+  run_dir = os.path.join(workdir, 'model')
+  data = train_lib.load_inputs(cfg, root, [material])
+  train_lib.fit_run(cfg, root, run_dir, [material], data, max_to_keep=None)
+  return run_dir, model_lib.read_evals(run_dir)
+
+
+def export_epoch(run_dir: str, row: dict, out: str) -> str:
+  """A run folder whose shipped params are the ``row`` epoch's (what the estimate loads)."""
+  if os.path.isdir(os.path.join(out, model_lib.train.BEST_DIR)):
+    return out
+  _, params, _ = model_lib.load_network(run_dir, step=row['step'])
+  os.makedirs(out, exist_ok=True)
+  for f in (model_lib.train.CONFIG_FILE, train_lib.INPUTS_FILE):
+    shutil.copy(os.path.join(run_dir, f), os.path.join(out, f))
+  with checkpoint.manager(out, 1, model_lib.train.BEST_DIR) as mngr:
+    checkpoint.save(mngr, row['step'], params)
+  return out
+
+
+def picks(evals: list[dict]) -> dict[str, dict]:
+  """``{criterion: eval row}``: the first epoch of the best validation score, and the last."""
+  return {
+    'triplet': max(evals, key=lambda r: r['val_triplet_accuracy']),
+    'retrieval': min(evals, key=lambda r: r['val_retrieval']['error']),
+    'last': evals[-1],
+  }
+
+
+def estimate_score(results: list[dict], who: str = 'estimate') -> dict:
+  """Mean ``|log(value / truth)|`` per parameter over recordings, and their
+  mean relative to the range centre's (1 = no better than the centre guess)."""
+  out = {}
+  for name in physsim.Params._fields:
+    out[name] = float(
+      np.mean([abs(np.log(r[who][name] / r['truth'][name])) for r in results])
+    )
+  centre = {
+    n: float(
+      np.mean([abs(np.log(r['range_centre'][n] / r['truth'][n])) for r in results])
+    )
+    for n in physsim.Params._fields
+  }
+  out['vs_centre'] = float(
+    np.mean([out[n] / centre[n] for n in physsim.Params._fields])
+  )
+  return out
+
+
+def spearman(a, b) -> float:
+  """Rank correlation of two equal-length sequences (ties broken by order)."""
+  ra, rb = (np.argsort(np.argsort(np.asarray(x, np.float64))) for x in (a, b))
+  return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def main(argv):
+  del argv
+  logging.set_verbosity(logging.WARNING)
+  wd, material, sequences = FLAGS.workdir, FLAGS.material, FLAGS.sequences
+  t0 = time.time()
+  run_dir, evals = train_all_epochs(
+    wd, material, sequences, _EPOCHS.value, FLAGS.backend
+  )
+  chosen = picks(evals)
+  _, rec_cfg, _, est_cfg = demo.configs(material, sequences, 0, FLAGS.backend)
+  space = physsim.search_space(material)
+  centre = dict(zip(physsim.Params._fields, map(float, space.center()), strict=True))
+  rec_root = os.path.join(wd, 'recordings')
+  n_rec = _RECORDINGS.value
+  gen.run(dataclasses.replace(rec_cfg, sequences=n_rec, batch_size=n_rec), rec_root)
+  results = {}
+  epochs = [r['epoch'] for r in (evals if _ALL_EPOCHS.value else chosen.values())]
+  for epoch in sorted(set(epochs)):
+    row = next(r for r in evals if r['epoch'] == epoch)
+    model_dir = export_epoch(run_dir, row, os.path.join(wd, 'epochs', str(epoch)))
+    for i in range(n_rec):
+      rec_dir = physsim.dataset.sequence_dir(rec_root, material, f'{i:04d}')
+      rec = estimate_lib.load_recording(
+        rec_dir, fps=est_cfg.fps, size=(demo._RES, demo._RES), frames=demo._FRAMES
+      )
+      out = os.path.join(wd, 'estimates', f'epoch{epoch}', f'{i:04d}')
+      res = estimate_lib.estimate(
+        dataclasses.replace(est_cfg, seed=i), rec, model_dir, out, progress=False
+      )
+      value = {k: float(np.ravel(v['value'])[0]) for k, v in res['estimate'].items()}
+      results.setdefault(epoch, []).append(
+        {'estimate': value, 'truth': res['truth'], 'range_centre': centre}
+      )
+      print(f'epoch {epoch}, recording {i}: {json.dumps(res["errors"]["estimate"])}')
+
+  per_epoch = []
+  for r in evals:
+    if r['epoch'] not in results:
+      continue
+    per_epoch.append({
+      'epoch': r['epoch'],
+      'val_triplet_accuracy': r['val_triplet_accuracy'],
+      'val_retrieval': r['val_retrieval'],
+      'test_triplet_accuracy': r.get('test_triplet_accuracy'),
+      'test_retrieval': r.get('test_retrieval', {}),
+      'estimate': estimate_score(results[r['epoch']]),
+    })  # fmt: skip
+  centre_score = estimate_score(next(iter(results.values())), 'range_centre')
+  print(
+    f'\n{material}, {sequences} simulations, {n_rec} real-like recordings, '
+    f'{time.time() - t0:.0f} s. Errors are mean |log(value / truth)|; "vs centre" '
+    'and retrieval "error" are means over the parameters relative to the range '
+    'centre / a random reference (1 = no better).\n'
+  )
+  names = physsim.Params._fields
+  print(
+    '| epoch | picked by | val triplet acc | val retrieval | test retrieval | '
+    + ' | '.join(f'estimate {n}' for n in names)
+    + ' | estimate vs centre |'
+  )
+  print('|---:|---|---:|---:|---:|' + '---:|' * (len(names) + 1))
+  for r in per_epoch:
+    by = ', '.join(k for k, v in chosen.items() if v['epoch'] == r['epoch'])
+    e = r['estimate']
+    print(
+      f'| {r["epoch"]} | {by} | {r["val_triplet_accuracy"]:.3f} | '
+      f'{r["val_retrieval"]["error"]:.3f} | {r["test_retrieval"].get("error", np.nan):.3f} | '
+      + ' | '.join(f'{e[n]:.3f}' for n in names)
+      + f' | {e["vs_centre"]:.3f} |'
+    )
+  print(
+    '| range centre | | | | | '
+    + ' | '.join(f'{centre_score[n]:.3f}' for n in names)
+    + ' | 1.000 |'
+  )
+  correlations = {}
+  if len(per_epoch) >= 3:
+    target = [r['estimate']['vs_centre'] for r in per_epoch]
+    for key, get in (
+      ('val_triplet_accuracy', lambda r: -r['val_triplet_accuracy']),
+      ('val_retrieval', lambda r: r['val_retrieval']['error']),
+      ('test_triplet_accuracy', lambda r: -(r['test_triplet_accuracy'] or 0.0)),
+      ('test_retrieval', lambda r: r['test_retrieval'].get('error', np.nan)),
+    ):
+      correlations[key] = spearman([get(r) for r in per_epoch], target)
+    print(
+      '\nRank correlation across epochs with the estimate error (vs centre); '
+      'positive = the criterion (accuracy negated) tracks the estimate error:'
+    )
+    for k, v in correlations.items():
+      print(f'  {k}: {v:+.2f}')
+  out = {
+    'material': material,
+    'sequences': sequences,
+    'recordings': n_rec,
+    'evals': evals,
+    'per_epoch': per_epoch,
+    'picks': {k: v['epoch'] for k, v in chosen.items()},
+    'range_centre': centre_score,
+    'correlations': correlations,
+    'per_recording': {str(k): v for k, v in results.items()},
+    'seconds': time.time() - t0,
+  }
+  path = os.path.join(wd, 'selection_study.json')
+  model_lib.config_io.write_json(path, out)
+  print(f'\nwrote {path}')
+
+
+if __name__ == '__main__':
+  app.run(main)
