@@ -129,16 +129,22 @@ def main(argv):
   rec_root = os.path.join(wd, 'recordings')
   n_rec = _RECORDINGS.value
   gen.run(dataclasses.replace(rec_cfg, sequences=n_rec, batch_size=n_rec), rec_root)
+  recordings, skipped = {}, {}
+  for i in range(n_rec):
+    rec_dir = physsim.dataset.sequence_dir(rec_root, material, f'{i:04d}')
+    try:
+      recordings[i] = estimate_lib.load_recording(
+        rec_dir, fps=est_cfg.fps, size=(demo._RES, demo._RES), frames=demo._FRAMES
+      )
+    except ValueError as e:  # e.g. an unseen camera pose that never sees the cloth
+      skipped[i] = str(e)
+      print(f'recording {i} skipped: {e}')
   results = {}
   epochs = [r['epoch'] for r in (evals if _ALL_EPOCHS.value else chosen.values())]
   for epoch in sorted(set(epochs)):
     row = next(r for r in evals if r['epoch'] == epoch)
     model_dir = export_epoch(run_dir, row, os.path.join(wd, 'epochs', str(epoch)))
-    for i in range(n_rec):
-      rec_dir = physsim.dataset.sequence_dir(rec_root, material, f'{i:04d}')
-      rec = estimate_lib.load_recording(
-        rec_dir, fps=est_cfg.fps, size=(demo._RES, demo._RES), frames=demo._FRAMES
-      )
+    for i, rec in recordings.items():
       out = os.path.join(wd, 'estimates', f'epoch{epoch}', f'{i:04d}')
       res = estimate_lib.estimate(
         dataclasses.replace(est_cfg, seed=i), rec, model_dir, out, progress=False
@@ -163,7 +169,7 @@ def main(argv):
     })  # fmt: skip
   centre_score = estimate_score(next(iter(results.values())), 'range_centre')
   print(
-    f'\n{material}, {sequences} simulations, {n_rec} real-like recordings, '
+    f'\n{material}, {sequences} simulations, {len(recordings)} real-like recordings, '
     f'{time.time() - t0:.0f} s. Errors are mean |log(value / truth)|; "vs centre" '
     'and retrieval "error" are means over the parameters relative to the range '
     'centre / a random reference (1 = no better).\n'
@@ -208,7 +214,8 @@ def main(argv):
   out = {
     'material': material,
     'sequences': sequences,
-    'recordings': n_rec,
+    'recordings': sorted(recordings),
+    'skipped_recordings': skipped,
     'evals': evals,
     'per_epoch': per_epoch,
     'picks': {k: v['epoch'] for k, v in chosen.items()},

@@ -59,6 +59,7 @@ import model as model_lib  # noqa: E402
 from experiments import files  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 from physsim import dataset  # noqa: E402
+from physsim import params as params_lib  # noqa: E402
 
 # (network, modality) in the paper's column order.
 COLUMNS = (('physnet', 'depth'), ('sdn', 'rgb'), ('physnet', 'rgb'), ('sdn', 'depth'))
@@ -268,6 +269,7 @@ def format_table(results: dict, root: str, config: Config) -> str:
     + _epoch_note(t)
     + ' n/a: the test set could not support the metric.',
   ]
+  lines += _retrieval_table(results)
   paper = [(m, [f'{v}' for v in PAPER_TABLE1[m]]) for m in results if m in PAPER_TABLE1]
   if paper:
     lines += [
@@ -277,6 +279,47 @@ def format_table(results: dict, root: str, config: Config) -> str:
     ]
     lines += _table(paper)
   return '\n'.join(lines) + '\n'
+
+
+def retrieval_cell(row: dict) -> str:
+  """``'E (b / w / a)'``: a run's test retrieval error against chance, and each
+  parameter's mean |log ratio|, or 'n/a'."""
+  r = row.get('test_retrieval')
+  if not r:
+    return 'n/a'
+  per = ' / '.join(f'{r[f]:.2f}' for f in params_lib.FIELDS)
+  return f'{r["error"]:.2f} ({per})'
+
+
+def _retrieval_table(results: dict) -> list[str]:
+  """Parameter retrieval of the held-out simulations (``model.retrieval``), when logged."""
+  names = [COLUMN_NAMES[c] for c in COLUMNS]
+  rows = [
+    (m, [retrieval_cell(r.get(n, {}).get('simulation', {})) for n in names])
+    for m, r in results.items()
+  ]
+  if all(c == 'n/a' for _, cells in rows for c in cells):
+    return []
+  chance = next(
+    r[n]['simulation']['test_retrieval']['chance']
+    for r in results.values()
+    for n in names
+    if r.get(n, {}).get('simulation', {}).get('test_retrieval')
+  )
+  return [
+    '',
+    '## Parameter retrieval on the held-out simulations (`model.retrieval`)',
+    '',
+    'Each held-out clip (one simulation, one camera) retrieves the PSD-nearest '
+    'training clip of its camera. Cell: mean over the parameters of the error '
+    'relative to a random reference (0 = exact, 1 = chance), then the mean '
+    '|log(retrieved / true)| of bending scale / wind speed / area weight. Chance '
+    'for the first material: '
+    + ' / '.join(f'{chance[f]:.2f}' for f in params_lib.FIELDS)
+    + '.',
+    '',
+    *_table(rows),
+  ]
 
 
 def _label_params(index: dataset.DatasetIndex, material: str) -> dict[int, tuple]:

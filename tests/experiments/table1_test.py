@@ -15,6 +15,8 @@ from experiments import table1, train
 MATERIAL = 'gray_interlock'
 # Cells are printed with one decimal.
 _PRINT_TOLERANCE_PCT = 0.05 + 1e-9
+# Retrieval cells print two decimals of mean |log ratio|.
+_RETRIEVAL_PRINT_TOLERANCE = 0.0051
 # The table's triplet accuracy samples 10,000 triplets: 4 sigma of a Bernoulli
 # mean at p = 0.5 is 2 points around the exhaustive value.
 _TRIPLET_TOLERANCE_PCT = 2.0 + _PRINT_TOLERANCE_PCT
@@ -203,3 +205,33 @@ def test_report_of_runs_as_they_stand(result, rgb_dataset, table1_workdir, tmp_p
     assert 'cut at epoch' in f.read()
   with pytest.raises(ValueError, match='no run'):
     table1.report(config, rgb_dataset, str(tmp_path / 'empty'))
+
+
+def _energy64(x, y):
+  def mean_norm(a, b):
+    return np.linalg.norm(a[:, None] - b[None], axis=-1).mean()
+
+  return 2 * mean_norm(x, y) - mean_norm(x, x) - mean_norm(y, y)
+
+
+def test_retrieval_cell_matches_a_numpy_retrieval(result, rgb_dataset, table1_workdir):
+  emb, y, tr, te, _ = _embedding(rgb_dataset, table1_workdir, 'simulation')
+  cfg = dataclasses.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
+  v = train.video_info(cfg, rgb_dataset, [MATERIAL])
+  errors = []
+  for q in np.unique(v.video[te]):
+    qi = te[v.video[te] == q]
+    refs = [
+      r
+      for r in np.unique(v.video[tr])
+      if v.camera[tr][v.video[tr] == r][0] == v.camera[qi[0]]
+    ]
+    d = [_energy64(emb[qi], emb[tr[v.video[tr] == r]]) for r in refs]
+    best = tr[v.video[tr] == refs[int(np.argmin(d))]][0]
+    errors.append(np.abs(np.log(v.params[best] / v.params[qi[0]])))
+  want = np.mean(errors, axis=0)  # bending / wind / area weight
+  section = result['markdown'].split('## Parameter retrieval')[1].split('## ')[0]
+  row = next(ln for ln in section.splitlines() if ln.startswith(f'| {MATERIAL} '))
+  cell = row.strip('|').split('|')[1].strip()  # PhySNet (depth), 'E (b / w / a)'
+  got = [float(x) for x in cell.split('(')[1].rstrip(')').split(' / ')]
+  np.testing.assert_allclose(got, want, atol=_RETRIEVAL_PRINT_TOLERANCE)
