@@ -50,6 +50,7 @@ class Config:
     input_mode: depth -> input mapping (``model.inputs.MODES``; unused for rgb).
     image_size: train at this (square) size; 0 = the dataset's.
     conv_features, dense_features: PhySNet widths (the original: 32,64 / 256,256).
+    embed_dim: size of the embedding (the paper's similarity map: 2).
     epochs, learning_rate, batch_size, lr_step_epochs: optimisation (the paper's
       code: 30, 1e-3, 32, 8).
     split: 'simulation' (held-out sequences) or 'random' (the paper's per image).
@@ -72,6 +73,7 @@ class Config:
   image_size: int = 0
   conv_features: tuple[int, ...] = (32, 64)
   dense_features: tuple[int, ...] = (256, 256)
+  embed_dim: int = 2
   epochs: int = 30
   learning_rate: float = 1e-3
   batch_size: int = 32
@@ -239,6 +241,7 @@ def train_config(config: Config, image_size) -> model_lib.TrainConfig:
     image_size=tuple(image_size),
     conv_features=config.conv_features,
     dense_features=config.dense_features,
+    embed_dim=config.embed_dim,
   )
   common = dict(
     learning_rate=config.learning_rate,

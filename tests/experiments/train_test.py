@@ -230,3 +230,17 @@ def test_simulation_split_runs_log_parameter_retrieval(runs, rgb_dataset):
   for r in evals:  # every held-out simulation, from every camera
     assert r['test_retrieval']['queries'] == held_out * rows[0]['n_cameras']
     assert set(r['test_retrieval']) >= {'error', 'wind_speed', 'area_weight'}
+
+
+def test_embed_dim_reaches_both_networks():
+  for network in ('physnet', 'sdn'):
+    tc = train.train_config(
+      dataclasses.replace(_SMOKE, network=network, embed_dim=8), (32, 32)
+    )
+    trunk = tc.physnet if network == 'physnet' else tc.sdn.trunk
+    assert trunk.embed_dim == 8
+    net = model_lib.train.make_network(tc)
+    shapes = jax.eval_shape(net.init, jax.random.PRNGKey(0))
+    item = model_lib.train.item_shape(tc)
+    out = jax.eval_shape(net.apply, shapes, jax.ShapeDtypeStruct((2, *item), 'float32'))
+    assert out.shape == (2, 8)
