@@ -41,6 +41,28 @@ VARIANTS = {
   '2-D, metric depth': {'input_mode': 'metric'},
   '8-D, metric depth': {'embed_dim': 8, 'input_mode': 'metric'},
 }
+# No network: each frame's input pixels are its embedding. If even these do not
+# retrieve a parameter, the videos do not show it (at this size), whatever is trained.
+RAW = {
+  'raw pixels, relative depth (no network)': 'relative',
+  'raw pixels, metric depth (no network)': 'metric',
+}
+
+
+def raw_retrieval(cfg, root: str, material: str, data) -> dict:
+  """``model.retrieval.summary`` of the held-out simulations with the inputs'
+  pixels as embeddings, on the split (and training part) a run of ``cfg`` uses."""
+  x, y, g = data
+  tc = train_lib.train_config(cfg, x.shape[-3:-1])
+  train_idx, test_idx = model_lib.split_indices(tc, y, g)
+  fit_idx, _ = model_lib.validation_split(tc, y, g, train_idx)
+  videos = model_lib.retrieval.check_videos(
+    train_lib.video_info(cfg, root, [material]), len(x)
+  )
+  emb = np.asarray(x, np.float32).reshape(len(x), -1)
+  lr = model_lib.retrieval.retrieval_log_ratios(emb, videos, test_idx, fit_idx)
+  chance = model_lib.retrieval.chance_errors(videos, test_idx, fit_idx)
+  return model_lib.retrieval.summary(lr, chance, videos.names)
 
 
 def main(argv):
@@ -76,17 +98,35 @@ def main(argv):
         **{f'{n}_vs_chance': r[n] / r['chance'][n] for n in names},
       })  # fmt: skip
       print(json.dumps(rows[-1]), flush=True)
-  keys = ['test_triplet_accuracy', 'retrieval_error'] + [f'{n}_vs_chance' for n in names]
+  for variant, mode in RAW.items():
+    for seed in map(int, _SEEDS.value):
+      cfg = dataclasses.replace(base, seed=seed, input_mode=mode)
+      if mode not in inputs:
+        inputs[mode] = train_lib.load_inputs(cfg, root, [material])
+      r = raw_retrieval(cfg, root, material, inputs[mode])
+      rows.append({
+        'variant': variant,
+        'seed': seed,
+        'test_triplet_accuracy': float('nan'),
+        'retrieval_error': r['error'],
+        **{f'{n}_vs_chance': r[n] / r['chance'][n] for n in names},
+      })  # fmt: skip
+      print(json.dumps(rows[-1]), flush=True)
+  keys = ['test_triplet_accuracy', 'retrieval_error'] + [
+    f'{n}_vs_chance' for n in names
+  ]
   print(
     f'\n{material}, {sequences} simulations, seeds {_SEEDS.value}, '
     f'{time.time() - t0:.0f} s; mean (min-max) over seeds at the epoch chosen by '
     'validation triplet accuracy; retrieval relative to a random reference '
     '(1 = chance)\n'
   )
-  print('| variant | held-out triplet acc | retrieval (all) | ' + ' | '.join(names) + ' |')
+  print(
+    '| variant | held-out triplet acc | retrieval (all) | ' + ' | '.join(names) + ' |'
+  )
   print('|---|' + '---:|' * (2 + len(names)))
   summary = {}
-  for variant in VARIANTS:
+  for variant in [*VARIANTS, *RAW]:
     vals = {k: [r[k] for r in rows if r['variant'] == variant] for k in keys}
     summary[variant] = {k: float(np.mean(v)) for k, v in vals.items()}
     cells = [f'{np.mean(v):.2f} ({min(v):.2f}-{max(v):.2f})' for v in vals.values()]
@@ -96,6 +136,7 @@ def main(argv):
     'sequences': sequences,
     'epochs': _EPOCHS.value,
     'variants': VARIANTS,
+    'raw': RAW,
     'runs': rows,
     'mean': summary,
     'seconds': time.time() - t0,
