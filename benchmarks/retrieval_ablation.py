@@ -11,6 +11,11 @@ simulations' parameters are retrieved, each against a random reference
 
   PYTHONPATH=. python benchmarks/retrieval_ablation.py --workdir=out/selection \\
       --sequences=32 --seeds=0,1,2
+  # the paper's cloth, cameras and 3 s clips (one fabric, 64x64, MuJoCo C):
+  python -m experiments.generate_dataset --preset=paper --materials=gray_interlock \\
+      --resolution=64 --backend=c --out=out/paper64/data
+  PYTHONPATH=. python benchmarks/retrieval_ablation.py --workdir=out/paper64 \\
+      --dataset=out/paper64/data --image_size=64
 """
 
 import dataclasses
@@ -34,6 +39,15 @@ from physsim import params as params_lib  # noqa: E402
 FLAGS = flags.FLAGS
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs per run')
 _SEEDS = flags.DEFINE_list('seeds', ['0', '1', '2'], 'training seeds per variant')
+_DATASET = flags.DEFINE_string(
+  'dataset', '', "an existing dataset (default: the demo's, made under --workdir)"
+)
+_IMAGE_SIZE = flags.DEFINE_integer('image_size', 0, "input size (0: the demo's)")
+_ONLY = flags.DEFINE_list(
+  'only',
+  [],
+  'run only the variants whose names start with one of these (e.g. paper,raw)',
+)
 VARIANTS = {
   'paper (2-D, relative depth)': {},
   '8-D embedding': {'embed_dim': 8},
@@ -71,14 +85,23 @@ def main(argv):
   wd, material, sequences = FLAGS.workdir, FLAGS.material, FLAGS.sequences
   t0 = time.time()
   data_cfg, _, train_cfg, _ = demo.configs(material, sequences, 0, FLAGS.backend)
-  root = os.path.join(wd, 'data')
-  gen.run(data_cfg, root)
+  root = _DATASET.value or os.path.join(wd, 'data')
+  if not _DATASET.value:
+    gen.run(data_cfg, root)
   base = dataclasses.replace(
     train_cfg, epochs=_EPOCHS.value, val_fraction=0.25, materials=(material,)
   )
+  if _IMAGE_SIZE.value:
+    base = dataclasses.replace(base, image_size=_IMAGE_SIZE.value)
   names = params_lib.FIELDS
+
+  def chosen(variant: str) -> bool:
+    return not _ONLY.value or any(variant.startswith(p) for p in _ONLY.value)
+
   rows, inputs = [], {}
   for variant, over in VARIANTS.items():
+    if not chosen(variant):
+      continue
     for seed in map(int, _SEEDS.value):
       cfg = dataclasses.replace(base, seed=seed, **over)
       mode = cfg.input_mode
@@ -99,6 +122,8 @@ def main(argv):
       })  # fmt: skip
       print(json.dumps(rows[-1]), flush=True)
   for variant, mode in RAW.items():
+    if not chosen(variant):
+      continue
     for seed in map(int, _SEEDS.value):
       cfg = dataclasses.replace(base, seed=seed, input_mode=mode)
       if mode not in inputs:
@@ -116,7 +141,7 @@ def main(argv):
     f'{n}_vs_chance' for n in names
   ]
   print(
-    f'\n{material}, {sequences} simulations, seeds {_SEEDS.value}, '
+    f'\n{material}, {root}, seeds {_SEEDS.value}, '
     f'{time.time() - t0:.0f} s; mean (min-max) over seeds at the epoch chosen by '
     'validation triplet accuracy; retrieval relative to a random reference '
     '(1 = chance)\n'
@@ -126,14 +151,15 @@ def main(argv):
   )
   print('|---|' + '---:|' * (2 + len(names)))
   summary = {}
-  for variant in [*VARIANTS, *RAW]:
+  for variant in filter(chosen, [*VARIANTS, *RAW]):
     vals = {k: [r[k] for r in rows if r['variant'] == variant] for k in keys}
     summary[variant] = {k: float(np.mean(v)) for k, v in vals.items()}
     cells = [f'{np.mean(v):.2f} ({min(v):.2f}-{max(v):.2f})' for v in vals.values()]
     print(f'| {variant} | ' + ' | '.join(cells) + ' |')
   out = {
     'material': material,
-    'sequences': sequences,
+    'dataset': root,
+    'image_size': base.image_size,
     'epochs': _EPOCHS.value,
     'variants': VARIANTS,
     'raw': RAW,
