@@ -64,7 +64,7 @@ RAW = {
 
 
 def raw_retrieval(cfg, root: str, material: str, data) -> dict:
-  """``model.retrieval.summary`` of the held-out simulations with the inputs'
+  """``model.retrieval.score`` of the held-out simulations with the inputs'
   pixels as embeddings, on the split (and training part) a run of ``cfg`` uses."""
   x, y, g = data
   tc = train_lib.train_config(cfg, x.shape[-3:-1])
@@ -74,9 +74,7 @@ def raw_retrieval(cfg, root: str, material: str, data) -> dict:
     train_lib.video_info(cfg, root, [material]), len(x)
   )
   emb = np.asarray(x, np.float32).reshape(len(x), -1)
-  lr = model_lib.retrieval.retrieval_log_ratios(emb, videos, test_idx, fit_idx)
-  chance = model_lib.retrieval.chance_errors(videos, test_idx, fit_idx)
-  return model_lib.retrieval.summary(lr, chance, videos.names)
+  return model_lib.retrieval.score(emb, videos, test_idx, fit_idx)
 
 
 def main(argv):

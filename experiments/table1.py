@@ -294,18 +294,16 @@ def retrieval_cell(row: dict) -> str:
 def _retrieval_table(results: dict) -> list[str]:
   """Parameter retrieval of the held-out simulations (``model.retrieval``), when logged."""
   names = [COLUMN_NAMES[c] for c in COLUMNS]
-  rows = [
-    (m, [retrieval_cell(r.get(n, {}).get('simulation', {})) for n in names])
-    for m, r in results.items()
+  runs = {
+    m: [r.get(n, {}).get('simulation', {}) for n in names] for m, r in results.items()
+  }
+  logged = [
+    x['test_retrieval'] for xs in runs.values() for x in xs if x.get('test_retrieval')
   ]
-  if all(c == 'n/a' for _, cells in rows for c in cells):
+  if not logged:
     return []
-  chance = next(
-    r[n]['simulation']['test_retrieval']['chance']
-    for r in results.values()
-    for n in names
-    if r.get(n, {}).get('simulation', {}).get('test_retrieval')
-  )
+  chance = logged[0]['chance']
+  rows = [(m, [retrieval_cell(x) for x in xs]) for m, xs in runs.items()]
   return [
     '',
     '## Parameter retrieval on the held-out simulations (`model.retrieval`)',

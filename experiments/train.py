@@ -214,13 +214,15 @@ def video_info(config: Config, root: str, materials) -> model_lib.Videos:
   """
   index = dataset.open_dataset(root)
   video, camera, params = [], [], []
+  clips = 0  # clips so far: the next clip's id
   for m in materials:
     for r in index.filter(material=m, valid=True).rows:
       c, t = r['n_cameras'], r['n_frames']
       per_camera = t if config.network == 'physnet' else t // config.sdn_frames
-      first = len(video) and video[-1][-1] + 1
-      video.append(first + np.repeat(np.arange(c), per_camera))
-      camera.append(np.repeat(np.arange(c), per_camera))
+      cams = np.repeat(np.arange(c), per_camera)
+      video.append(clips + cams)
+      camera.append(cams)
+      clips += c
       params.append(np.tile([r[f] for f in params_lib.FIELDS], (c * per_camera, 1)))
   if not video:
     raise ValueError(f'{root}: no valid sequences of {list(materials)}')

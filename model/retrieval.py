@@ -67,8 +67,7 @@ def check_videos(videos: Videos, n: int) -> Videos:
   if not np.all(np.isfinite(params) & (params > 0)):
     bad = params[~np.all(np.isfinite(params) & (params > 0), axis=1)][0]
     raise ValueError(f'Videos.params must be finite and > 0, got a row {bad.tolist()}.')
-  _, first = np.unique(video, return_index=True)
-  inv = np.unique(video, return_inverse=True)[1]
+  _, first, inv = np.unique(video, return_index=True, return_inverse=True)
   for name, a in (('camera', camera), ('params', params)):
     ref = a[first][inv]
     if not np.array_equal(ref, a):
@@ -95,6 +94,28 @@ def _batched_psd(x: jax.Array, refs: jax.Array, kind: str) -> jax.Array:
   return jax.vmap(lambda r: psd_lib.psd(x, r, kind))(refs)
 
 
+def _same_camera(videos: Videos, query_idx, ref_idx):
+  """Yields ``(query clip's items, [items of each reference clip of its camera])``
+  per query clip in clip-id order, skipping queries without such a reference."""
+  queries, refs = _clips(videos, query_idx), _clips(videos, ref_idx)
+  by_camera: dict[int, list[np.ndarray]] = {}
+  for items in refs.values():
+    by_camera.setdefault(int(videos.camera[items[0]]), []).append(items)
+  for items in queries.values():
+    cands = by_camera.get(int(videos.camera[items[0]]), [])
+    if cands:
+      yield items, cands
+
+
+def _log_ratios(videos: Videos, query, refs) -> np.ndarray:
+  """``(R, P)`` log(reference / query parameters) of one query clip."""
+  return np.log(videos.params[[r[0] for r in refs]] / videos.params[query[0]])
+
+
+def _stack(rows: list, p: int) -> np.ndarray:
+  return np.asarray(rows, np.float64).reshape(len(rows), p)
+
+
 def retrieval_log_ratios(
   embeddings: np.ndarray,
   videos: Videos,
@@ -116,39 +137,25 @@ def retrieval_log_ratios(
     its camera (queries without one are left out), in clip-id order.
   """
   emb = np.asarray(embeddings, np.float32)
-  queries, refs = _clips(videos, query_idx), _clips(videos, ref_idx)
-  by_camera: dict[int, list[int]] = {}
-  for v, items in refs.items():
-    by_camera.setdefault(int(videos.camera[items[0]]), []).append(v)
   out = []
-  for items in queries.values():
-    cands = by_camera.get(int(videos.camera[items[0]]), [])
-    if not cands:
-      continue
-    sizes = {len(refs[v]) for v in cands}
-    if len(sizes) == 1:  # one vmapped call; ragged references go one by one
-      stack = jnp.asarray(np.stack([emb[refs[v]] for v in cands]))
-      d = np.asarray(_batched_psd(jnp.asarray(emb[items]), stack, kind=kind))
+  for items, refs in _same_camera(videos, query_idx, ref_idx):
+    x = jnp.asarray(emb[items])
+    if len({len(r) for r in refs}) == 1:  # one vmapped call; ragged ones go singly
+      d = np.asarray(
+        _batched_psd(x, jnp.asarray(np.stack([emb[r] for r in refs])), kind)
+      )
     else:
-      d = np.array([
-        float(psd_lib.psd(jnp.asarray(emb[items]), jnp.asarray(emb[refs[v]]), kind))
-        for v in cands
-      ])  # fmt: skip
-    best = refs[cands[int(np.argmin(d))]][0]
-    out.append(np.log(videos.params[best] / videos.params[items[0]]))
-  return np.asarray(out, np.float64).reshape(len(out), videos.params.shape[1])
+      d = np.array([float(psd_lib.psd(x, jnp.asarray(emb[r]), kind)) for r in refs])
+    out.append(_log_ratios(videos, items, refs)[int(np.argmin(d))])
+  return _stack(out, videos.params.shape[1])
 
 
 def _per_query(videos: Videos, query_idx, ref_idx, pick) -> np.ndarray:
   """``pick(log ratios (R, P) of the same-camera references) -> (P,)`` per query clip."""
-  queries, refs = _clips(videos, query_idx), _clips(videos, ref_idx)
-  out = []
-  for items in queries.values():
-    cam, truth = videos.camera[items[0]], videos.params[items[0]]
-    cands = [r[0] for r in refs.values() if videos.camera[r[0]] == cam]
-    if cands:
-      out.append(pick(np.log(videos.params[cands] / truth)))
-  return np.asarray(out, np.float64).reshape(len(out), videos.params.shape[1])
+  rows = [
+    pick(_log_ratios(videos, q, r)) for q, r in _same_camera(videos, query_idx, ref_idx)
+  ]
+  return _stack(rows, videos.params.shape[1])
 
 
 def oracle_log_ratios(videos: Videos, query_idx, ref_idx) -> np.ndarray:
@@ -163,6 +170,15 @@ def chance_errors(videos: Videos, query_idx, ref_idx) -> np.ndarray:
   """``(Q, P)`` expected ``|log ratio|`` of a reference of the query's camera
   drawn at random: what an embedding that knows nothing would score."""
   return _per_query(videos, query_idx, ref_idx, lambda lr: np.abs(lr).mean(axis=0))
+
+
+def score(
+  embeddings: np.ndarray, videos: Videos, query_idx, ref_idx, kind: str = 'energy'
+) -> dict:
+  """``summary`` of the query clips' retrieval among the reference clips
+  (``retrieval_log_ratios`` against ``chance_errors``); {} without queries."""
+  lr = retrieval_log_ratios(embeddings, videos, query_idx, ref_idx, kind)
+  return summary(lr, chance_errors(videos, query_idx, ref_idx), videos.names)
 
 
 def summary(log_ratios: np.ndarray, chance: np.ndarray, names) -> dict:

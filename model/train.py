@@ -610,10 +610,8 @@ def evaluate_retrieval(
   emb[used] = part
   out = {}
   for name, idx in (('val', val_idx), ('test', test_idx)):
-    lr = retrieval.retrieval_log_ratios(emb, videos, idx, fit_idx)
-    if len(lr):
-      chance = retrieval.chance_errors(videos, idx, fit_idx)
-      out[f'{name}_retrieval'] = retrieval.summary(lr, chance, videos.names)
+    if scores := retrieval.score(emb, videos, idx, fit_idx):
+      out[f'{name}_retrieval'] = scores
   return out
 
 
