@@ -11,6 +11,8 @@
 #   4. the tables, Table 1 and the similarity maps; then, while time is left,
 #      the random-split runs of Table 1's k-NN column.
 #   setsid bash benchmarks/gpu_paper.sh /tmp/run >/tmp/run.log 2>&1 &
+# COLUMNS=physnet_depth,sdn_depth: only those methods (no RGB frames then);
+# RANDOM_SPLIT=0: skip the random-split runs at the end.
 # Progress: $R/status.txt. Every step resumes: rerun after an interruption.
 # Training defaults: at most EPOCHS epochs, the epoch chosen on VAL of the
 # training simulations, stopping after PATIENCE epochs without a better one.
@@ -21,19 +23,22 @@ R=${1:-/tmp/run}
 . "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS (and their SMOKE versions)
 SHARDS_PER_GPU=${SHARDS_PER_GPU:-2}
 LATENCY=${LATENCY:-1}
-DS_ARGS="--rgb --batch_size=210"
+RANDOM_SPLIT=${RANDOM_SPLIT:-1}
+COLUMNS=${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth}
+DS_ARGS="--batch_size=210"
 EVAL_ARGS="--sequences=3"
 EST_ARGS=""
 if [ -n "${SMOKE:-}" ]; then  # tiny everything, MuJoCo C, for checking this script on a CPU
-  DS_ARGS="--preset=smoke --rgb --sequences=10 --materials=gray_interlock,black_denim"
+  DS_ARGS="--preset=smoke --sequences=10 --materials=gray_interlock,black_denim"
   EVAL_ARGS="--smoke"
   EST_ARGS="--preset=smoke --backend=c"
 fi
+[[ $COLUMNS == *rgb* ]] && DS_ARGS="$DS_ARGS --rgb"
 T1="python -m experiments.table1 --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --train_only"
-note "start: $NG GPUs; table1 $T1_ARGS"
+note "start: $NG GPUs; columns $COLUMNS; table1 $T1_ARGS"
 
 make_queue simulation >"$R/queue/simulation.txt"
-make_queue random >"$R/queue/random.txt"
+if [ "$RANDOM_SPLIT" = 1 ]; then make_queue random; fi >"$R/queue/random.txt"
 lane() {
   local g=$1
   case $g in
@@ -61,7 +66,7 @@ lane() {
   for ((s = g * SHARDS_PER_GPU; s < (g + 1) * SHARDS_PER_GPU; s++)); do
     XLA_PYTHON_CLIENT_MEM_FRACTION=$(awk "BEGIN { print 0.8 / $SHARDS_PER_GPU }") \
       step "$g" "tables_shard$s" 1500 python -m experiments.tables --eval="$R/eval" \
-      --models="$R/t1" --workdir="$R/tables" --batched --shard="$s" \
+      --models="$R/t1" --workdir="$R/tables" --methods="$COLUMNS" --batched --shard="$s" \
       --num_shards=$((NG * SHARDS_PER_GPU)) $EST_ARGS &
     pids+=($!)
   done
@@ -70,9 +75,9 @@ lane() {
   if [ "$g" -eq 0 ]; then
     for ((s = 0; s < NG; s++)); do wait_for "$R/estimates_gpu$s.done"; done
     step 0 tables 600 python -m experiments.tables --eval="$R/eval" --models="$R/t1" \
-      --workdir="$R/tables" $EST_ARGS
+      --workdir="$R/tables" --methods="$COLUMNS" $EST_ARGS
     step 0 table1 900 python -m experiments.table1 --dataset="$R/ds" --workdir="$R/t1" \
-      $T1_ARGS --splits=simulation
+      $T1_ARGS --columns="$COLUMNS" --splits=simulation
     touch "$R/tables.done"
   fi
   drain "$g" random 1500
@@ -80,6 +85,7 @@ lane() {
 
 for ((g = 0; g < NG; g++)); do lane "$g" & done
 wait
-step 0 table1_all 900 python -m experiments.table1 --dataset="$R/ds" --workdir="$R/t1" $T1_ARGS
+[ "$RANDOM_SPLIT" = 1 ] && step 0 table1_all 900 python -m experiments.table1 \
+  --dataset="$R/ds" --workdir="$R/t1" $T1_ARGS --columns="$COLUMNS"
 note "all done"
 touch "$R/all.done"
