@@ -142,3 +142,42 @@ def test_rgb_and_sensor_noise(tmp_path):
   assert not np.any((noisy.depth > 0) & (clean.depth == 0))
   both = (noisy.depth > 0) & (clean.depth > 0)
   assert both.any() and np.any(noisy.depth[both] != clean.depth[both])
+
+
+def test_min_coverage_redraws_only_poorly_framed_cameras(tmp_path):
+  # Reference sweep without the rule, then a threshold between its cameras'
+  # coverages: cameras below it get new poses, the rest stay bit for bit.
+  cfg = dataclasses.replace(_SMOKE, materials=('gray_interlock',))
+  gd.run(cfg, str(tmp_path / 'a'))
+  seqs = ('0000', '0001')
+  ref = {
+    s: dataset.read_sequence(str(tmp_path / 'a' / 'gray_interlock' / s)) for s in seqs
+  }
+  cover = {s: (r.depth > 0).mean(axis=(-1, -2)).min(axis=-1) for s, r in ref.items()}
+  flat = np.sort(np.concatenate(list(cover.values())))
+  assert flat[0] < flat[-1], 'need cameras of different coverage'
+  threshold = float((flat[0] + flat[1]) / 2)  # only the worst camera is below
+  draws = 8
+  s = gd.run(
+    dataclasses.replace(cfg, min_coverage=threshold, pose_draws=draws),
+    str(tmp_path / 'b'),
+  )
+  with open(tmp_path / 'a' / 'dataset.json') as f:
+    assert 'min_coverage' not in json.load(f)['config']  # old datasets still resume
+  redrawn = 0
+  for seq in seqs:
+    new = dataset.read_sequence(str(tmp_path / 'b' / 'gray_interlock' / seq))
+    got = (new.depth > 0).mean(axis=(-1, -2)).min(axis=-1)
+    np.testing.assert_allclose(new.meta['coverage_min'], got, atol=1e-5)
+    for c in range(cfg.cameras):
+      if cover[seq][c] >= threshold:
+        assert new.meta['pose_draws'][c] == 1
+        assert new.meta['extrinsics'][c] == ref[seq].meta['extrinsics'][c]
+        np.testing.assert_array_equal(new.depth[c], ref[seq].depth[c])
+      else:
+        redrawn += 1
+        assert 1 < new.meta['pose_draws'][c] <= draws
+        assert got[c] >= threshold or new.meta['pose_draws'][c] == draws
+        assert got[c] > cover[seq][c]  # the best draw is kept
+        assert new.meta['extrinsics'][c] != ref[seq].meta['extrinsics'][c]
+  assert redrawn == 1 and s['cameras_redrawn'] == 1
