@@ -116,7 +116,7 @@ def main(argv):
         'epoch': row['epoch'],
         'test_triplet_accuracy': row['test_triplet_accuracy'],
         'retrieval_error': r['error'],
-        **{f'{n}_vs_chance': r[n] / r['chance'][n] for n in names},
+        **{f'{n}_vs_chance': v for n, v in model_lib.retrieval.vs_chance(r).items()},
       })  # fmt: skip
       print(json.dumps(rows[-1]), flush=True)
   for variant, mode in RAW.items():
@@ -132,7 +132,7 @@ def main(argv):
         'seed': seed,
         'test_triplet_accuracy': float('nan'),
         'retrieval_error': r['error'],
-        **{f'{n}_vs_chance': r[n] / r['chance'][n] for n in names},
+        **{f'{n}_vs_chance': v for n, v in model_lib.retrieval.vs_chance(r).items()},
       })  # fmt: skip
       print(json.dumps(rows[-1]), flush=True)
   keys = ['test_triplet_accuracy', 'retrieval_error'] + [

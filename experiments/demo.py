@@ -117,16 +117,19 @@ def report(result: dict) -> str:
   """A markdown table of estimate, truth and the range-centre guess."""
   space = physsim.search_space(result['material'])
   centre = space.center()
+  retrieval = result.get('network_retrieval_vs_chance', {})
   lines = [
-    '| parameter | true | estimated | GP 90% interval | range centre |',
-    '|---|---|---|---|---|',
+    '| parameter | true | estimated | GP 90% interval | range centre '
+    '| network retrieval (1 = chance) |',
+    '|---|---|---|---|---|---|',
   ]
   for i, name in enumerate(physsim.Params._fields):
     e = result['estimate'][name]
     lo, hi = e['interval_90']
+    r = f'{retrieval[name]:.2f}' if name in retrieval else 'n/a'
     lines.append(
       f'| {name} | {result["truth"][name]:.3g} | {e["value"]:.3g} | '
-      f'[{lo:.3g}, {hi:.3g}] | {float(centre[i]):.3g} |'
+      f'[{lo:.3g}, {hi:.3g}] | {float(centre[i]):.3g} | {r} |'
     )
   err = result['errors']
   lines.append('')
@@ -138,6 +141,11 @@ def report(result: dict) -> str:
         for k in err['estimate']
       }
     )
+  )
+  lines.append(
+    'network retrieval: how well the trained network told each parameter apart '
+    'between held-out simulations; near 1 the video barely constrains it, and its '
+    'estimate is a guess'
   )
   return '\n'.join(lines)
 

@@ -794,6 +794,16 @@ def load_embedding(model_dir: str) -> EmbeddingNet:
   )
 
 
+def network_retrieval(model_dir: str) -> dict[str, float] | None:
+  """How well the network tells each parameter apart between held-out
+  simulations: its logged parameter retrieval (``model.retrieval``) at the
+  epoch it ships, over chance (1: the PSD does not constrain that parameter,
+  so neither can the estimate). None for runs that did not log it.
+  """
+  r = model_lib.selected_eval(model_lib.read_evals(model_dir)).get('test_retrieval')
+  return model_lib.retrieval.vs_chance(r) if r else None
+
+
 def estimate(
   config: EstimateConfig,
   recording: Recording,
@@ -869,6 +879,7 @@ def estimate(
     workdir,
     res,
     best_frames,
+    retrieval=network_retrieval(model_dir),
     seconds=time.time() - t_start,
     seconds_in_objective=float(np.sum(sim_seconds)),
   )
@@ -931,6 +942,7 @@ def finish(
   workdir: str,
   res: bo.Result,
   best_frames: np.ndarray,
+  retrieval: dict[str, float] | None = None,
   **timing,
 ) -> dict:
   """Writes ``estimate.json``, ``trace.png`` and ``montage.png`` of a finished
@@ -942,6 +954,8 @@ def finish(
     res: the search's result (a finite best value).
     best_frames: the best candidate's camera-0 frames as its network saw
       them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
+    retrieval: the network's ``network_retrieval``, recorded beside the
+      estimate (a parameter near 1 is not constrained by the video).
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
   space = physsim.search_space(config.material)
@@ -960,6 +974,7 @@ def finish(
     'failed_evaluations': int(np.sum(~np.isfinite(res.Y))),
     'iterations': int(res.n_iter),
     'stopped_by_rule': bool(res.stopped_early),
+    **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
     **{k: float(v) for k, v in timing.items()},
     'config': dataclasses.asdict(config),
   }
@@ -974,6 +989,16 @@ def finish(
     os.path.join(workdir, 'montage.png'),
   )
   return result
+
+
+def retrieval_note(retrieval: dict[str, float]) -> str:
+  """One line saying which parameters the network barely tells apart."""
+  cells = ', '.join(f'{n} {v:.2f}' for n, v in retrieval.items())
+  return (
+    f'network retrieval on held-out simulations, over chance: {cells} '
+    '(near 1: the video barely constrains that parameter; trust its interval, '
+    'not its value)'
+  )
 
 
 def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace) -> dict:
@@ -1089,6 +1114,8 @@ def main(argv):
   result = estimate(config, rec, f.model, f.workdir)
   est = result['estimate']
   print(json.dumps({k: v['value'] for k, v in est.items()}, indent=1))
+  if r := result.get('network_retrieval_vs_chance'):
+    print(retrieval_note(r))
   if 'errors' in result:
     print(json.dumps(result['errors'], indent=1))
 

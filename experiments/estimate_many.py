@@ -139,7 +139,8 @@ def estimate_many(
       job, r = jobs[s.index], res[s.index]
       out[s.index] = est.finish(
         job.config, job.recording, s.problem.modality, job.workdir, r,
-        frames[s.index], seconds=wall, seconds_in_objective=sim_seconds,
+        frames[s.index], retrieval=est.network_retrieval(job.model_dir),
+        seconds=wall, seconds_in_objective=sim_seconds,
         recordings_in_batch=len(jobs),
       )  # fmt: skip
       if progress:

@@ -376,8 +376,22 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
     print(f'{name}: {len(x)} inputs of shape {x.shape[1:]}, {len(set(y))} labels')
     run_dir = os.path.join(workdir, name)
     _, out[name] = fit_run(config, root, run_dir, mats, (x, y, g), progress=progress)
-    print(f'{name}: {json.dumps(out[name])}')
+    print(f'{name}: {describe_eval(out[name])}')
   return out
+
+
+def describe_eval(row: dict) -> str:
+  """A selected eval row in one line: epoch, held-out triplet accuracy and,
+  when logged, each parameter's retrieval over chance (``model.retrieval``)."""
+  if not row:
+    return 'not evaluated'
+  parts = [f'epoch {row["epoch"]}']
+  if (acc := row.get('test_triplet_accuracy')) is not None:
+    parts.append(f'held-out triplet accuracy {100 * acc:.1f}%')
+  if r := row.get('test_retrieval'):
+    cells = model_lib.retrieval.vs_chance(r).items()
+    parts.append('retrieval over chance ' + ', '.join(f'{n} {v:.2f}' for n, v in cells))
+  return '; '.join(parts)
 
 
 def choose_lr(

@@ -213,3 +213,9 @@ def summary(log_ratios: np.ndarray, chance: np.ndarray, names) -> dict:
     **{n: float(v) for n, v in zip(names, err, strict=True)},
     'chance': {n: float(v) for n, v in zip(names, base, strict=True)},
   }
+
+
+def vs_chance(s: dict) -> dict[str, float]:
+  """Each parameter's mean |log ratio| of a ``summary`` over its chance value
+  (1 = no better than a random reference); {} for an empty summary."""
+  return {n: s[n] / c for n, c in s.get('chance', {}).items() if c > 0}

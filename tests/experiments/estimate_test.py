@@ -331,3 +331,41 @@ def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
   np.testing.assert_array_equal(failed, [1, config.n_init + 1])  # slot 1 of each
   assert result['failed_evaluations'] == 2
   assert np.isfinite(result['psd_best'])
+
+
+def test_network_retrieval_of_the_shipped_epoch(tmp_path):
+  def row(epoch, val, wind):
+    chance = {'bending_scale': 2.0, 'wind_speed': 0.5, 'area_weight': 0.1}
+    test = {'bending_scale': 2.0, 'wind_speed': wind, 'area_weight': 0.09}
+    return {'eval': True, 'epoch': epoch, 'val_score': val,
+            'test_retrieval': {**test, 'chance': chance, 'error': 0.0, 'queries': 4}}  # fmt: skip
+
+  run = tmp_path / 'run'
+  run.mkdir()
+  assert est.network_retrieval(str(run)) is None  # no log: nothing claimed
+  rows = [row(1, 0.7, 0.4), row(2, 0.9, 0.1), row(3, 0.8, 0.3)]
+  (run / 'metrics.jsonl').write_text(''.join(json.dumps(r) + '\n' for r in rows))
+  got = est.network_retrieval(str(run))  # epoch 2: the best validation score
+  assert got == pytest.approx(
+    {'bending_scale': 1.0, 'wind_speed': 0.2, 'area_weight': 0.9}
+  )
+  assert 'wind_speed 0.20' in est.retrieval_note(got)
+  from experiments import train
+
+  line = train.describe_eval({**rows[1], 'test_triplet_accuracy': 0.625})
+  assert line.startswith(
+    'epoch 2; held-out triplet accuracy 62.5%; retrieval over chance'
+  )
+  assert 'area_weight 0.90' in line
+
+
+def test_demo_report_shows_retrieval(env, recovery):
+  from experiments import demo
+
+  result, _ = recovery
+  assert 'network_retrieval_vs_chance' not in result  # the fixture logged none
+  plain = demo.report(result)
+  assert plain.count('| n/a |') == 3
+  r = {'bending_scale': 1.05, 'wind_speed': 0.4, 'area_weight': 0.95}
+  shown = demo.report({**result, 'network_retrieval_vs_chance': r})
+  assert '| 0.40 |' in shown and '| 1.05 |' in shown and 'n/a' not in shown

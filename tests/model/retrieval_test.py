@@ -142,6 +142,18 @@ class RetrievalTest(absltest.TestCase):
     with self.assertRaisesRegex(ValueError, '2 names for 3'):
       retrieval.check_videos(ok._replace(names=('a', 'b')), 2)
 
+  def test_vs_chance_by_hand(self):
+    lr = np.array([[0.2, 1.0], [0.4, 3.0]])
+    chance = np.array([[0.5, 2.0], [0.7, 2.0]])
+    s = retrieval.summary(lr, chance, ('wind', 'bend'))
+    got = retrieval.vs_chance(s)
+    # means 0.3 / 0.6 and 2.0 / 2.0
+    self.assertEqual(set(got), {'wind', 'bend'})
+    self.assertAlmostEqual(got['wind'], 0.5, places=12)
+    self.assertAlmostEqual(got['bend'], 1.0, places=12)
+    self.assertAlmostEqual(s['error'], 0.75, places=12)
+    self.assertEqual(retrieval.vs_chance({}), {})
+
 
 if __name__ == '__main__':
   absltest.main()
