@@ -17,7 +17,6 @@ Every stage resumes from what ``workdir`` already holds.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import time
 
@@ -108,46 +107,9 @@ def run(workdir: str, material: str, sequences: int, seed: int, backend: str):
   result = estimate_lib.estimate(
     est_cfg, rec, os.path.join(workdir, 'model', material), workdir + '/estimate'
   )
-  print(report(result))
+  print(estimate_lib.report_table(result))
   print(f'total {time.time() - t0:.0f} s; pictures in {workdir}/estimate')
   return result
-
-
-def report(result: dict) -> str:
-  """A markdown table of estimate, truth and the range-centre guess."""
-  space = physsim.search_space(result['material'])
-  centre = space.center()
-  retrieval = result.get('network_retrieval_vs_chance', {})
-  lines = [
-    '| parameter | true | estimated | GP 90% interval | range centre '
-    '| network retrieval (1 = chance) |',
-    '|---|---|---|---|---|---|',
-  ]
-  for i, name in enumerate(physsim.Params._fields):
-    e = result['estimate'][name]
-    lo, hi = e['interval_90']
-    r = f'{retrieval[name]:.2f}' if name in retrieval else 'n/a'
-    lines.append(
-      f'| {name} | {result["truth"][name]:.3g} | {e["value"]:.3g} | '
-      f'[{lo:.3g}, {hi:.3g}] | {float(centre[i]):.3g} | {r} |'
-    )
-  err = result['errors']
-  lines.append('')
-  lines.append(
-    'errors (estimate vs range centre): '
-    + json.dumps(
-      {
-        k: [round(err['estimate'][k], 2), round(err['range_centre'][k], 2)]
-        for k in err['estimate']
-      }
-    )
-  )
-  lines.append(
-    'network retrieval: how well the trained network told each parameter apart '
-    'between held-out simulations; near 1 the video barely constrains it, and its '
-    'estimate is a guess'
-  )
-  return '\n'.join(lines)
 
 
 def main(argv):

@@ -991,13 +991,53 @@ def finish(
   return result
 
 
+_RETRIEVAL_MEANING = 'near 1: the video barely constrains that parameter; trust its interval, not its value'
+
+
+def report_table(result: dict) -> str:
+  """A markdown table of an estimate with ground truth: estimate, truth, GP
+  interval, the range-centre guess and the network's retrieval over chance."""
+  space = physsim.search_space(result['material'])
+  centre = space.center()
+  retrieval = result.get('network_retrieval_vs_chance', {})
+  lines = [
+    '| parameter | true | estimated | GP 90% interval | range centre '
+    '| network retrieval (1 = chance) |',
+    '|---|---|---|---|---|---|',
+  ]
+  for i, name in enumerate(physsim.Params._fields):
+    e = result['estimate'][name]
+    lo, hi = e['interval_90']
+    r = f'{retrieval[name]:.2f}' if name in retrieval else 'n/a'
+    lines.append(
+      f'| {name} | {result["truth"][name]:.3g} | {e["value"]:.3g} | '
+      f'[{lo:.3g}, {hi:.3g}] | {float(centre[i]):.3g} | {r} |'
+    )
+  err = result['errors']
+  lines.append('')
+  lines.append(
+    'errors (estimate vs range centre): '
+    + json.dumps(
+      {
+        k: [round(err['estimate'][k], 2), round(err['range_centre'][k], 2)]
+        for k in err['estimate']
+      }
+    )
+  )
+  if retrieval:
+    lines.append(
+      'network retrieval: how well the network tells each parameter apart between '
+      f'held-out simulations ({_RETRIEVAL_MEANING})'
+    )
+  return '\n'.join(lines)
+
+
 def retrieval_note(retrieval: dict[str, float]) -> str:
   """One line saying which parameters the network barely tells apart."""
   cells = ', '.join(f'{n} {v:.2f}' for n, v in retrieval.items())
   return (
     f'network retrieval on held-out simulations, over chance: {cells} '
-    '(near 1: the video barely constrains that parameter; trust its interval, '
-    'not its value)'
+    f'({_RETRIEVAL_MEANING})'
   )
 
 
@@ -1112,12 +1152,13 @@ def main(argv):
     rgb=net.modality == 'rgb',
   )
   result = estimate(config, rec, f.model, f.workdir)
+  if 'truth' in result:
+    print(report_table(result))
+    return
   est = result['estimate']
   print(json.dumps({k: v['value'] for k, v in est.items()}, indent=1))
   if r := result.get('network_retrieval_vs_chance'):
     print(retrieval_note(r))
-  if 'errors' in result:
-    print(json.dumps(result['errors'], indent=1))
 
 
 def _define_flags():

@@ -359,13 +359,11 @@ def test_network_retrieval_of_the_shipped_epoch(tmp_path):
   assert 'area_weight 0.90' in line
 
 
-def test_demo_report_shows_retrieval(env, recovery):
-  from experiments import demo
-
+def test_report_table_shows_retrieval(env, recovery):
   result, _ = recovery
   assert 'network_retrieval_vs_chance' not in result  # the fixture logged none
-  plain = demo.report(result)
+  plain = est.report_table(result)
   assert plain.count('| n/a |') == 3
   r = {'bending_scale': 1.05, 'wind_speed': 0.4, 'area_weight': 0.95}
-  shown = demo.report({**result, 'network_retrieval_vs_chance': r})
+  shown = est.report_table({**result, 'network_retrieval_vs_chance': r})
   assert '| 0.40 |' in shown and '| 1.05 |' in shown and 'n/a' not in shown
