@@ -30,7 +30,7 @@ from absl import app, flags, logging
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model as model_lib  # noqa: E402
-from experiments import demo  # noqa: E402
+from experiments import demo, files  # noqa: E402
 from experiments import generate_dataset as gen  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 from physsim import params as params_lib  # noqa: E402
@@ -166,7 +166,7 @@ def main(argv):
     'seconds': time.time() - t0,
   }
   path = os.path.join(wd, 'retrieval_ablation.json')
-  model_lib.config_io.write_json(path, out)
+  files.write_json(path, out)
   print(f'\nwrote {path}')
 
 

@@ -36,7 +36,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments import demo  # noqa: E402
+from experiments import demo, files  # noqa: E402
 from experiments import estimate as estimate_lib  # noqa: E402
 from experiments import generate_dataset as gen  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
@@ -225,7 +225,7 @@ def main(argv):
     'seconds': time.time() - t0,
   }
   path = os.path.join(wd, 'selection_study.json')
-  model_lib.config_io.write_json(path, out)
+  files.write_json(path, out)
   print(f'\nwrote {path}')
 
 

@@ -174,12 +174,15 @@ def _frame_cameras(config: Config, draw, render, poses, frames, valid):
   frames change.
 
   Returns:
-    (poses, depth, rgb or None, (B, C) poses drawn per camera, (B, C) coverage).
+    (poses, depth, rgb or None, (B, C) poses drawn per camera, (B, C) coverage,
+    or None when ``min_coverage`` is off: the sweep's hot path skips it).
   """
   depth, rgb = frames
+  if not config.min_coverage:
+    return poses, depth, rgb, None, None
   cover = _coverage(depth)
   draws = np.ones(cover.shape, np.int64)
-  for attempt in range(1, config.pose_draws if config.min_coverage else 1):
+  for attempt in range(1, config.pose_draws):
     low = (cover < config.min_coverage) & np.asarray(valid)[:, None]
     if not low.any():
       break
@@ -537,21 +540,16 @@ def run(config: Config, workdir: str) -> dict:
           'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))
           if valid
           else None,
-          **(
-            {
-              'pose_draws': draws[j].tolist(),
-              'coverage_min': [round(float(x), 5) for x in coverage[j]],
-            }
-            if config.min_coverage and valid
-            else {}
-          ),
         }
-        if config.min_coverage and valid and (coverage[j] < config.min_coverage).any():
-          logging.warning(
-            '%s/%04d: the best of %d camera poses sees the cloth on %.4f of a frame',
-            material, i, config.pose_draws, coverage[j].min(),
-          )  # fmt: skip
-        cameras_redrawn += int((draws[j] > 1).sum())
+        if coverage is not None and valid:  # min_coverage is on
+          meta['pose_draws'] = draws[j].tolist()
+          meta['coverage_min'] = [round(float(x), 5) for x in coverage[j]]
+          cameras_redrawn += int((draws[j] > 1).sum())
+          if coverage[j].min() < config.min_coverage:
+            logging.warning(
+              '%s/%04d: the best of %d camera poses sees the cloth on %.4f of a frame',
+              material, i, config.pose_draws, coverage[j].min(),
+            )  # fmt: skip
         pending.append(
           writers.submit(
             dataset.write_sequence,
