@@ -28,11 +28,6 @@ from experiments import generate_dataset as gen
 from experiments import train as train_lib
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('workdir', 'out/demo', 'everything goes here')
-flags.DEFINE_string('material', 'gray_interlock', 'paper fabric name')
-flags.DEFINE_integer('sequences', 24, 'training simulations')
-flags.DEFINE_integer('seed', 0, 'seed of the recording (ground truth) and search')
-flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on GPU")
 
 _RES = 32  # image size
 _FRAMES = 16  # at 20 Hz: 0.8 s clips
@@ -112,6 +107,16 @@ def run(workdir: str, material: str, sequences: int, seed: int, backend: str):
   return result
 
 
+def define_flags() -> None:
+  """The demo's flags, defined only when it runs as a script: importing
+  ``run`` beside another script's flags (``--sequences``...) must not clash."""
+  flags.DEFINE_string('workdir', 'out/demo', 'everything goes here')
+  flags.DEFINE_string('material', 'gray_interlock', 'paper fabric name')
+  flags.DEFINE_integer('sequences', 24, 'training simulations')
+  flags.DEFINE_integer('seed', 0, 'seed of the recording (ground truth) and search')
+  flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on GPU")
+
+
 def main(argv):
   del argv
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
@@ -119,4 +124,5 @@ def main(argv):
 
 
 if __name__ == '__main__':
+  define_flags()
   app.run(main)
