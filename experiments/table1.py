@@ -212,8 +212,17 @@ def cell(runs: dict) -> str:
   return f'{a} / {b}'
 
 
-def _table(rows: list[tuple[str, list[str]]]) -> list[str]:
-  names = [COLUMN_NAMES[c] for c in COLUMNS]
+def column_names(config: Config) -> list[str]:
+  """The table's columns: those ``config.columns`` asks for (all four when
+  empty), in the paper's order."""
+  return [
+    COLUMN_NAMES[c]
+    for c in COLUMNS
+    if not config.columns or f'{c[0]}_{c[1]}' in config.columns
+  ]
+
+
+def _table(rows: list[tuple[str, list[str]]], names: list[str]) -> list[str]:
   lines = ['| Material | ' + ' | '.join(names) + ' |']
   lines.append('|---|' + '---:|' * len(names))
   lines += [f'| {m} | ' + ' | '.join(cells) + ' |' for m, cells in rows]
@@ -239,8 +248,9 @@ def _epoch_note(t: train_lib.Config) -> str:
 
 
 def format_table(results: dict, root: str, config: Config) -> str:
-  """The markdown of Table 1 (ours, the metric definitions, and the paper's)."""
-  names = [COLUMN_NAMES[c] for c in COLUMNS]
+  """The markdown of Table 1 (ours, the metric definitions, and the paper's, whose
+  four columns are always shown)."""
+  names = column_names(config)
   t = config.train
   knn_k = model_lib.TrainConfig().knn_k
   lines = [
@@ -251,7 +261,7 @@ def format_table(results: dict, root: str, config: Config) -> str:
     '',
   ]
   lines += _table(
-    [(m, [cell(r.get(n, {})) for n in names]) for m, r in results.items()]
+    [(m, [cell(r.get(n, {})) for n in names]) for m, r in results.items()], names
   )
   lines += [
     '',
@@ -269,7 +279,7 @@ def format_table(results: dict, root: str, config: Config) -> str:
     + _epoch_note(t)
     + ' n/a: the test set could not support the metric.',
   ]
-  lines += _retrieval_table(results)
+  lines += _retrieval_table(results, names)
   paper = [(m, [f'{v}' for v in PAPER_TABLE1[m]]) for m in results if m in PAPER_TABLE1]
   if paper:
     lines += [
@@ -277,7 +287,7 @@ def format_table(results: dict, root: str, config: Config) -> str:
       "## The paper's Table 1 (clustering accuracy, %; protocol not stated)",
       '',
     ]
-    lines += _table(paper)
+    lines += _table(paper, [COLUMN_NAMES[c] for c in COLUMNS])
   return '\n'.join(lines) + '\n'
 
 
@@ -291,9 +301,8 @@ def retrieval_cell(row: dict) -> str:
   return f'{r["error"]:.2f} ({per})'
 
 
-def _retrieval_table(results: dict) -> list[str]:
+def _retrieval_table(results: dict, names: list[str]) -> list[str]:
   """Parameter retrieval of the held-out simulations (``model.retrieval``), when logged."""
-  names = [COLUMN_NAMES[c] for c in COLUMNS]
   runs = {
     m: [r.get(n, {}).get('simulation', {}) for n in names] for m, r in results.items()
   }
@@ -316,7 +325,7 @@ def _retrieval_table(results: dict) -> list[str]:
     + ' / '.join(f'{chance[f]:.2f}' for f in params_lib.FIELDS)
     + '.',
     '',
-    *_table(rows),
+    *_table(rows, names),
   ]
 
 
