@@ -37,6 +37,7 @@ from physsim import params as params_lib  # noqa: E402
 
 # --workdir, --material, --sequences and --backend are experiments.demo's flags.
 FLAGS = flags.FLAGS
+demo.define_flags()
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs per run')
 _SEEDS = flags.DEFINE_list('seeds', ['0', '1', '2'], 'training seeds per variant')
 _DATASET = flags.DEFINE_string(

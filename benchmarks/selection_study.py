@@ -44,6 +44,7 @@ from model import checkpoint  # noqa: E402
 
 # --workdir, --material, --sequences and --backend are experiments.demo's flags.
 FLAGS = flags.FLAGS
+demo.define_flags()
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs (every one is kept)')
 _RECORDINGS = flags.DEFINE_integer('recordings', 4, 'real-like recordings')
 _ALL_EPOCHS = flags.DEFINE_bool(

@@ -3,6 +3,12 @@ command: two minutes, too long for a unit test)."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
+import pytest
+
 from experiments import demo
 from experiments import generate_dataset as gen
 from experiments import train as train_lib
@@ -32,3 +38,21 @@ def test_recording_differs_from_training_like_reality_and_search_matches_trainin
   assert (est.cloth_resolution, est.frames) == (data.cloth_resolution, data.frames)
   assert est.seed == 3 and rec.seed != data.seed
   assert training.epochs <= train_lib.PRESETS['paper'].epochs
+
+
+@pytest.mark.parametrize('script', ['retrieval_ablation.py', 'selection_study.py'])
+def test_scripts_built_on_the_demo_have_its_flags(script):
+  # These benchmarks take --workdir, --material, --sequences and --backend
+  # from the demo, which defines them only on request.
+  root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+  out = subprocess.run(
+    [sys.executable, os.path.join(root, 'benchmarks', script), '--helpfull'],
+    capture_output=True,
+    text=True,
+    cwd=root,
+    timeout=300,
+  )
+  text = out.stdout + out.stderr  # absl's --helpfull prints usage and exits 1
+  assert 'Traceback' not in text, text[-2000:]
+  for flag in ('--workdir', '--material', '--sequences', '--backend', '--epochs'):
+    assert f'{flag}:' in text, flag
