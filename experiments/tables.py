@@ -15,8 +15,11 @@ shown as '-'. RGB methods need an evaluation set with colour frames (what
   python -m experiments.tables --eval=data/eval --models=out/table1 \
       --workdir=out/tables [--jobs=4]
 
-Writes ``tables.md``, ``tables.json`` and ``bending_surfaces.png`` (the
-paper's Figure 4: true and estimated 3x5 bending matrices). Each estimate
+Writes ``tables.md``, ``tables.json``, ``bending_surfaces_<method>.png`` (the
+paper's Figure 4: true and estimated 3x5 bending matrices) and
+``psd_candidates_<method>.png`` (the PSD of every candidate the searches scored
+against each parameter, relative to the truth: the landscape as sampled; for
+lines through the truth, ``experiments.landscape``). Each estimate
 resumes from its own folder. By default each runs in its own process
 (``--jobs`` at once; on a GPU each gets a share of its memory); with
 ``--batched`` one process runs them all in lockstep, simulating every
@@ -344,6 +347,60 @@ def bending_surfaces(results: dict, method: str, path: str) -> None:
   plt.close(fig)
 
 
+def candidate_landscapes(results: dict, method: str, workdir: str) -> dict:
+  """Every candidate a method's searches scored, placed against the truth.
+
+  Reads each finished estimate's ``bo_state.npz`` (no simulation). Returns
+  ``{fabric or garment: [(ratio (n, 3), rel (n,)) per recording]}``: ``ratio``
+  is ``log10(value / truth)`` of bending scale, wind speed and area weight (0 =
+  the truth), ``rel`` the candidate's PSD over the search's best (>= 1; NaN
+  where its simulation failed).
+  """
+  out: dict = {}
+  for key, r in sorted(results.items()):
+    if key[0] != method or 'truth' not in r:
+      continue
+    state = os.path.join(workdir, key[0], key[1], f'{key[2]}-{key[3]}', 'bo_state.npz')
+    if not os.path.isfile(state):
+      continue
+    with np.load(state) as z:
+      x, y = np.asarray(z['X'], np.float64), np.asarray(z['Y'], np.float64)
+    values = physsim.from_unit(x, physsim.search_space(r['material']))
+    truth = [r['truth'][f] for f in physsim.Params._fields]
+    ratio = np.stack(
+      [np.log10(np.ravel(v) / t) for v, t in zip(values, truth, strict=True)], 1
+    )
+    out.setdefault(key[2], []).append((ratio, y / np.nanmin(y)))
+  return out
+
+
+def plot_candidate_landscapes(landscapes: dict, method: str, path: str) -> None:
+  """The PSD along each parameter, as the searches sampled it: one row per
+  fabric or garment, one column per parameter, one colour per recording."""
+  if not landscapes:
+    return
+  names = list(landscapes)
+  labels = ('bending scale', 'wind speed', 'area weight')
+  fig, axes = plt.subplots(
+    len(names), 3, figsize=(11, 2.1 * len(names)), sharey=True, squeeze=False
+  )
+  for row, name in zip(axes, names, strict=True):
+    for j, (ratio, rel) in enumerate(landscapes[name]):
+      for i, ax in enumerate(row):
+        ax.semilogy(ratio[:, i], rel, '.', ms=4, color=f'C{j}')
+    for i, ax in enumerate(row):
+      ax.axvline(0.0, color='k', lw=0.8)
+      ax.set_title(f'{name}: {labels[i]}', fontsize=8)
+  for i, ax in enumerate(axes[-1]):
+    ax.set_xlabel(f'log10({labels[i]} / truth)')
+  for ax in axes[:, 0]:
+    ax.set_ylabel('PSD / best')
+  fig.suptitle(f'{method}: every candidate the searches scored (truth at 0)')
+  fig.tight_layout()
+  files.savefig(fig, path, dpi=80)
+  plt.close(fig)
+
+
 def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
   os.makedirs(workdir, exist_ok=True)
   results = run_all(config, eval_root, models, workdir)
@@ -360,6 +417,10 @@ def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
   )
   for m in config.methods:
     bending_surfaces(results, m, os.path.join(workdir, f'bending_surfaces_{m}.png'))
+    plot_candidate_landscapes(
+      candidate_landscapes(results, m, workdir), m,
+      os.path.join(workdir, f'psd_candidates_{m}.png'),
+    )  # fmt: skip
   print(md)
   return md
 

@@ -142,3 +142,41 @@ def test_batched_runs_real_estimates(tmp_path):
   good = out[tables._key(rec, 'physnet_depth')]
   assert good['truth'] == fx.TRUTH and good['recordings_in_batch'] == 1
   assert 'missing' in out[tables._key(bad, 'physnet_depth')]['failed']
+
+
+def test_candidate_landscapes_place_each_candidate_against_the_truth(tmp_path):
+  import cv2
+
+  import physsim
+
+  truth = {'bending_scale': 2.0, 'wind_speed': 3.0, 'area_weight': 0.33}
+  space = physsim.search_space('black_denim')
+  u_truth = np.ravel(np.asarray(physsim.to_unit(physsim.params.make(**truth), space)))
+  x = np.stack([u_truth, np.zeros(3), np.ones(3)])
+  y = np.array([0.5, 1.0, np.nan])  # the third candidate blew up
+  key = ('physnet_depth', 'fabrics', 'black_denim', '0000')
+  folder = tmp_path / 'physnet_depth' / 'fabrics' / 'black_denim-0000'
+  folder.mkdir(parents=True)
+  np.savez(folder / 'bo_state.npz', X=x, Y=y)
+  results = {
+    key: {'truth': truth, 'material': 'black_denim'},
+    key[:3] + ('0001',): {'failed': 'exit 1'},  # no state: left out
+    ('sdn_depth',) + key[1:]: {'truth': truth, 'material': 'black_denim'},
+  }
+  out = tables.candidate_landscapes(results, 'physnet_depth', str(tmp_path))
+  assert list(out) == ['black_denim'] and len(out['black_denim']) == 1
+  ratio, rel = out['black_denim'][0]
+  np.testing.assert_allclose(ratio[0], 0.0, atol=1e-6)  # the truth itself
+  # The centre of the box, by hand: bending's log-centre 1 (0.1-10), wind 3.5 m/s
+  # (1-6), area weight the range's middle.
+  lo, hi = space.bounds()[2]
+  want = np.log10([1.0 / 2.0, 3.5 / 3.0, (lo + hi) / 2 / 0.33])
+  np.testing.assert_allclose(ratio[1], want, rtol=1e-5)
+  np.testing.assert_allclose(
+    ratio[2], np.log10([10 / 2.0, 6 / 3.0, hi / 0.33]), rtol=1e-5
+  )
+  np.testing.assert_array_equal(rel[:2], [1.0, 2.0])
+  assert np.isnan(rel[2])
+  png = str(tmp_path / 'psd_candidates.png')
+  tables.plot_candidate_landscapes(out, 'physnet_depth', png)
+  assert cv2.imread(png) is not None
