@@ -9,8 +9,7 @@
 set -u
 R=${1:?run folder}
 D=${2:?destination}
-COLUMNS=${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth}
-. "$(dirname "$0")/gpu_lib.sh"  # T1_ARGS (the run's training settings), PYTHONPATH
+. "$(dirname "$0")/gpu_lib.sh"  # T1_ARGS (the run's training settings), COLUMNS, PYTHONPATH
 mkdir -p "$D/metrics"
 cp "$R/status.txt" "$D/" 2>/dev/null
 if [ -d "$R/tables" ] && [ -d "$R/eval" ]; then  # tables of the finished estimates

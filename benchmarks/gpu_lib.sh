@@ -11,6 +11,8 @@ export PYTHONPATH=${PYTHONPATH:-/tmp/site:$PWD} PYTHONUNBUFFERED=1 MUJOCO_GL=${M
 NG=${NG:-$(nvidia-smi -L | wc -l)}
 FABRICS=(white_tablecloth gray_interlock black_denim sparkle_fleece pink_nylon ponte_roma red_violet)
 T1_ARGS="--epochs=$EPOCHS --val_fraction=$VAL --patience=$PATIENCE"
+# Table 1 columns = Tables 2/3 methods a job trains and estimates (default: all four).
+COLUMNS=${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth}
 if [ -n "${SMOKE:-}" ]; then  # tiny settings for checking a script on a CPU
   FABRICS=(gray_interlock black_denim)
   T1_ARGS="--preset=smoke --epochs=3 --val_fraction=$VAL --patience=1 --test_fraction=0.2"
@@ -31,8 +33,8 @@ wait_for() { while [ ! -e "$1" ]; do sleep 5; done; }
 # The queue: "name columns split materials" per line, longest tasks first.
 pairs() { local i; for ((i = 0; i < ${#FABRICS[@]}; i += $1)); do
   local s=("${FABRICS[@]:i:$1}"); (IFS=,; echo "${s[*]}"); done; }
-make_queue() {  # $1: split; the columns in $COLUMNS (default: all four)
-  local m c n cols=",${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth},"
+make_queue() {  # $1: split; the columns in $COLUMNS
+  local m c n cols=",$COLUMNS,"
   # column:fabrics per task, the longest tasks first
   for c in sdn_rgb:1 sdn_depth:2 physnet_rgb:2 physnet_depth:3; do
     n=${c#*:} c=${c%:*}

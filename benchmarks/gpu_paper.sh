@@ -22,11 +22,10 @@
 #   NG=2 SMOKE=1 bash benchmarks/gpu_paper.sh /tmp/gp_smoke
 set -uo pipefail
 R=${1:-/tmp/run}
-. "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS (and their SMOKE versions)
+. "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS, COLUMNS (and SMOKE versions)
 SHARDS_PER_GPU=${SHARDS_PER_GPU:-2}
 LATENCY=${LATENCY:-1}
 RANDOM_SPLIT=${RANDOM_SPLIT:-1}
-COLUMNS=${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth}
 DS_ARGS="--batch_size=210"
 EVAL_ARGS="--sequences=3"
 EST_ARGS=""

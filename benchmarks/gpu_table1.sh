@@ -11,8 +11,7 @@
 # On a CPU, NG=2 SMOKE=1 checks the script with tiny settings (MuJoCo C).
 set -u
 R=${1:-/tmp/t1run}
-. "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS (and their SMOKE versions)
-COLUMNS=${COLUMNS:-sdn_rgb,sdn_depth,physnet_rgb,physnet_depth}
+. "$(dirname "$0")/gpu_lib.sh"  # FABRICS, NG, T1_ARGS, COLUMNS (and SMOKE versions)
 SPLITS=${SPLITS:-random}
 DS_ARGS="--batch_size=210"
 [ -n "${SMOKE:-}" ] && DS_ARGS="--preset=smoke --sequences=10 --materials=gray_interlock,black_denim"

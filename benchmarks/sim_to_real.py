@@ -31,7 +31,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments import demo, files  # noqa: E402
+from experiments import demo, files, landscape  # noqa: E402
 from experiments import estimate as est  # noqa: E402
 from experiments import generate_dataset as gen  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
@@ -66,11 +66,10 @@ def variants(train_cfg: gen.Config, rec_cfg: gen.Config) -> dict[str, gen.Config
 
 
 def wind_line(u_truth: np.ndarray, points: int) -> np.ndarray:
-  """(n, 3) unit points along wind through the truth, sorted by wind."""
-  w = np.unique(np.append(np.linspace(-1, 1, points), u_truth[1]))
-  line = np.tile(u_truth, (len(w), 1))
-  line[:, 1] = w
-  return line
+  """(n, 3) unit points along wind through the truth, sorted by wind
+  (``experiments.landscape``'s line for that parameter, without its grid)."""
+  u, parts = landscape.points(landscape.Config(points_1d=points, grid=0), u_truth)
+  return u[parts['line_1']]
 
 
 def main(argv):

@@ -1034,7 +1034,7 @@ def report_table(result: dict) -> str:
 
 def retrieval_note(retrieval: dict[str, float]) -> str:
   """One line saying which parameters the network barely tells apart."""
-  cells = ', '.join(f'{n} {v:.2f}' for n, v in retrieval.items())
+  cells = model_lib.retrieval.describe(retrieval)
   return (
     f'network retrieval on held-out simulations, over chance: {cells} '
     f'({_RETRIEVAL_MEANING})'

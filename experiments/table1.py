@@ -179,9 +179,7 @@ def train_all(
   out = {}
   for m in materials:
     out[m] = {}
-    for network, modality in COLUMNS:
-      if config.columns and f'{network}_{modality}' not in config.columns:
-        continue
+    for network, modality in selected_columns(config):
       name = COLUMN_NAMES[network, modality]
       out[m][name], data = {}, None
       for split in SPLITS:
@@ -212,14 +210,17 @@ def cell(runs: dict) -> str:
   return f'{a} / {b}'
 
 
-def column_names(config: Config) -> list[str]:
-  """The table's columns: those ``config.columns`` asks for (all four when
-  empty), in the paper's order."""
+def selected_columns(config: Config) -> list[tuple[str, str]]:
+  """The ``(network, modality)`` columns ``config.columns`` asks for (all four
+  when empty), in the paper's order."""
   return [
-    COLUMN_NAMES[c]
-    for c in COLUMNS
-    if not config.columns or f'{c[0]}_{c[1]}' in config.columns
+    c for c in COLUMNS if not config.columns or f'{c[0]}_{c[1]}' in config.columns
   ]
+
+
+def column_names(config: Config) -> list[str]:
+  """The table's column names (`selected_columns`)."""
+  return [COLUMN_NAMES[c] for c in selected_columns(config)]
 
 
 def _table(rows: list[tuple[str, list[str]]], names: list[str]) -> list[str]:
@@ -409,9 +410,7 @@ def collect(config: Config, workdir: str) -> tuple[dict, list[str]]:
   """
   results: dict = {}
   cut = []
-  for network, modality in COLUMNS:
-    if config.columns and f'{network}_{modality}' not in config.columns:
-      continue
+  for network, modality in selected_columns(config):
     name = COLUMN_NAMES[network, modality]
     for split in SPLITS:
       if config.splits and split not in config.splits:
@@ -481,7 +480,7 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
   if config.train_only:
     return {'results': results, 'markdown': '', 'maps': {}}
   # The maps show the PhySNet (depth) simulation-split runs: only when trained here.
-  has_maps = 'physnet_depth' in (config.columns or ['physnet_depth']) and (
+  has_maps = ('physnet', 'depth') in selected_columns(config) and (
     'simulation' in (config.splits or SPLITS)
   )
   maps = {m: similarity_map(config, root, workdir, m) for m in results if has_maps}

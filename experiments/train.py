@@ -389,8 +389,10 @@ def describe_eval(row: dict) -> str:
   if (acc := row.get('test_triplet_accuracy')) is not None:
     parts.append(f'held-out triplet accuracy {100 * acc:.1f}%')
   if r := row.get('test_retrieval'):
-    cells = model_lib.retrieval.vs_chance(r).items()
-    parts.append('retrieval over chance ' + ', '.join(f'{n} {v:.2f}' for n, v in cells))
+    parts.append(
+      'retrieval over chance '
+      + model_lib.retrieval.describe(model_lib.retrieval.vs_chance(r))
+    )
   return '; '.join(parts)
 
 

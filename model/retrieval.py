@@ -219,3 +219,8 @@ def vs_chance(s: dict) -> dict[str, float]:
   """Each parameter's mean |log ratio| of a ``summary`` over its chance value
   (1 = no better than a random reference); {} for an empty summary."""
   return {n: s[n] / c for n, c in s.get('chance', {}).items() if c > 0}
+
+
+def describe(ratios: dict[str, float]) -> str:
+  """``vs_chance`` ratios as ``'name 0.31, ...'`` for a log line."""
+  return ', '.join(f'{n} {v:.2f}' for n, v in ratios.items())
