@@ -1042,12 +1042,15 @@ def retrieval_note(retrieval: dict[str, float]) -> str:
 
 
 def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace) -> dict:
-  """Percent errors of wind and area weight, the bending factor, and the same
-  for the trivial estimate (the centre of the search range)."""
+  """Percent errors of wind and area weight, the bending factor, the percent
+  error of the load ratio rho v^2 / (w g) (what a sheet's shape constrains
+  best), and the same for the trivial estimate (the centre of the search range)."""
   centre = space.center()
+  true_ratio = float(physsim.load_ratio(truth['wind_speed'], truth['area_weight']))
 
   def one(p):
     b = float(np.asarray(p.bending_scale).ravel()[0])
+    ratio = float(physsim.load_ratio(p.wind_speed, p.area_weight))
     return {
       'wind_speed_pct': 100
       * abs(float(p.wind_speed) - truth['wind_speed'])
@@ -1056,6 +1059,7 @@ def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace) -> dic
       * abs(float(p.area_weight) - truth['area_weight'])
       / truth['area_weight'],
       'bending_factor': float(np.exp(abs(np.log(b / truth['bending_scale'])))),  # >= 1
+      'load_ratio_pct': 100 * abs(ratio - true_ratio) / true_ratio,
     }
 
   return {'estimate': one(best), 'range_centre': one(centre)}

@@ -44,8 +44,6 @@ from experiments import estimate as est
 from experiments import files  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 
-AIR_DENSITY = 1.0  # kg/m^3, ArcSim's wind model
-GRAVITY = 9.81  # m/s^2
 STATS = ('mean_deflection_m', 'centre_dominant_hz', 'flutter_fraction')
 STATE_FILE = 'landscape_state.npz'
 
@@ -78,12 +76,6 @@ PRESETS = {
     batch=8,
   ),
 }
-
-
-def load_ratio(wind_speed, area_weight):
-  """rho v^2 / (w g): wind pressure over cloth weight per area (dimensionless)."""
-  v = np.asarray(wind_speed, np.float64)
-  return AIR_DENSITY * v**2 / (np.asarray(area_weight, np.float64) * GRAVITY)
 
 
 def points(config: Config, u_truth: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -132,7 +124,7 @@ def ratio_r2(stat, wind_speed, area_weight) -> dict:
     ``{'r2_ratio', 'r2_ratio_and_wind', 'n'}`` (NaN when too few points).
   """
   y = np.asarray(stat, np.float64)
-  lr = np.log(load_ratio(wind_speed, area_weight))
+  lr = np.log(physsim.load_ratio(wind_speed, area_weight))
   lv = np.log(np.asarray(wind_speed, np.float64))
   ok = np.isfinite(y)
   y, lr, lv = y[ok], lr[ok], lv[ok]
@@ -244,7 +236,9 @@ def run(config: Config, recording_dir: str, model_dir: str, workdir: str) -> dic
   wind, weight = P[g, 1], P[g, 2]
   grid_psd = psd[g]
   k = int(np.nanargmin(grid_psd)) if np.isfinite(grid_psd).any() else None
-  truth_ratio = float(load_ratio(rec.truth['wind_speed'], rec.truth['area_weight']))
+  truth_ratio = float(
+    physsim.load_ratio(rec.truth['wind_speed'], rec.truth['area_weight'])
+  )
   result = {
     'recording': rec.source,
     'model': model_dir,
@@ -260,12 +254,12 @@ def run(config: Config, recording_dir: str, model_dir: str, workdir: str) -> dic
       'argmin': None
       if k is None
       else {'wind_speed': float(wind[k]), 'area_weight': float(weight[k]),
-            'ratio': float(load_ratio(wind[k], weight[k])), 'psd': float(grid_psd[k])},
+            'ratio': float(physsim.load_ratio(wind[k], weight[k])), 'psd': float(grid_psd[k])},
       'psd_vs_ratio': ratio_r2(np.log(grid_psd), wind, weight),
     },
     'identifiability': {
       'stats': {s: stats[g, j].tolist() for j, s in enumerate(STATS)},
-      'ratio': load_ratio(wind, weight).tolist(),
+      'ratio': physsim.load_ratio(wind, weight).tolist(),
       **{s: ratio_r2(stats[g, j], wind, weight) for j, s in enumerate(STATS)},
     },
     'failed_simulations': int(np.sum(~np.isfinite(psd))),
@@ -315,7 +309,9 @@ def plot_grid(grid: dict, truth: dict, path: str) -> None:
   )  # fmt: skip
   fig.colorbar(im, ax=ax, label='log$_{10}$ PSD')
   fv, fw = np.meshgrid(np.linspace(v[0], v[-1], 100), np.linspace(w[0], w[-1], 100))
-  cs = ax.contour(fv, fw, load_ratio(fv, fw), levels=8, colors='w', linewidths=0.7)
+  cs = ax.contour(
+    fv, fw, physsim.load_ratio(fv, fw), levels=8, colors='w', linewidths=0.7
+  )
   ax.clabel(cs, fontsize=7, fmt='%.1f')
   ax.plot(truth['wind_speed'], truth['area_weight'], 'r*', ms=14, label='truth')
   if grid['argmin'] is not None:

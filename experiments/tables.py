@@ -46,6 +46,7 @@ import numpy as np  # noqa: E402
 from absl import app, flags, logging  # noqa: E402
 
 import physsim  # noqa: E402
+from experiments import estimate as est  # noqa: E402
 from experiments import files, make_eval_set, table1  # noqa: E402
 from physsim import dataset  # noqa: E402
 
@@ -64,7 +65,8 @@ PAPER = {
 }
 # The paper's four methods, as <network>_<modality> run folders of table1.
 METHODS = ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
-ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor')
+ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor', 'load_ratio_pct')
+ERROR_NAMES = ('wind %', 'area weight %', 'bending factor', 'load ratio %')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -229,8 +231,26 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
   return results
 
 
+def rescore(result: dict) -> dict:
+  """The result with its ``errors`` recomputed by today's ``estimate.errors``
+  from its estimate and truth (so older runs gain newer error measures)."""
+  if 'truth' not in result or 'estimate' not in result:
+    return result
+  best = physsim.Params(
+    *(result['estimate'][f]['value'] for f in physsim.Params._fields)
+  )
+  space = physsim.search_space(result['material'])
+  return {**result, 'errors': est.errors(best, result['truth'], space)}
+
+
+def _values(rows, source, err):
+  return [r['errors'][source][err] for r in rows if err in r['errors'][source]]
+
+
 def _mean(rows, source, err):
-  vals = [r['errors'][source][err] for r in rows]
+  vals = _values(rows, source, err)
+  if not vals:
+    return float('nan')
   if err == 'bending_factor':  # a factor: geometric mean
     return float(np.exp(np.mean(np.log(vals))))
   return float(np.mean(vals))
@@ -249,6 +269,99 @@ def summarise(results: dict, methods) -> dict:
       s[source] = {e: _mean(ok, source, e) for e in ERRORS} if ok else None
     out[(method, name)] = s
   return out
+
+
+def _group(key: tuple) -> str:
+  return 'fabrics' if key[1] == 'fabrics' else 'garments'
+
+
+def overall(results: dict, methods) -> dict:
+  """Per method and group (fabrics, garments), over every recording: the mean
+  and median of each error, and on how many recordings the method beats the
+  range centre. ``('range centre', group)`` holds the trivial estimate's
+  errors over the distinct recordings."""
+  rows, centre = {}, {}
+  for key, res in sorted(results.items()):
+    if key[0] not in methods:
+      continue
+    rows.setdefault((key[0], _group(key)), []).append(res)
+    if 'errors' in res:
+      centre.setdefault(_group(key), {})[key[1:]] = res
+  out = {}
+  for (method, group), rs in rows.items():
+    ok = [r for r in rs if 'errors' in r]
+    s = {'n': len(rs), 'failed': len(rs) - len(ok)}
+    for e in ERRORS:
+      pairs = [
+        (r['errors']['estimate'][e], r['errors']['range_centre'][e])
+        for r in ok
+        if e in r['errors']['estimate']
+      ]
+      s[e] = {
+        'mean': _mean(ok, 'estimate', e),
+        'median': float(np.median(_values(ok, 'estimate', e))) if pairs else None,
+        'beats_centre': sum(a < b for a, b in pairs),
+        'of': len(pairs),
+      }
+    out[(method, group)] = s
+  for group, recs in centre.items():
+    rs = list(recs.values())
+    out[('range centre', group)] = {
+      'n': len(rs),
+      'failed': 0,
+      **{
+        e: {
+          'mean': _mean(rs, 'range_centre', e),
+          'median': float(np.median(_values(rs, 'range_centre', e))),
+        }
+        for e in ERRORS
+      },
+    }
+  return out
+
+
+def format_overall(table: dict) -> str:
+  """Markdown of ``overall``: one row per method and group."""
+  lines = [
+    '### All recordings',
+    '',
+    '| method | set | n | '
+    + ' | '.join(f'{n}: mean / median' for n in ERROR_NAMES)
+    + ' | beats range centre on (wind / area weight / bending / load ratio) |',
+    '|---' * (3 + len(ERRORS) + 1) + '|',
+  ]
+  for (method, group), s in sorted(
+    table.items(), key=lambda kv: (kv[0][1], kv[0][0] == 'range centre', kv[0][0])
+  ):
+    cells = []
+    for e in ERRORS:
+      x = s[e]
+      unit = 'x' if e == 'bending_factor' else ''
+      med = (
+        ''
+        if x['median'] is None
+        else f' / {unit}{x["median"]:.{1 if not unit else 2}f}'
+      )
+      cells.append(f'{unit}{x["mean"]:.{1 if not unit else 2}f}{med}')
+    beats = (
+      ' / '.join(f'{s[e]["beats_centre"]}' for e in ERRORS)
+      + f' of {s[ERRORS[0]]["of"]}'
+      if 'beats_centre' in s[ERRORS[0]]
+      else ''
+    )
+    failed = f' ({s["failed"]} F)' if s['failed'] else ''
+    lines.append(
+      f'| {method} | {group} | {s["n"]}{failed} | '
+      + ' | '.join(cells)
+      + f' | {beats} |'
+    )
+  lines += [
+    '',
+    'Bending: geometric mean / median of the factor. Load ratio: rho v^2 / (w g) '
+    'from the estimated wind and area weight against the true one (a static sheet '
+    'constrains only this combination of the two).',
+  ]
+  return '\n'.join(lines)
 
 
 def _fmt(s, source):
@@ -403,15 +516,41 @@ def plot_candidate_landscapes(landscapes: dict, method: str, path: str) -> None:
 
 def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
   os.makedirs(workdir, exist_ok=True)
-  results = run_all(config, eval_root, models, workdir)
+  results = {
+    k: rescore(v) for k, v in run_all(config, eval_root, models, workdir).items()
+  }
+  return report(results, config, workdir)
+
+
+def from_json(paths) -> dict:
+  """The rescored estimates of one or more ``tables.json`` runs wrote (runs of
+  different methods on the same evaluation set merge into one table)."""
+  out = {}
+  for path in paths:
+    with open(path) as f:
+      estimates = json.load(f).get('estimates')
+    if not isinstance(estimates, dict):
+      raise ValueError(f'{path}: no "estimates" (not a tables.json)')
+    for k, v in estimates.items():
+      key = tuple(k.split('/'))
+      if key in out:
+        raise ValueError(f'{path}: estimate {k} is also in an earlier file')
+      out[key] = rescore(v)
+  return out
+
+
+def report(results: dict, config: Config, workdir: str) -> str:
+  """Writes the tables, the JSON and the figures of finished estimates."""
   summary = summarise(results, config.methods)
-  md = format_tables(summary, config.methods)
+  table = overall(results, config.methods)
+  md = format_tables(summary, config.methods) + '\n\n' + format_overall(table)
   dataset.write_text_atomic(os.path.join(workdir, 'tables.md'), md + '\n')
   dataset.write_json_atomic(
     os.path.join(workdir, 'tables.json'),
     {
       'config': dataclasses.asdict(config),
       'summary': {'/'.join(k): v for k, v in summary.items()},
+      'overall': {'/'.join(k): v for k, v in table.items()},
       'estimates': {'/'.join(k): v for k, v in results.items()},
     },
   )
@@ -443,6 +582,9 @@ def define_flags() -> None:
   flags.DEFINE_integer('shard', 0, 'this process takes chunk i of num_shards')
   flags.DEFINE_integer('num_shards', 1, 'processes sharing the estimates')
   flags.DEFINE_bool('report_only', False, 'tables of the finished estimates only')
+  flags.DEFINE_list(
+    'from_json', [], "re-tabulate runs' tables.json files (no evaluation set needed)"
+  )
 
 
 def main(argv):
@@ -459,7 +601,11 @@ def main(argv):
     num_shards=FLAGS.num_shards,
     report_only=FLAGS.report_only,
   )
-  run(config, FLAGS.eval, FLAGS.models, FLAGS.workdir)
+  if FLAGS.from_json:
+    os.makedirs(FLAGS.workdir, exist_ok=True)
+    report(from_json(FLAGS.from_json), config, FLAGS.workdir)
+  else:
+    run(config, FLAGS.eval, FLAGS.models, FLAGS.workdir)
 
 
 if __name__ == '__main__':

@@ -30,7 +30,14 @@ from physsim.cloth import ClothModel, SimConfig, build, reference_rigidity
 from physsim.forces import Gusts, face_wind_forces, sample_gusts
 from physsim.materials import FABRICS, Fabric, Material, fabric, load_material
 from physsim.mesh import GARMENTS, Mesh, garment, square
-from physsim.params import Params, SearchSpace, from_unit, search_space, to_unit
+from physsim.params import (
+  Params,
+  SearchSpace,
+  from_unit,
+  load_ratio,
+  search_space,
+  to_unit,
+)
 from physsim.render import (
   FABRIC_COLORS,
   depth_image,
@@ -71,6 +78,7 @@ __all__ = [
   'fabric',
   'face_wind_forces',
   'from_unit',
+  'load_ratio',
   'garment',
   'load_depth_video',
   'load_material',

@@ -21,6 +21,8 @@ from physsim import materials
 
 FIELDS = ('bending_scale', 'wind_speed', 'area_weight')
 UNITS = {'bending_scale': 'x measured', 'wind_speed': 'm/s', 'area_weight': 'kg/m^2'}
+AIR_DENSITY = 1.0  # kg/m^3, ArcSim's wind model (physsim.forces)
+GRAVITY = 9.81  # m/s^2
 
 
 class Params(NamedTuple):
@@ -58,6 +60,16 @@ class SearchSpace:
 def search_space(fabric_name: str) -> SearchSpace:
   """The paper's search space for one of its seven fabrics."""
   return SearchSpace(area_weight=materials.fabric(fabric_name).area_weight_range)
+
+
+def load_ratio(wind_speed, area_weight):
+  """rho v^2 / (w g): wind pressure over cloth weight per area (dimensionless).
+
+  A sheet's static shape depends on wind and area weight only through this
+  ratio, so a video constrains it better than either (experiments.landscape).
+  """
+  v = np.asarray(wind_speed, np.float64)
+  return AIR_DENSITY * v**2 / (np.asarray(area_weight, np.float64) * GRAVITY)
 
 
 def make(bending_scale, wind_speed, area_weight) -> Params:

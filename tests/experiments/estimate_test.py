@@ -190,6 +190,26 @@ def test_montage_frames_are_kept_not_resimulated(env, tmp_path, monkeypatch):
   assert result['evaluations'] == config.n_init + config.q
 
 
+def test_errors_by_hand():
+  truth = {'bending_scale': 2.0, 'wind_speed': 4.0, 'area_weight': 0.2}
+  space = physsim.SearchSpace(area_weight=(0.1, 0.3))
+  err = est.errors(physsim.params.make(0.5, 5.0, 0.25), truth, space)
+  e = err['estimate']
+  assert e['wind_speed_pct'] == pytest.approx(25.0, rel=1e-12)
+  assert e['area_weight_pct'] == pytest.approx(25.0, rel=1e-12)
+  assert e['bending_factor'] == pytest.approx(4.0, rel=1e-12)  # 0.5 vs 2: x4
+  # load ratio ~ v^2 / w: (25 / 0.25) / (16 / 0.2) = 1.25
+  assert e['load_ratio_pct'] == pytest.approx(25.0, rel=1e-12)
+  # wind and weight off along the ratio's iso-line: the ratio is exact
+  on_line = est.errors(physsim.params.make(2.0, 4.4, 0.242), truth, space)['estimate']
+  assert on_line['load_ratio_pct'] == pytest.approx(0.0, abs=1e-9)
+  # range centre: bending 1 (log centre), 3.5 m/s, 0.2 kg/m^2
+  c = err['range_centre']
+  assert c['wind_speed_pct'] == pytest.approx(12.5, rel=1e-12)
+  assert c['area_weight_pct'] == pytest.approx(0.0, abs=1e-9)
+  assert c['load_ratio_pct'] == pytest.approx(100 * (1 - 3.5**2 / 16), rel=1e-12)
+
+
 def test_best_seen():
   best = est.BestSeen()
   assert best.frames_of(np.zeros(3)) is None  # nothing seen (a resumed search)

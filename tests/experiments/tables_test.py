@@ -37,6 +37,79 @@ def test_summary_means_and_failures():
   assert 'Table 3: garments' in md
 
 
+def _estimate(wind, weight, bending=1.0):
+  """A finished estimate with truth (3 m/s, 0.2 kg/m^2, bending 1) and no errors
+  yet: ``rescore`` computes them."""
+  value = lambda v: {'value': v}
+  return {
+    'material': 'black_denim',
+    'bending_matrix_Nm': np.full((3, 5), 1e-5 * bending).tolist(),
+    'truth': {'bending_scale': 1.0, 'wind_speed': 3.0, 'area_weight': 0.2},
+    'estimate': {
+      'bending_scale': value(bending),
+      'wind_speed': value(wind),
+      'area_weight': value(weight),
+    },
+  }
+
+
+def test_overall_means_medians_and_wins_over_the_centre():
+  results = {
+    ('physnet_depth', 'fabrics', 'black_denim', '0000'): _estimate(3.3, 0.2),
+    ('physnet_depth', 'fabrics', 'black_denim', '0001'): _estimate(3.0, 0.22),
+    ('physnet_depth', 'fabrics', 'black_denim', '0002'): _estimate(6.0, 0.2, 10),
+    ('physnet_depth', 'jeans', 'jeans', '0000'): {'failed': 'exit 1'},
+  }
+  results = {k: tables.rescore(v) for k, v in results.items()}
+  table = tables.overall(results, ('physnet_depth',))
+  f = table[('physnet_depth', 'fabrics')]
+  assert (f['n'], f['failed']) == (3, 0)
+  # wind: 10%, 0%, 100%
+  assert f['wind_speed_pct']['mean'] == pytest.approx(110 / 3)
+  assert f['wind_speed_pct']['median'] == pytest.approx(10.0)
+  # load ratio v^2 / w: 1.21 - 1, 1 - 1 / 1.1, 4 - 1
+  assert f['load_ratio_pct']['median'] == pytest.approx(21.0)
+  assert f['load_ratio_pct']['mean'] == pytest.approx((21 + 100 / 11 + 300) / 3)
+  # bending factors 1, 1, 10: geometric mean 10^(1/3)
+  assert f['bending_factor']['mean'] == pytest.approx(10 ** (1 / 3))
+  # range centre for denim: 3.5 m/s (16.7% off): the 10% and 0% estimates win
+  assert (f['wind_speed_pct']['beats_centre'], f['wind_speed_pct']['of']) == (2, 3)
+  assert table[('physnet_depth', 'garments')]['failed'] == 1
+  centre = table[('range centre', 'fabrics')]
+  assert centre['n'] == 3
+  assert centre['wind_speed_pct']['mean'] == pytest.approx(100 * 0.5 / 3)
+  md = tables.format_overall(table)
+  assert '| physnet_depth | fabrics | 3 | 36.7 / 10.0 |' in md
+  assert '| physnet_depth | garments | 1 (1 F) |' in md
+  assert ' 2 / ' in md and ' of 3 |' in md
+
+
+def test_from_json_merges_runs_and_refuses_duplicates(tmp_path):
+  depth = {'physnet_depth/fabrics/black_denim/0000': _estimate(3.3, 0.2)}
+  rgb = {'sdn_rgb/fabrics/black_denim/0000': _estimate(3.0, 0.2)}
+  paths = []
+  for name, est in (('depth', depth), ('rgb', rgb), ('again', depth)):
+    paths.append(str(tmp_path / f'{name}.json'))
+    tables.files.write_json(paths[-1], {'estimates': est})
+  merged = tables.from_json(paths[:2])
+  assert set(merged) == {
+    ('physnet_depth', 'fabrics', 'black_denim', '0000'),
+    ('sdn_rgb', 'fabrics', 'black_denim', '0000'),
+  }
+  err = merged[('physnet_depth', 'fabrics', 'black_denim', '0000')]['errors']
+  assert err['estimate']['wind_speed_pct'] == pytest.approx(10.0)
+  md = tables.report(
+    merged, tables.Config(methods=('physnet_depth', 'sdn_rgb')), str(tmp_path / 'w')
+  )
+  assert '| black_denim | 10.0 | 0.0 | x1.00 | 0.0 | 0.0 | x1.00 |' in md
+  assert os.path.isfile(tmp_path / 'w' / 'tables.json')
+  with pytest.raises(ValueError, match='also in an earlier file'):
+    tables.from_json([paths[0], paths[2]])
+  tables.files.write_json(paths[1], {'rows': []})
+  with pytest.raises(ValueError, match='not a tables.json'):
+    tables.from_json(paths[1:2])
+
+
 def test_unsupported_method_and_empty_eval(tmp_path):
   with pytest.raises(ValueError, match='supports'):
     tables.run_all(tables.Config(methods=('sdn_thermal',)), str(tmp_path), '', '')

@@ -49,3 +49,13 @@ def test_from_unit_rejects_outside_box_and_bad_shape():
     params.from_unit([0.0, 1.5, 0.0])
   with pytest.raises(ValueError, match='trailing axis'):
     params.from_unit([0.0, 0.0])
+
+
+def test_load_ratio_by_hand():
+  # rho v^2 / (w g) with rho = 1 kg/m^3: 3 m/s on 0.2 kg/m^2
+  np.testing.assert_allclose(
+    params.load_ratio(3.0, 0.2), 9.0 / (0.2 * 9.81), rtol=1e-12
+  )
+  np.testing.assert_allclose(
+    params.load_ratio([1.0, 2.0], [0.1, 0.4]), [1 / 0.981, 4 / 3.924], rtol=1e-12
+  )
