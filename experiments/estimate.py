@@ -20,7 +20,9 @@ iterations) or after ``max_iter`` iterations, and resumes from its saved state.
   python -m experiments.estimate --recording=DIR --material=gray_interlock \
       --model=out/train/gray_interlock --workdir=out/estimate
 
-Writes ``estimate.json`` (values, GP uncertainty, 3x5 bending matrix),
+Writes ``estimate.json`` (values, GP uncertainty, 3x5 bending matrix, and the
+load ratio rho v^2 / (w g) with its interval: what a sheet's shape constrains
+best of wind and area weight),
 ``trace.png`` (the paper's Figure 3) and ``montage.png`` (recording beside the
 best simulation).
 """
@@ -736,18 +738,32 @@ def _check_run(
   files.write_json(path, run)
 
 
+def _stats(value, samples: np.ndarray) -> dict:
+  """A value with the median, 90% interval and spread of its GP samples."""
+  return {
+    'value': float(np.asarray(value).ravel()[0]),
+    'posterior_median': float(np.median(samples)),
+    'interval_90': [
+      float(np.quantile(samples, 0.05)),
+      float(np.quantile(samples, 0.95)),
+    ],
+    'std': float(samples.std()),
+  }
+
+
 def _summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
-  names = physsim.Params._fields
-  out = {}
-  for i, n in enumerate(names):
-    s = samples_phys[:, i]
-    out[n] = {
-      'value': float(np.asarray(best[i]).ravel()[0]),
-      'posterior_median': float(np.median(s)),
-      'interval_90': [float(np.quantile(s, 0.05)), float(np.quantile(s, 0.95))],
-      'std': float(s.std()),
-    }
-  return out
+  return {n: _stats(best[i], samples_phys[:, i]) for i, n in enumerate(best._fields)}
+
+
+def _load_ratio_summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
+  """rho v^2 / (w g) of the best candidate and of the GP samples: the
+  combination of wind and area weight a sheet's shape constrains best."""
+  i, j = (
+    physsim.Params._fields.index('wind_speed'),
+    physsim.Params._fields.index('area_weight'),
+  )
+  ratio = physsim.load_ratio(samples_phys[:, i], samples_phys[:, j])
+  return _stats(physsim.load_ratio(best.wind_speed, best.area_weight), ratio)
 
 
 class EmbeddingNet(NamedTuple):
@@ -968,6 +984,7 @@ def finish(
     'material': config.material,
     'garment': config.garment,
     'estimate': _summary(samples, best),
+    'load_ratio': _load_ratio_summary(samples, best),
     'bending_matrix_Nm': (float(best.bending_scale) * material.bending).tolist(),
     'psd_best': float(res.y_best),
     'evaluations': int(res.n_evals),
@@ -1012,6 +1029,15 @@ def report_table(result: dict) -> str:
     lines.append(
       f'| {name} | {result["truth"][name]:.3g} | {e["value"]:.3g} | '
       f'[{lo:.3g}, {hi:.3g}] | {float(centre[i]):.3g} | {r} |'
+    )
+  if ratio := result.get('load_ratio'):  # older results lack it
+    t = result['truth']
+    true = float(physsim.load_ratio(t['wind_speed'], t['area_weight']))
+    lo, hi = ratio['interval_90']
+    guess = float(physsim.load_ratio(centre.wind_speed, centre.area_weight))
+    lines.append(
+      f'| load ratio rho v^2/(w g) | {true:.3g} | {ratio["value"]:.3g} | '
+      f'[{lo:.3g}, {hi:.3g}] | {guess:.3g} | - |'
     )
   err = result['errors']
   lines.append('')
@@ -1159,8 +1185,9 @@ def main(argv):
   if 'truth' in result:
     print(report_table(result))
     return
-  est = result['estimate']
-  print(json.dumps({k: v['value'] for k, v in est.items()}, indent=1))
+  values = {k: v['value'] for k, v in result['estimate'].items()}
+  values['load_ratio'] = result['load_ratio']['value']
+  print(json.dumps(values, indent=1))
   if r := result.get('network_retrieval_vs_chance'):
     print(retrieval_note(r))
 

@@ -100,6 +100,12 @@ def test_recovers_known_parameters(env, recovery):
   err = result['errors']
   assert result['psd_best'] < 0.5 * psd_centre
   assert err['estimate']['wind_speed_pct'] < err['range_centre']['wind_speed_pct']
+  # the load ratio is the best candidate's, its interval from the GP samples
+  e, ratio = result['estimate'], result['load_ratio']
+  v, w = e['wind_speed']['value'], e['area_weight']['value']
+  assert ratio['value'] == pytest.approx(v**2 / (w * 9.81), rel=1e-12)
+  lo, hi = ratio['interval_90']
+  assert lo <= ratio['posterior_median'] <= hi
   for name in ('estimate.json', 'trace.png', 'montage.png', est.RUN_FILE):
     assert os.path.isfile(os.path.join(env['root'], 'full', name))
 
@@ -384,6 +390,9 @@ def test_report_table_shows_retrieval(env, recovery):
   assert 'network_retrieval_vs_chance' not in result  # the fixture logged none
   plain = est.report_table(result)
   assert plain.count('| n/a |') == 3
+  ratio_row = next(x for x in plain.splitlines() if x.startswith('| load ratio'))
+  t = result['truth']
+  assert f'| {t["wind_speed"] ** 2 / (t["area_weight"] * 9.81):.3g} |' in ratio_row
   r = {'bending_scale': 1.05, 'wind_speed': 0.4, 'area_weight': 0.95}
   shown = est.report_table({**result, 'network_retrieval_vs_chance': r})
   assert '| 0.40 |' in shown and '| 1.05 |' in shown and 'n/a' not in shown
