@@ -333,16 +333,12 @@ def format_overall(table: dict) -> str:
   for (method, group), s in sorted(
     table.items(), key=lambda kv: (kv[0][1], kv[0][0] == 'range centre', kv[0][0])
   ):
-    cells = []
-    for e in ERRORS:
-      x = s[e]
-      unit = 'x' if e == 'bending_factor' else ''
-      med = (
-        ''
-        if x['median'] is None
-        else f' / {unit}{x["median"]:.{1 if not unit else 2}f}'
-      )
-      cells.append(f'{unit}{x["mean"]:.{1 if not unit else 2}f}{med}')
+    num = lambda e, v: f'x{v:.2f}' if e == 'bending_factor' else f'{v:.1f}'
+    cells = [
+      num(e, s[e]['mean'])
+      + ('' if s[e]['median'] is None else f' / {num(e, s[e]["median"])}')
+      for e in ERRORS
+    ]
     beats = (
       ' / '.join(f'{s[e]["beats_centre"]}' for e in ERRORS)
       + f' of {s[ERRORS[0]]["of"]}'
