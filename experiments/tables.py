@@ -505,7 +505,7 @@ def plot_candidate_landscapes(landscapes: dict, method: str, path: str) -> None:
   for ax in axes[:, 0]:
     ax.set_ylabel('PSD / best')
   fig.suptitle(f'{method}: every candidate the searches scored (truth at 0)')
-  fig.tight_layout()
+  fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / fig.get_figheight()))  # room for the title
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
 
