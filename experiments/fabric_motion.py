@@ -16,7 +16,6 @@ finished group is stored as it completes, so a rerun resumes.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import time
 
@@ -132,12 +131,7 @@ def run(config: Config, workdir: str) -> dict:
   """Runs both parts, resuming from finished groups in ``workdir``."""
   os.makedirs(workdir, exist_ok=True)
   path = os.path.join(workdir, 'motion_sweep.json')
-  done = {}
-  if os.path.exists(path):
-    with open(path) as f:
-      saved = json.load(f)
-    if saved.get('config') == dataclasses.asdict(config):
-      done = saved['groups']
+  done = files.resume(path, config).get('groups', {})
   groups = [('sweep', 'chosen', config.winds, config.bendings)]
   groups += [('settings', v, config.variant_winds, (1.0,)) for v in config.variants]
   for part, variant, winds, bendings in groups:

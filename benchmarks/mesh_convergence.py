@@ -1,0 +1,226 @@
+"""Does the sheet move the same on the estimate's mesh as on a finer one?
+
+The real-like recordings are simulated on a finer mesh (33x33) than the
+estimate's candidates (25x25). Where the two meshes move differently under the
+same wind, the estimate is biased before any network is involved. This
+simulates the same fabrics, winds and gusts (one key: the same frozen
+turbulence) at several mesh resolutions and compares the motion statistics of
+``physsim.motion``; for each finer-mesh world it reports the *equivalent wind*:
+the wind at which the estimate's mesh has the same mean wind-wise deflection
+(linear interpolation along its wind sweep; outside the sweep, or where the
+deflection curve is flat, it is not defined). Prints a table and writes
+``mesh_convergence.json`` and ``mesh_convergence.png``; each finished
+resolution is saved as it completes, so a rerun resumes.
+
+  PYTHONPATH=. python benchmarks/mesh_convergence.py --workdir=out/mesh
+  PYTHONPATH=. python benchmarks/mesh_convergence.py --preset=smoke --workdir=/tmp/m
+"""
+
+import dataclasses
+import os
+import sys
+import time
+
+import jax
+import matplotlib
+import numpy as np
+from absl import app, flags
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import physsim  # noqa: E402
+from experiments import files  # noqa: E402
+from physsim import motion  # noqa: E402
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+  fabrics: tuple[str, ...] = ('white_tablecloth', 'red_violet', 'black_denim')
+  winds: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
+  resolutions: tuple[int, ...] = (17, 25, 33)
+  estimate_resolution: int = 25  # experiments.estimate's default cloth
+  bending: float = 1.0
+  gusts: float = 0.2
+  frames: int = 60
+  fps: float = 20.0
+  warmup: float = 1.0
+  backend: str = 'auto'
+  seed: int = 0
+
+
+PRESETS = {
+  'default': Config(),
+  'smoke': Config(
+    fabrics=('red_violet',),
+    winds=(2.0, 4.0),
+    resolutions=(6, 8),
+    estimate_resolution=6,
+    frames=8,
+    warmup=0.2,
+  ),
+}
+STATS = ('mean_deflection_m', 'centre_dominant_hz', 'flutter_fraction', 'strain_p99')
+# A deflection curve rising by less than this per m/s carries no wind information.
+_FLAT_M_PER_MS = 0.01
+
+
+def simulate_resolution(config: Config, resolution: int) -> dict:
+  """Every fabric x wind on one mesh as one batch; motion statistics per world."""
+  mesh = physsim.square(resolution)
+  model = physsim.build(mesh, config.fabrics[0])
+  f, w = np.meshgrid(np.arange(len(config.fabrics)), config.winds, indexing='ij')
+  f, w = f.ravel(), w.ravel()
+  names = [config.fabrics[i] for i in f]
+  weight = np.array([physsim.fabric(n).real_area_weight for n in names])
+  p = physsim.params.make(np.full(w.size, config.bending), w, weight)
+  t0 = time.time()
+  out = physsim.simulate(
+    model,
+    p,
+    frames=config.frames,
+    fps=config.fps,
+    warmup=config.warmup,
+    wind=physsim.Wind(gust_intensity=config.gusts),
+    key=jax.random.key(config.seed),  # one key: every world the same gusts
+    backend=physsim.resolve_backend(config.backend),
+    material=names,
+  )
+  rows = []
+  for i in range(w.size):
+    row = {'fabric': names[i], 'wind_speed': float(w[i]), 'valid': bool(out.valid[i])}
+    if out.valid[i]:
+      stats = motion.motion_stats(mesh, out.positions[i], config.fps)
+      row.update({k: stats[k] for k in STATS})
+    rows.append(row)
+  return {'rows': rows, 'seconds': time.time() - t0}
+
+
+def equivalent_wind(winds, deflection, target: float) -> float:
+  """The wind at which a deflection-vs-wind curve reaches ``target``.
+
+  Linear interpolation on the rising part of the curve; NaN where ``target`` is
+  outside the curve's range or the curve is flat there (a sheet blown flat
+  deflects alike over a range of winds).
+  """
+  winds = np.asarray(winds, np.float64)
+  d = np.asarray(deflection, np.float64)
+  for k in range(len(winds) - 1):
+    lo, hi = d[k], d[k + 1]
+    if min(lo, hi) <= target <= max(lo, hi) and lo != hi:
+      if abs(hi - lo) / (winds[k + 1] - winds[k]) < _FLAT_M_PER_MS:
+        return float('nan')
+      return float(winds[k] + (target - lo) / (hi - lo) * (winds[k + 1] - winds[k]))
+  return float('nan')
+
+
+def compare(config: Config, done: dict) -> list[dict]:
+  """One row per fabric, wind and resolution, with the equivalent wind on the
+  estimate's mesh of that world's mean deflection."""
+  base = {
+    (r['fabric'], r['wind_speed']): r
+    for r in done[str(config.estimate_resolution)]['rows']
+  }
+  out = []
+  for res in config.resolutions:
+    for r in done[str(res)]['rows']:
+      row = {'resolution': res, **r}
+      curve = [base.get((r['fabric'], w)) for w in config.winds]
+      if r['valid'] and all(c and c['valid'] for c in curve):
+        row['equivalent_wind'] = equivalent_wind(
+          config.winds, [c['mean_deflection_m'] for c in curve], r['mean_deflection_m']
+        )
+      out.append(row)
+  return out
+
+
+def table(config: Config, rows: list[dict]) -> str:
+  lines = [
+    '| fabric | wind m/s | mesh | mean deflection m | dominant Hz | flutter share '
+    f'| strain p99 | wind on the {config.estimate_resolution}x'
+    f'{config.estimate_resolution} mesh for that deflection |',
+    '|---|---|---|---|---|---|---|---|',
+  ]
+  for r in sorted(rows, key=lambda r: (r['fabric'], r['wind_speed'], r['resolution'])):
+    head = f'| {r["fabric"]} | {r["wind_speed"]:g} | {r["resolution"]} |'
+    if not r['valid']:
+      lines.append(head + ' blew up | | | | |')
+      continue
+    eq = r.get('equivalent_wind', float('nan'))
+    lines.append(
+      head + f' {r["mean_deflection_m"]:.3f} | {r["centre_dominant_hz"]:.2f} | '
+      f'{r["flutter_fraction"]:.2f} | {r["strain_p99"]:.3f} | '
+      + (f'{eq:.2f}' if np.isfinite(eq) else 'n/d')
+      + ' |'
+    )
+  return '\n'.join(lines)
+
+
+def plot(config: Config, rows: list[dict], path: str) -> None:
+  fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+  for ax, stat in zip(axes, STATS[:3], strict=True):
+    for i, fab in enumerate(config.fabrics):
+      for j, res in enumerate(config.resolutions):
+        sel = [
+          r
+          for r in rows
+          if r['fabric'] == fab and r['resolution'] == res and r['valid']
+        ]
+        ax.plot(
+          [r['wind_speed'] for r in sel],
+          [r[stat] for r in sel],
+          ['-', '--', ':', '-.'][j % 4],
+          marker='o',
+          ms=3,
+          color=f'C{i}',
+          label=f'{fab} {res}x{res}',
+        )
+    ax.set(xlabel='wind speed (m/s)', ylabel=stat)
+    ax.grid(alpha=0.3)
+  axes[0].legend(fontsize=6)
+  fig.suptitle('the same fabrics and gusts on three meshes')
+  fig.tight_layout()
+  files.savefig(fig, path, dpi=100)
+  plt.close(fig)
+
+
+def run(config: Config, workdir: str) -> list[dict]:
+  os.makedirs(workdir, exist_ok=True)
+  path = os.path.join(workdir, 'mesh_convergence.json')
+  done = files.resume(path, config).get('resolutions', {})
+  for res in sorted(set(config.resolutions) | {config.estimate_resolution}):
+    if str(res) in done:
+      continue
+    n = len(config.fabrics) * len(config.winds)
+    print(f'{res}x{res} mesh: simulating {n} worlds ...', flush=True)
+    done[str(res)] = simulate_resolution(config, res)
+    files.write_json(path, {'config': dataclasses.asdict(config), 'resolutions': done})
+  rows = compare(config, done)
+  files.write_json(
+    path, {'config': dataclasses.asdict(config), 'resolutions': done, 'rows': rows}
+  )
+  plot(config, rows, os.path.join(workdir, 'mesh_convergence.png'))
+  print(table(config, rows))
+  return rows
+
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('workdir', 'out/mesh', 'results and the figure')
+flags.DEFINE_enum('preset', 'default', list(PRESETS), 'sizes')
+flags.DEFINE_enum(
+  'backend', None, ['auto', 'mjx', 'c'], "override: 'auto' = MJX on GPU"
+)
+
+
+def main(argv):
+  del argv
+  config = PRESETS[FLAGS.preset]
+  if FLAGS.backend:
+    config = dataclasses.replace(config, backend=FLAGS.backend)
+  run(config, FLAGS.workdir)
+
+
+if __name__ == '__main__':
+  app.run(main)
