@@ -7,8 +7,8 @@ simulates the same fabrics, winds and gusts (one key: the same frozen
 turbulence) at several mesh resolutions and compares the motion statistics of
 ``physsim.motion``; for each finer-mesh world it reports the *equivalent wind*:
 the wind at which the estimate's mesh has the same mean wind-wise deflection
-(linear interpolation along its wind sweep; outside the sweep, or where the
-deflection curve is flat, it is not defined). Prints a table and writes
+(linear interpolation along its wind sweep up to where the curve first goes
+flat; beyond that, or outside the sweep, it is not defined). Prints a table and writes
 ``mesh_convergence.json`` and ``mesh_convergence.png``; each finished
 resolution is saved as it completes, so a rerun resumes.
 
@@ -101,17 +101,18 @@ def simulate_resolution(config: Config, resolution: int) -> dict:
 def equivalent_wind(winds, deflection, target: float) -> float:
   """The wind at which a deflection-vs-wind curve reaches ``target``.
 
-  Linear interpolation on the rising part of the curve; NaN where ``target`` is
-  outside the curve's range or the curve is flat there (a sheet blown flat
-  deflects alike over a range of winds).
+  Linear interpolation along the curve from the lowest wind, up to its first
+  flat segment: beyond it the sheet is blown flat and deflects alike over a
+  range of winds, so deflection no longer names a wind (NaN), as it is for a
+  ``target`` outside the curve's range.
   """
   winds = np.asarray(winds, np.float64)
   d = np.asarray(deflection, np.float64)
   for k in range(len(winds) - 1):
     lo, hi = d[k], d[k + 1]
-    if min(lo, hi) <= target <= max(lo, hi) and lo != hi:
-      if abs(hi - lo) / (winds[k + 1] - winds[k]) < _FLAT_M_PER_MS:
-        return float('nan')
+    if (hi - lo) / (winds[k + 1] - winds[k]) < _FLAT_M_PER_MS:
+      return float('nan')
+    if lo <= target <= hi:
       return float(winds[k] + (target - lo) / (hi - lo) * (winds[k + 1] - winds[k]))
   return float('nan')
 

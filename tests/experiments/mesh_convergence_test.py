@@ -25,6 +25,8 @@ def test_equivalent_wind_by_hand():
   assert np.isnan(mc.equivalent_wind(winds, d, 0.402))
   assert np.isnan(mc.equivalent_wind(winds, d, 0.05))  # below the sweep
   assert np.isnan(mc.equivalent_wind(winds, d, 0.50))  # above it
+  # past the first flat segment a later rise names no wind either
+  assert np.isnan(mc.equivalent_wind(winds, [0.1, 0.3, 0.305, 0.35], 0.33))
 
 
 def test_tiny_run_compares_meshes_and_resumes(tmp_path, monkeypatch):
