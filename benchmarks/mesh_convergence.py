@@ -3,14 +3,16 @@
 The real-like recordings are simulated on a finer mesh (33x33) than the
 estimate's candidates (25x25). Where the two meshes move differently under the
 same wind, the estimate is biased before any network is involved. This
-simulates the same fabrics, winds and gusts (one key: the same frozen
-turbulence) at several mesh resolutions and compares the motion statistics of
-``physsim.motion``; for each finer-mesh world it reports the *equivalent wind*:
-the wind at which the estimate's mesh has the same mean wind-wise deflection
-(linear interpolation along its wind sweep up to where the curve first goes
-flat; beyond that, or outside the sweep, it is not defined). Prints a table and writes
-``mesh_convergence.json`` and ``mesh_convergence.png``; each finished
-resolution is saved as it completes, so a rerun resumes.
+simulates the same fabrics, winds and gust histories (a few seeds; a seed's
+frozen turbulence is the same on every mesh) at several mesh resolutions and
+compares the motion statistics of ``physsim.motion`` between meshes against how
+much they change between gust seeds alone. For each world it also reports the
+*equivalent wind*: the wind at which the estimate's mesh has the same mean
+wind-wise deflection (linear interpolation along its wind sweep up to where the
+curve first goes flat; beyond that, or outside the sweep, it is not defined).
+Prints a table and writes ``mesh_convergence.json`` and
+``mesh_convergence.png``; each finished resolution is saved as it completes, so
+a rerun resumes.
 
   PYTHONPATH=. python benchmarks/mesh_convergence.py --workdir=out/mesh
   PYTHONPATH=. python benchmarks/mesh_convergence.py --preset=smoke --workdir=/tmp/m
@@ -22,6 +24,7 @@ import sys
 import time
 
 import jax
+import jax.numpy as jnp
 import matplotlib
 import numpy as np
 from absl import app, flags
@@ -48,7 +51,7 @@ class Config:
   fps: float = 20.0
   warmup: float = 1.0
   backend: str = 'auto'
-  seed: int = 0
+  seeds: tuple[int, ...] = (0, 1, 2)  # gust histories; each the same on every mesh
 
 
 PRESETS = {
@@ -60,6 +63,7 @@ PRESETS = {
     estimate_resolution=6,
     frames=8,
     warmup=0.2,
+    seeds=(0, 1),
   ),
 }
 STATS = ('mean_deflection_m', 'centre_dominant_hz', 'flutter_fraction', 'strain_p99')
@@ -68,11 +72,15 @@ _FLAT_M_PER_MS = 0.01
 
 
 def simulate_resolution(config: Config, resolution: int) -> dict:
-  """Every fabric x wind on one mesh as one batch; motion statistics per world."""
+  """Every fabric x wind x gust seed on one mesh as one batch; motion statistics
+  per world. A seed's gust modes do not depend on the mesh (``physsim.forces``),
+  so world (fabric, wind, seed) sees the same gusts on every mesh."""
   mesh = physsim.square(resolution)
   model = physsim.build(mesh, config.fabrics[0])
-  f, w = np.meshgrid(np.arange(len(config.fabrics)), config.winds, indexing='ij')
-  f, w = f.ravel(), w.ravel()
+  f, w, s = np.meshgrid(
+    np.arange(len(config.fabrics)), config.winds, config.seeds, indexing='ij'
+  )
+  f, w, s = f.ravel(), w.ravel(), s.ravel()
   names = [config.fabrics[i] for i in f]
   weight = np.array([physsim.fabric(n).real_area_weight for n in names])
   p = physsim.params.make(np.full(w.size, config.bending), w, weight)
@@ -84,13 +92,18 @@ def simulate_resolution(config: Config, resolution: int) -> dict:
     fps=config.fps,
     warmup=config.warmup,
     wind=physsim.Wind(gust_intensity=config.gusts),
-    key=jax.random.key(config.seed),  # one key: every world the same gusts
+    key=jax.vmap(jax.random.key)(jnp.asarray(s)),  # one key per world: its seed
     backend=physsim.resolve_backend(config.backend),
     material=names,
   )
   rows = []
   for i in range(w.size):
-    row = {'fabric': names[i], 'wind_speed': float(w[i]), 'valid': bool(out.valid[i])}
+    row = {
+      'fabric': names[i],
+      'wind_speed': float(w[i]),
+      'seed': int(s[i]),
+      'valid': bool(out.valid[i]),
+    }
     if out.valid[i]:
       stats = motion.motion_stats(mesh, out.positions[i], config.fps)
       row.update({k: stats[k] for k in STATS})
@@ -121,19 +134,60 @@ def compare(config: Config, done: dict) -> list[dict]:
   """One row per fabric, wind and resolution, with the equivalent wind on the
   estimate's mesh of that world's mean deflection."""
   base = {
-    (r['fabric'], r['wind_speed']): r
+    (r['fabric'], r['wind_speed'], r['seed']): r
     for r in done[str(config.estimate_resolution)]['rows']
   }
   out = []
   for res in config.resolutions:
     for r in done[str(res)]['rows']:
       row = {'resolution': res, **r}
-      curve = [base.get((r['fabric'], w)) for w in config.winds]
+      curve = [base.get((r['fabric'], w, r['seed'])) for w in config.winds]
       if r['valid'] and all(c and c['valid'] for c in curve):
         row['equivalent_wind'] = equivalent_wind(
           config.winds, [c['mean_deflection_m'] for c in curve], r['mean_deflection_m']
         )
       out.append(row)
+  return out
+
+
+def aggregate(rows: list[dict]) -> list[dict]:
+  """Per fabric, wind and mesh: each statistic's mean and standard deviation
+  over the gust seeds, and the mean equivalent wind where it is defined."""
+  groups: dict = {}
+  for r in rows:
+    if r['valid']:
+      groups.setdefault((r['fabric'], r['wind_speed'], r['resolution']), []).append(r)
+  out = []
+  for (fabric, wind, res), rs in sorted(groups.items()):
+    row = {'fabric': fabric, 'wind_speed': wind, 'resolution': res, 'seeds': len(rs)}
+    for k in STATS:
+      v = np.array([r[k] for r in rs])
+      row[k] = {'mean': float(v.mean()), 'std': float(v.std())}
+    eq = np.array([r.get('equivalent_wind', np.nan) for r in rs])
+    row['equivalent_wind'] = (
+      float(eq[np.isfinite(eq)].mean()) if np.isfinite(eq).any() else None
+    )
+    out.append(row)
+  return out
+
+
+def spread(rows: list[dict]) -> dict:
+  """How much each statistic changes between meshes (same fabric, wind and
+  gusts) against between gust seeds (same fabric, wind and mesh): the mean
+  range of each over its groups. A mesh effect is one clearly above chance."""
+  out = {}
+  for k in STATS:
+    by_mesh, by_seed = {}, {}
+    for r in rows:
+      if r['valid']:
+        by_mesh.setdefault((r['fabric'], r['wind_speed'], r['seed']), []).append(r[k])
+        by_seed.setdefault((r['fabric'], r['wind_speed'], r['resolution']), []).append(
+          r[k]
+        )
+    out[k] = {
+      'between_meshes': float(np.mean([np.ptp(v) for v in by_mesh.values()])),
+      'between_seeds': float(np.mean([np.ptp(v) for v in by_seed.values()])),
+    }
   return out
 
 
@@ -144,44 +198,56 @@ def table(config: Config, rows: list[dict]) -> str:
     f'{config.estimate_resolution} mesh for that deflection |',
     '|---|---|---|---|---|---|---|---|',
   ]
-  for r in sorted(rows, key=lambda r: (r['fabric'], r['wind_speed'], r['resolution'])):
-    head = f'| {r["fabric"]} | {r["wind_speed"]:g} | {r["resolution"]} |'
-    if not r['valid']:
-      lines.append(head + ' blew up | | | | |')
-      continue
-    eq = r.get('equivalent_wind', float('nan'))
+  for r in aggregate(rows):
+    cells = [
+      f'{r[k]["mean"]:.{p}f} +- {r[k]["std"]:.{p}f}'
+      for k, p in zip(STATS, (3, 2, 2, 3), strict=True)
+    ]
+    eq = r['equivalent_wind']
     lines.append(
-      head + f' {r["mean_deflection_m"]:.3f} | {r["centre_dominant_hz"]:.2f} | '
-      f'{r["flutter_fraction"]:.2f} | {r["strain_p99"]:.3f} | '
-      + (f'{eq:.2f}' if np.isfinite(eq) else 'n/d')
-      + ' |'
+      f'| {r["fabric"]} | {r["wind_speed"]:g} | {r["resolution"]} | '
+      + ' | '.join(cells)
+      + f' | {"n/d" if eq is None else f"{eq:.2f}"} |'
     )
+  lines += [
+    '',
+    f'Means +- standard deviations over {len(config.seeds)} gust seeds. Mean range '
+    'of each statistic between meshes (same fabric, wind, gusts) and between gust '
+    'seeds (same fabric, wind, mesh):',
+    '',
+    '| statistic | between meshes | between gust seeds |',
+    '|---|---|---|',
+  ]
+  for k, v in spread(rows).items():
+    lines.append(f'| {k} | {v["between_meshes"]:.3f} | {v["between_seeds"]:.3f} |')
   return '\n'.join(lines)
 
 
 def plot(config: Config, rows: list[dict], path: str) -> None:
+  agg = aggregate(rows)
   fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
   for ax, stat in zip(axes, STATS[:3], strict=True):
     for i, fab in enumerate(config.fabrics):
       for j, res in enumerate(config.resolutions):
-        sel = [
-          r
-          for r in rows
-          if r['fabric'] == fab and r['resolution'] == res and r['valid']
-        ]
-        ax.plot(
-          [r['wind_speed'] for r in sel],
-          [r[stat] for r in sel],
-          ['-', '--', ':', '-.'][j % 4],
+        sel = [r for r in agg if r['fabric'] == fab and r['resolution'] == res]
+        ax.errorbar(
+          [r['wind_speed'] + 0.06 * (j - 1) for r in sel],
+          [r[stat]['mean'] for r in sel],
+          yerr=[r[stat]['std'] for r in sel],
+          fmt=['-', '--', ':', '-.'][j % 4],
           marker='o',
           ms=3,
+          capsize=2,
           color=f'C{i}',
           label=f'{fab} {res}x{res}',
         )
     ax.set(xlabel='wind speed (m/s)', ylabel=stat)
     ax.grid(alpha=0.3)
   axes[0].legend(fontsize=6)
-  fig.suptitle('the same fabrics and gusts on three meshes')
+  fig.suptitle(
+    f'the same fabrics and gusts on {len(config.resolutions)} meshes '
+    f'(mean +- sd over {len(config.seeds)} gust seeds)'
+  )
   fig.tight_layout()
   files.savefig(fig, path, dpi=100)
   plt.close(fig)
@@ -194,13 +260,19 @@ def run(config: Config, workdir: str) -> list[dict]:
   for res in sorted(set(config.resolutions) | {config.estimate_resolution}):
     if str(res) in done:
       continue
-    n = len(config.fabrics) * len(config.winds)
+    n = len(config.fabrics) * len(config.winds) * len(config.seeds)
     print(f'{res}x{res} mesh: simulating {n} worlds ...', flush=True)
     done[str(res)] = simulate_resolution(config, res)
     files.write_json(path, {'config': dataclasses.asdict(config), 'resolutions': done})
   rows = compare(config, done)
   files.write_json(
-    path, {'config': dataclasses.asdict(config), 'resolutions': done, 'rows': rows}
+    path,
+    {
+      'config': dataclasses.asdict(config),
+      'resolutions': done,
+      'rows': rows,
+      'spread': spread(rows),
+    },
   )
   plot(config, rows, os.path.join(workdir, 'mesh_convergence.png'))
   print(table(config, rows))

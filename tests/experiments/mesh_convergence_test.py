@@ -29,11 +29,31 @@ def test_equivalent_wind_by_hand():
   assert np.isnan(mc.equivalent_wind(winds, [0.1, 0.3, 0.305, 0.35], 0.33))
 
 
+def test_spread_between_meshes_and_seeds_by_hand():
+  def row(res, seed, deflection):
+    stats = dict.fromkeys(mc.STATS, 0.0) | {'mean_deflection_m': deflection}
+    return {'fabric': 'f', 'wind_speed': 2.0, 'resolution': res, 'seed': seed,
+            'valid': True, **stats}  # fmt: skip
+
+  rows = [row(25, 0, 0.30), row(33, 0, 0.34), row(25, 1, 0.31), row(33, 1, 0.33)]
+  rows.append({**row(33, 2, 9.9), 'valid': False})  # a blown-up world is left out
+  s = mc.spread(rows)['mean_deflection_m']
+  # between meshes: seed 0 range 0.04, seed 1 range 0.02; between seeds: 0.01, 0.01
+  assert s['between_meshes'] == pytest.approx(0.03, abs=_EXACT)
+  assert s['between_seeds'] == pytest.approx(0.01, abs=_EXACT)
+  agg = {r['resolution']: r for r in mc.aggregate(rows)}
+  assert agg[33]['seeds'] == 2
+  assert agg[33]['mean_deflection_m']['mean'] == pytest.approx(0.335, abs=_EXACT)
+  assert agg[33]['mean_deflection_m']['std'] == pytest.approx(0.005, abs=_EXACT)
+  assert agg[25]['equivalent_wind'] is None  # compare() set none
+
+
 def test_tiny_run_compares_meshes_and_resumes(tmp_path, monkeypatch):
   config = dataclasses.replace(mc.PRESETS['smoke'], backend='c')
   workdir = str(tmp_path)
   rows = mc.run(config, workdir)
-  assert len(rows) == len(config.resolutions) * len(config.fabrics) * len(config.winds)
+  worlds = len(config.fabrics) * len(config.winds) * len(config.seeds)
+  assert len(rows) == len(config.resolutions) * worlds
   assert all(r['valid'] for r in rows)
   for r in rows:
     if r['resolution'] == config.estimate_resolution:
@@ -48,7 +68,7 @@ def test_tiny_run_compares_meshes_and_resumes(tmp_path, monkeypatch):
   monkeypatch.setattr(mc, 'simulate_resolution', no_simulation)
   assert mc.run(config, workdir) == rows
   with pytest.raises(AssertionError, match='simulated again'):
-    mc.run(dataclasses.replace(config, seed=1), workdir)  # another config: reruns
+    mc.run(dataclasses.replace(config, seeds=(1,)), workdir)  # another config: reruns
 
 
 def test_resume_reads_only_the_same_config(tmp_path):
@@ -59,6 +79,6 @@ def test_resume_reads_only_the_same_config(tmp_path):
     path, {'config': dataclasses.asdict(config), 'resolutions': {'6': 1}}
   )
   assert files.resume(path, config)['resolutions'] == {'6': 1}  # lists vs tuples
-  assert files.resume(path, dataclasses.replace(config, seed=3)) == {}
+  assert files.resume(path, dataclasses.replace(config, seeds=(3,))) == {}
   files.write_json(path, {'config': {'unknown_field': 1}})
   assert files.resume(path, config) == {}
