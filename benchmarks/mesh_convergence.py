@@ -280,11 +280,16 @@ def run(config: Config, workdir: str) -> list[dict]:
 
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('workdir', 'out/mesh', 'results and the figure')
-flags.DEFINE_enum('preset', 'default', list(PRESETS), 'sizes')
-flags.DEFINE_enum(
-  'backend', None, ['auto', 'mjx', 'c'], "override: 'auto' = MJX on GPU"
-)
+
+
+def define_flags() -> None:
+  """Defined only when run as a script: a test importing this module must not
+  take flag names (``--preset``) other scripts' ``define_flags`` check for."""
+  flags.DEFINE_string('workdir', 'out/mesh', 'results and the figure')
+  flags.DEFINE_enum('preset', 'default', list(PRESETS), 'sizes')
+  flags.DEFINE_enum(
+    'backend', None, ['auto', 'mjx', 'c'], "override: 'auto' = MJX on GPU"
+  )
 
 
 def main(argv):
@@ -296,4 +301,5 @@ def main(argv):
 
 
 if __name__ == '__main__':
+  define_flags()
   app.run(main)
