@@ -35,7 +35,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import physsim  # noqa: E402
-from experiments import files  # noqa: E402
+from experiments import cli, files  # noqa: E402
 from physsim import motion  # noqa: E402
 
 
@@ -282,24 +282,11 @@ def run(config: Config, workdir: str) -> list[dict]:
 FLAGS = flags.FLAGS
 
 
-def define_flags() -> None:
-  """Defined only when run as a script: a test importing this module must not
-  take flag names (``--preset``) other scripts' ``define_flags`` check for."""
-  flags.DEFINE_string('workdir', 'out/mesh', 'results and the figure')
-  flags.DEFINE_enum('preset', 'default', list(PRESETS), 'sizes')
-  flags.DEFINE_enum(
-    'backend', None, ['auto', 'mjx', 'c'], "override: 'auto' = MJX on GPU"
-  )
-
-
 def main(argv):
   del argv
-  config = PRESETS[FLAGS.preset]
-  if FLAGS.backend:
-    config = dataclasses.replace(config, backend=FLAGS.backend)
-  run(config, FLAGS.workdir)
+  run(cli.preset_config(PRESETS), FLAGS.workdir)
 
 
 if __name__ == '__main__':
-  define_flags()
+  cli.define_preset_flags('out/mesh', PRESETS)
   app.run(main)

@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 from absl import app, flags  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments import files  # noqa: E402
+from experiments import cli, files  # noqa: E402
 from physsim import motion  # noqa: E402
 
 
@@ -74,11 +74,6 @@ VARIANTS = {
 }
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('workdir', 'out/motion', 'where results and plots go')
-flags.DEFINE_enum('preset', 'full', list(PRESETS), 'sizes')
-flags.DEFINE_enum(
-  'backend', None, ['auto', 'mjx', 'c'], "override: 'auto' = MJX on GPU"
-)
 
 
 def _simulate_group(config: Config, variant: str, winds, bendings):
@@ -240,11 +235,9 @@ def plot_sweep(config: Config, done, path: str) -> None:
 
 def main(argv):
   del argv
-  config = PRESETS[FLAGS.preset]
-  if FLAGS.backend:
-    config = dataclasses.replace(config, backend=FLAGS.backend)
-  run(config, FLAGS.workdir)
+  run(cli.preset_config(PRESETS), FLAGS.workdir)
 
 
 if __name__ == '__main__':
+  cli.define_preset_flags('out/motion', PRESETS)
   app.run(main)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -82,3 +84,27 @@ def test_resume_reads_only_the_same_config(tmp_path):
   assert files.resume(path, dataclasses.replace(config, seeds=(3,))) == {}
   files.write_json(path, {'config': {'unknown_field': 1}})
   assert files.resume(path, config) == {}
+
+
+@pytest.mark.parametrize(
+  'script, output',
+  [
+    (['benchmarks/mesh_convergence.py'], 'mesh_convergence.json'),
+    (['-m', 'experiments.fabric_motion'], 'motion_sweep.json'),
+  ],
+)
+def test_preset_scripts_run_from_the_command_line(tmp_path, script, output):
+  # experiments.cli's flags, defined when the script runs (not on import)
+  root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+  env = dict(os.environ, PYTHONPATH=root)
+  args = ['--preset=smoke', '--backend=c', f'--workdir={tmp_path}']
+  done = subprocess.run(
+    [sys.executable, *script, *args], cwd=root, env=env, capture_output=True, text=True
+  )
+  assert done.returncode == 0, done.stderr[-2000:]
+  assert os.path.isfile(tmp_path / output)
+  bad = subprocess.run(
+    [sys.executable, *script, '--preset=huge'], cwd=root, env=env, capture_output=True,
+    text=True,
+  )  # fmt: skip
+  assert bad.returncode != 0 and 'huge' in bad.stderr
