@@ -27,7 +27,6 @@ import jax
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
-from absl import app, flags
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
@@ -279,14 +278,5 @@ def run(config: Config, workdir: str) -> list[dict]:
   return rows
 
 
-FLAGS = flags.FLAGS
-
-
-def main(argv):
-  del argv
-  run(cli.preset_config(PRESETS), FLAGS.workdir)
-
-
 if __name__ == '__main__':
-  cli.define_preset_flags('out/mesh', PRESETS)
-  app.run(main)
+  cli.run_script(PRESETS, run, 'out/mesh')

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from absl import flags
+from absl import app, flags
 
 FLAGS = flags.FLAGS
 
@@ -27,3 +27,10 @@ def preset_config(presets: dict):
   if FLAGS.backend:
     config = dataclasses.replace(config, backend=FLAGS.backend)
   return config
+
+
+def run_script(presets: dict, run, workdir: str) -> None:
+  """Defines the flags and runs ``run(config, workdir)`` with the chosen
+  preset: a study script's whole ``__main__``."""
+  define_preset_flags(workdir, presets)
+  app.run(lambda argv: run(preset_config(presets), FLAGS.workdir))

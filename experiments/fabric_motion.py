@@ -25,7 +25,6 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from absl import app, flags  # noqa: E402
 
 import physsim  # noqa: E402
 from experiments import cli, files  # noqa: E402
@@ -72,8 +71,6 @@ VARIANTS = {
   'dt_1ms': ({'timestep': 0.001, 'edge_solref': 0.002}, None),
   'steady': ({}, 0.0),
 }
-
-FLAGS = flags.FLAGS
 
 
 def _simulate_group(config: Config, variant: str, winds, bendings):
@@ -233,11 +230,5 @@ def plot_sweep(config: Config, done, path: str) -> None:
   plt.close(fig)
 
 
-def main(argv):
-  del argv
-  run(cli.preset_config(PRESETS), FLAGS.workdir)
-
-
 if __name__ == '__main__':
-  cli.define_preset_flags('out/motion', PRESETS)
-  app.run(main)
+  cli.run_script(PRESETS, run, 'out/motion')
