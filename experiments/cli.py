@@ -33,4 +33,9 @@ def run_script(presets: dict, run, workdir: str) -> None:
   """Defines the flags and runs ``run(config, workdir)`` with the chosen
   preset: a study script's whole ``__main__``."""
   define_preset_flags(workdir, presets)
-  app.run(lambda argv: run(preset_config(presets), FLAGS.workdir))
+
+  def main(argv):
+    del argv
+    run(preset_config(presets), FLAGS.workdir)  # not returned: app.run exits with it
+
+  app.run(main)
