@@ -95,18 +95,17 @@ def simulate_resolution(config: Config, resolution: int) -> dict:
     backend=physsim.resolve_backend(config.backend),
     material=names,
   )
-  rows = []
-  for i in range(w.size):
-    row = {
+  stats = motion.batch_stats(mesh, out.positions, out.valid, config.fps)
+  rows = [
+    {
       'fabric': names[i],
       'wind_speed': float(w[i]),
       'seed': int(s[i]),
-      'valid': bool(out.valid[i]),
+      'valid': st['valid'],
+      **{k: st[k] for k in STATS if k in st},
     }
-    if out.valid[i]:
-      stats = motion.motion_stats(mesh, out.positions[i], config.fps)
-      row.update({k: stats[k] for k in STATS})
-    rows.append(row)
+    for i, st in enumerate(stats)
+  ]
   return {'rows': rows, 'seconds': time.time() - t0}
 
 

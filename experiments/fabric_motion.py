@@ -103,19 +103,18 @@ def _simulate_group(config: Config, variant: str, winds, bendings):
     material=names,
   )
   seconds = time.time() - t0
-  rows = []
-  for i in range(w.size):
-    row = {
+  stats = motion.batch_stats(model.mesh, out.positions, out.valid, config.fps)
+  rows = [
+    {
       'fabric': names[i],
       'variant': variant,
       'wind_speed': float(w[i]),
       'bending_scale': float(b[i]),
       'area_weight': float(weight[i]),
-      'valid': bool(out.valid[i]),
+      **st,
     }
-    if out.valid[i]:
-      row.update(motion.motion_stats(model.mesh, out.positions[i], config.fps))
-    rows.append(row)
+    for i, st in enumerate(stats)
+  ]
   return {'rows': rows, 'seconds': seconds, 'backend': backend, 'worlds': w.size}
 
 

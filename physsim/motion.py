@@ -86,3 +86,13 @@ def motion_stats(mesh: Mesh, positions: np.ndarray, fps: float) -> dict[str, flo
     else 0.0,
     'mean_deflection_m': float((positions[..., 1] - mesh.vertices[:, 1]).mean()),
   }
+
+
+def batch_stats(mesh: Mesh, positions, valid, fps: float) -> list[dict]:
+  """``motion_stats`` of every world of a batch (a ``Rollout``'s positions
+  (B, T, V, 3) and valid (B,)): ``{'valid': bool, **stats}`` per world, the
+  statistics only where the world did not blow up."""
+  return [
+    {'valid': bool(ok), **(motion_stats(mesh, x, fps) if ok else {})}
+    for x, ok in zip(positions, valid, strict=True)
+  ]

@@ -31,6 +31,15 @@ def test_pure_translation_has_no_strain_and_known_spectrum():
   assert abs(s['mean_deflection_m']) < 1e-3
 
 
+def test_batch_stats_per_world_and_blown_up_worlds_without_stats():
+  mesh = physsim.square(5)
+  x, _ = _wave(mesh, amp=0.1, hz=2.0)
+  batch = np.stack([x, np.full_like(x, np.nan)])
+  one, bad = motion.batch_stats(mesh, batch, np.array([True, False]), fps=20.0)
+  assert one == {'valid': True, **motion.motion_stats(mesh, x, fps=20.0)}
+  assert bad == {'valid': False}
+
+
 def test_slow_swing_is_not_flutter():
   mesh = physsim.square(5)
   x, _ = _wave(mesh, amp=0.2, hz=1 / 3)
