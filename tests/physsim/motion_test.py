@@ -65,3 +65,31 @@ def test_bad_shapes():
     motion.motion_stats(mesh, np.zeros((10, 4, 3)), 20.0)
   with pytest.raises(ValueError, match='at least 4 frames'):
     motion.motion_stats(mesh, np.zeros((2, 9, 3)), 20.0)
+
+
+def _travelling(mesh, speed, hz=4 / 3, fps=20.0, frames=60, amp=0.02):
+  """Motion normal to the sheet (y) of ``amp sin(2 pi hz (t - d / speed))``,
+  d the rest distance below the top edge (speed inf: all in phase)."""
+  t = np.arange(frames)[:, None] / fps
+  d = mesh.vertices[:, 2].max() - mesh.vertices[:, 2]
+  x = np.repeat(mesh.vertices[None], frames, axis=0)
+  x[..., 1] += amp * np.sin(2 * np.pi * hz * (t - d[None] / speed))
+  return x
+
+
+@pytest.mark.parametrize('speed', [0.6, 1.5, -1.0])
+def test_wave_slowness_of_a_travelling_wave(speed):
+  # 4/3 Hz is bin 4 of 60 frames at 20 Hz; the 1 m sheet holds 0.6-1.5 wavelengths
+  mesh = physsim.square(8)
+  s = motion.motion_stats(mesh, _travelling(mesh, speed), fps=20.0)
+  assert s['wave_hz'] == pytest.approx(4 / 3)
+  assert s['wave_slowness_s_per_m'] == pytest.approx(1 / speed, rel=0.02)
+
+
+def test_in_phase_motion_has_no_slowness_and_a_still_sheet_none_at_all():
+  mesh = physsim.square(8)
+  moving = motion.motion_stats(mesh, _travelling(mesh, np.inf), fps=20.0)
+  assert abs(moving['wave_slowness_s_per_m']) < 1e-9
+  still = np.repeat(mesh.vertices[None], 20, axis=0)
+  slowness, hz = motion.wave_slowness(mesh, still, 20.0)
+  assert np.isnan(slowness) and np.isnan(hz)
