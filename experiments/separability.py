@@ -15,13 +15,15 @@ fabric:
   same point. The Fisher information J^T S^-1 J bounds the error of any
   unbiased estimate of (log v, log w) from these statistics: the 1-sigma
   errors of wind, area weight and load ratio in percent, with every statistic
-  and with each one left out (which statistic does the separating).
+  and with each one left out (which statistic does the separating);
+* the same bound with the search box as a prior (log-uniform ranges, taken as
+  Gaussian with the same spread): what one recording can add to the range.
 
-It bounds what these statistics can give (a network could see more, though
-none of ours does: ``model.retrieval``); local linearity and Gaussian noise
-are assumed. Area weights reach a quarter beyond each fabric's search range,
-so that slopes are measured over more than the noise; the bounds are reported
-inside the range.
+It bounds what these statistics can give, not the whole video (though our
+networks retrieve area weight at chance too: ``model.retrieval``); local
+linearity and Gaussian gust noise are assumed. Area weights reach a quarter
+beyond each fabric's search range, so that slopes are measured over more than
+the noise; the bounds are medians over the grid points inside the range.
 
   python -m experiments.separability --workdir=out/separability          # GPU: 1,120 worlds
   python -m experiments.separability --workdir=/tmp/sep --preset=smoke   # CPU, a minute
@@ -60,6 +62,7 @@ STATS = (
 )
 # Area weights beyond the paper's ranges, so the grid may leave them.
 _SPACE = physsim.SearchSpace(area_weight=(0.05, 0.6))
+_BOX = physsim.SearchSpace()  # the estimate's wind range
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,7 +145,7 @@ def _quadratic(a, b):
   return x, da, db
 
 
-def fisher_bounds(log_v, log_w, point, Y) -> dict:
+def fisher_bounds(log_v, log_w, point, Y, prior_sd=None) -> dict:
   """Cramer-Rao bounds on (log v, log w) from statistics at grid points.
 
   Args:
@@ -150,6 +153,9 @@ def fisher_bounds(log_v, log_w, point, Y) -> dict:
     point: (N,) integer id of each world's grid point (worlds of one point are
       gust seeds of the same parameters).
     Y: (N, K) the worlds' statistics, all finite.
+    prior_sd: optional (2,) standard deviations of a prior on (log v, log w)
+      (inf: flat); its information adds to the statistics' (the Bayesian,
+      van Trees form of the bound).
 
   Returns:
     ``{'points': (P, 2) log v and log w of each point, 'sigma': (P, 3) the
@@ -179,6 +185,8 @@ def fisher_bounds(log_v, log_w, point, Y) -> dict:
   fit_r2 = 1.0 - resid.var(0) / np.maximum(means.var(0), 1e-300)
   J = np.stack([da @ coef, db @ coef], 2)  # (P, K, 2)
   info = np.einsum('pka,kl,plb->pab', J, np.linalg.inv(noise), J)
+  if prior_sd is not None:
+    info = info + np.diag(1.0 / np.square(np.asarray(prior_sd, np.float64)))
   a = np.array([2.0, -1.0])  # log ratio = 2 log v - log w + const
   sigma = np.full((P, 3), np.inf)  # where the statistics cannot tell v from w
   for p in range(P):
@@ -211,10 +219,12 @@ def analyse_fabric(config: Config, fabric: str, rows: list[dict]) -> dict:
   ]  # constants say nothing
   point = np.unique(np.stack([v, w], 1), axis=0, return_inverse=True)[1].ravel()
   lo, hi = physsim.fabric(fabric).area_weight_range
+  # The search box as a prior: log-uniform over each range has sd = width / sqrt(12).
+  box_sd = np.log([_BOX.wind_speed[1] / _BOX.wind_speed[0], hi / lo]) / np.sqrt(12.0)
 
-  def bounds(cols) -> dict:
+  def bounds(cols, prior_sd=None) -> dict:
     cols = [c for c in cols if c in varies]
-    b = fisher_bounds(np.log(v), np.log(w), point, Y[:, cols])
+    b = fisher_bounds(np.log(v), np.log(w), point, Y[:, cols], prior_sd)
     inside = (np.exp(b['points'][:, 1]) >= lo) & (np.exp(b['points'][:, 1]) <= hi)
     med = np.median(b['sigma'][inside], axis=0)
     return {
@@ -231,6 +241,11 @@ def analyse_fabric(config: Config, fabric: str, rows: list[dict]) -> dict:
     'range_half_width_pct': 100.0 * (hi - lo) / (hi + lo),
     'r2': {k: ratio_r2(Y[:, j], v, w) for j, k in enumerate(STATS)},
     'bounds': bounds(every),
+    'bounds_with_box': bounds(every, box_sd),
+    'box_sd_pct': {
+      'wind': float(_percent(box_sd[0])),
+      'area_weight': float(_percent(box_sd[1])),
+    },
     'without': {k: bounds([c for c in every if c != j]) for j, k in enumerate(STATS)},
   }
 
@@ -262,20 +277,24 @@ def run(config: Config, workdir: str) -> dict:
 
 
 def table(analysis: dict) -> str:
-  """Bounds per fabric, and what leaving each statistic out costs."""
+  """Bounds per fabric, with and without the search box as a prior, and what
+  leaving each statistic out costs."""
   lines = [
-    '1-sigma bounds from one recording (median over grid points inside the range):',
+    '1-sigma bounds from one recording, % (median over grid points inside the '
+    'range); from the statistics alone, and with the search box as a prior '
+    '(its sd alone in brackets):',
     '',
-    '| fabric | wind % | area weight % | load ratio % | range half-width % '
+    '| fabric | wind | area weight | load ratio | with the box: wind | area weight '
     '| area weight % without: ' + ' / '.join(STATS) + ' |',
-    '|---|---:|---:|---:|---:|---|',
+    '|---|---:|---:|---:|---:|---:|---|',
   ]
   for f, a in analysis.items():
-    b = a['bounds']
+    b, p, box = a['bounds'], a['bounds_with_box'], a['box_sd_pct']
     left = ' / '.join(f'{a["without"][k]["area_weight_pct"]:.0f}' for k in STATS)
     lines.append(
       f'| {f} | {b["wind_pct"]:.1f} | {b["area_weight_pct"]:.1f} | '
-      f'{b["load_ratio_pct"]:.1f} | {a["range_half_width_pct"]:.1f} | {left} |'
+      f'{b["load_ratio_pct"]:.1f} | {p["wind_pct"]:.1f} ({box["wind"]:.0f}) | '
+      f'{p["area_weight_pct"]:.1f} ({box["area_weight"]:.1f}) | {left} |'
     )
   lines += [
     '',
@@ -331,25 +350,31 @@ def plot_stats(config: Config, done: dict, path: str) -> None:
 
 
 def plot_bounds(analysis: dict, path: str) -> None:
-  """1-sigma bounds per fabric against the issue's targets and the ranges."""
+  """1-sigma bounds per fabric, from the statistics alone and with the search
+  box as a prior, against the issue's targets."""
   names = list(analysis)
   x = np.arange(len(names))
-  fig, ax = plt.subplots(figsize=(1.3 * len(names) + 3, 3.8))
-  for off, key, label in (
-    (-0.25, 'wind_pct', 'wind speed'),
-    (0.0, 'area_weight_pct', 'area weight'),
-    (0.25, 'load_ratio_pct', 'load ratio'),
+  fig, axes = plt.subplots(1, 2, figsize=(1.3 * len(names) + 4, 4.0), sharey=True)
+  for ax, key, title in (
+    (axes[0], 'bounds', 'from the motion statistics alone'),
+    (axes[1], 'bounds_with_box', 'with the search box as a prior'),
   ):
-    ax.bar(x + off, [analysis[n]['bounds'][key] for n in names], 0.25, label=label)
-  ax.plot(x, [analysis[n]['range_half_width_pct'] for n in names], 'k_', ms=22,
-          mew=2, label='area-weight range half-width')  # fmt: skip
-  ax.axhline(5, color='r', ls='--', lw=1, label='area-weight target 5%')
-  ax.axhline(10, color='g', ls=':', lw=1, label='wind target 10%')
-  ax.set_xticks(x, [n.replace('_', '\n') for n in names], fontsize=8)
-  ax.set(yscale='log', ylabel='1-sigma error from one recording (%)',
-         title='Cramer-Rao bound from the motion statistics')  # fmt: skip
-  ax.legend(fontsize=7)
-  ax.grid(alpha=0.3, axis='y')
+    for off, k, label in (
+      (-0.25, 'wind_pct', 'wind speed'),
+      (0.0, 'area_weight_pct', 'area weight'),
+      (0.25, 'load_ratio_pct', 'load ratio'),
+    ):
+      ax.bar(x + off, [analysis[n][key][k] for n in names], 0.25, label=label)
+    ax.axhline(5, color='r', ls='--', lw=1, label='area-weight target 5%')
+    ax.axhline(10, color='g', ls=':', lw=1, label='wind target 10%')
+    ax.set_xticks(x, [n.replace('_', '\n') for n in names], fontsize=7)
+    ax.set(yscale='log', title=title)
+    ax.grid(alpha=0.3, axis='y')
+  axes[1].plot(x, [analysis[n]['box_sd_pct']['area_weight'] for n in names], 'k_',
+               ms=16, mew=2, label='area-weight box alone (sd)')  # fmt: skip
+  axes[0].set_ylabel('1-sigma error from one recording (%)')
+  axes[1].legend(fontsize=7)
+  fig.suptitle('Cramer-Rao bounds on wind and area weight', fontsize=10)
   fig.tight_layout()
   files.savefig(fig, path, dpi=90)
   plt.close(fig)

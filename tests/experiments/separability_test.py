@@ -50,6 +50,16 @@ def test_statistics_of_the_load_ratio_alone_bound_it_but_not_wind_or_weight():
   assert s[1] > 10 * s[2] and s[0] > 5 * s[2]
 
 
+def test_a_prior_on_area_weight_passes_half_its_spread_to_the_wind():
+  # One statistic of the log ratio (noise s) and a prior of sd p on log w, flat
+  # on log v: log v = (log r + log w) / 2, so var(log v) = (s^2 + p^2) / 4, while
+  # log w keeps its prior's sd and the ratio its own noise.
+  s, p = 0.1, 0.2
+  b = sep.fisher_bounds(*_linear_worlds([[2.0, -1.0]], [s]), prior_sd=[np.inf, p])
+  want = [np.sqrt(s**2 + p**2) / 2, p, s]
+  np.testing.assert_allclose(np.median(b['sigma'], axis=0), want, rtol=_SAMPLED)
+
+
 def test_too_few_seeds_is_refused():
   lv, lw, point, Y = _linear_worlds(np.eye(2), [0.1, 0.1], seeds=1)
   with pytest.raises(ValueError, match='more seeds or points'):
@@ -65,8 +75,12 @@ def test_tiny_run_sees_the_ratio_in_the_deflection_and_resumes(tmp_path, monkeyp
   assert a['used'] >= a['worlds'] - 2  # a still sheet's slowness may be NaN
   # the sheet's mean shape is a function of rho v^2 / (w g) (well above the rest)
   assert a['r2']['mean_deflection_m']['r2_ratio'] > 0.9
-  b = a['bounds']
+  b, box = a['bounds'], a['bounds_with_box']
   assert 0 < b['load_ratio_pct'] < b['area_weight_pct']
+  # adding a prior's information narrows the bound below both the statistics' and its own
+  assert box['area_weight_pct'] <= min(
+    b['area_weight_pct'], a['box_sd_pct']['area_weight']
+  )
   for name in ('separability.md', 'separability_stats.png', 'separability_bounds.png'):
     assert os.path.isfile(os.path.join(workdir, name))
 
