@@ -74,12 +74,12 @@ def test_tiny_run_sees_the_ratio_in_the_deflection_and_resumes(tmp_path, monkeyp
   assert a['worlds'] == len(config.winds) * config.weights * len(config.seeds)
   assert a['used'] >= a['worlds'] - 2  # a still sheet's slowness may be NaN
   # the sheet's mean shape is a function of rho v^2 / (w g) (well above the rest)
-  assert a['r2']['mean_deflection_m']['r2_ratio'] > 0.9
+  assert a['r2']['mean_deflection_m']['r2_base'] > 0.9
   b, box = a['bounds'], a['bounds_with_box']
   assert 0 < b['load_ratio_pct'] < b['area_weight_pct']
   # adding a prior's information narrows the bound below both the statistics' and its own
   assert box['area_weight_pct'] <= min(
-    b['area_weight_pct'], a['box_sd_pct']['area_weight']
+    b['area_weight_pct'], a['box_sd']['area_weight_pct']
   )
   for name in ('separability.md', 'separability_stats.png', 'separability_bounds.png'):
     assert os.path.isfile(os.path.join(workdir, name))
@@ -89,3 +89,23 @@ def test_tiny_run_sees_the_ratio_in_the_deflection_and_resumes(tmp_path, monkeyp
 
   monkeypatch.setattr(sep, 'simulate_fabric', no_simulation)
   assert sep.run(config, workdir)['analysis'] == result['analysis']
+
+
+def test_tiny_bending_run_sweeps_bending_at_the_mean_area_weight(tmp_path):
+  config = dataclasses.replace(sep.PRESETS['smoke_bending'], backend='c')
+  a = sep.run(config, str(tmp_path))['analysis']['red_violet']
+  assert a['varied'] == 'bending_scale'
+  assert a['used'] >= a['worlds'] - 2
+  # bending's range alone: log-uniform over 0.1-10, sd ln(100) / sqrt(12)
+  assert a['box_sd']['bending_factor'] == pytest.approx(np.exp(np.log(100) / 12**0.5))
+  assert 1 < a['bounds_with_box']['bending_factor'] <= a['box_sd']['bending_factor']
+  rows = sep.run(config, str(tmp_path))['fabrics']['red_violet']['rows']
+  assert {r['bending_scale'] for r in rows} == set(config.bendings)
+  (weight,) = {r['area_weight'] for r in rows}
+  assert weight == pytest.approx(0.135)  # (0.10 + 0.17) / 2
+  assert os.path.isfile(str(tmp_path / 'separability_bending_bounds.png'))
+
+
+def test_an_unknown_second_parameter_is_refused(tmp_path):
+  with pytest.raises(ValueError, match="vary='fps'"):
+    sep.run(dataclasses.replace(sep.PRESETS['smoke'], vary='fps'), str(tmp_path))
