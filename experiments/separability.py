@@ -485,8 +485,8 @@ def plot_bounds(config: Config, analysis: dict, path: str) -> None:
   key2 = shown[1][0]
   axes[1].plot(x, [pct(key2, analysis[f]['box_sd'][key2]) for f in names], 'k_',
                ms=16, mew=2, label='the range alone (sd)')  # fmt: skip
-  unit = ' (bending: factor - 1)' if config.vary == 'bending_scale' else ''
-  axes[0].set_ylabel(f'1-sigma error from one recording, %{unit}')
+  unit = '\n(bending: factor - 1)' if config.vary == 'bending_scale' else ''
+  axes[0].set_ylabel(f'1-sigma error of one recording, %{unit}')
   axes[1].legend(fontsize=7)
   second = 'bending' if config.vary == 'bending_scale' else 'area weight'
   fig.suptitle(f'Cramer-Rao bounds on wind and {second}', fontsize=10)
