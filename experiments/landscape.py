@@ -41,7 +41,7 @@ from tqdm import tqdm  # noqa: E402
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
 from experiments import estimate as est
-from experiments import files  # noqa: E402
+from experiments import files, separability  # noqa: E402
 from experiments import train as train_lib  # noqa: E402
 
 STATS = ('mean_deflection_m', 'centre_dominant_hz', 'flutter_fraction')
@@ -124,21 +124,16 @@ def ratio_r2(stat, wind_speed, area_weight) -> dict:
     ``{'r2_ratio', 'r2_ratio_and_wind', 'n'}`` (NaN when too few points).
   """
   y = np.asarray(stat, np.float64)
-  lr = np.log(physsim.load_ratio(wind_speed, area_weight))
-  lv = np.log(np.asarray(wind_speed, np.float64))
-  ok = np.isfinite(y)
-  y, lr, lv = y[ok], lr[ok], lv[ok]
-  ratio = np.stack([lr**k for k in range(4)], 1)  # 1, r, r^2, r^3
-  both = np.concatenate([ratio, np.stack([lv, lv**2], 1)], 1)
-  tss = np.sum((y - y.mean()) ** 2) if y.size else 0.0
-
-  def r2(a):
-    if y.size <= a.shape[1] or tss <= 0:
-      return float('nan')
-    coef = np.linalg.lstsq(a, y, rcond=None)[0]
-    return float(1.0 - np.sum((y - a @ coef) ** 2) / tss)
-
-  return {'r2_ratio': r2(ratio), 'r2_ratio_and_wind': r2(both), 'n': int(y.size)}
+  r = separability.nested_r2(
+    y,
+    np.log(physsim.load_ratio(wind_speed, area_weight)),
+    np.log(np.asarray(wind_speed, np.float64)),
+  )
+  return {
+    'r2_ratio': r['r2_base'],
+    'r2_ratio_and_wind': r['r2_added'],
+    'n': int(np.isfinite(y).sum()),
+  }
 
 
 def _signature(config: Config, recording: est.Recording, model_dir: str) -> str:

@@ -244,7 +244,7 @@ def _percent(log_sigma: np.ndarray) -> np.ndarray:
   return 100.0 * np.expm1(log_sigma)
 
 
-def _r2_nested(y, base, added) -> dict:
+def nested_r2(y, base, added) -> dict:
   """R^2 of ``y`` on a cubic in ``base``, then also a quadratic in ``added``."""
   ok = np.isfinite(y)
   y, base, added = y[ok], base[ok], added[ok]
@@ -316,7 +316,7 @@ def analyse_fabric(config: Config, fabric: str, rows: list[dict]) -> dict:
     'worlds': len(rows),
     'used': len(ok),
     'range_half_width_pct': 100.0 * (hi - lo) / (hi + lo),
-    'r2': {k: _r2_nested(Y[:, j], base, added) for j, k in enumerate(STATS)},
+    'r2': {k: nested_r2(Y[:, j], base, added) for j, k in enumerate(STATS)},
     'bounds': bounds(every),
     'bounds_with_box': bounds(every, box_sd),
     'box_sd': _shown(config, box_sd),
