@@ -18,7 +18,7 @@ import numpy as np
 from absl import app, flags
 
 import bo
-from experiments import files
+from experiments.pipeline import files
 
 FLAGS = flags.FLAGS
 flags.DEFINE_integer('q', 4, 'points per proposal (the estimate default)')

@@ -56,7 +56,7 @@ case ${1:-render} in
       --sequences=2
     # Resumable: rerun until every recording has its estimate.json.
     step tables 530 python -m experiments.tables --eval=/tmp/eval \
-      --models=/tmp/models --workdir=/tmp/tables --jobs=7 --methods=physnet_depth
+      --models=/tmp/models --workdir=/tmp/tables --methods=physnet_depth --preset=paper
     cp /tmp/tables/tables.md /tmp/tables/tables.json "$OUT/" 2>/dev/null
     ;;
 esac

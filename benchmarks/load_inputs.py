@@ -23,8 +23,8 @@ import numpy as np
 from absl import app, flags
 
 import model as model_lib
-from experiments import files
-from experiments import train as train_lib
+from experiments.pipeline import embedding, files
+from experiments.pipeline import training as train_lib
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('dataset', None, 'dataset root (generate_dataset --out)')
@@ -32,7 +32,7 @@ flags.DEFINE_list('materials', ['gray_interlock'], 'materials to read')
 flags.DEFINE_list('workers', ['1', str(min(16, os.cpu_count() or 1))], 'thread counts')
 flags.DEFINE_list('mappings', ['jax', 'numpy'], 'depth mapping backends')
 flags.DEFINE_enum('network', 'physnet', ['physnet', 'sdn'], 'frames or clips')
-flags.DEFINE_enum('modality', 'depth', list(train_lib.MODALITIES), 'depth or rgb')
+flags.DEFINE_enum('modality', 'depth', list(embedding.MODALITIES), 'depth or rgb')
 flags.DEFINE_integer('repeats', 3, 'timed reads per thread count')
 flags.DEFINE_string('out', 'out/load_inputs.json', 'JSON result')
 

@@ -34,23 +34,52 @@ import matplotlib.pyplot as plt  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import physsim  # noqa: E402
-from experiments import cli, files  # noqa: E402
+from experiments.pipeline import cli, files  # noqa: E402
 from physsim import motion  # noqa: E402
 
 
 @dataclasses.dataclass(frozen=True)
 class Config:
+  """The mesh study.
+
+  Attributes:
+    fabrics: fabric names (physsim.FABRICS), each at its real area weight.
+    winds: wind speeds, m/s.
+    resolutions: cloth vertices per side of the meshes compared.
+    estimate_resolution: the estimate's cloth (EstimateConfig.cloth_resolution).
+    bending: bending scale.
+    gusts: RMS relative gust intensity.
+    frames: frames per simulation.
+    fps: frame rate, Hz.
+    warmup: simulated seconds before the first frame.
+    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    seeds: gust histories; each the same on every mesh.
+  """
+
   fabrics: tuple[str, ...] = ('white_tablecloth', 'red_violet', 'black_denim')
   winds: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
   resolutions: tuple[int, ...] = (17, 25, 33)
-  estimate_resolution: int = 25  # experiments.estimate's default cloth
+  estimate_resolution: int = 25
   bending: float = 1.0
   gusts: float = 0.2
   frames: int = 60
   fps: float = 20.0
   warmup: float = 1.0
-  backend: str = 'auto'
-  seeds: tuple[int, ...] = (0, 1, 2)  # gust histories; each the same on every mesh
+  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  seeds: tuple[int, ...] = (0, 1, 2)
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The benchmark from the command line.
+
+  Attributes:
+    workdir: results and figures go here (resumed from what it holds).
+    study: what is simulated.
+  """
+
+  workdir: str = 'out/mesh'
+  study: Config = Config()
 
 
 PRESETS = {
@@ -278,4 +307,7 @@ def run(config: Config, workdir: str) -> list[dict]:
 
 
 if __name__ == '__main__':
-  cli.run_script(PRESETS, run, 'out/mesh')
+  cli.run(
+    Args, {k: Args(study=v) for k, v in PRESETS.items()},
+    lambda args: run(args.study, args.workdir),
+  )  # fmt: skip

@@ -46,20 +46,24 @@ def _params(b, seed=0):
   return physsim.params.sample(np.random.default_rng(seed), b, physsim.SearchSpace())
 
 
+def _inputs(model, p, wind, key) -> physsim.WorldInputs:
+  """World inputs of parameter sets ``p``, one gust key per world from ``key``."""
+  p = physsim.params.make(*(np.atleast_1d(x) for x in p))
+  keys = jax.random.split(key, p.bending_scale.shape[0])
+  return physsim.world_inputs(model, *p, keys, wind)
+
+
 def _mjx_row(model, b):
   frames = max(1, round(FLAGS.seconds * 20))
-  fn = sim.mjx_rollout_fn(model, frames, 20.0, 0.0)
+  fn = sim.mjx_program(model, frames, 20.0, 0.0)
   wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity)
-  p = physsim.params.make(*(np.atleast_1d(x) for x in _params(b)))
-  w = sim._world_inputs(model, p, wind, jax.random.key(0), jax.numpy.float32)
+  w = _inputs(model, _params(b), wind, jax.random.key(0))
   t0 = time.perf_counter()
   compiled = fn.lower(w).compile()
   compile_s = time.perf_counter() - t0
   times, valid = [], None
   for r in range(FLAGS.repeats + 1):  # first call warms caches/graphs
-    w = sim._world_inputs(
-      model, _params(b, r), wind, jax.random.key(r), jax.numpy.float32
-    )
+    w = _inputs(model, _params(b, r), wind, jax.random.key(r))
     t0 = time.perf_counter()
     xs, valid = jax.block_until_ready(compiled(w))
     if r:
@@ -82,8 +86,7 @@ def _c_job(args):
   p = _params(b, seed)
   p = physsim.params.make(*(np.atleast_1d(x) for x in p))
   wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity if FLAGS.is_parsed() else 0.2)
-  w = sim._world_inputs(model, p, wind, jax.random.key(seed), jax.numpy.float32)
-  w = jax.tree.map(np.asarray, w)
+  w = jax.tree.map(np.asarray, _inputs(model, p, wind, jax.random.key(seed)))._asdict()
   w['body_mass'] = model.body_masses(p.area_weight)
   w['speed'], w['bending'] = p.wind_speed, p.bending_scale
   frames = max(1, round(seconds * 20))
@@ -128,11 +131,9 @@ def _c_row(model, cores):
 
 def _paper_dataset(model):
   """All 210 paper sequences (60 frames at 20 Hz after 1 s warm-up) in one call."""
-  fn = sim.mjx_rollout_fn(model, 60, 20.0, _WARMUP)
+  fn = sim.mjx_program(model, 60, 20.0, _WARMUP)
   p = _params(_PAPER_SEQUENCES, 123)
-  w = sim._world_inputs(
-    model, p, physsim.Wind(gust_intensity=0.2), jax.random.key(1), jax.numpy.float32
-  )
+  w = _inputs(model, p, physsim.Wind(gust_intensity=0.2), jax.random.key(1))
   t0 = time.perf_counter()
   compiled = fn.lower(w).compile()
   compile_s = time.perf_counter() - t0

@@ -30,14 +30,17 @@ from absl import app, flags, logging
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model as model_lib  # noqa: E402
-from experiments import demo, files  # noqa: E402
-from experiments import generate_dataset as gen  # noqa: E402
-from experiments import train as train_lib  # noqa: E402
+from experiments.pipeline import datasets as gen  # noqa: E402
+from experiments.pipeline import demo, files  # noqa: E402
+from experiments.pipeline import training as train_lib  # noqa: E402
 from physsim import params as params_lib  # noqa: E402
 
-# --workdir, --material, --sequences and --backend are experiments.demo's flags.
 FLAGS = flags.FLAGS
-demo.define_flags()
+# The demo's settings (experiments/demo.py), which this study builds on.
+flags.DEFINE_string('workdir', 'out/demo', 'data and runs go here')
+flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
+flags.DEFINE_integer('sequences', 24, 'training simulations')
+flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on a GPU")
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs per run')
 _SEEDS = flags.DEFINE_list('seeds', ['0', '1', '2'], 'training seeds per variant')
 _DATASET = flags.DEFINE_string(
@@ -87,7 +90,7 @@ def main(argv):
   root = _DATASET.value or os.path.join(wd, 'data')
   if not _DATASET.value:
     gen.run(data_cfg, root)
-  base = dataclasses.replace(
+  base = train_lib.replace(
     train_cfg, epochs=_EPOCHS.value, val_fraction=0.25, materials=(material,)
   )
   if _IMAGE_SIZE.value:
@@ -102,7 +105,7 @@ def main(argv):
     if not chosen(variant):
       continue
     for seed in map(int, _SEEDS.value):
-      cfg = dataclasses.replace(base, seed=seed, **over)
+      cfg = train_lib.replace(base, seed=seed, **over)
       mode = cfg.input_mode
       if mode not in inputs:
         inputs[mode] = train_lib.load_inputs(cfg, root, [material])
@@ -124,7 +127,7 @@ def main(argv):
     if not chosen(variant):
       continue
     for seed in map(int, _SEEDS.value):
-      cfg = dataclasses.replace(base, seed=seed, input_mode=mode)
+      cfg = train_lib.replace(base, seed=seed, input_mode=mode)
       if mode not in inputs:
         inputs[mode] = train_lib.load_inputs(cfg, root, [material])
       r = raw_retrieval(cfg, root, material, inputs[mode])

@@ -36,15 +36,18 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments import demo, files  # noqa: E402
-from experiments import estimate as estimate_lib  # noqa: E402
-from experiments import generate_dataset as gen  # noqa: E402
-from experiments import train as train_lib  # noqa: E402
+from experiments.pipeline import datasets as gen  # noqa: E402
+from experiments.pipeline import demo, embedding, files, search  # noqa: E402
+from experiments.pipeline import recording as recording_lib  # noqa: E402
+from experiments.pipeline import training as train_lib  # noqa: E402
 from model import checkpoint  # noqa: E402
 
-# --workdir, --material, --sequences and --backend are experiments.demo's flags.
 FLAGS = flags.FLAGS
-demo.define_flags()
+# The demo's settings (experiments/demo.py), which this study builds on.
+flags.DEFINE_string('workdir', 'out/demo', 'data and runs go here')
+flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
+flags.DEFINE_integer('sequences', 24, 'training simulations')
+flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on a GPU")
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs (every one is kept)')
 _RECORDINGS = flags.DEFINE_integer('recordings', 4, 'real-like recordings')
 _ALL_EPOCHS = flags.DEFINE_bool(
@@ -58,7 +61,7 @@ def train_all_epochs(workdir: str, material: str, sequences: int, epochs: int, b
   data_cfg, _, train_cfg, _ = demo.configs(material, sequences, 0, backend)
   root = os.path.join(workdir, 'data')
   gen.run(data_cfg, root)
-  cfg = dataclasses.replace(
+  cfg = train_lib.replace(
     train_cfg, epochs=epochs, val_fraction=0.25, materials=(material,)
   )
   run_dir = os.path.join(workdir, 'model')
@@ -73,7 +76,7 @@ def export_epoch(run_dir: str, row: dict, out: str) -> str:
     return out
   _, params, _ = model_lib.load_network(run_dir, step=row['step'])
   os.makedirs(out, exist_ok=True)
-  for f in (model_lib.train.CONFIG_FILE, train_lib.INPUTS_FILE):
+  for f in (model_lib.train.CONFIG_FILE, embedding.INPUTS_FILE):
     shutil.copy(os.path.join(run_dir, f), os.path.join(out, f))
   with checkpoint.manager(out, 1, model_lib.train.BEST_DIR) as mngr:
     checkpoint.save(mngr, row['step'], params)
@@ -134,7 +137,7 @@ def main(argv):
   for i in range(n_rec):
     rec_dir = physsim.dataset.sequence_dir(rec_root, material, f'{i:04d}')
     try:
-      recordings[i] = estimate_lib.load_recording(
+      recordings[i] = recording_lib.load_recording(
         rec_dir, fps=est_cfg.fps, size=(demo._RES, demo._RES), frames=demo._FRAMES
       )
     except ValueError as e:  # e.g. an unseen camera pose that never sees the cloth
@@ -147,7 +150,7 @@ def main(argv):
     model_dir = export_epoch(run_dir, row, os.path.join(wd, 'epochs', str(epoch)))
     for i, rec in recordings.items():
       out = os.path.join(wd, 'estimates', f'epoch{epoch}', f'{i:04d}')
-      res = estimate_lib.estimate(
+      res = search.estimate(
         dataclasses.replace(est_cfg, seed=i), rec, model_dir, out, progress=False
       )
       value = {k: float(np.ravel(v['value'])[0]) for k, v in res['estimate'].items()}

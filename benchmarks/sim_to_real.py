@@ -29,12 +29,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments import demo, files, landscape  # noqa: E402
-from experiments import estimate as est  # noqa: E402
-from experiments import generate_dataset as gen  # noqa: E402
-from experiments import train as train_lib  # noqa: E402
+from experiments.pipeline import datasets as gen  # noqa: E402
+from experiments.pipeline import demo, embedding, files, search  # noqa: E402
+from experiments.pipeline import objective as objective_lib  # noqa: E402
+from experiments.pipeline import recording as recording_lib  # noqa: E402
+from experiments.studies import landscape  # noqa: E402
 
 FLAGS = flags.FLAGS
 
@@ -67,7 +67,7 @@ def variants(train_cfg: gen.Config, rec_cfg: gen.Config) -> dict[str, gen.Config
 
 def wind_line(u_truth: np.ndarray, points: int) -> np.ndarray:
   """(n, 3) unit points along wind through the truth, sorted by wind
-  (``experiments.landscape``'s line for that parameter, without its grid)."""
+  (``experiments.studies.landscape``'s line for that parameter, without its grid)."""
   u, parts = landscape.points(landscape.Config(points_1d=points, grid=0), u_truth)
   return u[parts['line_1']]
 
@@ -81,15 +81,16 @@ def main(argv):
     raise ValueError(
       f'--model={model_dir}: no such run (python -m experiments.demo first)'
     )
-  network, net_params, net_config = model_lib.load_network(model_dir)
+  net = embedding.load_embedding(model_dir)
   material = FLAGS.material
   train_cfg, rec_cfg, _, est_cfg = demo.configs(material, 24, FLAGS.seed, FLAGS.backend)
-  size = tuple(net_config.physnet.image_size)
+  size = net.image_size
   results, truth0 = {}, None
+  evaluator = search.Evaluator()
   for name, cfg in variants(train_cfg, rec_cfg).items():
     root = os.path.join(wd, 'recordings', name.split(' ')[0].replace('-', '_'))
     gen.run(cfg, root)
-    rec = est.load_recording(
+    rec = recording_lib.load_recording(
       physsim.dataset.sequence_dir(root, material, '0000'),
       fps=est_cfg.fps,
       size=size,
@@ -100,19 +101,15 @@ def main(argv):
       raise ValueError(f'{root}: truth {rec.truth} differs from {truth0}')
     row = {}
     for noise in (True, False):
-      obj = est.make_objective(
-        dataclasses.replace(est_cfg, sensor_noise=noise),
-        network,
-        net_params,
-        train_lib.input_mode(model_dir),
-        rec,
+      problem = objective_lib.make_problem(
+        dataclasses.replace(est_cfg, sensor_noise=noise), net, rec
       )
       u_truth = np.asarray(
-        physsim.to_unit(physsim.params.make(**rec.truth), obj.space), np.float64
+        physsim.to_unit(physsim.params.make(**rec.truth), problem.space), np.float64
       ).ravel()
       line = wind_line(u_truth, FLAGS.points)
-      psd = np.asarray(obj.fun(line), np.float64)
-      wind = np.ravel(physsim.from_unit(line, obj.space)[1])
+      psd = search.score(problem, line, evaluator=evaluator).psd
+      wind = np.ravel(physsim.from_unit(line, problem.space)[1])
       k = int(np.nanargmin(psd))
       row['candidates with sensor model' if noise else 'clean candidates'] = {
         'wind_speed': wind.tolist(),

@@ -1,19 +1,24 @@
 """Gaussian-process Bayesian optimisation in JAX.
 
-The public entry point is ``minimize`` (or ``Minimizer``, its loop as
-ask/tell steps, for drivers that batch many searches); the GP (``gp``), kernels
-(``kernels``), acquisition functions (``acquisition``) and the proposal step
-(``propose``) are exposed as building blocks.
+The public entry points are ``minimize`` (or ``Minimizer``, its loop as
+ask/tell steps, for drivers that batch many searches) and ``PosteriorSearch``
+(a likelihood-free posterior from a GP of a noisy discrepancy, with the same
+ask/tell interface); the GP (``gp``), kernels (``kernels``), acquisition
+functions (``acquisition``) and the proposal step (``propose``) are exposed as
+building blocks.
 """
 
-from bo import acquisition, gp, kernels, propose, qmc, uncertainty
+from bo import acquisition, gp, kernels, posterior, propose, qmc, uncertainty
 from bo.loop import IterationInfo, Minimizer, Result, State, minimize
+from bo.posterior import PosteriorConfig, PosteriorSearch
 from bo.uncertainty import MinimizerSamples, minimizer_samples
 
 __all__ = [
   'IterationInfo',
   'Minimizer',
   'MinimizerSamples',
+  'PosteriorConfig',
+  'PosteriorSearch',
   'Result',
   'State',
   'acquisition',
@@ -21,6 +26,7 @@ __all__ = [
   'kernels',
   'minimize',
   'minimizer_samples',
+  'posterior',
   'propose',
   'qmc',
   'uncertainty',

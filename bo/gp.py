@@ -95,13 +95,15 @@ def lengthscale_prior_loc(d: int) -> float:
   return _SQRT2 + 0.5 * math.log(d) + math.log(2.0)
 
 
-def default_params(d: int, dtype=None) -> GPParams:
-  """Prior medians: a sensible starting point for fitting."""
+def default_params(d: int, dtype=None, noise_prior=None) -> GPParams:
+  """Prior medians: a sensible starting point for fitting (``noise_prior``:
+  the ``(loc, scale)`` of the noise variance's LogNormal, default the module's)."""
   dtype = dtype or jnp.zeros(()).dtype
+  noise_loc = (noise_prior or (NOISE_PRIOR_LOC, NOISE_PRIOR_SCALE))[0]
   return GPParams(
     log_lengthscales=jnp.full((d,), lengthscale_prior_loc(d), dtype),
     log_outputscale=jnp.asarray(OUTPUTSCALE_PRIOR_LOC, dtype),
-    log_noise=jnp.asarray(NOISE_PRIOR_LOC, dtype),
+    log_noise=jnp.asarray(noise_loc, dtype),
   )
 
 
@@ -164,15 +166,22 @@ def _lognormal_logpdf(log_x, loc, scale):
   return jnp.sum(-0.5 * z * z - jnp.log(scale) - 0.5 * _LOG_2PI - log_x)
 
 
-def log_prior(params: GPParams) -> jnp.ndarray:
-  """Log prior density of the hyperparameters (on the positive scale)."""
+def log_prior(params: GPParams, noise_prior=None) -> jnp.ndarray:
+  """Log prior density of the hyperparameters (on the positive scale).
+
+  ``noise_prior``: ``(loc, scale)`` of the LogNormal on the noise variance of
+  standardised targets; default ``(NOISE_PRIOR_LOC, NOISE_PRIOR_SCALE)`` (for
+  deterministic objectives). A noisy simulator's discrepancy needs a prior that
+  admits its noise (``bo.posterior``).
+  """
   d = params.log_lengthscales.shape[0]
+  loc, scale = noise_prior or (NOISE_PRIOR_LOC, NOISE_PRIOR_SCALE)
   return (
     _lognormal_logpdf(params.log_lengthscales, lengthscale_prior_loc(d), _SQRT3)
     + _lognormal_logpdf(
       params.log_outputscale, OUTPUTSCALE_PRIOR_LOC, OUTPUTSCALE_PRIOR_SCALE
     )
-    + _lognormal_logpdf(params.log_noise, NOISE_PRIOR_LOC, NOISE_PRIOR_SCALE)
+    + _lognormal_logpdf(params.log_noise, loc, scale)
   )
 
 
@@ -229,6 +238,7 @@ def fit(
   n_restarts: int = 4,
   maxiter: int = 50,
   init_params: GPParams | None = None,
+  noise_prior: tuple[float, float] | None = None,
 ) -> GPState:
   """Fits hyperparameters by maximum a posteriori and conditions the GP.
 
@@ -251,6 +261,8 @@ def fit(
     n_restarts: number of L-BFGS-B starts (at least 2).
     maxiter: L-BFGS-B iterations per start.
     init_params: optional warm start.
+    noise_prior: ``(loc, scale)`` of the noise variance's LogNormal prior
+      (static; default the module's, for deterministic objectives).
 
   Returns:
     The fitted GP state.
@@ -263,13 +275,17 @@ def fit(
   def loss(theta):
     p = params_from_array(theta)
     n = jnp.maximum(jnp.sum(mask), 1)
-    value = -(log_marginal_likelihood(p, x, y_std, mask, kernel=kernel) + log_prior(p))
+    value = -(
+      log_marginal_likelihood(p, x, y_std, mask, kernel=kernel)
+      + log_prior(p, noise_prior)
+    )
     return value / n  # Per-point scale, as in GPyTorch's ExactMarginalLogLikelihood.
 
-  prior = params_to_array(default_params(d, dtype))
+  prior = params_to_array(default_params(d, dtype, noise_prior))
   warm = prior if init_params is None else params_to_array(init_params).astype(dtype)
+  noise_scale = (noise_prior or (NOISE_PRIOR_LOC, NOISE_PRIOR_SCALE))[1]
   scales = jnp.concatenate(
-    [jnp.full((d,), _SQRT3), jnp.array([OUTPUTSCALE_PRIOR_SCALE, NOISE_PRIOR_SCALE])]
+    [jnp.full((d,), _SQRT3), jnp.array([OUTPUTSCALE_PRIOR_SCALE, noise_scale])]
   ).astype(dtype)
   # Half the prior spread: extreme draws are ill-conditioned and only cost time.
   draws = prior + 0.5 * scales * jax.random.normal(key, (n_restarts - 2, d + 2), dtype)

@@ -1,1 +1,2 @@
-"""experiments package."""
+"""Scripts (one thin ``main`` each, ``python -m experiments.<name> --help``) over
+the ``pipeline`` library and the ``studies`` built on it."""

@@ -1,128 +1,46 @@
-"""The end-to-end estimate on a small built-in default (minutes on a CPU).
-
-1. simulate and render a small training set of one fabric (``generate_dataset``);
-2. train a small PhySNet on it (``experiments.train``);
-3. make one real-like recording with known parameters (finer mesh, sensor
-   noise, 24 fps, an unseen camera pose, gustier wind: ``make_eval_set``'s
-   settings, small);
-4. estimate bending, wind and area weight from that recording alone
-   (``experiments.estimate``), and print them beside the truth and beside the
-   trivial guess (the centre of the search range).
+"""The main job on a small built-in default: an end-to-end estimate in minutes on a CPU.
 
   python -m experiments.demo --workdir=out/demo
 
-Every stage resumes from what ``workdir`` already holds.
+Simulates a small training set, trains a small PhySNet, makes one real-like
+recording with known parameters and estimates them from it alone
+(``experiments.pipeline.demo``). Every stage resumes from what ``--workdir``
+holds.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import os
-import time
 
-from absl import app, flags, logging
+from absl import logging
 
-import physsim
-from experiments import estimate as estimate_lib
-from experiments import generate_dataset as gen
-from experiments import train as train_lib
-
-FLAGS = flags.FLAGS
-
-_RES = 32  # image size
-_FRAMES = 16  # at 20 Hz: 0.8 s clips
-_CLOTH = 10  # vertices per side
+from experiments.pipeline import cli
+from experiments.pipeline import demo as demo_lib
 
 
-def configs(material: str, sequences: int, seed: int, backend: str):
-  """(training set, recording, training, estimate) configs of the demo."""
-  data = dataclasses.replace(
-    gen.PRESETS['paper'],
-    materials=(material,),
-    sequences=sequences,
-    frames=_FRAMES,
-    warmup=0.5,
-    cameras=3,
-    resolution=_RES,
-    cloth_resolution=_CLOTH,
-    backend=backend,
-    batch_size=sequences,
-  )
-  recording = dataclasses.replace(
-    gen.PRESETS['eval'],
-    materials=(material,),
-    sequences=1,
-    batch_size=1,
-    frames=20,  # 24 fps -> 16 frames at 20 Hz
-    warmup=0.5,
-    cloth_resolution=_CLOTH + 3,
-    resolution=_RES,
-    backend=backend,
-    seed=1000 + seed,
-  )
-  training = dataclasses.replace(
-    train_lib.PRESETS['smoke'],
-    conv_features=(16, 32),
-    dense_features=(64,),
-    epochs=10,
-    lr_step_epochs=6,
-    batch_size=32,
-  )
-  est = dataclasses.replace(
-    estimate_lib.EstimateConfig(material=material),
-    cloth_resolution=_CLOTH,
-    frames=_FRAMES,
-    warmup=0.5,
-    q=4,
-    n_init=8,
-    max_iter=10,
-    backend=backend,
-    seed=seed,
-  )
-  return data, recording, training, est
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The demo from the command line.
+
+  Attributes:
+    workdir: data, model, recording and estimate go here.
+    material: the fabric (physsim.FABRICS).
+    sequences: training simulations.
+    seed: seed of the recording (its ground truth) and of the search.
+    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+  """
+
+  workdir: str = 'out/demo'
+  material: str = 'gray_interlock'
+  sequences: int = 24
+  seed: int = 0
+  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
 
 
-def run(workdir: str, material: str, sequences: int, seed: int, backend: str):
-  data_cfg, rec_cfg, train_cfg, est_cfg = configs(material, sequences, seed, backend)
-  t0 = time.time()
-  print('== 1/4 training set', flush=True)
-  gen.run(data_cfg, os.path.join(workdir, 'data'))
-  print('== 2/4 training PhySNet', flush=True)
-  train_lib.run(
-    train_cfg, os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
-  )
-  print('== 3/4 a real-like recording', flush=True)
-  rec_root = os.path.join(workdir, 'recording')
-  gen.run(rec_cfg, rec_root)
-  rec_dir = physsim.dataset.sequence_dir(rec_root, material, '0000')
-  rec = estimate_lib.load_recording(
-    rec_dir, fps=est_cfg.fps, size=(_RES, _RES), frames=_FRAMES
-  )
-  print('== 4/4 estimate', flush=True)
-  result = estimate_lib.estimate(
-    est_cfg, rec, os.path.join(workdir, 'model', material), workdir + '/estimate'
-  )
-  print(estimate_lib.report_table(result))
-  print(f'total {time.time() - t0:.0f} s; pictures in {workdir}/estimate')
-  return result
-
-
-def define_flags() -> None:
-  """The demo's flags, defined only when it runs as a script: importing
-  ``run`` beside another script's flags (``--sequences``...) must not clash."""
-  flags.DEFINE_string('workdir', 'out/demo', 'everything goes here')
-  flags.DEFINE_string('material', 'gray_interlock', 'paper fabric name')
-  flags.DEFINE_integer('sequences', 24, 'training simulations')
-  flags.DEFINE_integer('seed', 0, 'seed of the recording (ground truth) and search')
-  flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on GPU")
-
-
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
-  run(FLAGS.workdir, FLAGS.material, FLAGS.sequences, FLAGS.seed, FLAGS.backend)
+  demo_lib.run(args.workdir, args.material, args.sequences, args.seed, args.backend)
 
 
 if __name__ == '__main__':
-  define_flags()
-  app.run(main)
+  cli.run(Args, {'default': Args()}, main)

@@ -1,385 +1,51 @@
-"""The estimate's objective landscape around a known truth, and what physics can tell apart.
+r"""The estimate's objective landscape around a known truth, and what physics tells apart.
 
-For a recording with ground truth (a dataset sequence folder) and a trained
-PhySNet run, this evaluates the estimate's objective (``make_objective``):
-
-  (a) along each parameter through the truth, the other two held at the truth;
-  (b) over a grid of the (wind speed, area weight) plane at the true bending;
-
-and, on the same grid's simulations without any network, the motion statistics
-(``physsim.motion.motion_stats``: mean deflection, the centre's dominant
-frequency, its flutter share) against the dimensionless load ratio
-``rho v^2 / (w g)`` (air density 1 kg/m^3 as ArcSim, g = 9.81 m/s^2). Where a
-statistic is a function of that ratio alone, the dynamics cannot separate wind
-from area weight along the ratio's iso-lines; ``landscape.json`` gives, per
-statistic and for the PSD, the variance share a cubic in log ratio explains and
-the share gained by also knowing the wind.
-
-  python -m experiments.landscape --recording=out/demo/recording/gray_interlock/0000 \\
+  python -m experiments.landscape --recording=out/demo/recording/gray_interlock/0000 \
       --model=out/demo/model/gray_interlock --workdir=out/landscape --preset=smoke
 
-Writes ``landscape_1d.png``, ``landscape_wind_weight.png``, ``identifiability.png``
-and ``landscape.json``. Simulations run in batches of ``batch`` candidates (one
-MJX batch on a GPU); finished batches are kept in ``landscape_state.npz`` and a
-rerun resumes from them.
+What it evaluates and writes: ``experiments.studies.landscape``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import time
 
-import matplotlib
-import numpy as np
+from absl import logging
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-import model as model_lib  # noqa: E402
-import physsim  # noqa: E402
-from experiments import estimate as est
-from experiments import files, separability  # noqa: E402
-from experiments import train as train_lib  # noqa: E402
-
-STATS = ('mean_deflection_m', 'centre_dominant_hz', 'flutter_fraction')
-STATE_FILE = 'landscape_state.npz'
+from experiments.pipeline import cli
+from experiments.studies import landscape as landscape_lib
 
 
 @dataclasses.dataclass(frozen=True)
-class Config:
-  """A landscape study.
+class Args:
+  """A landscape study from the command line.
 
   Attributes:
-    objective: the estimate settings whose objective is mapped (simulation
-      size, frames, gusts, backend, seed; ``material`` is the recording's).
-    points_1d: values per parameter along its whole range (the truth added).
-    grid: (wind speed, area weight) grid points per side.
-    batch: candidates simulated per call.
+    recording: a dataset sequence folder with ground truth (meta.json).
+    model: a trained PhySNet run.
+    workdir: PNGs, JSON and the resumable state go here.
+    study: what is evaluated.
   """
 
-  objective: est.EstimateConfig = est.EstimateConfig()
-  points_1d: int = 15
-  grid: int = 9
-  batch: int = 16
+  recording: str = cli.required()
+  model: str = cli.required()
+  workdir: str = 'out/landscape'
+  study: landscape_lib.Config = landscape_lib.Config()
 
 
-PRESETS = {
-  'default': Config(),
-  # The demo's estimate settings at a few points: about a minute on a CPU.
-  'smoke': Config(
-    objective=est.EstimateConfig(cloth_resolution=10, frames=16, warmup=0.5),
-    points_1d=5,
-    grid=4,
-    batch=8,
-  ),
-}
+PRESETS = {k: Args(study=v) for k, v in landscape_lib.PRESETS.items()}
 
 
-def points(config: Config, u_truth: np.ndarray) -> tuple[np.ndarray, dict]:
-  """All unit-cube points of the study, in evaluation order.
-
-  Args:
-    config: the study.
-    u_truth: (3,) the truth in unit coordinates.
-
-  Returns:
-    ``(U, parts)``: ``U`` is (N, 3); ``parts`` maps 'line_<i>' (one per
-    parameter, its ``points_1d + 1`` points sorted along parameter i) and
-    'grid' (``grid**2`` points, wind-major: row = wind index) to index arrays
-    into ``U``.
-  """
-  u_truth = np.asarray(u_truth, np.float64)
-  blocks, parts, n = [], {}, 0
-  for i in range(3):
-    line = np.unique(np.append(np.linspace(-1, 1, config.points_1d), u_truth[i]))
-    block = np.tile(u_truth, (len(line), 1))
-    block[:, i] = line
-    blocks.append(block)
-    parts[f'line_{i}'] = np.arange(n, n + len(block))
-    n += len(block)
-  g = np.linspace(-1, 1, config.grid)
-  wind, weight = np.meshgrid(g, g, indexing='ij')
-  block = np.tile(u_truth, (config.grid**2, 1))
-  block[:, 1], block[:, 2] = wind.ravel(), weight.ravel()
-  blocks.append(block)
-  parts['grid'] = np.arange(n, n + len(block))
-  return np.concatenate(blocks), parts
-
-
-def ratio_r2(stat, wind_speed, area_weight) -> dict:
-  """How much of a statistic the load ratio explains, and what wind adds.
-
-  Least-squares fits of ``stat`` against a cubic in log ratio, then against
-  that cubic plus a quadratic in log wind speed (so area weight enters too).
-
-  Args:
-    stat: (N,) values; non-finite ones are left out.
-    wind_speed: (N,) m/s.
-    area_weight: (N,) kg/m^2.
-
-  Returns:
-    ``{'r2_ratio', 'r2_ratio_and_wind', 'n'}`` (NaN when too few points).
-  """
-  y = np.asarray(stat, np.float64)
-  r = separability.nested_r2(
-    y,
-    np.log(physsim.load_ratio(wind_speed, area_weight)),
-    np.log(np.asarray(wind_speed, np.float64)),
-  )
-  return {
-    'r2_ratio': r['r2_base'],
-    'r2_ratio_and_wind': r['r2_added'],
-    'n': int(np.isfinite(y).sum()),
-  }
-
-
-def _signature(config: Config, recording: est.Recording, model_dir: str) -> str:
-  return json.dumps(
-    {
-      'config': dataclasses.asdict(config),
-      'recording': os.path.abspath(recording.source),
-      'model': os.path.abspath(model_dir),
-    },
-    sort_keys=True,
-  )
-
-
-def evaluate_points(obj: est.Objective, U, mesh, fps, batch, state_path, signature):
-  """(N,) PSD and (N, len(STATS)) motion stats of unit points ``U``, resumable."""
-  n = len(U)
-  psd = np.full(n, np.nan)
-  stats = np.full((n, len(STATS)), np.nan)
-  done = 0
-  if os.path.exists(state_path):
-    with np.load(state_path) as z:
-      if str(z['signature']) != signature:
-        raise ValueError(f'{state_path} belongs to another study; use a new workdir')
-      done = int(z['done'])
-      psd[:done], stats[:done] = z['psd'][:done], z['stats'][:done]
-  with tqdm(total=n, initial=done, desc='simulations', unit='sim') as bar:
-    while done < n:
-      u = U[done : done + batch]
-      y, positions, valid = obj.evaluate(u)
-      psd[done : done + len(u)] = y
-      for j in range(len(u)):
-        if valid[j]:
-          s = physsim.motion.motion_stats(mesh, np.asarray(positions[j]), fps)
-          stats[done + j] = [s[k] for k in STATS]
-      done += len(u)
-      bar.update(len(u))
-
-      def write(p, done=done):
-        with open(p, 'wb') as f:
-          np.savez(f, signature=signature, done=done, psd=psd, stats=stats)
-
-      files.write_atomic(state_path, write)
-  return psd, stats
-
-
-def run(config: Config, recording_dir: str, model_dir: str, workdir: str) -> dict:
-  """Runs (or resumes) the study; returns and writes ``landscape.json``."""
-  t0 = time.time()
-  network, net_params, net_config = model_lib.load_network(model_dir)
-  meta = est._read_json(os.path.join(recording_dir, 'meta.json'))
-  obj_config = dataclasses.replace(
-    config.objective, material=meta.get('material', config.objective.material)
-  )
-  config = dataclasses.replace(config, objective=obj_config)
-  rec = est.load_recording(
-    recording_dir,
-    fps=obj_config.fps,
-    size=tuple(net_config.physnet.image_size),
-    frames=obj_config.frames,
-  )
-  if rec.truth is None:
-    raise ValueError(f'{recording_dir}: no ground truth (meta.json wind_speed, ...)')
-  obj = est.make_objective(
-    obj_config, network, net_params, train_lib.input_mode(model_dir), rec
-  )
-  space = obj.space
-  truth = physsim.params.make(**rec.truth)
-  u_truth = np.asarray(physsim.to_unit(truth, space), np.float64).ravel()
-  U, parts = points(config, u_truth)
-  os.makedirs(workdir, exist_ok=True)
-  psd, stats = evaluate_points(
-    obj,
-    U,
-    obj.mesh,
-    obj_config.fps,
-    config.batch,
-    os.path.join(workdir, STATE_FILE),
-    _signature(config, rec, model_dir),
-  )
-  P = np.stack([np.ravel(a) for a in physsim.from_unit(U, space)], 1)  # (N, 3)
-  names = physsim.Params._fields
-
-  lines = {}
-  for i, name in enumerate(names):
-    idx = parts[f'line_{i}']
-    y = psd[idx]
-    best = int(np.nanargmin(y)) if np.isfinite(y).any() else None
-    lines[name] = {
-      'values': P[idx, i].tolist(),
-      'psd': y.tolist(),
-      'argmin': None if best is None else float(P[idx[best], i]),
-      'truth': float(rec.truth[name]),
-    }
-  g = parts['grid']
-  wind, weight = P[g, 1], P[g, 2]
-  grid_psd = psd[g]
-  k = int(np.nanargmin(grid_psd)) if np.isfinite(grid_psd).any() else None
-  truth_ratio = float(
-    physsim.load_ratio(rec.truth['wind_speed'], rec.truth['area_weight'])
-  )
-  result = {
-    'recording': rec.source,
-    'model': model_dir,
-    'material': obj_config.material,
-    'truth': rec.truth,
-    'truth_ratio': truth_ratio,
-    'psd_truth': float(psd[parts['line_0']][np.argmin(np.abs(U[parts['line_0'], 0] - u_truth[0]))]),
-    'line': lines,
-    'grid': {
-      'wind_speed': np.unique(wind).tolist(),
-      'area_weight': np.unique(weight).tolist(),
-      'psd': grid_psd.reshape(config.grid, config.grid).tolist(),  # [wind, weight]
-      'argmin': None
-      if k is None
-      else {'wind_speed': float(wind[k]), 'area_weight': float(weight[k]),
-            'ratio': float(physsim.load_ratio(wind[k], weight[k])), 'psd': float(grid_psd[k])},
-      'psd_vs_ratio': ratio_r2(np.log(grid_psd), wind, weight),
-    },
-    'identifiability': {
-      'stats': {s: stats[g, j].tolist() for j, s in enumerate(STATS)},
-      'ratio': physsim.load_ratio(wind, weight).tolist(),
-      **{s: ratio_r2(stats[g, j], wind, weight) for j, s in enumerate(STATS)},
-    },
-    'failed_simulations': int(np.sum(~np.isfinite(psd))),
-    'config': dataclasses.asdict(config),
-    'seconds': time.time() - t0,
-  }  # fmt: skip
-  files.write_json(os.path.join(workdir, 'landscape.json'), result)
-  plot_lines(lines, space, os.path.join(workdir, 'landscape_1d.png'))
-  plot_grid(
-    result['grid'], rec.truth, os.path.join(workdir, 'landscape_wind_weight.png')
-  )
-  plot_identifiability(
-    result['identifiability'], wind, truth_ratio,
-    os.path.join(workdir, 'identifiability.png'),
-  )  # fmt: skip
-  return result
-
-
-# -------------------------------------------------------------------- figures
-
-
-def plot_lines(lines: dict, space, path: str) -> None:
-  """PSD along each parameter through the truth (three panels)."""
-  labels = ['bending scale', 'wind speed (m/s)', 'area weight (kg/m$^2$)']
-  fig, axes = plt.subplots(1, 3, figsize=(13, 3.4))
-  for ax, (name, line), label in zip(axes, lines.items(), labels, strict=True):
-    ax.plot(line['values'], line['psd'], 'o-', color='k', ms=4)
-    ax.axvline(line['truth'], color='r', lw=1, label='truth')
-    ax.set(xlabel=label, ylabel='PSD', xlim=getattr(space, name))
-    if name == 'bending_scale':
-      ax.set_xscale('log')
-    ax.legend(fontsize=8)
-  fig.tight_layout()
-  files.savefig(fig, path, dpi=90)
-  plt.close(fig)
-
-
-def plot_grid(grid: dict, truth: dict, path: str) -> None:
-  """log PSD over (wind speed, area weight) with iso-lines of v^2 / w."""
-  v, w = np.asarray(grid['wind_speed']), np.asarray(grid['area_weight'])
-  z = np.log10(np.asarray(grid['psd']))  # [wind, weight]
-  fig, ax = plt.subplots(figsize=(6, 4.6))
-  dv, dw = np.diff(v).mean() / 2, np.diff(w).mean() / 2
-  im = ax.imshow(
-    z.T, origin='lower', aspect='auto', cmap='viridis',
-    extent=(v[0] - dv, v[-1] + dv, w[0] - dw, w[-1] + dw),
-  )  # fmt: skip
-  fig.colorbar(im, ax=ax, label='log$_{10}$ PSD')
-  fv, fw = np.meshgrid(np.linspace(v[0], v[-1], 100), np.linspace(w[0], w[-1], 100))
-  cs = ax.contour(
-    fv, fw, physsim.load_ratio(fv, fw), levels=8, colors='w', linewidths=0.7
-  )
-  ax.clabel(cs, fontsize=7, fmt='%.1f')
-  ax.plot(truth['wind_speed'], truth['area_weight'], 'r*', ms=14, label='truth')
-  if grid['argmin'] is not None:
-    a = grid['argmin']
-    ax.plot(a['wind_speed'], a['area_weight'], 'wx', ms=10, label='grid minimum')
-  ax.set(xlabel='wind speed (m/s)', ylabel='area weight (kg/m$^2$)',
-         title='PSD; white: $\\rho v^2 / (w g)$')  # fmt: skip
-  ax.legend(fontsize=8, loc='upper left')
-  fig.tight_layout()
-  files.savefig(fig, path, dpi=90)
-  plt.close(fig)
-
-
-def plot_identifiability(ident: dict, wind, truth_ratio: float, path: str) -> None:
-  """Each motion statistic against the load ratio, coloured by wind speed."""
-  ratio = np.asarray(ident['ratio'])
-  fig, axes = plt.subplots(1, len(STATS), figsize=(14, 3.8), layout='constrained')
-  for ax, s in zip(axes, STATS, strict=True):
-    sc = ax.scatter(ratio, ident['stats'][s], c=wind, cmap='plasma', s=22)
-    ax.axvline(truth_ratio, color='r', lw=1)
-    r = ident[s]
-    ax.set(xscale='log', xlabel='$\\rho v^2 / (w g)$', ylabel=s,
-           title=f'R$^2$ ratio {r["r2_ratio"]:.2f}, +wind {r["r2_ratio_and_wind"]:.2f}')  # fmt: skip
-  fig.colorbar(sc, ax=axes, label='wind speed (m/s)')
-  files.savefig(fig, path, dpi=90)
-  plt.close(fig)
-
-
-# ------------------------------------------------------------------------ CLI
-
-
-def main(argv):
-  from absl import flags, logging
-
-  del argv
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
-  f = flags.FLAGS
-  config = PRESETS[f.preset]
-  over = {k: getattr(f, k) for k in ('backend', 'seed', 'workers') if f[k].present}
-  if over:
-    config = dataclasses.replace(
-      config, objective=dataclasses.replace(config.objective, **over)
-    )
-  for k in ('points_1d', 'grid', 'batch'):
-    if f[k].present:
-      config = dataclasses.replace(config, **{k: getattr(f, k)})
-  result = run(config, f.recording, f.model, f.workdir)
+  result = landscape_lib.run(args.study, args.recording, args.model, args.workdir)
   print(json.dumps({k: result[k] for k in ('truth', 'truth_ratio', 'psd_truth')}))
   print(json.dumps({'grid_argmin': result['grid']['argmin']}))
-  for s in ('psd_vs_ratio',):
-    print(s, json.dumps(result['grid'][s]))
-  for s in STATS:
+  print('psd_vs_ratio', json.dumps(result['grid']['psd_vs_ratio']))
+  for s in landscape_lib.STATS:
     print(s, json.dumps(result['identifiability'][s]))
 
 
-def _define_flags():
-  from absl import flags
-
-  flags.DEFINE_string('recording', None, 'dataset sequence folder with ground truth')
-  flags.DEFINE_string('model', None, 'trained PhySNet run (experiments.train)')
-  flags.DEFINE_string('workdir', 'out/landscape', 'PNGs, JSON and state')
-  flags.DEFINE_enum('preset', 'default', list(PRESETS), 'sizes')
-  flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], 'simulator')
-  flags.DEFINE_integer('seed', 0, 'gusts and cameras')
-  flags.DEFINE_integer('workers', 0, 'C backend processes (0: one per core)')
-  flags.DEFINE_integer('points_1d', 15, 'values per parameter line')
-  flags.DEFINE_integer('grid', 9, 'grid points per side')
-  flags.DEFINE_integer('batch', 16, 'candidates per simulation call')
-  flags.mark_flags_as_required(['recording', 'model'])
-
-
 if __name__ == '__main__':
-  from absl import app
-
-  _define_flags()
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -1,91 +1,49 @@
-"""The real-like evaluation set: seven fabrics and three garments with ground truth.
-
-The paper's recordings are not public, so we make recordings that differ from
-the training data the way reality does (``generate_dataset``'s ``eval``
-preset: finer mesh, depth-sensor noise, 24 fps for 2.5 s, camera poses the
-training set never used, gustier wind, one camera) and keep their ground truth.
-Each recording also has colour frames (``cam0/rgb_*.png``, the fabric's colour,
-no noise), so one set serves the depth and the RGB methods.
-Garments follow the paper: a T-shirt of interlock, a shirt of tablecloth and
-jeans of denim, each later estimated with the network of its fabric.
+"""Make the real-like evaluation set: seven fabrics and three garments with ground truth.
 
   python -m experiments.make_eval_set --out=data/eval
-  python -m experiments.make_eval_set --out=/tmp/eval --smoke
+  python -m experiments.make_eval_set --out=/tmp/eval --preset=smoke
 
-Layout: ``<out>/fabrics`` (all seven) and ``<out>/<garment>``, each a
-``physsim.dataset`` root; reruns resume.
+How it differs from the training data: ``experiments.pipeline.eval_set``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from absl import app, flags, logging
+from absl import logging
 
-from experiments import generate_dataset as gen
-
-# The paper's garments and the fabric each is made of.
-GARMENT_FABRICS = {
-  'tshirt': 'gray_interlock',
-  'shirt': 'white_tablecloth',
-  'jeans': 'black_denim',
-}
-
-FLAGS = flags.FLAGS
+from experiments.pipeline import cli, eval_set
 
 
-def define_flags() -> None:
-  flags.DEFINE_string('out', 'data/eval', 'evaluation set root')
-  flags.DEFINE_integer('sequences', None, 'recordings per fabric/garment (default 3)')
-  flags.DEFINE_integer('resolution', None, 'image size (default 256)')
-  flags.DEFINE_bool('smoke', False, 'tiny: 2 fabrics, 1 garment, small images (CPU)')
-  flags.DEFINE_string('backend', None, "override 'auto'")
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The evaluation set from the command line.
+
+  Attributes:
+    out: the set's root (fabrics/ and one folder per garment).
+    smoke: tiny: 2 fabrics, 1 garment, small images (CPU).
+    sequences: recordings per fabric and garment (0: 3).
+    resolution: image width = height, pixels (0: 256).
+    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+  """
+
+  out: str = 'data/eval'
+  smoke: bool = False
+  sequences: int = 0
+  resolution: int = 0
+  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
 
 
-def configs(smoke: bool = False, **overrides) -> dict[str, gen.Config]:
-  """Subfolder name -> dataset config of the evaluation set."""
-  base = dataclasses.replace(gen.PRESETS['eval'], rgb=True)
-  if smoke:
-    base = dataclasses.replace(
-      base,
-      sequences=1,
-      batch_size=1,
-      frames=12,
-      warmup=0.5,
-      cloth_resolution=12,
-      resolution=64,
-      backend='c',
-      workers=1,
-    )
-  base = dataclasses.replace(base, **{k: v for k, v in overrides.items() if v})
-  out = {
-    'fabrics': dataclasses.replace(
-      base, materials=('gray_interlock', 'black_denim') if smoke else base.materials
-    )
-  }
-  for garment, fabric in list(GARMENT_FABRICS.items())[: 1 if smoke else None]:
-    out[garment] = dataclasses.replace(
-      base,
-      materials=(fabric,),
-      garment=garment,
-      garment_spacing=0.08 if smoke else 0.03,
-    )
-  return out
+PRESETS = {'default': Args(), 'smoke': Args(smoke=True, backend='c')}
 
 
-def main(argv):
-  del argv
-  logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
-  overrides = dict(
-    sequences=FLAGS.sequences, resolution=FLAGS.resolution, backend=FLAGS.backend
-  )
-  for name, config in configs(FLAGS.smoke, **overrides).items():
-    if config.sequences and config.batch_size > config.sequences:
-      config = dataclasses.replace(config, batch_size=config.sequences)
-    print(f'== {name}')
-    gen.run(config, f'{FLAGS.out}/{name}')
+def main(args: Args) -> None:
+  logging.set_verbosity(logging.WARNING)
+  eval_set.run(
+    args.out, args.smoke, sequences=args.sequences, resolution=args.resolution,
+    backend=args.backend if args.backend != 'auto' else '',
+  )  # fmt: skip
 
 
 if __name__ == '__main__':
-  define_flags()
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -44,9 +44,18 @@ from physsim.render import (
   make_depth_renderer,
   render_depth,
   render_rgb,
+  render_rgb8,
   shade_rgb,
 )
-from physsim.rollout import Rollout, Wind, resolve_backend, simulate
+from physsim.rollout import (
+  Rollout,
+  Wind,
+  WorldInputs,
+  resolve_backend,
+  rollout_fn,
+  simulate,
+  world_inputs,
+)
 from physsim.sensor import SensorNoise, apply_noise, apply_noise_frames
 from physsim.video import DepthVideo, load_depth_video
 
@@ -69,6 +78,7 @@ __all__ = [
   'SensorNoise',
   'SimConfig',
   'Wind',
+  'WorldInputs',
   'apply_noise',
   'apply_noise_frames',
   'build',
@@ -90,9 +100,11 @@ __all__ = [
   'pose_to_dict',
   'reference_rigidity',
   'resolve_backend',
+  'rollout_fn',
   'render',
   'render_depth',
   'render_rgb',
+  'render_rgb8',
   'sample_gusts',
   'sample_poses',
   'search_space',
@@ -102,5 +114,6 @@ __all__ = [
   'square',
   'to_unit',
   'video',
+  'world_inputs',
   'world_to_camera',
 ]

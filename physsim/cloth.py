@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
+import jax.numpy as jnp
 import mujoco
 import numpy as np
 
@@ -132,6 +134,12 @@ class ClothModel:
   hinge_verts: np.ndarray
   hinge_coef: np.ndarray
   hinge_c16: np.ndarray
+  # Compiled rollouts and worker pools of this model (``physsim.rollout``),
+  # built on first use and kept as long as the model: a model is compiled for
+  # MJX once, whoever simulates it.
+  programs: dict = dataclasses.field(
+    default_factory=dict, compare=False, repr=False, hash=False
+  )
 
   @property
   def n_vertices(self) -> int:
@@ -148,6 +156,14 @@ class ClothModel:
     moving = self.vert_qadr >= 0
     out[..., self.vert_body[moving]] = vm[..., moving]
     return out
+
+  def body_masses_jax(self, area_weight) -> jax.Array:
+    """``body_masses`` as a traceable function: (B,) -> (B, nbody) float32."""
+    moving = self.vert_qadr >= 0
+    areas = jnp.asarray(self.mesh.vertex_areas[moving], jnp.float32)
+    out = jnp.zeros(jnp.shape(area_weight) + (self.mj_model.nbody,), jnp.float32)
+    mass = jnp.asarray(area_weight, jnp.float32)[..., None] * areas
+    return out.at[..., self.vert_body[moving]].set(mass)
 
 
 def build(

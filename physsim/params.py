@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from typing import NamedTuple
 
+import jax.numpy as jnp
 import numpy as np
 
 from physsim import materials
@@ -140,6 +141,29 @@ def from_unit(u, space: SearchSpace | None = None) -> Params:
     x = lo + (u[..., i] + 1.0) * 0.5 * (hi - lo)
     out.append(np.exp(x) if log else x)
   return make(*out)
+
+
+def unit_map(
+  space: SearchSpace | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+  """``(lo, hi, log)`` per field, each (3,): the map ``from_unit_traced`` applies
+  (bending's bounds are logs when ``space.log_bending``)."""
+  space = space or SearchSpace()
+  edges = [_edges(space, name) for name in FIELDS]
+  lo, hi, log = (np.array(col) for col in zip(*edges, strict=True))
+  return lo.astype(np.float64), hi.astype(np.float64), log.astype(bool)
+
+
+def from_unit_traced(u, lo, hi, log):
+  """``from_unit`` without checks, for inside ``jit``: ``u (..., 3)`` clipped to
+  the box, with ``unit_map``'s arrays (which may carry leading batch axes).
+
+  Returns:
+    (..., 3) physical values in field order.
+  """
+  u = jnp.clip(u, -1.0, 1.0)
+  x = lo + (u + 1.0) * 0.5 * (hi - lo)
+  return jnp.where(log, jnp.exp(x), x)
 
 
 def sample(rng: np.random.Generator, n: int, space: SearchSpace | None = None):

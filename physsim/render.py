@@ -458,6 +458,38 @@ def render_rgb(
   return _render_batched(fn, positions, poses, _default_chunk(method, chunk))
 
 
+def render_rgb8(
+  positions,
+  faces,
+  intrinsics: Intrinsics,
+  poses: Pose,
+  colors,
+  method: str = 'raster',
+) -> jax.Array:
+  """8-bit colour video of worlds of different colours, as datasets store it.
+
+  Shades in white once and tints each world (the shading is lambert times the
+  colour on a black background, so tinting commutes with it up to rounding),
+  then rounds to 8 bits.
+
+  Args:
+    positions: (B, T, V, 3) vertex trajectories, metres.
+    faces: (F, 3) int vertex indices.
+    intrinsics: static intrinsics.
+    poses: Pose with rotation (B, C, 3, 3), position (B, C, 3).
+    colors: (B, 3) RGB in [0, 1], one per world.
+    method: ``'raster'`` or ``'brute'``.
+
+  Returns:
+    (B, C, T, H, W, 3) uint8.
+  """
+  white = render_rgb(
+    positions, faces, intrinsics, poses, (1.0, 1.0, 1.0), method=method
+  )
+  tint = jnp.asarray(colors, jnp.float32)[:, None, None, None, None, :]
+  return jnp.round(jnp.clip(white * tint, 0.0, 1.0) * 255).astype(jnp.uint8)
+
+
 def make_depth_renderer(
   faces,
   intrinsics: Intrinsics,

@@ -7,9 +7,14 @@ equality constraints; each substep the rollout computes ArcSim's face wind
 (with optional gusts) and MuJoCo's bending stencil times the world's bending
 scale, and applies them as ``xfrc_applied`` on the vertex bodies.
 
-Per-world fields: ``body_mass`` (area weight), wind speed, direction, gusts and
-bending scale are all arrays, so new values never recompile. Frame count,
-substeps, mesh and batch size are static.
+Per-world fields (``WorldInputs``: ``body_mass`` from the area weight, wind
+speed, direction, gusts and bending scale) are all arrays, so new values never
+recompile. Frame count, substeps, mesh and batch size are static.
+
+Two ways in: ``simulate`` (NumPy in, NumPy out, validated) for sweeps and
+studies, and ``world_inputs`` + ``rollout_fn`` (traceable, not jitted) for a
+pipeline that fuses simulation with rendering and scoring under one ``jit``.
+A ``ClothModel`` keeps what it compiles (``ClothModel.programs``).
 """
 
 from __future__ import annotations
@@ -108,20 +113,38 @@ def _applied_forces(c: _Consts, model: ClothModel, qpos, qvel, t, w):
   x = c.rest.at[c.moving].add(qpos[c.qidx])
   v = jnp.zeros_like(c.rest).at[c.moving].set(qvel[c.qidx])
   centroid = x[c.faces].mean(axis=1)
-  u = forces.wind_velocity(centroid, t, w['speed'], w['direction'], w['gusts'])
+  u = forces.wind_velocity(centroid, t, w.speed, w.direction, w.gusts)
   cfg = model.config
   f = forces.face_wind_forces(
     x, v, c.faces, c.face_area, u, cfg.air_density, cfg.air_drag
   ) + forces.bending_forces(
-    x, v, c.hinge_verts, c.hinge_coef, c.hinge_c16, w['bending'], cfg.bending_damping
+    x, v, c.hinge_verts, c.hinge_coef, c.hinge_c16, w.bending, cfg.bending_damping
   )
   return f[c.moving]
 
 
-def _world_inputs(model, params, wind: Wind, key, dtype):
-  """Per-world arrays (leading axis B) that the rollout takes."""
-  b = params.bending_scale.shape[0]
-  direction = np.broadcast_to(np.asarray(wind.direction, np.float64), (b, 3))
+class WorldInputs(NamedTuple):
+  """Per-world arrays a rollout takes (leading axis B; a pytree of JAX arrays).
+
+  Attributes:
+    speed: (B,) mean wind speed, m/s.
+    direction: (B, 3) unit flow direction.
+    bending: (B,) bending scale relative to the model's reference rigidity.
+    gusts: ``forces.Gusts`` with a leading B axis.
+    body_mass: (B, nbody) MuJoCo body masses, kg.
+  """
+
+  speed: jax.Array
+  direction: jax.Array
+  bending: jax.Array
+  gusts: forces.Gusts
+  body_mass: jax.Array
+
+
+def check_wind(wind: Wind) -> np.ndarray:
+  """The wind's unit direction(s); raises ValueError on a bad direction or
+  gust intensity (host-side, before anything is traced)."""
+  direction = np.asarray(wind.direction, np.float64)
   norm = np.linalg.norm(direction, axis=-1, keepdims=True)
   if not np.all(np.isfinite(direction)) or np.any(norm < 1e-9):
     raise ValueError(
@@ -129,6 +152,50 @@ def _world_inputs(model, params, wind: Wind, key, dtype):
     )
   if not (0.0 <= wind.gust_intensity <= 1.0):
     raise ValueError(f'gust_intensity must be in [0, 1], got {wind.gust_intensity}')
+  return direction / norm
+
+
+def world_inputs(
+  model: ClothModel,
+  bending_scale,
+  wind_speed,
+  area_weight,
+  keys: jax.Array,
+  wind: Wind,
+  rigidity_ratio=1.0,
+) -> WorldInputs:
+  """Per-world rollout inputs, traceable (no host round trip).
+
+  Args:
+    model: the compiled cloth.
+    bending_scale, wind_speed, area_weight: (B,) physical parameters (trusted:
+      validate at the boundary, e.g. ``params.validate``).
+    keys: (B,) gust keys, one per world.
+    wind: shared wind settings (checked with ``check_wind``).
+    rigidity_ratio: scalar or (B,): the worlds' fabrics' reference rigidity
+      over the model's (``reference_rigidity``), so one compiled model
+      simulates every fabric of its mesh.
+
+  Returns:
+    ``WorldInputs`` in float32.
+  """
+  direction = check_wind(wind)
+  b = jnp.shape(wind_speed)[0]
+  gusts = jax.vmap(
+    lambda k: forces.sample_gusts(k, wind.gust_intensity, wind.gust_modes)
+  )(keys)
+  f32 = lambda a: jnp.asarray(a, jnp.float32)
+  return WorldInputs(
+    speed=f32(wind_speed),
+    direction=jnp.broadcast_to(f32(direction), (b, 3)),
+    bending=f32(bending_scale) * f32(rigidity_ratio),
+    gusts=jax.tree.map(f32, gusts),
+    body_mass=model.body_masses_jax(area_weight),
+  )
+
+
+def _world_keys(key, b: int, wind: Wind):
+  """(B,) gust keys from one key (split) or B keys (used as given)."""
   if wind.gust_intensity > 0 and key is None:
     raise ValueError('gusty wind needs a PRNG key (simulate(..., key=...))')
   key = jax.random.key(0) if key is None else key
@@ -136,19 +203,8 @@ def _world_inputs(model, params, wind: Wind, key, dtype):
   if key.ndim == (1 if typed else 2):  # one key per world, used as given
     if key.shape[0] != b:
       raise ValueError(f'got {key.shape[0]} gust keys for {b} worlds')
-    keys = key
-  else:
-    keys = jax.random.split(key, b)
-  gusts = jax.vmap(
-    lambda k: forces.sample_gusts(k, wind.gust_intensity, wind.gust_modes)
-  )(keys)
-  return {
-    'speed': jnp.asarray(params.wind_speed, dtype),
-    'direction': jnp.asarray(direction / norm, dtype),
-    'bending': jnp.asarray(params.bending_scale, dtype),
-    'gusts': jax.tree.map(lambda a: jnp.asarray(a, dtype), gusts),
-    'body_mass': jnp.asarray(model.body_masses(params.area_weight), dtype),
-  }
+    return key
+  return jax.random.split(key, b)
 
 
 def _frame_plan(model: ClothModel, frames: int, fps: float, warmup: float):
@@ -172,8 +228,8 @@ def _valid(positions, rest):
 # ---------------------------------------------------------------- MJX backend
 
 
-def _mjx_rollout_fn(model: ClothModel, frames: int, substeps: int, warm_frames: int):
-  """A jitted ``(world_inputs) -> (positions (B,T,V,3), valid (B,))``."""
+def _mjx_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: int):
+  """A traceable ``(WorldInputs) -> (positions (B,T,V,3), valid (B,))``."""
   from mujoco import mjx  # imported lazily: the C backend works without it
 
   m = model.mj_model
@@ -193,8 +249,8 @@ def _mjx_rollout_fn(model: ClothModel, frames: int, substeps: int, warm_frames: 
   dt = model.config.timestep
   nbody = m.nbody
 
-  def world(w, d):
-    mxw = mx.replace(body_mass=w['body_mass'])
+  def world(w: WorldInputs, d):
+    mxw = mx.replace(body_mass=w.body_mass)
 
     def substep(d, t):
       f = _applied_forces(c, model, d.qpos, d.qvel, t, w)
@@ -209,25 +265,12 @@ def _mjx_rollout_fn(model: ClothModel, frames: int, substeps: int, warm_frames: 
     _, xs = jax.lax.scan(frame, d, warm_frames + jnp.arange(frames))
     return xs  # (T, V, 3)
 
-  @jax.jit
-  def run(w):
+  def run(w: WorldInputs):
     # d0 is shared: MJX-warp broadcasts the data fields it writes per world.
     xs = jax.vmap(world, in_axes=(0, None))(w, d0)  # (B, T, V, 3)
     return xs, _valid(xs, c.rest)
 
   return run
-
-
-_MJX_CACHE: dict = {}
-
-
-def mjx_rollout_fn(model: ClothModel, frames: int = 60, fps: float = 20.0, warmup=1.0):
-  """The cached jitted MJX rollout for ``model`` (exposed for benchmarks)."""
-  substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
-  k = (id(model), frames, substeps, warm_frames)
-  if k not in _MJX_CACHE:
-    _MJX_CACHE[k] = (model, _mjx_rollout_fn(model, frames, substeps, warm_frames))
-  return _MJX_CACHE[k][1]
 
 
 # ------------------------------------------------------------ MuJoCo C backend
@@ -337,23 +380,35 @@ def _c_worker(args):
   return [_c_world(model, w, frames, substeps, warm_frames) for w in worlds]
 
 
-def _c_rollout(model, w, frames, substeps, warm_frames, workers):
+def _c_pool(model: ClothModel, workers: int):
+  """The model's pool of ``workers`` MuJoCo C processes, started once (spawned:
+  JAX is not fork-safe) and kept with the model, so repeated batches do not pay
+  the start-up of fresh interpreters."""
+  key = ('c_pool', workers)
+  if key not in model.programs:
+    ctx = multiprocessing.get_context('spawn')
+    model.programs[key] = concurrent.futures.ProcessPoolExecutor(
+      workers, mp_context=ctx
+    )
+  return model.programs[key]
+
+
+def _c_rollout(model, w: dict, frames, substeps, warm_frames, workers):
+  """Host rollout of every world on MuJoCo C: ``w`` holds ``WorldInputs``
+  fields as NumPy arrays. Returns (positions (B,T,V,3) float64, valid (B,))."""
   b = int(w['speed'].shape[0])
   worlds = [_np_world_inputs(w, i) for i in range(b)]
-  if workers <= 1 or b == 1:
+  workers = min(workers, b)
+  if workers <= 1:
     xs = [_c_world(model, wi, frames, substeps, warm_frames) for wi in worlds]
   else:
     chunks = [worlds[i::workers] for i in range(workers)]
-    ctx = multiprocessing.get_context('spawn')  # JAX is not fork-safe
-    with (
-      cpu_only_children(),
-      concurrent.futures.ProcessPoolExecutor(workers, mp_context=ctx) as pool,
-    ):
-      args = [
-        (model.mesh, model.material, model.config, ch, frames, substeps, warm_frames)
-        for ch in chunks
-      ]
-      parts = list(pool.map(_c_worker, args))
+    args = [
+      (model.mesh, model.material, model.config, ch, frames, substeps, warm_frames)
+      for ch in chunks
+    ]
+    with cpu_only_children():  # workers spawned now keep off the GPU
+      parts = list(_c_pool(model, workers).map(_c_worker, args))
     xs = [None] * b
     for i, part in enumerate(parts):
       for j, x in enumerate(part):
@@ -362,6 +417,30 @@ def _c_rollout(model, w, frames, substeps, warm_frames, workers):
   finite = np.all(np.isfinite(xs), axis=(1, 2, 3))
   disp = np.nanmax(np.abs(xs - model.mesh.vertices), axis=(1, 2, 3))
   return xs, finite & (disp < MAX_DISPLACEMENT)
+
+
+def _c_callback_rollout(
+  model: ClothModel, frames: int, substeps: int, warm_frames: int, workers: int
+):
+  """MuJoCo C as a traceable ``(WorldInputs) -> (positions, valid)``: a
+  ``jax.pure_callback`` to the host rollout, so a jitted pipeline keeps one
+  shape whichever backend simulates."""
+  v = model.n_vertices
+
+  def host(w):
+    w = jax.tree.map(np.asarray, w)._asdict()
+    xs, valid = _c_rollout(model, w, frames, substeps, warm_frames, workers)
+    return xs.astype(np.float32), valid
+
+  def run(w: WorldInputs):
+    b = w.speed.shape[0]
+    out = (
+      jax.ShapeDtypeStruct((b, frames, v, 3), jnp.float32),
+      jax.ShapeDtypeStruct((b,), jnp.bool_),
+    )
+    return jax.pure_callback(host, out, w)
+
+  return run
 
 
 # ------------------------------------------------------------------ public API
@@ -375,6 +454,66 @@ def resolve_backend(name: str) -> str:
   if name not in ('mjx', 'c'):
     raise ValueError(f"backend must be 'auto', 'mjx' or 'c', got {name!r}")
   return name
+
+
+def rollout_fn(
+  model: ClothModel,
+  *,
+  frames: int = 60,
+  fps: float = 20.0,
+  warmup: float = 1.0,
+  backend: str = 'mjx',
+  workers: int | None = None,
+):
+  """The rollout as a traceable ``(WorldInputs) -> (positions, valid)``.
+
+  Not jitted: callers fuse it with what follows (rendering, scoring) under
+  their own ``jax.jit``. Built once per setting and kept with the model.
+
+  Args:
+    model: compiled cloth.
+    frames, fps, warmup: the frame plan (as ``simulate``).
+    backend: ``'mjx'`` (traced MJX-warp) or ``'c'`` (MuJoCo C through a host
+      callback, ``workers`` processes; default all cores).
+    workers: see ``backend``.
+
+  Returns:
+    ``fn(w) -> (positions (B, T, V, 3) float32, valid (B,) bool)``.
+  """
+  substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
+  backend = resolve_backend(backend)
+  workers = workers or os.cpu_count() or 1
+  key = ('rollout', backend, frames, substeps, warm_frames)
+  key += (workers,) if backend == 'c' else ()
+  if key not in model.programs:
+    if backend == 'mjx':
+      fn = _mjx_rollout(model, frames, substeps, warm_frames)
+    else:
+      fn = _c_callback_rollout(model, frames, substeps, warm_frames, workers)
+    model.programs[key] = fn
+  return model.programs[key]
+
+
+def mjx_program(model: ClothModel, frames: int = 60, fps: float = 20.0, warmup=1.0):
+  """The jitted MJX rollout ``(WorldInputs) -> (positions, valid)`` that
+  ``simulate`` runs (kept with the model; exposed for benchmarks and tests)."""
+  substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
+  key = ('jit', frames, substeps, warm_frames)
+  if key not in model.programs:
+    fn = rollout_fn(model, frames=frames, fps=fps, warmup=warmup, backend='mjx')
+    model.programs[key] = jax.jit(fn)
+  return model.programs[key]
+
+
+def material_ratio(model: ClothModel, material, b: int) -> np.ndarray:
+  """(B,) reference rigidity of each world's fabric over the model's (1 where
+  ``material`` is None); raises ValueError on a count mismatch."""
+  if material is None:
+    return np.ones(b)
+  names = [material] * b if isinstance(material, str) else list(material)
+  if len(names) != b:
+    raise ValueError(f'material names {len(names)} for a batch of {b} worlds')
+  return np.array([reference_rigidity(n) for n in names]) / model.rigidity
 
 
 def simulate(
@@ -391,7 +530,7 @@ def simulate(
   workers: int | None = None,
   material: str | Sequence[str] | None = None,
 ) -> Rollout:
-  """Simulates a batch of parameter sets.
+  """Simulates a batch of parameter sets (host in, host out).
 
   Args:
     model: compiled cloth (``physsim.cloth.build``).
@@ -424,29 +563,28 @@ def simulate(
     raise ValueError(
       f'params must be scalars or 1-D batches, got {params.bending_scale.shape}'
     )
-  if material is not None:
-    b = params.bending_scale.shape[0]
-    names = [material] * b if isinstance(material, str) else list(material)
-    if len(names) != b:
-      raise ValueError(f'material names {len(names)} for a batch of {b} worlds')
-    ratio = np.array([reference_rigidity(n) for n in names]) / model.rigidity
-    params = params._replace(bending_scale=params.bending_scale * ratio)
+  b = params.bending_scale.shape[0]
+  ratio = material_ratio(model, material, b)
   wind = wind or Wind()
+  check_wind(wind)
   substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
+  if backend not in ('mjx', 'c'):
+    raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
+  keys = _world_keys(key, b, wind)
   times = np.arange(frames) / fps
   if backend == 'mjx':
-    w = _world_inputs(model, params, wind, key, jnp.float32)
-    xs, valid = mjx_rollout_fn(model, frames, fps, warmup)(w)
-    xs, valid = np.asarray(xs), np.asarray(valid)
-  elif backend == 'c':
-    w = _world_inputs(model, params, wind, key, jnp.float32)
-    w = jax.tree.map(np.asarray, w)
-    w['body_mass'] = model.body_masses(params.area_weight)
-    w['speed'], w['bending'] = params.wind_speed, params.bending_scale
-    xs, valid = _c_rollout(
-      model, w, frames, substeps, warm_frames, workers or os.cpu_count() or 1
-    )
-    xs = xs.astype(np.float32)
-  else:
-    raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
-  return Rollout(xs, valid, times)
+    w = world_inputs(model, *params, keys, wind, ratio)
+    xs, valid = mjx_program(model, frames, fps, warmup)(w)
+    return Rollout(np.asarray(xs), np.asarray(valid), times)
+  # The oracle keeps float64 parameters and masses (the gusts are float32).
+  w = world_inputs(model, *params, keys, wind, ratio)._asdict()
+  w = jax.tree.map(np.asarray, w)
+  w.update(
+    body_mass=model.body_masses(params.area_weight),
+    speed=params.wind_speed,
+    bending=params.bending_scale * ratio,
+  )
+  xs, valid = _c_rollout(
+    model, w, frames, substeps, warm_frames, workers or os.cpu_count() or 1
+  )
+  return Rollout(xs.astype(np.float32), valid, times)

@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from experiments import generate_dataset as gd
+from experiments.pipeline import datasets as gd
 from physsim import dataset
 
 # One material, four simulations (two held out by a 0.5 simulation split).

@@ -1,24 +1,12 @@
-"""Tests for experiments.demo's settings (the run itself is README's first
-command: two minutes, too long for a unit test)."""
+"""Tests of the demo's settings and its command line (the run itself is
+README's first command: minutes, too long for a unit test)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-
 import pytest
 
-from experiments import demo
-from experiments import generate_dataset as gen
-from experiments import train as train_lib
-
-
-def test_import_beside_another_scripts_flags():
-  # The demo defines its flags only as a script, so a user's script (or a
-  # test) that already defined generate_dataset's --sequences can import it.
-  gen.define_flags()
-  assert demo.run is not None
+from experiments.pipeline import demo
+from experiments.pipeline import training as train_lib
 
 
 def test_recording_differs_from_training_like_reality_and_search_matches_training():
@@ -37,22 +25,19 @@ def test_recording_differs_from_training_like_reality_and_search_matches_trainin
   # The search simulates what the network was trained on.
   assert (est.cloth_resolution, est.frames) == (data.cloth_resolution, data.frames)
   assert est.seed == 3 and rec.seed != data.seed
-  assert training.epochs <= train_lib.PRESETS['paper'].epochs
+  assert training.fit.epochs <= train_lib.PRESETS['paper'].fit.epochs
+  # On the C backend the training set comes in several batches (a bar with
+  # progress); MJX takes it in one.
+  many = demo.configs('black_denim', 24, 3, 'c')[0]
+  assert many.batch_size < many.sequences
+  assert demo.configs('black_denim', 24, 3, 'mjx')[0].batch_size == 24
 
 
-@pytest.mark.parametrize('script', ['retrieval_ablation.py', 'selection_study.py'])
-def test_scripts_built_on_the_demo_have_its_flags(script):
-  # These benchmarks take --workdir, --material, --sequences and --backend
-  # from the demo, which defines them only on request.
-  root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-  out = subprocess.run(
-    [sys.executable, os.path.join(root, 'benchmarks', script), '--helpfull'],
-    capture_output=True,
-    text=True,
-    cwd=root,
-    timeout=300,
-  )
-  text = out.stdout + out.stderr  # absl's --helpfull prints usage and exits 1
-  assert 'Traceback' not in text, text[-2000:]
-  for flag in ('--workdir', '--material', '--sequences', '--backend', '--epochs'):
-    assert f'{flag}:' in text, flag
+def test_command_line_takes_the_demo_settings():
+  from experiments import demo as script
+  from experiments.pipeline import cli
+
+  args = cli.parse(script.Args, {'default': script.Args()}, ['demo', '--seed=4'])
+  assert (args.seed, args.material, args.workdir) == (4, 'gray_interlock', 'out/demo')
+  with pytest.raises(Exception, match='backend'):
+    cli.parse(script.Args, {'default': script.Args()}, ['demo', '--backend=cuda'])

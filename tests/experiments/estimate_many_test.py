@@ -1,4 +1,4 @@
-"""Tests for experiments.estimate_many: lockstep batching changes no search.
+"""Tests of search.estimate_many: lockstep batching changes no search.
 
 Recordings and the hand-made embedding come from ``estimate_fixtures``.
 """
@@ -11,8 +11,8 @@ import os
 import numpy as np
 import pytest
 
-from experiments import estimate as est
-from experiments import estimate_many as em
+from experiments.pipeline import objective as obj_lib
+from experiments.pipeline import search as em
 from tests.experiments.estimate_fixtures import (
   CONFIG,
   TRUTH,
@@ -22,8 +22,8 @@ from tests.experiments.estimate_fixtures import (
 )
 
 OTHER_TRUTH = dict(bending_scale=3.0, wind_speed=2.0, area_weight=0.22)
-# Another simulation group: a different gust intensity is another clock/wind
-# setting, so this job is batched separately.
+# Another structure: a different gust intensity is another fused program, so
+# this job is scored in a call of its own.
 GUSTY = dataclasses.replace(CONFIG, gusts=0.3)
 # The C backend and the renderer are deterministic per world, so a candidate
 # scores the same whatever batch it is in, up to float32 rendering.
@@ -62,13 +62,13 @@ def batched(env):
 def test_lockstep_equals_one_by_one(env, batched):
   for i, (config, rec) in enumerate(env['recs']):
     alone_dir = os.path.join(env['root'], f'alone{i}')
-    alone = est.estimate(config, rec, env['model'], alone_dir, progress=False)
+    alone = em.estimate(config, rec, env['model'], alone_dir, progress=False)
     a, b = _state(alone_dir), _state(os.path.join(env['root'], f'many{i}'))
     np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
     np.testing.assert_allclose(b['Y'], a['Y'], rtol=_REPEAT_TOLERANCE)
     assert batched[i]['estimate'] == alone['estimate']
     assert batched[i]['recordings_in_batch'] == 3
-    for name in ('estimate.json', 'trace.png', 'montage.png', est.RUN_FILE):
+    for name in ('estimate.json', 'trace.png', 'montage.png', em.RUN_FILE):
       assert os.path.isfile(os.path.join(env['root'], f'many{i}', name))
   # the two fabrics' searches differ: each scored against its own recording
   assert not np.allclose(batched[0]['psd_best'], batched[1]['psd_best'])
@@ -88,19 +88,19 @@ def test_a_bad_job_does_not_stop_the_others(env, tmp_path):
 
 
 def test_resume_after_interrupt(env, batched, monkeypatch):
-  real = est.evaluate_problems
+  real = obj_lib.Objective.__call__
   calls = {'n': 0}
 
   def dying(*a, **kw):
-    if calls['n'] == 3:  # two groups: the initial design and one iteration
+    if calls['n'] == 3:  # two structures: the initial design and one iteration
       raise RuntimeError('machine taken back')
     calls['n'] += 1
     return real(*a, **kw)
 
-  monkeypatch.setattr(est, 'evaluate_problems', dying)
+  monkeypatch.setattr(obj_lib.Objective, '__call__', dying)
   with pytest.raises(RuntimeError):
     em.estimate_many(_jobs(env, 'resumed'), progress=False)
-  monkeypatch.setattr(est, 'evaluate_problems', real)
+  monkeypatch.setattr(obj_lib.Objective, '__call__', real)
   resumed = em.estimate_many(_jobs(env, 'resumed'), progress=False)
   for i in range(3):
     a = _state(os.path.join(env['root'], f'many{i}'))
@@ -116,16 +116,34 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
     em.Job(config, rec, env['model'], str(tmp_path / 'long')),
     em.Job(dataclasses.replace(config, max_iter=1), rec, env['model'], short),
   ]
-  real = est.evaluate_problems
+  real = em.Evaluator.__call__
   seen = []
 
-  def watching(problems, us, **kw):
+  def watching(self, problems, us, firsts, **kw):
     seen.append((len(problems), os.path.isfile(os.path.join(short, 'estimate.json'))))
-    return real(problems, us, **kw)
+    return real(self, problems, us, firsts, **kw)
 
-  monkeypatch.setattr(est, 'evaluate_problems', watching)
+  monkeypatch.setattr(em.Evaluator, '__call__', watching)
   out = em.estimate_many(jobs, progress=False)
   # steps: initial design (both), iteration 1 (both; the short one stops),
   # then the long one alone, with the short one's result already written
   assert seen == [(2, False), (2, False), (1, True), (1, True)]
   assert out[1]['evaluations'] == config.n_init + config.q
+
+
+def test_one_structure_is_one_call(env, monkeypatch):
+  # The two recordings of one structure (same mesh, clock, camera model,
+  # network) are scored in one fused call per step, the gusty one in another.
+  calls = []
+  real = obj_lib.Objective.__call__
+
+  def call(obj, data, u, *a, **kw):
+    calls.append(u.shape)
+    return real(obj, data, u, *a, **kw)
+
+  monkeypatch.setattr(obj_lib.Objective, '__call__', call)
+  em.estimate_many(_jobs(env, 'counted'), progress=False)
+  n_init, q = CONFIG.n_init, CONFIG.q
+  # (P, q, 3) per call: P padded to a power of two (2 recordings, then 1)
+  assert calls[:2] == [(2, n_init, 3), (1, n_init, 3)]
+  assert calls[2:4] == [(2, q, 3), (1, q, 3)]

@@ -18,9 +18,10 @@ import pytest
 
 import model as model_lib
 import physsim
-from experiments import estimate as est
-from experiments import generate_dataset as gd
-from experiments import train
+from experiments.pipeline import embedding, search
+from experiments.pipeline import objective as obj_lib
+from experiments.pipeline import recording as recording_lib
+from experiments.pipeline import training as train
 from physsim import dataset
 from tests.experiments.estimate_fixtures import (
   CLIP_FRAMES,
@@ -40,8 +41,8 @@ _SHORT = dataclasses.replace(CONFIG, max_iter=0, min_iter=0)
 _CLIP_TOLERANCE = 1e-5
 # rgb_input is uint8 / 255 on both paths: bit-exact.
 _RGB_INPUT_TOLERANCE = 0.0
-# uint8 levels by which the dataset's tinted white shading may differ from the
-# estimate's shading in the fabric colour (one float32 rounding before x255).
+# uint8 levels by which tinted white shading (datasets and estimate) may differ
+# from shading in the fabric colour (one float32 rounding before x255).
 _SHADE_LEVELS = 1
 # The fixture recording is rendered by the estimate's own RGB renderer at the
 # truth, so the truth's PSD vanishes up to float32 embedding noise.
@@ -66,7 +67,7 @@ def env(tmp_path_factory):
 )
 def test_method_runs_end_to_end(env, method):
   workdir = os.path.join(env['root'], 'run_' + '_'.join(method))
-  result = est.estimate(
+  result = search.estimate(
     _SHORT, env['rec'], env['models'][method], workdir, progress=False
   )
   assert result['evaluations'] == _SHORT.n_init + _SHORT.q * _SHORT.max_iter
@@ -78,25 +79,27 @@ def test_method_runs_end_to_end(env, method):
 
 
 def test_rgb_truth_scores_zero(env):
-  net = est.load_embedding(env['models'][('physnet', 'rgb')])
-  obj = est.make_objective(
-    CONFIG, net.network, net.params, net.input_mode, env['rec'], modality='rgb'
+  net = embedding.load_embedding(env['models'][('physnet', 'rgb')])
+  problem = obj_lib.make_problem(CONFIG, net, env['rec'])
+  u_truth = physsim.to_unit(physsim.params.make(**TRUTH), problem.space)
+  u = np.stack([u_truth, np.zeros(3)])[None]
+  gust, noise = obj_lib.candidate_keys(CONFIG, 0, 2)
+  s = obj_lib.Objective(problem)(
+    obj_lib.stack([problem.data]), u, gust[None], noise[None], frames=True
   )
-  u_truth = physsim.to_unit(physsim.params.make(**TRUTH), obj.space)
-  psd_truth, psd_centre = obj.fun(np.stack([u_truth, np.zeros(3)]))
+  psd_truth, psd_centre = s.psd[0]
   assert psd_truth < _TRUTH_RGB_PSD_TOLERANCE < psd_centre
-  frames, _ = obj.simulate_frames(u_truth[None])
-  assert frames.dtype == np.uint8 and frames.shape[-1] == 3
-  np.testing.assert_array_equal(np.asarray(frames[0, 0]), env['rec'].rgb)
+  assert s.frames.dtype == np.uint8 and s.frames.shape[-1] == 3
+  np.testing.assert_array_equal(s.frames[0], env['rec'].rgb)  # the best: the truth
 
 
 def test_sdn_clip_embedding_equals_clip_by_clip(env):
-  net = est.load_embedding(env['models'][('sdn', 'depth')])
+  net = embedding.load_embedding(env['models'][('sdn', 'depth')])
   assert net.clip_frames == CLIP_FRAMES
   depth = np.stack([env['rec'].depth, env['rec'].depth[::-1]])  # (2, 8, H, W)
   depth = np.concatenate([depth, depth[:, :1]], axis=1)  # 9 frames: one left over
-  x = est.network_inputs(jnp.asarray(depth), 'depth', net.input_mode)
-  got = np.asarray(est.embed_video(net.network, net.params, x, CLIP_FRAMES))
+  x = embedding.network_inputs(jnp.asarray(depth), 'depth', net.input_mode)
+  got = np.asarray(embedding.embed_video(net.network, net.params, x, CLIP_FRAMES))
   assert got.shape == (2, 2, 2)
   for s in range(2):
     for k in range(2):
@@ -116,15 +119,17 @@ def test_rgb_recording_input_equals_training_input(rgb_dataset):
   n = int(meta['n_frames'])
   cam0 = np.asarray(x[:n])  # ordered by sequence, camera, frame
   for step in (1, 2):  # the source rate, and half of it (every second frame)
-    rec = est.load_recording(
+    rec = recording_lib.load_recording(
       index.path(row), fps=meta['fps'] / step, size=(16, 16), rgb=True
     )
-    got = np.asarray(est.network_inputs(rec.rgb, 'rgb'))
+    got = np.asarray(embedding.network_inputs(rec.rgb, 'rgb'))
     assert len(got) == len(rec.depth) == len(range(0, n, step))
     np.testing.assert_allclose(got, cam0[::step], atol=_RGB_INPUT_TOLERANCE, rtol=0)
 
 
-def test_dataset_and_estimate_shade_alike():
+def test_tinted_shading_matches_shading_in_the_colour():
+  # Datasets and the estimate shade in white and tint each world
+  # (physsim.render_rgb8); shading directly in the colour agrees to a level.
   mesh = physsim.square(CONFIG.cloth_resolution)
   intr = physsim.Intrinsics(width=SIZE, height=SIZE)
   # A crumpled cloth, so the faces' shading differs.
@@ -132,17 +137,12 @@ def test_dataset_and_estimate_shade_alike():
   pos = (jnp.asarray(mesh.vertices, jnp.float32) + bumps)[None, None]  # (1, 1, V, 3)
   poses = physsim.sample_poses(jax.random.key(3), 1)
   poses = jax.tree.map(lambda a: a[None], poses)  # (1, 1, ...)
-  ds_render = gd._renderer(mesh.faces, intr, gd.Config(rgb=True))
-  fabric = 'pink_nylon'  # a colour whose channels differ
-  _, ds_rgb = ds_render(
-    pos, poses, jax.random.key(0), jnp.asarray([gd.rgb_color(fabric)])
-  )
-  est_render = est._renderer(
-    '', 0.04, CONFIG.cloth_resolution, intr, gd.rgb_color(fabric)
-  )
-  est_rgb = est_render(pos, poses)
-  assert np.asarray(est_rgb).max() > 0
-  diff = np.abs(np.asarray(ds_rgb, int) - np.asarray(est_rgb, int))
+  colour = embedding.rgb_color('pink_nylon')  # a colour whose channels differ
+  tinted = physsim.render_rgb8(pos, mesh.faces, intr, poses, jnp.asarray([colour]))
+  direct = physsim.render_rgb(pos, mesh.faces, intr, poses, color=colour)
+  direct = jnp.round(direct * 255).astype(jnp.uint8)
+  assert np.asarray(tinted).max() > 0
+  diff = np.abs(np.asarray(tinted, int) - np.asarray(direct, int))
   assert diff.max() <= _SHADE_LEVELS
 
 
@@ -152,17 +152,17 @@ def test_rgb_method_without_rgb_frames_is_named(env, tmp_path):
     load(depth_only, rgb=True)
   rec = load(depth_only)
   with pytest.raises(ValueError, match=f'{depth_only}.*no RGB frames'):
-    est.estimate(_SHORT, rec, env['models'][('sdn', 'rgb')], str(tmp_path / 'w'))
+    search.estimate(_SHORT, rec, env['models'][('sdn', 'rgb')], str(tmp_path / 'w'))
 
 
 def test_recording_shorter_than_a_clip_is_named(env, tmp_path):
   short = env['rec']._replace(depth=env['rec'].depth[: CLIP_FRAMES - 1])
   with pytest.raises(ValueError, match=f'{env["seq"]}.*shorter than one SDN clip'):
-    est.estimate(_SHORT, short, env['models'][('sdn', 'depth')], str(tmp_path / 'w'))
-  assert not os.path.exists(tmp_path / 'w' / est.RUN_FILE)  # nothing recorded
+    search.estimate(_SHORT, short, env['models'][('sdn', 'depth')], str(tmp_path / 'w'))
+  assert not os.path.exists(tmp_path / 'w')  # nothing written
 
 
 def test_network_inputs_rejects_unknown_modality():
   with pytest.raises(ValueError, match='thermal'):
-    est.network_inputs(np.zeros((1, 4, 4)), 'thermal')
+    embedding.network_inputs(np.zeros((1, 4, 4)), 'thermal')
   assert model_lib.rgb_input(np.full((1, 2, 2, 3), 255, np.uint8)).max() == 1.0

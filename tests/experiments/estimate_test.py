@@ -1,4 +1,4 @@
-"""Tests for experiments.estimate: recovery, stopping rule, resume, bad input.
+"""Tests of the estimate pipeline: the fused objective, the search, resume, bad input.
 
 The model and recording come from ``estimate_fixtures`` (a hand-made
 embedding, not a trained network; see there why).
@@ -12,12 +12,15 @@ import os
 import shutil
 
 import cv2
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import model as model_lib
 import physsim
-from experiments import estimate as est
+from experiments.pipeline import embedding, report, search
+from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
   TRUTH,
@@ -26,7 +29,27 @@ from tests.experiments.estimate_fixtures import (
   write_recording,
 )
 
+# The truth's PSD is zero but for the mm quantisation of the recording.
+_TRUTH_PSD_TOLERANCE = 1e-3
+# The same candidate scores the same in every call (common random numbers,
+# deterministic C backend and renderer).
+_REPEAT_TOLERANCE = 1e-6
+# The fused program against the same stages run one by one on the host:
+# float32 parameters in the fused path, float64 in the reference.
+_FUSED_TOLERANCE = 1e-4
+
 # ----------------------------------------------------------------- fixtures
+
+
+# One evaluator for the whole file: each fused program compiles once (per
+# structure and shape), as it would for a user's many estimates in one process.
+EVALUATOR = search.Evaluator()
+
+
+def _estimate(config, rec, model, workdir, **kw):
+  return search.estimate(
+    config, rec, model, workdir, progress=False, evaluator=EVALUATOR, **kw
+  )
 
 
 @pytest.fixture(scope='module')
@@ -34,34 +57,23 @@ def env(tmp_path_factory):
   root = str(tmp_path_factory.mktemp('estimate'))
   model_dir = write_hand_made_model(os.path.join(root, 'model'))
   seq = write_recording(root, TRUTH)
-  return dict(root=root, model=model_dir, seq=seq, rec=load(seq))
+  net = embedding.load_embedding(model_dir)
+  rec = load(seq)
+  problem = obj_lib.make_problem(CONFIG, net, rec)
+  return dict(
+    root=root, model=model_dir, seq=seq, rec=rec, net=net, problem=problem,
+    objective=EVALUATOR.objective(problem),
+  )  # fmt: skip
 
 
-_MAKE_OBJECTIVE = est.make_objective  # the real one, whatever is patched later
-
-
-class _Interrupted(Exception):
-  pass
-
-
-class _Counting:
-  """Wraps ``make_objective`` so that ``fun`` counts calls (and may fail)."""
-
-  def __init__(self, fail_after: int | None = None):
-    self.calls = 0
-    self.fail_after = fail_after
-    self._make = _MAKE_OBJECTIVE
-
-  def __call__(self, *args, **kw):
-    obj = self._make(*args, **kw)
-
-    def fun(u):
-      if self.fail_after is not None and self.calls >= self.fail_after:
-        raise _Interrupted(f'after {self.calls} calls')
-      self.calls += 1
-      return obj.fun(u)
-
-    return obj._replace(fun=fun)
+def _score(env, u, config=CONFIG, problem=None, objective=None, **kw):
+  """PSD of unit points ``u (q, 3)`` of one problem through the fused program."""
+  problem = problem or env['problem']
+  objective = objective or env['objective']
+  gust, noise = obj_lib.candidate_keys(config, 0, len(u))
+  return objective(
+    obj_lib.stack([problem.data]), np.asarray(u)[None], gust[None], noise[None], **kw
+  )
 
 
 def _state(workdir: str) -> dict:
@@ -69,29 +81,130 @@ def _state(workdir: str) -> dict:
     return {k: z[k] for k in z.files}
 
 
+class _Interrupted(Exception):
+  pass
+
+
+_REAL_CALL = obj_lib.Objective.__call__  # whatever is patched later
+
+
+class _CountCalls:
+  """Patches ``Objective.__call__`` to count calls, failing after ``fail_after``."""
+
+  def __init__(self, monkeypatch, fail_after: int | None = None):
+    self.calls = 0
+    real = _REAL_CALL
+
+    def call(obj, *a, **kw):
+      if fail_after is not None and self.calls >= fail_after:
+        raise _Interrupted(f'after {self.calls} calls')
+      self.calls += 1
+      return real(obj, *a, **kw)
+
+    monkeypatch.setattr(obj_lib.Objective, '__call__', call)
+
+
 @pytest.fixture(scope='module')
 def recovery(env):
   workdir = os.path.join(env['root'], 'full')
-  result = est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+  result = _estimate(CONFIG, env['rec'], env['model'], workdir)
   return result, _state(workdir)
 
 
-# ------------------------------------------------------------------- tests
+def _u_truth():
+  space = physsim.search_space(CONFIG.material)
+  return physsim.to_unit(physsim.params.make(**TRUTH), space)
 
-# The truth's PSD is zero but for the mm quantisation of the recording.
-_TRUTH_PSD_TOLERANCE = 1e-3
-# The same candidate scores the same in every objective (common random numbers,
-# deterministic C backend and renderer).
-_REPEAT_TOLERANCE = 1e-6
+
+# ------------------------------------------------------------ the objective
+
+
+def test_fused_objective_equals_its_stages_run_one_by_one(env):
+  # Reference: the documented stages, each on the host or in its own call,
+  # with float64 parameters: simulate (MuJoCo C), rest mesh for blown-up
+  # worlds, render, embed, energy distance.
+  u = np.stack([_u_truth(), np.zeros(3), np.array([0.5, -0.7, 0.9])])
+  fused = _score(env, u)
+  space = physsim.search_space(CONFIG.material)
+  model = obj_lib.cloth(CONFIG)
+  out = physsim.simulate(
+    model, physsim.from_unit(u, space), frames=CONFIG.frames, fps=CONFIG.fps,
+    warmup=CONFIG.warmup, wind=physsim.Wind(gust_intensity=CONFIG.gusts),
+    key=jnp.stack([jax.random.fold_in(jax.random.key(CONFIG.seed), 2)] * len(u)),
+    backend='c', workers=1, material=CONFIG.material,
+  )  # fmt: skip
+  poses = jax.tree.map(
+    lambda a: jnp.repeat(a[None], len(u), 0), env['problem'].data.poses
+  )
+  depth = physsim.render_depth(
+    out.positions, model.mesh.faces, env['problem'].intr, poses
+  )
+  net = env['net']
+  x = embedding.network_inputs(depth[:, 0], net.modality, net.input_mode)
+  pts = embedding.embed_video(net.network, net.params, x)
+  rec = env['problem'].data.rec_points
+  ref = np.array([float(model_lib.psd.psd(p, rec)) for p in pts])
+  np.testing.assert_allclose(fused.psd[0], ref, rtol=_FUSED_TOLERANCE, atol=1e-6)
+  assert fused.psd[0, 0] < _TRUTH_PSD_TOLERANCE  # the truth scores ~0
+  assert fused.valid.all()
+
+
+def test_one_compile_per_shape_and_repeats_score_alike(env):
+  u = np.stack([_u_truth(), np.zeros(3)])
+  first = _score(env, u)
+  size = env['objective']._program._cache_size()
+  again = _score(env, u[::-1])  # new values, same shape: no recompile
+  assert env['objective']._program._cache_size() == size
+  np.testing.assert_allclose(again.psd[0], first.psd[0, ::-1], rtol=_REPEAT_TOLERANCE)
+
+
+def test_fresh_keys_draw_other_gusts(env):
+  # Without common random numbers, evaluations draw their own gusts: the same
+  # candidate scores differently (the simulator's noise a posterior needs).
+  config = dataclasses.replace(CONFIG, point='median')
+  u = np.stack([_u_truth()] * 3)
+  gust, noise = obj_lib.candidate_keys(config, 0, 3)
+  s = env['objective'](
+    obj_lib.stack([env['problem'].data]), u[None], gust[None], noise[None]
+  )
+  assert np.ptp(s.psd) > 0
+  # and they are the search's evaluations 0..2: a resume draws the same
+  g2, _ = obj_lib.candidate_keys(config, 1, 2)
+  assert np.array_equal(jax.random.key_data(g2), jax.random.key_data(gust[1:]))
+
+
+def test_candidates_go_through_the_sensor_model(env):
+  # A recording made through the depth-sensor model (holes at edges and grazing
+  # angles, axial noise) matches the truth only when the candidates go through
+  # it too, with the same noise (common random numbers).
+  rec = env['rec']
+  key = jax.random.fold_in(jax.random.key(CONFIG.seed), 3)
+  noisy = physsim.apply_noise_frames(key, jnp.asarray(rec.depth)[None], rec.intrinsics)
+  rec = rec._replace(depth=np.asarray(noisy[0]))
+  assert (rec.depth > 0).sum() < (env['rec'].depth > 0).sum()  # pixels dropped
+  u = _u_truth()[None]
+  psd = {}
+  for on in (True, False):
+    config = dataclasses.replace(CONFIG, sensor_noise=on)
+    problem = obj_lib.make_problem(config, env['net'], rec)
+    psd[on] = _score(env, u, config, problem, EVALUATOR.objective(problem)).psd[0, 0]
+  assert psd[True] < _TRUTH_PSD_TOLERANCE
+  assert psd[False] > 10 * _TRUTH_PSD_TOLERANCE
+
+
+def test_candidates_outside_the_cube_are_refused(env):
+  with pytest.raises(ValueError, match='inside'):
+    _score(env, np.array([[0.0, 1.5, 0.0]]))
+  with pytest.raises(ValueError, match='finite'):
+    _score(env, np.array([[np.nan, 0.0, 0.0]]))
+
+
+# --------------------------------------------------------------- the search
 
 
 def test_recovers_known_parameters(env, recovery):
   result, state = recovery
-  net, params, _ = model_lib.load_network(env['model'])
-  obj = est.make_objective(CONFIG, net, params, 'metric', env['rec'])
-  u_truth = physsim.to_unit(physsim.params.make(**TRUTH), obj.space)
-  psd_truth, psd_centre = obj.fun(np.stack([u_truth, np.zeros(3)]))
-  assert psd_truth < _TRUTH_PSD_TOLERANCE
+  psd_centre = _score(env, np.zeros((1, 3))).psd[0, 0]
   # the first evaluation is the range centre, scored as here
   np.testing.assert_allclose(state['Y'][0], psd_centre, rtol=_REPEAT_TOLERANCE)
   assert result['evaluations'] == CONFIG.n_init + CONFIG.q * CONFIG.max_iter
@@ -106,32 +219,9 @@ def test_recovers_known_parameters(env, recovery):
   assert ratio['value'] == pytest.approx(v**2 / (w * 9.81), rel=1e-12)
   lo, hi = ratio['interval_90']
   assert lo <= ratio['posterior_median'] <= hi
-  for name in ('estimate.json', 'trace.png', 'montage.png', est.RUN_FILE):
+  assert 0 < result['seconds_in_objective'] < result['seconds']
+  for name in ('estimate.json', 'trace.png', 'montage.png', search.RUN_FILE):
     assert os.path.isfile(os.path.join(env['root'], 'full', name))
-
-
-def test_candidates_go_through_the_sensor_model(env):
-  # A recording made through the depth-sensor model (holes at edges and grazing
-  # angles, axial noise) matches the truth only when the candidates go through
-  # it too: the estimate draws the same sensor noise for every candidate.
-  import jax
-
-  rec = env['rec']
-  noisy = est._sensor(rec.intrinsics)(
-    jax.numpy.asarray(rec.depth)[None, None],
-    jax.random.fold_in(jax.random.key(CONFIG.seed), 3)[None],
-  )[0, 0]
-  rec = rec._replace(depth=np.asarray(noisy))
-  assert (rec.depth > 0).sum() < (env['rec'].depth > 0).sum()  # pixels dropped
-  net, params, _ = model_lib.load_network(env['model'])
-  u = physsim.to_unit(
-    physsim.params.make(**TRUTH), physsim.search_space(CONFIG.material)
-  )
-  on = dataclasses.replace(CONFIG, sensor_noise=True)
-  with_model = est.make_objective(on, net, params, 'metric', rec).fun(u[None])[0]
-  without = est.make_objective(CONFIG, net, params, 'metric', rec).fun(u[None])[0]
-  assert with_model < _TRUTH_PSD_TOLERANCE
-  assert without > 10 * _TRUTH_PSD_TOLERANCE
 
 
 def test_stopping_rule_and_min_iter(env, monkeypatch):
@@ -141,14 +231,13 @@ def test_stopping_rule_and_min_iter(env, monkeypatch):
     CONFIG, stop_rel_change=1.0, stop_window=1, min_iter=3, max_iter=4
   )
   workdir = os.path.join(env['root'], 'stop')
-  result = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  result = _estimate(config, env['rec'], env['model'], workdir)
   assert result['stopped_by_rule']
   assert result['iterations'] == config.min_iter < config.max_iter
   assert result['evaluations'] == config.n_init + config.q * config.min_iter
   # Rerun on the finished workdir: nothing is evaluated again.
-  counting = _Counting()
-  monkeypatch.setattr(est, 'make_objective', counting)
-  again = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  counting = _CountCalls(monkeypatch)
+  again = _estimate(config, env['rec'], env['model'], workdir)
   assert counting.calls == 0
   assert again['estimate'] == result['estimate']
   assert again['iterations'] == result['iterations'] and again['stopped_by_rule']
@@ -158,15 +247,17 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
   result, state = recovery
   workdir = os.path.join(env['root'], 'resumed')
   done = 2  # the initial design and the first iteration
-  monkeypatch.setattr(est, 'make_objective', _Counting(fail_after=done))
+  _CountCalls(monkeypatch, fail_after=done)
   with pytest.raises(_Interrupted):
-    est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
+    _estimate(CONFIG, env['rec'], env['model'], workdir)
   assert len(_state(workdir)['Y']) == CONFIG.n_init + CONFIG.q
-
-  counting = _Counting()
-  monkeypatch.setattr(est, 'make_objective', counting)
-  resumed = est.estimate(CONFIG, env['rec'], env['model'], workdir, progress=False)
-  assert counting.calls == 1 + CONFIG.max_iter - done  # finished batches not redone
+  counting = _CountCalls(monkeypatch)
+  resumed = _estimate(CONFIG, env['rec'], env['model'], workdir)
+  # finished batches are not redone; one more call renders the best candidate
+  # if it was found before the interruption (the resumed search has not seen
+  # its frames)
+  best_before = np.nanargmin(state['Y']) < CONFIG.n_init + CONFIG.q
+  assert counting.calls == 1 + CONFIG.max_iter - done + int(best_before)
   np.testing.assert_array_equal(_state(workdir)['X'], state['X'])
   np.testing.assert_allclose(_state(workdir)['Y'], state['Y'], rtol=_REPEAT_TOLERANCE)
   assert resumed['estimate'] == result['estimate']
@@ -174,32 +265,86 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
 
 
 def test_montage_frames_are_kept_not_resimulated(env, tmp_path, monkeypatch):
-  # The best candidate's frames come from its scoring batch: no simulation
-  # beyond the search's own batches, and the frames are what a fresh
-  # simulation of the best candidate gives.
+  # The best candidate's frames come from its scoring batch: no call beyond
+  # the search's own batches, and they are what a fresh call gives.
   config = dataclasses.replace(CONFIG, max_iter=1)
-  sims, kept = [], []
-  real_sim, real_finish = est.simulate_problems, est.finish
+  kept = []
+  real = search.write_result
   monkeypatch.setattr(
-    est, 'simulate_problems', lambda *a, **kw: sims.append(1) or real_sim(*a, **kw)
+    search, 'write_result', lambda *a, **kw: kept.append(a[3]) or real(*a, **kw)
   )
-  monkeypatch.setattr(
-    est, 'finish', lambda *a, **kw: kept.append(a[5]) or real_finish(*a, **kw)
-  )
-  result = est.estimate(config, env['rec'], env['model'], str(tmp_path), progress=False)
-  assert len(sims) == 1 + config.max_iter  # the design and one iteration
-  net, params, _ = model_lib.load_network(env['model'])
-  obj = _MAKE_OBJECTIVE(config, net, params, 'metric', env['rec'])
-  x_best = _state(str(tmp_path))['X'][np.argmin(_state(str(tmp_path))['Y'])]
-  fresh, _ = obj.simulate_frames(x_best[None])
-  np.testing.assert_allclose(kept[0], np.asarray(fresh[0, 0]), atol=_REPEAT_TOLERANCE)
+  counting = _CountCalls(monkeypatch)
+  result = _estimate(config, env['rec'], env['model'], str(tmp_path))
+  assert counting.calls == 1 + config.max_iter  # the design and one iteration
+  state = _state(str(tmp_path))
+  x_best = state['X'][np.nanargmin(state['Y'])]
+  fresh = _score(env, x_best[None], frames=True).frames[0]
+  np.testing.assert_allclose(kept[0], fresh, atol=_REPEAT_TOLERANCE)
   assert result['evaluations'] == config.n_init + config.q
+
+
+def test_resume_refuses_another_run(env, recovery):
+  other = dataclasses.replace(CONFIG, gusts=0.3)
+  full = os.path.join(env['root'], 'full')
+  with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
+    search.estimate(other, env['rec'], env['model'], full)
+  # another camera is another run
+  moved = env['rec'].pose._replace(position=env['rec'].pose.position + 0.1)
+  with pytest.raises(ValueError, match=r'run\.json.*camera'):
+    search.estimate(CONFIG, env['rec']._replace(pose=moved), env['model'], full)
+  # the C worker count does not change results: it may differ on resume
+  workers = dataclasses.replace(CONFIG, workers=2)
+  job = search.Job(workers, env['rec'], env['model'], full)
+  search.check_run(job, obj_lib.make_problem(workers, env['net'], env['rec']))
+
+
+def _blow_up(monkeypatch, worlds):
+  """Marks ``worlds`` (indices in each fused batch) blown up: NaN positions."""
+  real = physsim.rollout_fn
+
+  def rollout_fn(*a, **kw):
+    fn = real(*a, **kw)
+
+    def run(w):
+      xs, valid = fn(w)
+      bad = jnp.isin(jnp.arange(xs.shape[0]), jnp.asarray(list(worlds)))
+      return jnp.where(bad[:, None, None, None], jnp.nan, xs), valid & ~bad
+
+    return run
+
+  monkeypatch.setattr(obj_lib.physsim, 'rollout_fn', rollout_fn)
+
+
+def test_every_candidate_blowing_up_names_the_recording(env, tmp_path, monkeypatch):
+  _blow_up(monkeypatch, range(max(CONFIG.q, CONFIG.n_init)))
+  config = dataclasses.replace(CONFIG, max_iter=1)
+  with pytest.raises(ValueError, match=f'{env["seq"]}.*blew up'):
+    search.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
+
+
+def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
+  env, tmp_path, monkeypatch
+):
+  _blow_up(monkeypatch, [1])
+  config = dataclasses.replace(CONFIG, max_iter=1, min_iter=1)
+  workdir = str(tmp_path / 'w')
+  # a fresh evaluator: its objectives are built with the patched rollout
+  result = search.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  y = _state(workdir)['Y']
+  assert len(y) == config.n_init + config.q
+  failed = np.flatnonzero(np.isnan(y))
+  np.testing.assert_array_equal(failed, [1, config.n_init + 1])  # slot 1 of each
+  assert result['failed_evaluations'] == 2
+  assert np.isfinite(result['psd_best'])
+
+
+# ----------------------------------------------------------------- reports
 
 
 def test_errors_by_hand():
   truth = {'bending_scale': 2.0, 'wind_speed': 4.0, 'area_weight': 0.2}
   space = physsim.SearchSpace(area_weight=(0.1, 0.3))
-  err = est.errors(physsim.params.make(0.5, 5.0, 0.25), truth, space)
+  err = report.errors(physsim.params.make(0.5, 5.0, 0.25), truth, space)
   e = err['estimate']
   assert e['wind_speed_pct'] == pytest.approx(25.0, rel=1e-12)
   assert e['area_weight_pct'] == pytest.approx(25.0, rel=1e-12)
@@ -207,8 +352,8 @@ def test_errors_by_hand():
   # load ratio ~ v^2 / w: (25 / 0.25) / (16 / 0.2) = 1.25
   assert e['load_ratio_pct'] == pytest.approx(25.0, rel=1e-12)
   # wind and weight off along the ratio's iso-line: the ratio is exact
-  on_line = est.errors(physsim.params.make(2.0, 4.4, 0.242), truth, space)['estimate']
-  assert on_line['load_ratio_pct'] == pytest.approx(0.0, abs=1e-9)
+  on_line = report.errors(physsim.params.make(2.0, 4.4, 0.242), truth, space)
+  assert on_line['estimate']['load_ratio_pct'] == pytest.approx(0.0, abs=1e-9)
   # range centre: bending 1 (log centre), 3.5 m/s, 0.2 kg/m^2
   c = err['range_centre']
   assert c['wind_speed_pct'] == pytest.approx(12.5, rel=1e-12)
@@ -217,28 +362,63 @@ def test_errors_by_hand():
 
 
 def test_best_seen():
-  best = est.BestSeen()
+  best = obj_lib.BestSeen()
   assert best.frames_of(np.zeros(3)) is None  # nothing seen (a resumed search)
   u = np.arange(9.0).reshape(3, 3)
-  frames = np.arange(3 * 2 * 4).reshape(3, 2, 4)  # (q, C, T)
-  best.update(u, np.array([np.nan, 2.0, 1.0]), frames)
-  np.testing.assert_array_equal(best.frames_of(u[2]), frames[2, 0])
+  best.update(u, np.array([np.nan, 2.0, 1.0]), 'frames of 2')
+  assert best.frames_of(u[2]) == 'frames of 2'
   assert best.frames_of(u[1]) is None
-  best.update(u[:2], np.array([1.0, np.nan]), frames[:2])  # not better: kept
-  np.testing.assert_array_equal(best.frames_of(u[2]), frames[2, 0])
-  best.update(u[:1], np.array([0.5]), frames[:1])
-  np.testing.assert_array_equal(best.frames_of(u[0]), frames[0, 0])
-  best.update(u, np.full(3, np.nan), frames)  # all failed: kept
+  best.update(u[:2], np.array([1.0, np.nan]), 'frames of 0')  # not better: kept
+  assert best.frames_of(u[2]) == 'frames of 2'
+  best.update(u[:1], np.array([0.5]), 'frames of 0')
+  assert best.frames_of(u[0]) == 'frames of 0'
+  best.update(u, np.full(3, np.nan), None)  # all failed: kept
   assert best.y == 0.5
 
 
-def test_resume_refuses_another_run(env, recovery):
-  other = dataclasses.replace(CONFIG, gusts=0.3)
-  with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
-    est.estimate(other, env['rec'], env['model'], os.path.join(env['root'], 'full'))
-  # the C worker count does not change results: it may differ on resume
-  workers = dataclasses.replace(CONFIG, workers=2)
-  est._check_run(os.path.join(env['root'], 'full'), workers, env['rec'], env['model'])
+def test_iterations_of_evaluations():
+  np.testing.assert_array_equal(
+    report.iterations_of(11, n_init=3, q=4), [0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2]
+  )
+
+
+def test_network_retrieval_of_the_shipped_epoch(tmp_path):
+  def row(epoch, val, wind):
+    chance = {'bending_scale': 2.0, 'wind_speed': 0.5, 'area_weight': 0.1}
+    test = {'bending_scale': 2.0, 'wind_speed': wind, 'area_weight': 0.09}
+    return {'eval': True, 'epoch': epoch, 'val_score': val,
+            'test_retrieval': {**test, 'chance': chance, 'error': 0.0, 'queries': 4}}  # fmt: skip
+
+  run = tmp_path / 'run'
+  run.mkdir()
+  assert embedding.network_retrieval(str(run)) is None  # no log: nothing claimed
+  rows = [row(1, 0.7, 0.4), row(2, 0.9, 0.1), row(3, 0.8, 0.3)]
+  (run / 'metrics.jsonl').write_text(''.join(json.dumps(r) + '\n' for r in rows))
+  got = embedding.network_retrieval(str(run))  # epoch 2: the best validation score
+  assert got == pytest.approx(
+    {'bending_scale': 1.0, 'wind_speed': 0.2, 'area_weight': 0.9}
+  )
+  assert 'wind_speed 0.20' in report.retrieval_note(got)
+  from experiments.pipeline import training
+
+  line = training.describe_eval({**rows[1], 'test_triplet_accuracy': 0.625})
+  assert line.startswith(
+    'epoch 2; held-out triplet accuracy 62.5%; retrieval over chance'
+  )
+  assert 'area_weight 0.90' in line
+
+
+def test_report_table_shows_retrieval(env, recovery):
+  result, _ = recovery
+  assert 'network_retrieval_vs_chance' not in result  # the fixture logged none
+  plain = report.report_table(result)
+  assert plain.count('| n/a |') == 3
+  ratio_row = next(x for x in plain.splitlines() if x.startswith('| load ratio'))
+  t = result['truth']
+  assert f'| {t["wind_speed"] ** 2 / (t["area_weight"] * 9.81):.3g} |' in ratio_row
+  r = {'bending_scale': 1.05, 'wind_speed': 0.4, 'area_weight': 0.95}
+  shown = report.report_table({**result, 'network_retrieval_vs_chance': r})
+  assert '| 0.40 |' in shown and '| 1.05 |' in shown and 'n/a' not in shown
 
 
 # -------------------------------------------------------------- bad input
@@ -309,7 +489,7 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
   empty = str(tmp_path / 'empty')
   os.makedirs(empty)
   with pytest.raises(ValueError, match='not a fit workdir'):
-    est.estimate(CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
+    search.estimate(CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
   untrained = str(tmp_path / 'untrained')
   os.makedirs(untrained)
   with open(os.path.join(env['model'], 'config.json')) as f:
@@ -317,82 +497,34 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
   with open(os.path.join(untrained, 'config.json'), 'w') as f:
     f.write(text)
   with pytest.raises(ValueError, match='no checkpoint'):
-    est.estimate(CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
+    search.estimate(CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
   small = env['rec']._replace(depth=env['rec'].depth[:, :16, :16])
   with pytest.raises(ValueError, match=r'takes \(32, 32\)'):
-    est.estimate(CONFIG, small, env['model'], str(tmp_path / 'w3'))
+    search.estimate(CONFIG, small, env['model'], str(tmp_path / 'w3'))
 
 
-def _blow_up(monkeypatch, worlds):
-  """Marks ``worlds`` (indices in each batch) of every simulation invalid."""
-  real = est.physsim.simulate
-
-  def simulate(*args, **kw):
-    out = real(*args, **kw)
-    bad = np.zeros(len(out.valid), bool)
-    bad[[w for w in worlds if w < len(bad)]] = True
-    pos = np.where(bad[:, None, None, None], np.nan, out.positions)
-    return out._replace(positions=pos, valid=out.valid & ~bad)
-
-  monkeypatch.setattr(est.physsim, 'simulate', simulate)
-
-
-def test_every_candidate_blowing_up_names_the_recording(env, tmp_path, monkeypatch):
-  _blow_up(monkeypatch, range(CONFIG.q))
-  config = dataclasses.replace(CONFIG, max_iter=1)
-  with pytest.raises(ValueError, match=f'{env["seq"]}.*blew up'):
-    est.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
-
-
-def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
-  env, tmp_path, monkeypatch
-):
-  _blow_up(monkeypatch, [1])
-  config = dataclasses.replace(CONFIG, max_iter=1, min_iter=1)
+def test_bad_config_is_refused_before_anything_is_written(env, tmp_path):
   workdir = str(tmp_path / 'w')
-  result = est.estimate(config, env['rec'], env['model'], workdir, progress=False)
-  y = _state(workdir)['Y']
-  assert len(y) == config.n_init + config.q
-  failed = np.flatnonzero(np.isnan(y))
-  np.testing.assert_array_equal(failed, [1, config.n_init + 1])  # slot 1 of each
-  assert result['failed_evaluations'] == 2
-  assert np.isfinite(result['psd_best'])
+  for bad, match in (
+    (dataclasses.replace(CONFIG, material='denim'), 'material'),
+    (dataclasses.replace(CONFIG, fps=1e-9), 'fps'),
+    (dataclasses.replace(CONFIG, q=0), 'q must be'),
+  ):
+    with pytest.raises(ValueError, match=match):
+      search.estimate(bad, env['rec'], env['model'], workdir)
+  assert not os.path.exists(workdir)
 
 
-def test_network_retrieval_of_the_shipped_epoch(tmp_path):
-  def row(epoch, val, wind):
-    chance = {'bending_scale': 2.0, 'wind_speed': 0.5, 'area_weight': 0.1}
-    test = {'bending_scale': 2.0, 'wind_speed': wind, 'area_weight': 0.09}
-    return {'eval': True, 'epoch': epoch, 'val_score': val,
-            'test_retrieval': {**test, 'chance': chance, 'error': 0.0, 'queries': 4}}  # fmt: skip
-
-  run = tmp_path / 'run'
-  run.mkdir()
-  assert est.network_retrieval(str(run)) is None  # no log: nothing claimed
-  rows = [row(1, 0.7, 0.4), row(2, 0.9, 0.1), row(3, 0.8, 0.3)]
-  (run / 'metrics.jsonl').write_text(''.join(json.dumps(r) + '\n' for r in rows))
-  got = est.network_retrieval(str(run))  # epoch 2: the best validation score
-  assert got == pytest.approx(
-    {'bending_scale': 1.0, 'wind_speed': 0.2, 'area_weight': 0.9}
-  )
-  assert 'wind_speed 0.20' in est.retrieval_note(got)
-  from experiments import train
-
-  line = train.describe_eval({**rows[1], 'test_triplet_accuracy': 0.625})
-  assert line.startswith(
-    'epoch 2; held-out triplet accuracy 62.5%; retrieval over chance'
-  )
-  assert 'area_weight 0.90' in line
-
-
-def test_report_table_shows_retrieval(env, recovery):
-  result, _ = recovery
-  assert 'network_retrieval_vs_chance' not in result  # the fixture logged none
-  plain = est.report_table(result)
-  assert plain.count('| n/a |') == 3
-  ratio_row = next(x for x in plain.splitlines() if x.startswith('| load ratio'))
-  t = result['truth']
-  assert f'| {t["wind_speed"] ** 2 / (t["area_weight"] * 9.81):.3g} |' in ratio_row
-  r = {'bending_scale': 1.05, 'wind_speed': 0.4, 'area_weight': 0.95}
-  shown = est.report_table({**result, 'network_retrieval_vs_chance': r})
-  assert '| 0.40 |' in shown and '| 1.05 |' in shown and 'n/a' not in shown
+@pytest.mark.slow
+def test_fused_objective_on_mjx_matches_mujoco_c(env):
+  # The same fused program with MJX (MuJoCo Warp, traced) in place of the
+  # MuJoCo C callback: PSDs agree to the two simulators' parity (float32
+  # MJX vs float64 forces in C; physsim's rollout test bounds positions by 5 mm).
+  config = dataclasses.replace(CONFIG, backend='mjx')
+  problem = obj_lib.make_problem(config, env['net'], env['rec'])
+  u = np.stack([_u_truth(), np.zeros(3)])
+  mjx = _score(env, u, config, problem, obj_lib.Objective(problem))
+  c = _score(env, u)
+  assert mjx.valid.all()
+  np.testing.assert_allclose(mjx.psd, c.psd, rtol=0.2, atol=5e-3)
+  assert mjx.psd[0, 0] < 0.5 * mjx.psd[0, 1]  # the truth still scores best

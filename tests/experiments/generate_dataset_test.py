@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments import generate_dataset as gd
+from experiments.pipeline import datasets as gd
 from physsim import dataset
 
 # A smoke sweep on the MuJoCo C backend (MJX compiles for ~90 s on this CPU).
@@ -110,16 +110,15 @@ def test_invalid_world_recorded_without_frames(tmp_path, monkeypatch):
 
 
 def test_flags_override_preset():
-  from absl import flags
+  from experiments import generate_dataset as script
+  from experiments.pipeline import cli
 
-  gd.define_flags()
-  flags.FLAGS(['prog', '--preset=smoke', '--frames=7', '--materials=red_violet'])
-  try:
-    cfg = gd.config_from_flags()
-  finally:
-    flags.FLAGS.unparse_flags()
+  argv = ['prog', '--preset=smoke', '--frames=7', '--materials=red_violet']
+  args = cli.parse(script.Args, script.PRESETS, argv)
+  cfg = args.sweep
   assert cfg.frames == 7 and cfg.materials == ('red_violet',)
   assert cfg.cameras == gd.PRESETS['smoke'].cameras
+  assert args.out == 'data/sim'  # a field of the script, not of the sweep
 
 
 def test_rgb_and_sensor_noise(tmp_path):

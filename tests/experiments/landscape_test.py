@@ -1,4 +1,4 @@
-"""Tests for experiments.landscape: the pure helpers by hand, one tiny study."""
+"""Tests of experiments.studies.landscape: the pure helpers by hand, one tiny study."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments import estimate as est
-from experiments import landscape as ls
+from experiments.pipeline import objective as obj_lib
+from experiments.studies import landscape as ls
 from tests.experiments.estimate_fixtures import (
   CONFIG,
   TRUTH,
@@ -73,13 +73,10 @@ def test_tiny_study_then_resume(tmp_path, monkeypatch):
 
   # A rerun simulates nothing and gives the same landscape.
   calls = []
-  make = est.make_objective
-
-  def counting(*args, **kw):
-    obj = make(*args, **kw)
-    return obj._replace(evaluate=lambda u: calls.append(u) or obj.evaluate(u))
-
-  monkeypatch.setattr(est, 'make_objective', counting)
+  real = obj_lib.Objective.__call__
+  monkeypatch.setattr(
+    obj_lib.Objective, '__call__', lambda *a, **kw: calls.append(1) or real(*a, **kw)
+  )
   again = ls.run(config, seq, model_dir, workdir)
   assert not calls
   assert again['grid'] == result['grid'] and again['line'] == result['line']

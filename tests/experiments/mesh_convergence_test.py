@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from benchmarks import mesh_convergence as mc
-from experiments import files
+from experiments.pipeline import files
 
 _EXACT = 1e-12
 

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from experiments import separability as sep
+from experiments.studies import separability as sep
 
 # Sampling error of a covariance and of fitted slopes from 3,600 noisy worlds.
 _SAMPLED = 0.1

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 
 from benchmarks import sim_to_real
-from experiments import demo
+from experiments.pipeline import demo
 
 
 def _changed(a, b) -> set[str]:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import model as model_lib
-from experiments import table1, train
+from experiments.pipeline import training as train
+from experiments.studies import table1
 
 MATERIAL = 'gray_interlock'
 # Cells are printed with one decimal.
@@ -50,9 +51,7 @@ def _embedding(rgb_dataset, workdir, split):
   """PhySNet (depth) embeddings of every frame, labels and the run's split."""
   run_dir = table1.run_dir(workdir, 'physnet', 'depth', split, MATERIAL)
   network, params, tconfig = model_lib.load_network(run_dir)
-  cfg = dataclasses.replace(
-    table1.PRESETS['smoke'].train, materials=(MATERIAL,), split=split
-  )
+  cfg = train.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,), split=split)
   x, y, g = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
   tr, te = model_lib.split_indices(tconfig, y, g)
   emb = model_lib.embed(network.apply, params, x).astype(np.float64)
@@ -141,7 +140,7 @@ def test_rerun_reuses_every_run(result, rgb_dataset, table1_workdir):
 def test_too_few_simulations_is_a_clear_error(rgb_dataset, tmp_path):
   config = dataclasses.replace(
     table1.PRESETS['smoke'],
-    train=dataclasses.replace(table1.PRESETS['smoke'].train, test_fraction=0.2),
+    train=train.replace(table1.PRESETS['smoke'].train, test_fraction=0.2),
   )
   with pytest.raises(ValueError, match='holds out 1'):
     table1.run(config, rgb_dataset, str(tmp_path), progress=False)
@@ -192,13 +191,13 @@ def test_report_of_runs_as_they_stand(result, rgb_dataset, table1_workdir, tmp_p
   with open(log) as f:
     rows = [json.loads(x) for x in f if x.strip()]
   first = [r for r in rows if r.get('eval')][0]
-  assert first['epoch'] < config.train.epochs
+  assert first['epoch'] < config.train.fit.epochs
   with open(log, 'w') as f:
     f.writelines(json.dumps(r) + '\n' for r in rows[: rows.index(first) + 1])
   out = table1.report(config, rgb_dataset, work)
   assert out['cut'] == [
     f'{MATERIAL} / PhySNet (depth) / random: cut at epoch {first["epoch"]} of '
-    f'{config.train.epochs}'
+    f'{config.train.fit.epochs}'
   ]
   assert out['results'][MATERIAL]['PhySNet (depth)']['random'] == first
   with open(os.path.join(work, table1.TABLE_FILE)) as f:
@@ -238,7 +237,7 @@ def _energy64(x, y):
 
 def test_retrieval_cell_matches_a_numpy_retrieval(result, rgb_dataset, table1_workdir):
   emb, y, tr, te, _ = _embedding(rgb_dataset, table1_workdir, 'simulation')
-  cfg = dataclasses.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
+  cfg = train.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
   v = train.video_info(cfg, rgb_dataset, [MATERIAL])
   errors = []
   for q in np.unique(v.video[te]):

@@ -1,11 +1,12 @@
 """Tests for experiments.tables: summaries and the markdown, on hand-made results."""
 
+import dataclasses
 import os
 
 import numpy as np
 import pytest
 
-from experiments import table1, tables
+from experiments.studies import table1, tables
 
 
 def _res(wind, weight, factor, centre=(50.0, 5.0, 2.0)):
@@ -98,7 +99,7 @@ def test_from_json_merges_runs_and_refuses_duplicates(tmp_path):
   }
   err = merged[('physnet_depth', 'fabrics', 'black_denim', '0000')]['errors']
   assert err['estimate']['wind_speed_pct'] == pytest.approx(10.0)
-  md = tables.report(
+  md = tables.write_report(
     merged, tables.Config(methods=('physnet_depth', 'sdn_rgb')), str(tmp_path / 'w')
   )
   assert '| black_denim | 10.0 | 0.0 | x1.00 | 0.0 | 0.0 | x1.00 |' in md
@@ -133,11 +134,14 @@ def test_a_method_without_networks_is_a_dash(tmp_path, monkeypatch):
   open(os.path.join(only, 'config.json'), 'w').close()
   ran = []
 
-  def job(r, method, *args):
-    ran.append(method)
-    return (method, r['set'], r['fabric'], r['seq_id']), _res(10.0, 2.0, 2.0)
+  def batched(jobs, *args):
+    ran.extend(method for _, method in jobs)
+    return {
+      (method, r['set'], r['fabric'], r['seq_id']): _res(10.0, 2.0, 2.0)
+      for r, method in jobs
+    }
 
-  monkeypatch.setattr(tables, '_job', job)
+  monkeypatch.setattr(tables, '_batched', batched)
   assert tables.METHODS == ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
   results = tables.run_all(tables.Config(), 'eval', models, str(tmp_path / 'w'))
   assert ran == ['sdn_rgb']
@@ -148,9 +152,7 @@ def test_a_method_without_networks_is_a_dash(tmp_path, monkeypatch):
   )
 
 
-def test_shards_split_the_pending_estimates_and_batched_runs_them_once(
-  tmp_path, monkeypatch
-):
+def test_shards_split_the_pending_estimates_and_run_them_once(tmp_path, monkeypatch):
   recs = [
     {'set': 'fabrics', 'fabric': 'black_denim', 'garment': '', 'seq_id': f'{i:04d}',
      'path': f'rec{i}'}
@@ -175,9 +177,7 @@ def test_shards_split_the_pending_estimates_and_batched_runs_them_once(
   monkeypatch.setattr(tables, '_batched', batched)
   seen = set()
   for shard in range(2):
-    config = tables.Config(
-      methods=('physnet_depth',), batched=True, shard=shard, num_shards=2
-    )
+    config = tables.Config(methods=('physnet_depth',), shard=shard, num_shards=2)
     results = tables.run_all(config, 'eval', models, workdir)
     assert results[('physnet_depth', 'fabrics', 'black_denim', '0000')] == _res(
       1.0, 1.0, 1.0
@@ -190,7 +190,7 @@ def test_shards_split_the_pending_estimates_and_batched_runs_them_once(
     tables.run_all(tables.Config(shard=2, num_shards=2), 'eval', models, workdir)
   # --report_only reads what has finished and runs nothing.
   fresh = str(tmp_path / 'fresh')
-  report = tables.Config(methods=('physnet_depth',), batched=True, report_only=True)
+  report = tables.Config(methods=('physnet_depth',), report_only=True)
   assert tables.run_all(report, 'eval', models, fresh) == {}
   assert len(calls) == 2
 
@@ -207,7 +207,11 @@ def test_batched_runs_real_estimates(tmp_path):
   rec = {'set': 'fabrics', 'fabric': fx.MATERIAL, 'garment': '', 'seq_id': '0000',
          'path': seq}  # fmt: skip
   bad = dict(rec, seq_id='0001', path=str(tmp_path / 'missing'))
-  config = tables.Config(preset='smoke', backend='c', batched=True)
+  from experiments.pipeline import objective
+
+  config = tables.Config(
+    estimate=dataclasses.replace(objective.PRESETS['smoke'], backend='c')
+  )
   out = tables._batched(
     [(rec, 'physnet_depth'), (bad, 'physnet_depth')], models, str(tmp_path / 'w'),
     config,

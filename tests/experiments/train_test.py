@@ -1,6 +1,5 @@
 """Tests for experiments.train: depth and RGB runs, inputs.json, restore, resume, bad input."""
 
-import dataclasses
 import json
 import os
 import shutil
@@ -11,12 +10,14 @@ import numpy as np
 import pytest
 
 import model as model_lib
-from experiments import table1, train
+from experiments.pipeline import embedding
+from experiments.pipeline import training as train
+from experiments.studies import table1
 from physsim import dataset
 
 MATERIAL = 'gray_interlock'
 # Table 1's smoke runs (half the simulations held out: two labels on each side).
-_SMOKE = dataclasses.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
+_SMOKE = train.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
 # 8-bit colour over 255 in float32 against the same in float64.
 _RGB_TOLERANCE = 1e-6
 
@@ -38,7 +39,7 @@ def runs(rgb_dataset, table1_workdir):
       table1_workdir, 'physnet', modality, 'simulation', MATERIAL
     )
     workdir = os.path.dirname(run_dir)
-    cfg = dataclasses.replace(_SMOKE, modality=modality)
+    cfg = train.replace(_SMOKE, modality=modality)
     out[modality] = (workdir, train.run(cfg, rgb_dataset, workdir, progress=False))
   return out
 
@@ -47,17 +48,17 @@ def runs(rgb_dataset, table1_workdir):
 def test_run_records_inputs_and_restores(runs, rgb_dataset, modality):
   workdir, result = runs[modality]
   run_dir = os.path.join(workdir, MATERIAL)
-  with open(os.path.join(run_dir, train.INPUTS_FILE)) as f:
+  with open(os.path.join(run_dir, embedding.INPUTS_FILE)) as f:
     rec = json.load(f)
   assert rec['modality'] == modality and rec['input_mode'] == _SMOKE.input_mode
   assert rec['materials'] == [MATERIAL] and rec['dataset'] == rgb_dataset
-  assert train.modality(run_dir) == modality
-  assert train.input_mode(run_dir) == _SMOKE.input_mode
+  assert embedding.modality(run_dir) == modality
+  assert embedding.input_mode(run_dir) == _SMOKE.input_mode
   assert 0.0 <= result[MATERIAL]['test_triplet_accuracy'] <= 1.0
 
   network, params, tconfig = model_lib.load_network(run_dir)
   assert tconfig.physnet.in_channels == train.CHANNELS[modality]
-  cfg = dataclasses.replace(_SMOKE, modality=modality)
+  cfg = train.replace(_SMOKE, modality=modality)
   x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
   assert x.shape == (4 * 2 * 4, 32, 32, train.CHANNELS[modality])
   emb = np.asarray(jax.jit(network.apply)(params, x[:5]))
@@ -72,18 +73,18 @@ def test_rerun_does_not_retrain(runs, rgb_dataset, modality):
   workdir, result = runs[modality]
   run_dir = os.path.join(workdir, MATERIAL)
   before = _snapshot(run_dir)
-  cfg = dataclasses.replace(_SMOKE, modality=modality)
+  cfg = train.replace(_SMOKE, modality=modality)
   again = train.run(cfg, rgb_dataset, workdir, progress=False)
   assert _snapshot(run_dir) == before
   assert again == result
   assert train.finished_eval(cfg, rgb_dataset, run_dir, [MATERIAL]) == result[MATERIAL]
   # another config is not this run
-  other = dataclasses.replace(cfg, seed=cfg.seed + 1)
+  other = train.replace(cfg, seed=cfg.fit.seed + 1)
   assert train.finished_eval(other, rgb_dataset, run_dir, [MATERIAL]) is None
 
 
 def test_rgb_inputs_match_the_png_files(rgb_dataset):
-  cfg = dataclasses.replace(_SMOKE, modality='rgb', image_size=0)
+  cfg = train.replace(_SMOKE, modality='rgb', image_size=0)
   x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
   index = dataset.open_dataset(rgb_dataset)
   rows = index.filter(material=MATERIAL, valid=True).rows
@@ -93,9 +94,9 @@ def test_rgb_inputs_match_the_png_files(rgb_dataset):
   np.testing.assert_allclose(x[8 + 4 + 2], ref, atol=_RGB_TOLERANCE)
   assert y[8 + 4 + 2] == rows[1]['label']
   # resizing is the depth's nearest-neighbour resize, channel by channel
-  small = train.load_inputs(
-    dataclasses.replace(cfg, image_size=16), rgb_dataset, [MATERIAL]
-  )[0]
+  small = train.load_inputs(train.replace(cfg, image_size=16), rgb_dataset, [MATERIAL])[
+    0
+  ]
   for c in range(3):
     np.testing.assert_array_equal(
       small[..., c], dataset.resize_depth(x[..., c], (16, 16))
@@ -104,7 +105,7 @@ def test_rgb_inputs_match_the_png_files(rgb_dataset):
 
 def test_threaded_reading_matches_one_thread(rgb_dataset, tmp_path):
   # Sequences are read by a thread pool; order and values do not depend on it.
-  cfg = dataclasses.replace(_SMOKE, image_size=0)
+  cfg = train.replace(_SMOKE, image_size=0)
   one = train.load_inputs(cfg, rgb_dataset, [MATERIAL], workers=1)
   many = train.load_inputs(cfg, rgb_dataset, [MATERIAL], workers=3)
   for a, b in zip(one, many, strict=True):
@@ -124,13 +125,13 @@ def test_threaded_reading_matches_one_thread(rgb_dataset, tmp_path):
 
 
 def test_sdn_rgb_clips(rgb_dataset):
-  cfg = dataclasses.replace(_SMOKE, modality='rgb', network='sdn')
+  cfg = train.replace(_SMOKE, modality='rgb', network='sdn')
   x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
   frames = train.load_inputs(
-    dataclasses.replace(cfg, network='physnet'), rgb_dataset, [MATERIAL]
+    train.replace(cfg, network='physnet'), rgb_dataset, [MATERIAL]
   )[0]
   # 4 frames per camera make one 4-frame clip per camera and sequence
-  assert x.shape == (4 * 2, cfg.sdn_frames, 32, 32, 3)
+  assert x.shape == (4 * 2, cfg.sdn.num_frames, 32, 32, 3)
   np.testing.assert_array_equal(x[3], frames[12:16])  # seq 1, cam 1
   tconfig = train.train_config(cfg, x.shape[-3:-1])
   assert tconfig.sdn.in_channels == 3
@@ -140,19 +141,19 @@ def test_sdn_rgb_clips(rgb_dataset):
 
 
 def test_rgb_of_a_depth_only_dataset_is_a_clear_error(depth_only_dataset, tmp_path):
-  cfg = dataclasses.replace(_SMOKE, modality='rgb')
+  cfg = train.replace(_SMOKE, modality='rgb')
   with pytest.raises(ValueError, match='no RGB frames') as err:
     train.run(cfg, depth_only_dataset, str(tmp_path), progress=False)
   assert depth_only_dataset in str(err.value)
   with pytest.raises(ValueError, match='modality'):
     train.load_inputs(
-      dataclasses.replace(cfg, modality='infrared'), depth_only_dataset, [MATERIAL]
+      train.replace(cfg, modality='infrared'), depth_only_dataset, [MATERIAL]
     )
 
 
 def test_unrecorded_run_defaults(tmp_path):
-  assert train.modality(str(tmp_path)) == 'depth'
-  assert train.input_mode(str(tmp_path)) == 'relative'
+  assert embedding.modality(str(tmp_path)) == 'depth'
+  assert embedding.input_mode(str(tmp_path)) == 'relative'
 
 
 def test_choose_lr_validates_on_the_training_simulations_only(
@@ -180,9 +181,7 @@ def test_choose_lr_validates_on_the_training_simulations_only(
 def test_model_selection_run_reports_the_shipped_epoch(rgb_dataset, tmp_path):
   # The smoke set has four simulations: the per-image split leaves all four
   # labels on every side, so validation works there.
-  cfg = dataclasses.replace(
-    _SMOKE, split='random', epochs=4, val_fraction=0.25, patience=1
-  )
+  cfg = train.replace(_SMOKE, split='random', epochs=4, val_fraction=0.25, patience=1)
   workdir = str(tmp_path)
   row = train.run(cfg, rgb_dataset, workdir, progress=False)[MATERIAL]
   run_dir = os.path.join(workdir, MATERIAL)
@@ -190,21 +189,21 @@ def test_model_selection_run_reports_the_shipped_epoch(rgb_dataset, tmp_path):
     evals = [r for r in map(json.loads, f) if r.get('eval')]
   best = model_lib.best_epoch(evals)
   assert row == best and 'test_knn_accuracy' in row
-  assert evals[-1]['epoch'] == min(cfg.epochs, best['epoch'] + cfg.patience)
+  assert evals[-1]['epoch'] == min(cfg.fit.epochs, best['epoch'] + cfg.fit.patience)
   assert os.path.isdir(os.path.join(run_dir, model_lib.train.BEST_DIR))
   before = _snapshot(run_dir)
   assert train.finished_eval(cfg, rgb_dataset, run_dir, [MATERIAL]) == best
   assert train.run(cfg, rgb_dataset, workdir, progress=False)[MATERIAL] == best
   assert _snapshot(run_dir) == before
   # A larger patience is the same run resumed, and it is no longer finished.
-  longer = dataclasses.replace(cfg, patience=10)
-  if evals[-1]['epoch'] < cfg.epochs:
+  longer = train.replace(cfg, patience=10)
+  if evals[-1]['epoch'] < cfg.fit.epochs:
     assert train.finished_eval(longer, rgb_dataset, run_dir, [MATERIAL]) is None
 
 
 @pytest.mark.parametrize('network', ['physnet', 'sdn'])
 def test_video_info_lines_up_with_the_loaded_items(rgb_dataset, network):
-  cfg = dataclasses.replace(_SMOKE, network=network)
+  cfg = train.replace(_SMOKE, network=network)
   x, y, _ = train.load_inputs(cfg, rgb_dataset, [MATERIAL])
   videos = model_lib.retrieval.check_videos(
     train.video_info(cfg, rgb_dataset, [MATERIAL]), len(x)
@@ -226,7 +225,7 @@ def test_simulation_split_runs_log_parameter_retrieval(runs, rgb_dataset):
   workdir, _ = runs['depth']
   evals = model_lib.read_evals(os.path.join(workdir, MATERIAL))
   rows = dataset.open_dataset(rgb_dataset).filter(material=MATERIAL, valid=True).rows
-  held_out = round(len(rows) * _SMOKE.test_fraction)
+  held_out = round(len(rows) * _SMOKE.fit.test_fraction)
   for r in evals:  # every held-out simulation, from every camera
     assert r['test_retrieval']['queries'] == held_out * rows[0]['n_cameras']
     assert set(r['test_retrieval']) >= {'error', 'wind_speed', 'area_weight'}
@@ -235,7 +234,7 @@ def test_simulation_split_runs_log_parameter_retrieval(runs, rgb_dataset):
 def test_embed_dim_reaches_both_networks():
   for network in ('physnet', 'sdn'):
     tc = train.train_config(
-      dataclasses.replace(_SMOKE, network=network, embed_dim=8), (32, 32)
+      train.replace(_SMOKE, network=network, embed_dim=8), (32, 32)
     )
     trunk = tc.physnet if network == 'physnet' else tc.sdn.trunk
     assert trunk.embed_dim == 8

@@ -161,7 +161,7 @@ def test_one_model_serves_every_material():
 
 
 def test_changing_values_does_not_recompile(model, batch, mjx_out):
-  fn = sim.mjx_rollout_fn(model, _FRAMES, _FPS, 0.0)
+  fn = sim.mjx_program(model, _FRAMES, _FPS, 0.0)
   before = fn._cache_size()
   other = physsim.params.make(
     batch.bending_scale[::-1], batch.wind_speed, batch.area_weight[::-1]
@@ -208,3 +208,26 @@ def test_bad_inputs_raise_clear_errors(model, kwargs, match):
 def test_out_of_range_params_are_rejected_before_simulating(model):
   with pytest.raises(ValueError, match='wind_speed'):
     sim.simulate(model, physsim.params.make(1.0, 9.0, 0.2), backend='c')
+
+
+# The traceable rollout takes float32 parameters and masses; simulate's C path
+# float64: the two differ by float32 rounding amplified over the flap.
+_CALLBACK_TOLERANCE = 2e-4  # m
+
+
+def test_c_rollout_inside_jit_equals_simulate(model, batch):
+  # rollout_fn('c') is MuJoCo C behind a pure_callback: one jitted pipeline
+  # can hold it where MJX would go.
+  wind = physsim.Wind(gust_intensity=0.2)
+  keys = jax.random.split(jax.random.key(7), 5)
+  fn = sim.rollout_fn(
+    model, frames=_FRAMES, fps=_FPS, warmup=0.0, backend='c', workers=1
+  )
+  w = physsim.world_inputs(model, *batch, keys, wind)
+  xs, valid = jax.jit(fn)(w)
+  ref = sim.simulate(
+    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind, key=keys,
+    backend='c', workers=1,
+  )  # fmt: skip
+  np.testing.assert_array_equal(np.asarray(valid), ref.valid)
+  np.testing.assert_allclose(np.asarray(xs), ref.positions, atol=_CALLBACK_TOLERANCE)

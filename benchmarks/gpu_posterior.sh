@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# One GPU's work for the posterior estimate, in stages (each fits one device call):
+#   calibration  experiments.calibrate at the demo's size: 100 pairs of held-out
+#                simulated recordings (the evaluation recipe), coverage and ranks.
+#   paper        a paper-size PhySNet-depth for gray interlock (its 30 training
+#                simulations x 6 cameras x 60 frames at 256x256) and 3 real-like
+#                recordings (generate_dataset --preset=eval);
+#   latency      then, on the same machine: benchmarks/estimate_latency.py (the
+#                default posterior and the paper's argmin, after compile) and
+#                Tables 2-style estimates of the 3 recordings with both.
+# Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
+# SMOKE=1 shrinks everything to check the script on a CPU.
+set -euo pipefail
+stage=${1:?stage: calibration, paper or latency}
+R=${2:-/tmp/posterior_run}
+OUT=${OUT:-out/gpu_posterior}
+mkdir -p "$R" "$OUT"
+export PYTHONUNBUFFERED=1
+GI=gray_interlock
+if [ -n "${SMOKE:-}" ]; then
+  CAL="--preset=smoke --backend=c"
+  DS="--preset=smoke --materials=$GI --sequences=4"
+  TR="--preset=smoke"
+  EV="--preset=smoke --materials=$GI --sequences=2 --resolution=32 --frames=8 --cloth_resolution=8"
+  EST="--preset=smoke --backend=c"
+  LAT="--backend=c --settings=default --repeats=1"
+else
+  CAL="--backend=mjx"
+  DS="--materials=$GI --batch_size=30"
+  TR="--val_fraction=0.2 --patience=4"
+  EV="--preset=eval --materials=$GI --sequences=3"
+  EST=""
+  LAT="--backend=mjx --settings=default,paper --repeats=1"
+fi
+case "$stage" in
+  calibration)
+    python -m experiments.calibrate --workdir="$R/calibration" $CAL 2>&1 | tee "$OUT/calibration.log"
+    cp "$R"/calibration/calibration.json "$R"/calibration/calibration.md \
+      "$R"/calibration/*.png "$OUT/"
+    ;;
+  paper)
+    python -m experiments.generate_dataset --out="$R/ds" $DS 2>&1 | tail -20 | tee "$OUT/dataset.log"
+    python -m experiments.train --dataset="$R/ds" --workdir="$R/t1/physnet_depth/simulation" \
+      --materials=$GI $TR 2>&1 | tail -5 | tee "$OUT/train.log"
+    python -m experiments.generate_dataset --out="$R/eval/fabrics" $EV 2>&1 | tail -8 | tee "$OUT/eval.log"
+    ;;
+  latency)
+    python benchmarks/estimate_latency.py --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
+      --model="$R/t1/physnet_depth/simulation/$GI" --out="$OUT/latency.json" $LAT 2>&1 \
+      | tee "$OUT/latency.log"
+    for p in paper default; do
+      pre=$p; [ -n "${SMOKE:-}" ] && pre=smoke
+      python -m experiments.tables --eval="$R/eval" --models="$R/t1" --workdir="$R/tables_$p" \
+        --methods=physnet_depth --preset=$pre ${EST:+--backend=c} 2>&1 | tail -30 | tee "$OUT/tables_$p.log"
+      cp "$R/tables_$p/tables.json" "$OUT/tables_$p.json"
+    done
+    cp "$R"/tables_default/physnet_depth/fabrics/$GI-0000/posterior.png "$OUT/posterior_${GI}_0000.png"
+    ;;
+  *) echo "unknown stage $stage"; exit 2 ;;
+esac

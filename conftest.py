@@ -1,0 +1,38 @@
+"""Test session settings for the whole suite.
+
+Tiers: ``python -m pytest -m "not slow" tests`` is the fast tier (minutes on
+two cores); tests marked ``slow`` compile MuJoCo Warp or run whole searches
+and studies; ``gpu`` tests need a CUDA device and skip without one. CI runs
+every tier (``python -m pytest -q tests``, as README says).
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+
+# Quiet and small: no TF-style logging, no preallocation if a GPU is present.
+os.environ.setdefault('TF_CPP_MIN_LOG_LEVEL', '2')
+os.environ.setdefault('XLA_PYTHON_CLIENT_PREALLOCATE', 'false')
+
+import jax  # noqa: E402
+import pytest  # noqa: E402
+
+
+def pytest_collection_modifyitems(config, items):
+  """Skips ``gpu`` tests when JAX has no GPU."""
+  if jax.default_backend() == 'gpu':
+    return
+  skip = pytest.mark.skip(reason='needs a CUDA GPU')
+  for item in items:
+    if 'gpu' in item.keywords:
+      item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True, scope='module')
+def _free_compiled_programs():
+  """Drops compiled programs after each test module: a session that keeps every
+  module's executables (MJX, renderers, networks, GPs) grows by gigabytes."""
+  yield
+  jax.clear_caches()
+  gc.collect()

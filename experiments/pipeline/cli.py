@@ -1,0 +1,260 @@
+"""Command lines from config dataclasses: the one config mechanism of the scripts.
+
+A script declares one frozen dataclass whose fields are its settings, each
+documented under ``Attributes:`` in the class docstring (meaning, units). A
+field that is itself a dataclass (a library's config, e.g. ``EstimateConfig``)
+contributes its own fields as flags under their own names, so a library config
+is never copied field by field. ``--preset`` picks a named instance of the
+script's dataclass; flags given on the command line override it.
+
+  @dataclasses.dataclass(frozen=True)
+  class Args:
+    \"\"\"...
+    Attributes:
+      workdir: where results go.
+      search: the search settings.
+    \"\"\"
+    workdir: str = cli.required()
+    search: EstimateConfig = EstimateConfig()
+
+  if __name__ == '__main__':
+    cli.run(Args, {'default': Args(), 'smoke': Args(search=SMOKE)}, main)
+
+User errors (``ValueError``, ``OSError``) end the run with one line on stderr
+and exit status 2; ``--verbose`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+import sys
+import types
+import typing
+from collections.abc import Callable, Mapping
+
+from absl import app, flags
+
+_REQUIRED = 'required'
+_CHOICES = 'choices'
+_SKIP = 'skip'
+
+
+def required(default: str = ''):
+  """A string field the command line must give (``--name=...``)."""
+  return dataclasses.field(default=default, metadata={_REQUIRED: True})
+
+
+def choice(default: str, choices):
+  """A string field restricted to ``choices`` (an enum flag)."""
+  return dataclasses.field(default=default, metadata={_CHOICES: tuple(choices)})
+
+
+def nested(default, *, skip=()):
+  """A field holding a library's config whose fields become flags, except
+  those named in ``skip`` (set by the library from other settings; a dotted
+  name skips a field of a config nested deeper, e.g. ``'fit.split'``)."""
+  return dataclasses.field(default=default, metadata={_SKIP: tuple(skip)})
+
+
+def field_docs(cls) -> dict[str, str]:
+  """Each field's text from the ``Attributes:`` section of ``cls``'s docstring.
+
+  A line ``name: text`` (or ``a, b: text`` for fields described together)
+  starts an entry; more deeply indented lines continue it.
+  """
+  doc = inspect.cleandoc(cls.__doc__ or '')
+  lines = doc.splitlines()
+  try:
+    start = next(i for i, line in enumerate(lines) if line.strip() == 'Attributes:')
+  except StopIteration:
+    return {}
+  out: dict[str, str] = {}
+  current: list[str] = []
+  indent = None
+  for line in lines[start + 1 :]:
+    if not line.strip():
+      continue
+    depth = len(line) - len(line.lstrip())
+    if depth == 0:
+      break
+    indent = depth if indent is None else indent
+    m = re.match(r'^([A-Za-z_][\w, ]*):\s*(.*)$', line.strip())
+    if depth == indent and m:
+      current = [n.strip() for n in m.group(1).split(',')]
+      for n in current:
+        out[n] = m.group(2)
+    elif current:
+      for n in current:
+        out[n] += ' ' + line.strip()
+  return out
+
+
+class _Leaf(typing.NamedTuple):
+  path: tuple[str, ...]  # field names from the script's dataclass down
+  field: dataclasses.Field
+  type: object
+  doc: str
+
+
+def _is_config(t) -> bool:
+  return isinstance(t, type) and dataclasses.is_dataclass(t)
+
+
+def leaves(cls) -> list[_Leaf]:
+  """The flag-carrying fields of ``cls``, nested dataclasses flattened.
+
+  Raises:
+    ValueError: two fields would take the same flag name, or a field has no
+      ``Attributes:`` entry or a type flags cannot carry.
+  """
+  out: list[_Leaf] = []
+
+  def walk(c, path, skip=()):
+    hints = typing.get_type_hints(c)
+    docs = field_docs(c)
+    for f in dataclasses.fields(c):
+      if f.name in skip:
+        continue
+      t = hints[f.name]
+      if _is_config(t):
+        deeper = tuple(s[len(f.name) + 1 :] for s in skip if s.startswith(f.name + '.'))
+        walk(t, path + (f.name,), f.metadata.get(_SKIP, ()) + deeper)
+        continue
+      if f.name not in docs:
+        raise ValueError(f'{c.__name__}.{f.name} has no Attributes: entry')
+      _parser(t, f'{c.__name__}.{f.name}')  # checks the type
+      out.append(_Leaf(path + (f.name,), f, t, docs[f.name]))
+
+  walk(cls, ())
+  names = [leaf.path[-1] for leaf in out]
+  dup = sorted({n for n in names if names.count(n) > 1})
+  if dup:
+    raise ValueError(f'{cls.__name__}: flag names {dup} appear in more than one config')
+  return out
+
+
+def _parser(t, where: str):
+  """``(kind, element type)`` of a field type, kind in bool/int/float/str/list."""
+  origin = typing.get_origin(t)
+  if t in (bool, int, float, str):
+    return t.__name__, t
+  if origin is tuple:
+    args = typing.get_args(t)
+    if len(args) == 2 and args[1] is Ellipsis and args[0] in (str, int, float):
+      return 'list', args[0]
+  if origin in (typing.Union, types.UnionType):
+    raise ValueError(f'{where}: optional types cannot be flags; use a default')
+  raise ValueError(f'{where}: type {t} cannot be a flag')
+
+
+def _get(obj, path):
+  for p in path:
+    obj = getattr(obj, p)
+  return obj
+
+
+def _replace(obj, path, value):
+  if len(path) == 1:
+    return dataclasses.replace(obj, **{path[0]: value})
+  child = _replace(getattr(obj, path[0]), path[1:], value)
+  return dataclasses.replace(obj, **{path[0]: child})
+
+
+def define_flags(
+  cls,
+  presets: Mapping[str, object],
+  flag_values: flags.FlagValues = flags.FLAGS,
+  module_name: str | None = None,
+) -> None:
+  """Defines ``--preset``, ``--verbose`` and one flag per leaf field of ``cls``.
+
+  Help text is the field's documentation; the default shown is the first
+  preset's value. ``module_name`` is the module ``--help`` lists them under
+  (the running script's: absl names it by ``sys.argv[0]``).
+  """
+  if not presets:
+    raise ValueError(f'{cls.__name__}: need at least one preset')
+  first = next(iter(presets.values()))
+  kw = dict(flag_values=flag_values, module_name=module_name)
+  flags.DEFINE_enum(
+    'preset', next(iter(presets)), list(presets),
+    'named settings; flags given override them', **kw,
+  )  # fmt: skip
+  flags.DEFINE_bool('verbose', False, 'show the traceback of an error', **kw)
+  for leaf in leaves(cls):
+    name, doc = leaf.path[-1], leaf.doc
+    default = _get(first, leaf.path)
+    kind, elem = _parser(leaf.type, name)
+    choices = leaf.field.metadata.get(_CHOICES)
+    if choices:
+      flags.DEFINE_enum(name, default, list(choices), doc, **kw)
+    elif kind == 'bool':
+      flags.DEFINE_bool(name, default, doc, **kw)
+    elif kind == 'int':
+      flags.DEFINE_integer(name, default, doc, **kw)
+    elif kind == 'float':
+      flags.DEFINE_float(name, default, doc, **kw)
+    elif kind == 'str':
+      flags.DEFINE_string(name, default, doc, **kw)
+    else:
+      flags.DEFINE_list(name, [str(v) for v in default], doc, **kw)
+
+
+def from_flags(
+  cls, presets: Mapping[str, object], flag_values: flags.FlagValues = flags.FLAGS
+):
+  """The chosen preset with the flags given on the command line applied.
+
+  Raises:
+    ValueError: a required field is missing or a list holds a bad value.
+  """
+  config = presets[flag_values.preset]
+  missing = []
+  for leaf in leaves(cls):
+    name = leaf.path[-1]
+    flag = flag_values[name]
+    if flag.present:
+      value = flag.value
+      kind, elem = _parser(leaf.type, name)
+      if kind == 'list':
+        try:
+          value = tuple(elem(v) for v in value)
+        except ValueError as e:
+          raise ValueError(f'--{name}: {e}') from e
+      config = _replace(config, leaf.path, value)
+    if leaf.field.metadata.get(_REQUIRED) and not _get(config, leaf.path):
+      missing.append(f'--{name}')
+  if missing:
+    raise ValueError(f'missing {", ".join(missing)} (see --help)')
+  return config
+
+
+def parse(cls, presets: Mapping[str, object], argv: list[str]):
+  """``from_flags`` for a command line ``argv`` (program name first), on a
+  fresh set of flags: for tests and for calling a script from Python."""
+  fv = flags.FlagValues()
+  define_flags(cls, presets, fv)
+  fv(argv)
+  return from_flags(cls, presets, fv)
+
+
+def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) -> None:
+  """A script's whole ``__main__``: flags from ``cls``, ``main(config)``, and
+  user errors as one line (exit status 2) unless ``--verbose``."""
+  define_flags(cls, presets, module_name=sys.argv[0])
+
+  def _main(argv):
+    if len(argv) > 1:
+      raise app.UsageError(f'unexpected arguments {argv[1:]}')
+    try:
+      main(from_flags(cls, presets))
+    except (ValueError, OSError) as e:
+      if flags.FLAGS.verbose:
+        raise
+      print(f'error: {e}', file=sys.stderr)
+      print('(run with --verbose for the traceback)', file=sys.stderr)
+      sys.exit(2)
+
+  app.run(_main)

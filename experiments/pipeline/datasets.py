@@ -1,0 +1,633 @@
+"""The fabric dataset sweep, simulated and rendered into the ``physsim.dataset`` format.
+
+For each material: parameter sets drawn uniformly in its normalised search box
+(seeded per material), simulated in fixed batches (``physsim.simulate``), each
+world seen by random cameras (``physsim.sample_poses``) through the JAX
+ray-caster in one jitted call per batch, and written sequence by sequence,
+atomically. A rerun resumes: finished sequences are kept as they are.
+``experiments/generate_dataset.py`` is its command line.
+
+Invalid (blown-up) worlds are written with ``valid=False`` and no frames; they
+are rendered with the rest mesh in their place only to keep the batch shape
+fixed, and those frames are discarded.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import functools
+import json
+import os
+import time
+import zlib
+
+import jax
+import jax.numpy as jnp
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from absl import logging  # noqa: E402
+
+import physsim  # noqa: E402
+from experiments.pipeline import cli, embedding, files, progress  # noqa: E402
+from physsim import dataset  # noqa: E402
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+  """One dataset sweep (each field is also a flag of generate_dataset).
+
+  Attributes:
+    materials: fabric names (``physsim.FABRICS``).
+    sequences: parameter sets (simulations) per material.
+    frames: frames per sequence.
+    fps: frame rate, Hz.
+    warmup: seconds simulated before the first frame.
+    cameras: cameras per sequence.
+    resolution: image width = height, pixels.
+    cloth_resolution: cloth vertices per side.
+    seed: the only seed.
+    backend: ``'auto'`` (MJX on a GPU, else MuJoCo C), ``'mjx'`` or ``'c'``.
+    batch_size: worlds simulated and rendered at once. The sequences of all
+      materials, in order, are grouped in fixed chunks of this size (one
+      compiled model serves every material), and gusts are drawn per chunk,
+      so a resume must use the same batch size (checked).
+    workers: processes for the C backend (0: all cores).
+    gust_intensity: RMS relative wind fluctuation.
+    rgb: also write shaded colour frames, each material in its
+      physsim.FABRIC_COLORS colour (as the estimate renders RGB candidates).
+    noise: apply ``physsim.sensor`` depth-camera noise to the depth frames.
+    render_method: ``'raster'`` or ``'brute'`` (``physsim.render``).
+    garment: '' for the square cloth, else a ``physsim.GARMENTS`` name.
+    garment_spacing: garment grid spacing, metres.
+    poses: ``'train'`` (``PoseRanges()``) or ``'evaluation'`` (the disjoint
+      ``PoseRanges.evaluation()``).
+    timestep: simulation step, seconds; 1/fps must be a multiple of it.
+    min_coverage: share of a frame's pixels the cloth must cover in every
+      frame of a camera, as someone filming it would frame it; a camera below
+      it gets a new pose, up to ``pose_draws`` draws in all (0: off).
+    pose_draws: most poses drawn per camera when ``min_coverage`` is on.
+  """
+
+  materials: tuple[str, ...] = tuple(physsim.FABRICS)
+  sequences: int = 30
+  frames: int = 60
+  fps: float = 20.0
+  warmup: float = 1.0
+  cameras: int = 6
+  resolution: int = 256
+  cloth_resolution: int = 25
+  seed: int = 0
+  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  batch_size: int = 30
+  workers: int = 0
+  gust_intensity: float = 0.2
+  rgb: bool = False
+  noise: bool = False
+  render_method: str = cli.choice('raster', ('raster', 'brute'))
+  garment: str = ''
+  garment_spacing: float = 0.04
+  poses: str = cli.choice('train', ('train', 'evaluation'))
+  timestep: float = 0.002
+  min_coverage: float = 0.0
+  pose_draws: int = 8
+
+
+PRESETS = {
+  'paper': Config(),
+  'smoke': Config(
+    materials=('gray_interlock', 'black_denim'),
+    sequences=2,
+    frames=4,
+    warmup=0.25,
+    cameras=2,
+    resolution=32,
+    cloth_resolution=8,
+    backend='c',
+    batch_size=2,
+    workers=1,
+  ),
+  # Real-like evaluation recordings, unlike the training data the way reality
+  # is: finer mesh, sensor noise, 24 fps for 2.5 s, unseen camera poses, gustier
+  # wind, one camera. Garments: the same with --garment (experiments.make_eval_set).
+  'eval': Config(
+    sequences=3,
+    frames=60,
+    fps=24.0,
+    cameras=1,
+    cloth_resolution=33,
+    noise=True,
+    poses='evaluation',
+    gust_intensity=0.3,
+    batch_size=3,
+    timestep=1 / 480,
+    seed=1000,  # parameter draws and gusts unlike the training set's (seed 0)
+    # Unseen poses can catch a wind-lifted sheet edge-on or leave it out of view
+    # (empty frames at 32x32); nobody keeps such a recording.
+    min_coverage=0.01,
+  ),
+}
+# Fields that do not change what is generated, so a resume may differ in them.
+_FREE_FIELDS = ('workers',)
+
+
+# PNG encoding releases the GIL: sequences of a batch are written in parallel.
+_WRITERS = 8
+
+POSES = {'train': physsim.PoseRanges(), 'evaluation': physsim.PoseRanges.evaluation()}
+
+
+def _draw_poses(config: Config, keys, seq_idx, attempt: int) -> physsim.Pose:
+  """(B, C) camera poses of sequences ``seq_idx``; draw 0 is the one a sweep
+  without ``min_coverage`` uses, so turning it on changes only the re-drawn."""
+
+  def one(key, i):
+    key = jax.random.fold_in(key, i)
+    if attempt:
+      key = jax.random.fold_in(key, attempt)
+    return physsim.sample_poses(key, config.cameras, POSES[config.poses])
+
+  return jax.vmap(one)(keys, seq_idx)
+
+
+def _coverage(depth: np.ndarray) -> np.ndarray:
+  """(B, C, T, H, W) depth -> (B, C): the least share of cloth pixels in a frame."""
+  return (depth > 0).mean(axis=(-1, -2)).min(axis=-1)
+
+
+def _where_cameras(low: np.ndarray, new, old) -> np.ndarray:
+  """Per (world, camera): ``new`` where ``low``, else ``old``."""
+  return np.where(low.reshape(low.shape + (1,) * (np.ndim(old) - 2)), new, old)
+
+
+def _frame_cameras(config: Config, draw, render, poses, frames, valid):
+  """Draws new poses for the cameras of valid worlds whose cloth covers less
+  than ``config.min_coverage`` of some frame, until none does or a camera has
+  had ``config.pose_draws`` poses, and keeps each camera's best-covered pose
+  (a sheet blown flat can stay grazing from every pose); only those cameras'
+  frames change.
+
+  Returns:
+    (poses, depth, rgb or None, (B, C) poses drawn per camera, (B, C) coverage,
+    or None when ``min_coverage`` is off: the sweep's hot path skips it).
+  """
+  depth, rgb = frames
+  if not config.min_coverage:
+    return poses, depth, rgb, None, None
+  cover = _coverage(depth)
+  draws = np.ones(cover.shape, np.int64)
+  for attempt in range(1, config.pose_draws):
+    low = (cover < config.min_coverage) & np.asarray(valid)[:, None]
+    if not low.any():
+      break
+    new_poses = jax.tree.map(
+      functools.partial(_where_cameras, low), draw(attempt), poses
+    )
+    new_depth, new_rgb = (
+      None if x is None else np.asarray(x)
+      for x in jax.block_until_ready(render(new_poses))
+    )
+    new_cover = _coverage(new_depth)
+    better = low & (new_cover > cover)
+    pick = functools.partial(_where_cameras, better)
+    poses = jax.tree.map(pick, new_poses, poses)
+    depth, cover = pick(new_depth, depth), pick(new_cover, cover)
+    if rgb is not None:
+      rgb = pick(new_rgb, rgb)
+    draws += low
+  return poses, depth, rgb, draws, cover
+
+
+def _mesh(config: Config) -> physsim.Mesh:
+  if config.garment:
+    return physsim.garment(config.garment, config.garment_spacing)
+  return physsim.square(config.cloth_resolution)
+
+
+def _material_stream(seed: int, material: str) -> int:
+  # Stable across runs and material lists (Python's hash() is salted).
+  return zlib.crc32(f'{seed}/{material}'.encode())
+
+
+def material_params(config: Config, material: str) -> physsim.Params:
+  """The material's ``sequences`` parameter sets (a prefix-stable draw)."""
+  rng = np.random.default_rng([config.seed, _material_stream(config.seed, material)])
+  return physsim.params.sample(rng, config.sequences, physsim.search_space(material))
+
+
+def _check_config(config: Config) -> None:
+  unknown = [m for m in config.materials if m not in physsim.FABRICS]
+  if unknown or not config.materials:
+    raise ValueError(f'materials {unknown} not in {sorted(physsim.FABRICS)}')
+  if len(set(config.materials)) != len(config.materials):
+    raise ValueError(f'materials repeat: {config.materials}')
+  for name in ('sequences', 'frames', 'cameras', 'resolution', 'batch_size'):
+    if getattr(config, name) < 1:
+      raise ValueError(f'{name} must be >= 1, got {getattr(config, name)}')
+  if config.garment and config.garment not in physsim.GARMENTS:
+    raise ValueError(
+      f'garment must be one of {physsim.GARMENTS}, got {config.garment!r}'
+    )
+  if config.poses not in POSES:
+    raise ValueError(f'poses must be one of {tuple(POSES)}, got {config.poses!r}')
+  if config.cloth_resolution < 2:
+    raise ValueError(f'cloth_resolution must be >= 2, got {config.cloth_resolution}')
+  if not 0.0 <= config.min_coverage < 1.0 or config.pose_draws < 1:
+    raise ValueError(
+      f'need 0 <= min_coverage < 1 and pose_draws >= 1, got {config.min_coverage} '
+      f'and {config.pose_draws}'
+    )
+
+
+def _identity(config: Config, backend: str) -> dict:
+  d = dataclasses.asdict(config)
+  d['materials'] = list(config.materials)
+  d['backend'] = backend
+  d['batching'] = 'across-materials'  # how gust keys map to sequences
+  if config.rgb:  # older RGB datasets were all one grey
+    d['rgb_colors'] = 'fabric'
+  for k in _FREE_FIELDS:
+    d.pop(k)
+  if not config.min_coverage:  # datasets made before the re-draw match
+    d.pop('min_coverage'), d.pop('pose_draws')
+  return d
+
+
+def _check_params(config: Config, params: dict | None) -> dict | None:
+  """Validated explicit parameter sets (``run``'s ``params``), or None."""
+  if params is None:
+    return None
+  out = {}
+  for m in config.materials:
+    if m not in params:
+      raise ValueError(f'params has no parameter sets for material {m!r}')
+    p = physsim.params.validate(params[m], physsim.search_space(m))
+    if p.bending_scale.shape != (config.sequences,):
+      raise ValueError(
+        f'params[{m!r}] holds {p.bending_scale.shape} sets, want ({config.sequences},)'
+      )
+    out[m] = p
+  return out
+
+
+def _open_workdir(workdir: str, config: Config, backend: str, params=None) -> dict:
+  """Creates or checks ``dataset.json``; a resume must match the config."""
+  os.makedirs(workdir, exist_ok=True)
+  dataset.clean_tmp(workdir)
+  ident = _identity(config, backend)
+  if params is not None:
+    ident['params'] = {
+      m: np.stack(list(p), 1).round(12).tolist() for m, p in params.items()
+    }
+  info_path = os.path.join(workdir, 'dataset.json')
+  if os.path.isfile(info_path):
+    with open(info_path) as f:
+      info = json.load(f)
+    old = info.get('config', {})
+    diff = sorted(k for k in set(old) | set(ident) if old.get(k) != ident.get(k))
+    if diff:
+      raise ValueError(
+        f'{info_path}: this folder holds a dataset made with a different config '
+        f'({", ".join(f"{k}: {old.get(k)!r} -> {ident.get(k)!r}" for k in diff)}); '
+        'use another --out or the same settings'
+      )
+    return info
+  return dataset.write_dataset_info(
+    workdir,
+    seed=config.seed,
+    config=ident,
+    jax_backend=jax.default_backend(),
+    pose_ranges=POSES[config.poses].to_dict(),
+  )
+
+
+def _renderer(faces, intrinsics, config: Config):
+  """The jitted per-batch render stage: (positions, poses, key, (B, 3) colours)
+  -> depth[, rgb]."""
+  noise = None
+  if config.noise:
+    try:
+      from physsim import sensor  # imported only when used
+    except ImportError as e:
+      raise ValueError(f'--noise needs physsim.sensor, which is missing ({e})') from e
+    noise = sensor.SensorNoise()
+  faces = jnp.asarray(faces, jnp.int32)
+
+  @jax.jit
+  def render(positions, poses, key, colors):
+    depth = physsim.render_depth(
+      positions, faces, intrinsics, poses, method=config.render_method
+    )  # (B, C, T, H, W)
+    if noise is not None:
+      depth = sensor.apply_noise_frames(key, depth, intrinsics, noise)
+    rgb = None
+    if config.rgb:  # a batch mixes materials: one colour per world
+      rgb = physsim.render_rgb8(
+        positions, faces, intrinsics, poses, colors, method=config.render_method
+      )  # (B, C, T, H, W, 3)
+    return depth, rgb
+
+  return render
+
+
+def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str | None:
+  """A grid of camera-0 frames (rows: sequences, columns: time), read from disk."""
+  rows = [r for r in rows if r['valid']][:n]
+  if not rows:
+    return None
+  seqs = [
+    dataset.read_sequence(
+      dataset.sequence_dir(workdir, material, r['seq_id']), cameras=[0], rgb=False
+    )
+    for r in rows
+  ]
+  t = seqs[0].depth.shape[1]
+  cols = np.unique(np.linspace(0, t - 1, min(n, t)).round().astype(int))
+  valid = np.concatenate([s.depth[0][cols][s.depth[0][cols] > 0] for s in seqs])
+  lo, hi = np.percentile(valid, [1, 99]) if valid.size else (0.0, 1.0)
+  cmap = plt.get_cmap('viridis').with_extremes(bad='white')
+  fig, axes = plt.subplots(
+    len(seqs), len(cols), figsize=(1.6 * len(cols), 1.6 * len(seqs)), squeeze=False
+  )
+  for i, (s, r) in enumerate(zip(seqs, rows, strict=True)):
+    for j, c in enumerate(cols):
+      ax = axes[i, j]
+      d = s.depth[0, c]
+      im = ax.imshow(np.ma.masked_equal(d, 0.0), cmap=cmap, vmin=lo, vmax=hi)
+      ax.set(xticks=[], yticks=[])
+      if i == 0:
+        ax.set_title(f't={c / s.meta["fps"]:.2f} s', fontsize=7)
+      if j == 0:
+        ax.set_ylabel(
+          f'{r["seq_id"]}\nb{r["bending_scale"]:.2g} w{r["wind_speed"]:.2g}\n'
+          f'a{r["area_weight"]:.3g}',
+          fontsize=6,
+        )
+  fig.colorbar(im, ax=axes, shrink=0.6, label='depth, m (white: invalid)')
+  fig.suptitle(f'{material}, camera 0', fontsize=9)
+  path = os.path.join(workdir, f'montage_{material}.png')
+  files.savefig(fig, path, dpi=110)
+  plt.close(fig)
+  return path
+
+
+def run(config: Config, workdir: str, params: dict | None = None) -> dict:
+  """Generates (or resumes) the dataset in ``workdir``; returns the summary.
+
+  Args:
+    config: the sweep.
+    workdir: dataset root (``physsim.dataset`` layout).
+    params: optional ``{material: physsim.Params}`` with ``sequences``
+      parameter sets each, instead of the seeded uniform draw (a study that
+      needs recordings sharing some parameters); recorded in dataset.json.
+
+  Returns:
+    The summary also written to ``<workdir>/summary.json``: counts per
+    material, seconds simulating / rendering / writing, frames per second.
+  """
+  _check_config(config)
+  backend = physsim.resolve_backend(config.backend)
+  given = _check_params(config, params)
+  _open_workdir(workdir, config, backend, given)
+  intrinsics = physsim.Intrinsics(width=config.resolution, height=config.resolution)
+  mesh = _mesh(config)
+  # MuJoCo's stiffest safe constraint time constant is two steps.
+  sim_config = physsim.SimConfig(
+    timestep=config.timestep,
+    edge_solref=max(physsim.SimConfig.edge_solref, 2 * config.timestep),
+  )
+  render = _renderer(mesh.faces, intrinsics, config)
+  wind = physsim.Wind(gust_intensity=config.gust_intensity)
+  root_key = jax.random.key(config.seed)
+  bs = config.batch_size
+  # One compiled model for every material (bending is scaled per world), so
+  # batches run across materials: jobs are (material index, sequence index).
+  model = physsim.build(mesh, config.materials[0], sim_config)
+  params = {m: given[m] if given else material_params(config, m)
+            for m in config.materials}  # fmt: skip
+  cam_keys = {
+    m: jax.random.fold_in(
+      jax.random.fold_in(root_key, _material_stream(config.seed, m)), 1
+    )
+    for m in config.materials
+  }
+  jobs = [(k, i) for k in range(len(config.materials)) for i in range(config.sequences)]
+  n_batches = -(-len(jobs) // bs)
+  # The first batch's calls include compiles (MJX model and renderer).
+  seconds = {
+    'simulate': 0.0,
+    'simulate_first_batches': 0.0,
+    'render': 0.0,
+    'first_render_call': None,
+    'write': 0.0,
+    'redraw': 0.0,
+  }
+  frames_simulated = 0
+  n_sim_batches = 0
+  counts = {
+    m: {'existing': 0, 'written': 0, 'valid': 0, 'invalid': 0} for m in config.materials
+  }
+  frames_rendered = 0
+  cameras_redrawn = 0
+  bar = progress.Bar(len(jobs), 'simulate + render', 'seq')
+  with concurrent.futures.ThreadPoolExecutor(_WRITERS) as writers:
+    for b in range(n_batches):
+      chunk = jobs[b * bs : (b + 1) * bs]
+      todo = [
+        (k, i)
+        for k, i in chunk
+        if not dataset.is_complete(workdir, config.materials[k], f'{i:04d}')
+      ]
+      for k, _ in set(chunk) - set(todo):
+        counts[config.materials[k]]['existing'] += 1
+      bar.skip(len(chunk) - len(todo))
+      if not todo:
+        continue
+      # Pad the last chunk to the full batch so nothing recompiles.
+      padded = chunk + [chunk[-1]] * (bs - len(chunk))
+      names = [config.materials[k] for k, _ in padded]
+      p = physsim.Params(
+        *(
+          np.array(
+            [getattr(params[n], f)[i] for n, (_, i) in zip(names, padded, strict=True)]
+          )
+          for f in physsim.Params._fields
+        )
+      )
+      k_wind, k_noise = jax.random.split(jax.random.fold_in(root_key, 2 + b))
+      t0 = time.perf_counter()
+      out = physsim.simulate(
+        model,
+        p,
+        frames=config.frames,
+        fps=config.fps,
+        warmup=config.warmup,
+        wind=wind,
+        key=k_wind,
+        backend=backend,
+        workers=config.workers or None,
+        material=names,
+      )
+      dt = time.perf_counter() - t0
+      n_sim_batches += 1
+      if b == 0:
+        seconds['simulate_first_batches'] += dt
+      else:
+        seconds['simulate'] += dt
+        frames_simulated += bs * config.frames
+      # Cameras per sequence, independent of batching.
+      draw = functools.partial(
+        _draw_poses,
+        config,
+        jnp.stack([cam_keys[n] for n in names]),
+        jnp.asarray([i for _, i in padded]),
+      )
+      poses = draw(0)  # (B, C)
+      # Blown-up worlds render the rest mesh: same shapes, frames discarded.
+      positions = np.where(
+        out.valid[:, None, None, None], out.positions, mesh.vertices.astype(np.float32)
+      )
+      t0 = time.perf_counter()
+      colors = jnp.asarray([embedding.rgb_color(n) for n in names], jnp.float32)
+      depth, rgb = jax.block_until_ready(render(positions, poses, k_noise, colors))
+      dt = time.perf_counter() - t0
+      if seconds['first_render_call'] is None:
+        seconds['first_render_call'] = dt  # includes the compile
+      else:
+        seconds['render'] += dt
+        frames_rendered += depth.size // (config.resolution**2)
+      depth = np.asarray(depth)
+      rgb = None if rgb is None else np.asarray(rgb)
+      t0 = time.perf_counter()
+      poses, depth, rgb, draws, coverage = _frame_cameras(
+        config,
+        draw,
+        functools.partial(render, positions, key=k_noise, colors=colors),
+        poses,
+        (depth, rgb),
+        out.valid,
+      )
+      seconds['redraw'] += time.perf_counter() - t0
+      t0 = time.perf_counter()
+      pending = []
+      for j, (k, i) in enumerate(chunk):
+        if (k, i) not in todo:
+          continue
+        material = config.materials[k]
+        valid = bool(out.valid[j])
+        row = dataset.make_row(
+          f'{i:04d}',
+          material,
+          k * config.sequences + int(i),
+          physsim.Params(*(f[i] for f in params[material])),
+          physsim.search_space(material),
+          valid=valid,
+          n_cameras=config.cameras,
+          n_frames=config.frames,
+        )
+        meta = {
+          **row,
+          'fps': config.fps,
+          'warmup_s': config.warmup,
+          'intrinsics': intrinsics.to_dict(),
+          'extrinsics': [
+            physsim.pose_to_dict(
+              physsim.Pose(poses.rotation[j, c], poses.position[j, c])
+            )
+            for c in range(config.cameras)
+          ],
+          'mesh': mesh.name,
+          'garment': config.garment,
+          'seed': config.seed,
+          'backend': backend,
+          'gust_intensity': config.gust_intensity,
+          'noise': config.noise,
+          **({'rgb_color': list(embedding.rgb_color(material))} if config.rgb else {}),
+          'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))
+          if valid
+          else None,
+        }
+        if coverage is not None and valid:  # min_coverage is on
+          meta['pose_draws'] = draws[j].tolist()
+          meta['coverage_min'] = [round(float(x), 5) for x in coverage[j]]
+          cameras_redrawn += int((draws[j] > 1).sum())
+          if coverage[j].min() < config.min_coverage:
+            logging.warning(
+              '%s/%04d: the best of %d camera poses sees the cloth on %.4f of a frame',
+              material, i, config.pose_draws, coverage[j].min(),
+            )  # fmt: skip
+        pending.append(
+          writers.submit(
+            dataset.write_sequence,
+            workdir,
+            meta,
+            depth[j] if valid else None,
+            rgb[j] if valid and rgb is not None else None,
+          )
+        )
+        counts[material]['written'] += 1
+      for f in concurrent.futures.as_completed(pending):
+        f.result()  # re-raises a failed write
+      bar.done(len(pending))
+      dataset.rebuild_index(workdir)
+      seconds['write'] += time.perf_counter() - t0
+  bar.close()
+  rows = dataset.rebuild_index(workdir)
+  montages = {}
+  for material in config.materials:
+    mrows = [r for r in rows if r['material'] == material]
+    counts[material]['valid'] = sum(r['valid'] for r in mrows)
+    counts[material]['invalid'] = sum(not r['valid'] for r in mrows)
+    montages[material] = _montage(workdir, material, mrows)
+  total = sum(c['written'] for c in counts.values())
+  sim_total = seconds['simulate'] + seconds['simulate_first_batches']
+  summary = {
+    'backend': backend,
+    'device': jax.default_backend(),
+    'counts': counts,
+    'sequences_written': total,
+    'seconds': seconds,
+    'frames_rendered_after_compile': frames_rendered,
+    'cameras_redrawn': cameras_redrawn,  # min_coverage: poses drawn again
+    'render_frames_per_s': frames_rendered / seconds['render']
+    if seconds['render']
+    else None,
+    'frames_simulated_after_first_batches': frames_simulated,
+    'simulated_world_frames_per_s_with_compile': (
+      n_sim_batches * bs * config.frames / sim_total if sim_total else None
+    ),
+    'simulated_world_frames_per_s': (
+      frames_simulated / seconds['simulate'] if seconds['simulate'] else None
+    ),
+    'montages': montages,
+  }
+  dataset.write_json_atomic(os.path.join(workdir, 'summary.json'), summary)
+  return summary
+
+
+def describe(s: dict, out: str) -> str:
+  """A summary from ``run`` as a short report: counts per material and timings."""
+  lines = [
+    f'{out}: {s["sequences_written"]} sequences written ({s["backend"]} backend, '
+    f'{s["device"]})',
+    '| material | existing | written | valid | invalid |',
+    '|---|---:|---:|---:|---:|',
+  ]
+  for m, c in s['counts'].items():
+    lines.append(
+      f'| {m} | {c["existing"]} | {c["written"]} | {c["valid"]} | {c["invalid"]} |'
+    )
+  sec = s['seconds']
+  nan = float('nan')
+  lines.append(
+    f'simulate: first batch (with compile) {sec["simulate_first_batches"]:.1f} s, '
+    f'later batches {sec["simulate"]:.1f} s '
+    f'({s["simulated_world_frames_per_s"] or nan:.1f} world-frames/s); render: first '
+    f'call (with compile) {sec["first_render_call"] or 0:.1f} s, later '
+    f'{sec["render"]:.1f} s ({s["render_frames_per_s"] or nan:.0f} frames/s); '
+    f'write {sec["write"]:.1f} s'
+  )
+  return '\n'.join(lines)

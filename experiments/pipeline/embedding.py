@@ -1,0 +1,161 @@
+"""A trained embedding network as the estimate uses it, and what it sees.
+
+Training (``experiments.pipeline.training``) records in each run folder how
+frames were turned into inputs (``inputs.json``: the modality and the depth
+input mode); the estimate repeats exactly that for the recording and for every
+candidate simulation, so both land in the same embedding space.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+import model as model_lib
+import physsim
+from physsim import dataset
+
+INPUTS_FILE = 'inputs.json'
+MODALITIES = ('depth', 'rgb')
+CHANNELS = {'depth': 1, 'rgb': 3}
+
+
+class EmbeddingNet(NamedTuple):
+  """A trained run as the estimate uses it.
+
+  Attributes:
+    network, params: the ``model.Network`` and its params.
+    modality: 'depth' or 'rgb'.
+    input_mode: its ``model.depth_input`` mode.
+    clip_frames: 0 for PhySNet (frames), the clip length for SDN.
+    image_size: (H, W) its inputs have.
+    materials: the fabrics it was trained on (empty when unrecorded).
+    architecture: what its ``apply`` computes apart from the params (the
+      network's config as text): runs of one architecture share compiles.
+  """
+
+  network: object
+  params: object
+  modality: str
+  input_mode: str
+  clip_frames: int
+  image_size: tuple[int, int]
+  materials: tuple[str, ...] = ()
+  architecture: str = ''
+
+
+def resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+  """Nearest-neighbour resize of (..., H, W, 3), as ``dataset.resize_depth`` does depth."""
+  chw = np.moveaxis(rgb, -1, -3)  # (..., 3, H, W)
+  return np.moveaxis(dataset.resize_depth(chw, size), -3, -1)
+
+
+def rgb_color(material: str) -> tuple[float, float, float]:
+  """The colour (RGB in [0, 1]) a material's cloth is rendered in."""
+  return physsim.FABRIC_COLORS.get(material, physsim.FABRIC_COLORS['default'])
+
+
+def _recorded(run_dir: str) -> dict:
+  path = os.path.join(run_dir, INPUTS_FILE)
+  if not os.path.isfile(path):
+    return {}
+  try:
+    with open(path) as f:
+      return json.load(f)
+  except (OSError, ValueError) as e:
+    raise ValueError(f'{path}: cannot read JSON ({e})') from e
+
+
+def input_mode(run_dir: str) -> str:
+  """The input mode a run was trained with (``relative`` if unrecorded)."""
+  return _recorded(run_dir).get('input_mode', 'relative')
+
+
+def modality(run_dir: str) -> str:
+  """The modality a run was trained on (``depth`` if unrecorded: older runs)."""
+  return _recorded(run_dir).get('modality', 'depth')
+
+
+def load_embedding(model_dir: str) -> EmbeddingNet:
+  """Loads any trained run (PhySNet or SDN, depth or RGB).
+
+  Raises:
+    ValueError: not a trained run, or an unknown modality, naming ``model_dir``.
+  """
+  mod = modality(model_dir)
+  if mod not in MODALITIES:
+    raise ValueError(
+      f'{model_dir}/{INPUTS_FILE}: modality {mod!r} is none of {MODALITIES}'
+    )
+  network, params, cfg = model_lib.load_network(model_dir)
+  sdn = cfg.network == 'sdn'
+  trunk = cfg.sdn.trunk if sdn else cfg.physnet
+  return EmbeddingNet(
+    network,
+    params,
+    mod,
+    input_mode(model_dir),
+    cfg.sdn.num_frames if sdn else 0,
+    tuple(trunk.image_size),
+    tuple(_recorded(model_dir).get('materials', ())),
+    repr((cfg.network, cfg.sdn if sdn else cfg.physnet)),
+  )
+
+
+def network_inputs(frames, modality: str, input_mode: str = 'relative') -> jax.Array:
+  """Frames to network inputs, as training makes them.
+
+  Args:
+    frames: (..., H, W) depth in metres ('depth') or (..., H, W, 3) uint8
+      colour ('rgb').
+    modality: 'depth' or 'rgb'.
+    input_mode: ``model.depth_input`` mode (depth only).
+
+  Returns:
+    (..., H, W, channels) float32.
+  """
+  if modality == 'depth':
+    return model_lib.depth_input(frames, input_mode)
+  if modality == 'rgb':
+    return model_lib.rgb_input(frames)
+  raise ValueError(f'modality must be one of {MODALITIES}, got {modality!r}')
+
+
+def embed_video(network, params, inputs, clip_frames: int = 0) -> jax.Array:
+  """Embeds videos frame by frame (PhySNet) or clip by clip (SDN).
+
+  Args:
+    network: a ``model.Network``.
+    params: its params.
+    inputs: (S, T, H, W, ch) network inputs of S videos.
+    clip_frames: 0: every frame is one point; else every non-overlapping clip
+      of this many frames is one point (the last ``T % clip_frames`` frames
+      are dropped, as training clips sequences).
+
+  Returns:
+    (S, N, D) points, N = T or T // clip_frames.
+  """
+  s, t = inputs.shape[:2]
+  if not clip_frames:
+    return network.apply(params, inputs.reshape(s * t, *inputs.shape[2:])).reshape(
+      s, t, -1
+    )
+  n = t // clip_frames
+  if n < 1:
+    raise ValueError(f'videos of {t} frames are shorter than a clip of {clip_frames}')
+  clips = inputs[:, : n * clip_frames].reshape(s * n, clip_frames, *inputs.shape[2:])
+  return network.apply(params, clips).reshape(s, n, -1)
+
+
+def network_retrieval(model_dir: str) -> dict[str, float] | None:
+  """How well the network tells each parameter apart between held-out
+  simulations: its logged parameter retrieval (``model.retrieval``) at the
+  epoch it ships, over chance (1: the PSD does not constrain that parameter,
+  so neither can the estimate). None for runs that did not log it.
+  """
+  r = model_lib.selected_eval(model_lib.read_evals(model_dir)).get('test_retrieval')
+  return model_lib.retrieval.vs_chance(r) if r else None

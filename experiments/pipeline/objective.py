@@ -1,0 +1,516 @@
+"""The estimate's objective: one fused, jitted simulate-render-sense-embed-score.
+
+A candidate is a point ``u`` of the unit cube ``[-1, 1]^3`` (bending
+log-uniform, wind and area weight linear over the material's search box).
+``Objective`` maps a batch of candidates of one or several recordings to their
+physics similarity distance (PSD) in one ``jax.jit``::
+
+  u (P, q, 3), keys ──► physical parameters ──► rollout (MJX, or MuJoCo C
+  through a host callback) ──► blown-up worlds replaced by the rest mesh ──►
+  ray-cast from each recording's camera(s) ──► depth-sensor model ──►
+  network inputs ──► embedding (each recording's own network params) ──►
+  energy distance to the recording's embedding ──► PSD (P, q), NaN where the
+  simulation blew up
+
+Nothing returns to the host in between; only the scores come back (and, when
+asked, the best candidate's frames or every candidate's positions). The
+program depends on the ``Problem.structure`` (mesh, clock, camera model,
+network architecture, sensor, distance); recordings of one structure share one
+compile and are scored in one call, with their arrays (poses, network params,
+embedding of the recording, search box) stacked on a leading axis.
+
+Randomness: every candidate has its own gust and sensor-noise key (explicit
+arguments). A posterior search (``point='median'``) draws fresh keys for every
+evaluation, so repeated candidates show the simulator's noise, which its GP
+models; the paper's argmin (``point='argmin'``) gives all candidates of a
+search the same keys (common random numbers: a smoother objective for a
+minimiser, at the price of one gust history's bias).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import model as model_lib
+import physsim
+from experiments.pipeline import cli, embedding
+from experiments.pipeline.posterior import Measured
+from experiments.pipeline.recording import Recording
+
+BACKENDS = ('auto', 'mjx', 'c')
+DISTANCES = ('energy', 'centroid')
+POINTS = ('median', 'argmin')
+LIKELIHOODS = ('gibbs', 'threshold')
+
+
+@dataclasses.dataclass(frozen=True)
+class EstimateConfig:
+  """Settings of one estimate (also what a resumed run must match).
+
+  Attributes:
+    point: 'median': the posterior median with 50% and 90% credible
+      intervals (a posterior search; fresh gusts and sensor noise for every
+      simulation); 'argmin': the paper's protocol, the lowest PSD that
+      Bayesian optimisation found (common random numbers), with no calibrated
+      interval.
+    material: paper fabric name (physsim.FABRICS): the search box and the
+      bending reference.
+    garment: '' for the 1 m square, else a physsim.GARMENTS name.
+    cloth_resolution: square cloth vertices per side.
+    garment_spacing: garment grid spacing, metres.
+    frames: most frames compared (at fps); a longer recording is cut, a
+      shorter one sets how many frames are simulated.
+    fps: frame rate the recording is resampled to, Hz.
+    warmup: simulated seconds before the first frame.
+    gusts: RMS relative gust intensity of the simulated wind.
+    cameras: training-like cameras to render from when the recording's camera
+      is unknown (their embeddings are pooled).
+    q: candidates per iteration (one simulation batch).
+    n_init: initial design size (the first point is the range centre).
+    max_iter: most iterations after the initial design.
+    stop_rel_change: stopping rule: the best point (argmin), or every 5%,
+      50% and 95% posterior quantile (median), moved less than this share of
+      each range over the last stop_window iterations.
+    stop_window: iterations the stopping rule looks back.
+    min_iter: iterations before the stopping rule is checked.
+    posterior_grid: posterior grid cells per dimension (bending, wind, area
+      weight).
+    likelihood: the posterior's approximate likelihood, 'gibbs' or
+      'threshold' (BOLFI's; see bo.posterior).
+    sharpness: the likelihood's constant, calibrated on simulations
+      (experiments/calibrate.py; docs/calibration.md).
+    replicates: candidates per iteration that repeat the most probable cell
+      with fresh randomness (they measure the simulator's noise).
+    distance: PSD between embedding sets ('energy' or 'centroid').
+    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    workers: processes of the C backend (0: one per core); does not change
+      results, so a resumed run may use another value.
+    sensor_noise: pass candidates' rendered depth through the depth-sensor
+      model (physsim.sensor) before embedding, as the recording went through
+      a real sensor.
+    seed: all randomness (design, gusts, sensor noise, cameras).
+    measured: an anemometer's wind or a scale's area weight, as priors.
+  """
+
+  point: str = cli.choice('median', POINTS)
+  material: str = 'gray_interlock'
+  garment: str = ''
+  cloth_resolution: int = 25
+  garment_spacing: float = 0.04
+  frames: int = 60
+  fps: float = 20.0
+  warmup: float = 1.0
+  gusts: float = 0.2
+  cameras: int = 2
+  q: int = 24
+  n_init: int = 48
+  max_iter: int = 5
+  stop_rel_change: float = 0.05
+  stop_window: int = 2
+  min_iter: int = 2
+  posterior_grid: tuple[int, ...] = (12, 64, 24)
+  likelihood: str = cli.choice('gibbs', LIKELIHOODS)
+  sharpness: float = 0.5
+  replicates: int = 1
+  distance: str = cli.choice('energy', DISTANCES)
+  backend: str = cli.choice('auto', BACKENDS)
+  workers: int = 0
+  sensor_noise: bool = True
+  seed: int = 0
+  measured: Measured = Measured()
+
+  @property
+  def common_random_numbers(self) -> bool:
+    """The paper's argmin scores every candidate with the same gusts and
+    sensor noise; a posterior needs fresh ones per simulation."""
+    return self.point == 'argmin'
+
+  def check(self) -> None:
+    """Raises ValueError naming the first field outside its allowed values."""
+    if self.material not in physsim.FABRICS:
+      raise ValueError(
+        f'material {self.material!r} is not one of {sorted(physsim.FABRICS)}'
+      )
+    if self.garment and self.garment not in physsim.GARMENTS:
+      raise ValueError(f'garment {self.garment!r} is not one of {physsim.GARMENTS}')
+    for name, allowed in (
+      ('backend', BACKENDS), ('distance', DISTANCES), ('point', POINTS),
+      ('likelihood', LIKELIHOODS),
+    ):  # fmt: skip
+      if getattr(self, name) not in allowed:
+        raise ValueError(
+          f'{name} must be one of {allowed}, got {getattr(self, name)!r}'
+        )
+    if (
+      len(self.posterior_grid) != 3
+      or min(self.posterior_grid) < 2
+      or self.sharpness <= 0
+    ):
+      raise ValueError(
+        f'need a posterior_grid of 3 sizes >= 2 and sharpness > 0, got {self.posterior_grid}, '
+        f'{self.sharpness}'
+      )
+    if self.point == 'median' and not 0 <= self.replicates < self.q:
+      raise ValueError(f'need 0 <= replicates < q, got {self.replicates}, {self.q}')
+    self.measured.check(physsim.search_space(self.material))
+    for name in ('frames', 'cameras', 'q', 'n_init', 'cloth_resolution'):
+      if getattr(self, name) < 1:
+        raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
+    if not (1 <= self.fps <= 240):
+      raise ValueError(f'fps must be in [1, 240] Hz, got {self.fps}')
+    if self.frames > 1000 or not (0 <= self.warmup <= 10):
+      raise ValueError(
+        f'need frames <= 1000 and 0 <= warmup <= 10 s, got {self.frames}, {self.warmup}'
+      )
+    if not (0 <= self.gusts <= 1) or self.max_iter < 0:
+      raise ValueError(
+        f'need 0 <= gusts <= 1 and max_iter >= 0, got {self.gusts}, {self.max_iter}'
+      )
+
+
+# The paper's protocol: Bayesian optimisation to the lowest PSD (qUCB there,
+# log-EI here), from the range centre, stopped when the best point settles.
+PAPER = EstimateConfig(
+  point='argmin',
+  q=4,
+  n_init=8,
+  max_iter=30,
+  stop_rel_change=0.1,
+  stop_window=3,
+  min_iter=5,
+)
+PRESETS = {
+  'default': EstimateConfig(),
+  'paper': PAPER,
+  # A quick look on a CPU: small cloth, short clip, few iterations.
+  'smoke': EstimateConfig(
+    cloth_resolution=10,
+    frames=16,
+    warmup=0.5,
+    q=8,
+    n_init=16,
+    max_iter=3,
+    posterior_grid=(8, 32, 16),
+  ),
+}
+
+
+def cloth(config: EstimateConfig) -> physsim.ClothModel:
+  """The compiled cloth of an estimate's mesh. Worlds name their fabric's
+  bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
+  model and its compiles."""
+  mesh = (
+    physsim.garment(config.garment, config.garment_spacing)
+    if config.garment
+    else physsim.square(config.cloth_resolution)
+  )
+  return physsim.build(mesh, 'gray_interlock')
+
+
+class ProblemData(NamedTuple):
+  """One recording's arrays (stack several on a leading axis to score them together).
+
+  Attributes:
+    lo, hi: (3,) the search box in the optimiser's coordinates
+      (``physsim.params.unit_map``: bending as logs).
+    log: (3,) which fields map log-uniformly.
+    rigidity_ratio: () the fabric's reference bending over the cloth model's.
+    poses: ``physsim.Pose`` of its C cameras, rotation (C, 3, 3), position (C, 3).
+    color: (3,) the fabric's RGB colour (RGB networks; unused for depth).
+    params: its network's params.
+    rec_points: (N, D) the recording's embedding.
+  """
+
+  lo: jax.Array
+  hi: jax.Array
+  log: jax.Array
+  rigidity_ratio: jax.Array
+  poses: physsim.Pose
+  color: jax.Array
+  params: object
+  rec_points: jax.Array
+
+
+class Problem(NamedTuple):
+  """One recording's objective: host-side description plus its arrays.
+
+  Attributes:
+    config: its settings.
+    source: the recording's path (for messages).
+    space: the material's search space.
+    n_frames: frames simulated (the recording's, at ``config.fps``).
+    intr: camera intrinsics (the recording's or a default field of view).
+    net: its embedding network.
+    data: its ``ProblemData``.
+  """
+
+  config: EstimateConfig
+  source: str
+  space: physsim.SearchSpace
+  n_frames: int
+  intr: physsim.Intrinsics
+  net: embedding.EmbeddingNet
+  data: ProblemData
+
+  def structure(self) -> tuple:
+    """What the fused program is compiled for: problems with equal structure
+    share one ``Objective`` and are scored in one call."""
+    c, n = self.config, self.net
+    return (
+      c.garment, c.garment_spacing if c.garment else 0.0,
+      0 if c.garment else c.cloth_resolution, self.n_frames, c.fps, c.warmup,
+      c.gusts, physsim.resolve_backend(c.backend), c.workers, self.intr,
+      self.data.poses.position.shape[0], c.sensor_noise, c.distance,
+      n.modality, n.input_mode, n.clip_frames, n.architecture,
+      jax.tree.structure(n.params),
+    )  # fmt: skip
+
+
+def make_problem(
+  config: EstimateConfig, net: embedding.EmbeddingNet, recording: Recording
+) -> Problem:
+  """Sets up one recording's objective: checks it against the network, picks
+  its cameras and embeds it.
+
+  Raises:
+    ValueError: a bad config, a recording whose frames do not fit the network
+      (size, modality, shorter than an SDN clip), naming the recording.
+  """
+  config.check()
+  size = tuple(net.image_size)
+  if tuple(recording.depth.shape[1:]) != size:
+    raise ValueError(
+      f'{recording.source}: frames of {recording.depth.shape[1:]} but the '
+      f'network takes {size}; load the recording at that size'
+    )
+  rec_frames = recording.rgb if net.modality == 'rgb' else recording.depth
+  if rec_frames is None:
+    raise ValueError(
+      f'{recording.source}: no RGB frames, but the network embeds colour frames '
+      '(load_recording(..., rgb=True) of a sequence with cam0/rgb_*.png)'
+    )
+  n_frames = rec_frames.shape[0]
+  if net.clip_frames and n_frames < net.clip_frames:
+    raise ValueError(
+      f'{recording.source}: {n_frames} frames at {recording.fps} fps, shorter '
+      f'than one SDN clip of {net.clip_frames} frames; use a longer recording '
+      '(and EstimateConfig.frames >= the clip)'
+    )
+  space = physsim.search_space(config.material)
+  h, w = recording.depth.shape[1:]
+  key = jax.random.key(config.seed)
+  # A known field of view is used even when the pose is unknown.
+  intr = recording.intrinsics or physsim.Intrinsics(width=w, height=h)
+  if recording.pose is not None:
+    poses = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32)[None], recording.pose)
+  else:
+    poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
+  inputs = embedding.network_inputs(
+    jnp.asarray(rec_frames)[None], net.modality, net.input_mode
+  )
+  rec_points = jax.jit(embedding.embed_video, static_argnums=(0, 3))(
+    net.network, net.params, inputs, net.clip_frames
+  )[0]
+  lo, hi, log = physsim.params.unit_map(space)
+  model = cloth(config)
+  data = ProblemData(
+    jnp.asarray(lo, jnp.float32), jnp.asarray(hi, jnp.float32), jnp.asarray(log),
+    jnp.float32(physsim.reference_rigidity(config.material) / model.rigidity),
+    poses, jnp.asarray(embedding.rgb_color(config.material), jnp.float32),
+    net.params, rec_points,
+  )  # fmt: skip
+  return Problem(config, recording.source, space, n_frames, intr, net, data)
+
+
+class Scores(NamedTuple):
+  """What one ``Objective`` call returns (host arrays).
+
+  Attributes:
+    psd: (P, q) float64 PSD, NaN where the simulation blew up.
+    valid: (P, q) bool, False where it blew up.
+    frames: (P, T, H, W) depth or (P, T, H, W, 3) uint8 colour of each
+      problem's lowest-PSD candidate, camera 0, as its network saw them; or
+      None when not asked.
+    positions: (P, q, T, V, 3) simulated vertex positions, or None.
+  """
+
+  psd: np.ndarray
+  valid: np.ndarray
+  frames: np.ndarray | None = None
+  positions: np.ndarray | None = None
+
+
+class Objective:
+  """The fused program of one ``Problem.structure``, compiled once per
+  (P, q) shape and kept by this object (no global caches).
+
+  Call it with stacked ``ProblemData`` of P problems of that structure,
+  candidates ``u (P, q, 3)`` and per-candidate keys ``(P, q)``.
+  """
+
+  def __init__(self, problem: Problem):
+    c, net = problem.config, problem.net
+    self.structure = problem.structure()
+    self.cloth = cloth(c)
+    self.mesh = self.cloth.mesh
+    self.n_frames = problem.n_frames
+    self._rollout = physsim.rollout_fn(
+      self.cloth, frames=problem.n_frames, fps=c.fps, warmup=c.warmup,
+      backend=c.backend, workers=c.workers or None,
+    )  # fmt: skip
+    self._wind = physsim.Wind(gust_intensity=c.gusts)
+    self._intr = problem.intr
+    self._net = net
+    self._sensor = c.sensor_noise and net.modality == 'depth'
+    self._distance = c.distance
+    self._program = jax.jit(
+      self._fused, static_argnames=('with_frames', 'with_positions')
+    )
+
+  def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
+             with_positions):  # fmt: skip
+    p, q = u.shape[:2]
+    x = physsim.params.from_unit_traced(
+      u, data.lo[:, None], data.hi[:, None], data.log[:, None]
+    ).reshape(p * q, 3)  # (Pq, 3) physical
+    ratio = jnp.repeat(data.rigidity_ratio, q)
+    w = physsim.world_inputs(
+      self.cloth, x[:, 0], x[:, 1], x[:, 2], gust_keys.reshape(-1), self._wind, ratio
+    )
+    positions, valid = self._rollout(w)  # (Pq, T, V, 3), (Pq,)
+    rest = jnp.asarray(self.mesh.vertices, positions.dtype)
+    positions = jnp.where(valid[:, None, None, None], positions, rest)
+    poses = jax.tree.map(lambda a: jnp.repeat(a, q, axis=0), data.poses)  # (Pq, C)
+    faces = jnp.asarray(self.mesh.faces, jnp.int32)
+    net = self._net
+    if net.modality == 'depth':
+      frames = physsim.render_depth(positions, faces, self._intr, poses)
+      if self._sensor:
+        frames = jax.vmap(lambda k, f: physsim.apply_noise_frames(k, f, self._intr))(
+          noise_keys.reshape(-1), frames
+        )  # (Pq, C, T, H, W)
+    else:  # each fabric's colour, 8 bits, as datasets are written
+      colors = jnp.repeat(data.color, q, axis=0)
+      frames = physsim.render_rgb8(positions, faces, self._intr, poses, colors)
+    inputs = embedding.network_inputs(frames, net.modality, net.input_mode)
+    inputs = inputs.reshape(p, q, *inputs.shape[1:])  # (P, q, C, T, H, W, ch)
+
+    def score(params, rec_points, x):  # one problem's q candidates
+      c, t = x.shape[1:3]
+      pts = embedding.embed_video(
+        net.network, params, x.reshape(q * c, t, *x.shape[3:]), net.clip_frames
+      )  # cameras pooled: (q, C * N, D)
+      pts = pts.reshape(q, -1, rec_points.shape[-1])
+      return jax.vmap(lambda a: model_lib.psd.psd(a, rec_points, self._distance))(pts)
+
+    d = jax.vmap(score)(data.params, data.rec_points, inputs)  # (P, q)
+    ok = valid.reshape(p, q) & jnp.isfinite(d)
+    d = jnp.where(ok, d, jnp.nan)
+    out = {'psd': d, 'valid': valid.reshape(p, q)}
+    if with_frames:
+      best = jnp.argmin(jnp.where(ok, d, jnp.inf), axis=1)  # (P,)
+      cam0 = frames.reshape(p, q, *frames.shape[1:])[:, :, 0]  # (P, q, T, H, W[, 3])
+      out['frames'] = jnp.take_along_axis(
+        cam0, best.reshape((p, 1) + (1,) * (cam0.ndim - 2)), axis=1
+      )[:, 0]
+    if with_positions:
+      out['positions'] = positions.reshape(p, q, *positions.shape[1:])
+    return out
+
+  def __call__(
+    self,
+    data: ProblemData,
+    u,
+    gust_keys: jax.Array,
+    noise_keys: jax.Array,
+    *,
+    frames: bool = False,
+    positions: bool = False,
+  ) -> Scores:
+    """Scores candidates ``u (P, q, 3)`` of the P stacked problems in ``data``.
+
+    Args:
+      data: stacked ``ProblemData`` (leading axis P).
+      u: (P, q, 3) unit-cube candidates.
+      gust_keys, noise_keys: (P, q) typed PRNG keys, one per candidate.
+      frames: also return each problem's best candidate's camera-0 frames.
+      positions: also return every candidate's vertex positions.
+
+    Raises:
+      ValueError: ``u`` of the wrong shape, not finite or outside the cube.
+    """
+    u = np.asarray(u, np.float64)
+    p = data.lo.shape[0]
+    if u.ndim != 3 or u.shape[0] != p or u.shape[2] != 3:
+      raise ValueError(f'candidates must be (P={p}, q, 3), got {u.shape}')
+    if not np.all(np.isfinite(u)) or np.any(np.abs(u) > 1 + 1e-9):
+      raise ValueError('candidates must be finite and inside [-1, 1]^3')
+    if gust_keys.shape != u.shape[:2] or noise_keys.shape != u.shape[:2]:
+      raise ValueError(
+        f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
+      )
+    out = self._program(
+      data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys,
+      with_frames=frames, with_positions=positions,
+    )  # fmt: skip
+    out = jax.device_get(out)
+    return Scores(
+      np.asarray(out['psd'], np.float64),
+      np.asarray(out['valid']),
+      out.get('frames'),
+      out.get('positions'),
+    )
+
+
+def stack(datas: list[ProblemData]) -> ProblemData:
+  """ProblemData of several problems (same structure) on a leading axis."""
+  return jax.tree.map(lambda *a: jnp.stack(a), *datas)
+
+
+def candidate_keys(config: EstimateConfig, first: int, q: int):
+  """(gust keys, noise keys), each (q,), of a search's evaluations
+  ``first .. first + q - 1`` (its running count, so a resumed search draws the
+  same keys). With ``common_random_numbers`` every evaluation gets the
+  search's one pair of keys."""
+  key = jax.random.key(config.seed)
+  gust, noise = jax.random.fold_in(key, 2), jax.random.fold_in(key, 3)
+  if config.common_random_numbers:
+    return (
+      jnp.broadcast_to(gust, (q,)),
+      jnp.broadcast_to(noise, (q,)),
+    )
+  idx = jnp.arange(first, first + q)
+  fold = jax.vmap(jax.random.fold_in, in_axes=(None, 0))
+  return fold(gust, idx), fold(noise, idx)
+
+
+class BestSeen:
+  """The lowest PSD a search has scored and its candidate's camera-0 frames.
+
+  A finished search shows its best candidate beside the recording; keeping
+  those frames while scoring saves re-simulating it. A resumed search has not
+  seen its earlier candidates' frames, so ``frames_of`` then returns None.
+  """
+
+  def __init__(self):
+    self.u, self.y, self.frames = None, np.inf, None
+
+  def update(self, u, y, frames) -> None:
+    """Candidates ``u (q, 3)``, their PSDs ``y (q,)`` (NaN: failed) and the
+    lowest one's frames ``(T, ...)``."""
+    y = np.where(np.isfinite(y), y, np.inf)
+    i = int(np.argmin(y)) if len(y) else 0
+    if len(y) and y[i] < self.y:
+      self.u, self.y = np.array(u[i], np.float64), float(y[i])
+      self.frames = None if frames is None else np.asarray(frames)
+
+  def frames_of(self, u) -> np.ndarray | None:
+    """The kept frames if ``u`` is the kept candidate, else None."""
+    if self.u is None or not np.array_equal(self.u, np.asarray(u, np.float64)):
+      return None
+    return self.frames

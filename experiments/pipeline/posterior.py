@@ -1,0 +1,252 @@
+"""Posteriors of (bending, wind, area weight) in physical units: priors, summaries, joints.
+
+The search (``bo.PosteriorSearch``) works in the unit cube of the material's
+search box; this module supplies its prior on the grid (uniform in the box,
+bending log-uniform, times what the user measured: an anemometer's wind, a
+scale's area weight), turns its draws into physical summaries (posterior
+median, 50% and 90% central intervals, the load ratio rho v^2 / (w g)), and
+combines several recordings of one fabric into a joint posterior (one bending
+and area weight, one wind per recording).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import matplotlib
+import numpy as np
+from jax.scipy.special import logsumexp
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+
+import bo  # noqa: E402
+import physsim  # noqa: E402
+from experiments.pipeline import files  # noqa: E402
+
+FIELDS = physsim.params.FIELDS  # bending_scale, wind_speed, area_weight
+LEVELS = (50, 90)
+
+
+@dataclasses.dataclass(frozen=True)
+class Measured:
+  """What the user measured besides the video (0: not measured).
+
+  Attributes:
+    wind_speed: an anemometer's reading at the cloth, m/s.
+    wind_speed_sd: its standard uncertainty, m/s.
+    area_weight: a scale and a ruler's reading, kg/m^2.
+    area_weight_sd: its standard uncertainty, kg/m^2.
+  """
+
+  wind_speed: float = 0.0
+  wind_speed_sd: float = 0.0
+  area_weight: float = 0.0
+  area_weight_sd: float = 0.0
+
+  def check(self, space: physsim.SearchSpace) -> None:
+    """Raises ValueError on a reading without uncertainty, or far outside the box."""
+    for name in ('wind_speed', 'area_weight'):
+      v, sd = getattr(self, name), getattr(self, f'{name}_sd')
+      if v == 0 and sd == 0:
+        continue
+      lo, hi = getattr(space, name)
+      if not (v > 0 and sd > 0):
+        raise ValueError(
+          f'--{name}={v} needs --{name}_sd > 0 (its uncertainty), got {sd}'
+        )
+      if v + 3 * sd < lo or v - 3 * sd > hi:
+        raise ValueError(
+          f'--{name}={v} +- {sd} lies outside the search range [{lo}, {hi}]'
+        )
+
+
+def log_prior(points, space: physsim.SearchSpace, measured: Measured) -> np.ndarray:
+  """(G,) log prior at unit-cube ``points (G, 3)``: uniform in the box (so
+  bending log-uniform), times a Gaussian for each measured quantity."""
+  out = np.zeros(len(points))
+  phys = physsim.params.from_unit(np.clip(points, -1, 1), space)
+  for i, name in enumerate(FIELDS):
+    if name == 'bending_scale':
+      continue
+    v, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
+    if sd > 0:
+      out += -0.5 * ((np.ravel(phys[i]) - v) / sd) ** 2
+  return out
+
+
+def physical(samples_unit, space: physsim.SearchSpace) -> np.ndarray:
+  """(S, 3) unit-cube draws -> (S, 3) physical values in ``FIELDS`` order."""
+  p = physsim.params.from_unit(np.clip(samples_unit, -1, 1), space)
+  return np.stack([np.ravel(a) for a in p], axis=1)
+
+
+def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False) -> dict:
+  """Median, central intervals, sd, and how much narrower than the prior."""
+  out = {'median': float(np.median(x)), 'std': float(np.std(x))}
+  for level in LEVELS:
+    q = np.quantile(x, [(1 - level / 100) / 2, (1 + level / 100) / 2])
+    out[f'interval_{level}'] = [float(q[0]), float(q[1])]
+  f = np.log if log else (lambda a: a)
+  width = lambda a: float(np.diff(f(np.quantile(a, [0.05, 0.95])))[0])
+  out['narrowing_90'] = width(prior) / max(width(x), 1e-12)  # 1: the prior's width
+  return out
+
+
+def summarise(samples_unit, space: physsim.SearchSpace, prior_unit) -> dict:
+  """Physical summaries of posterior draws, each beside the prior's.
+
+  Args:
+    samples_unit: (S, 3) posterior draws, unit cube.
+    space: the search box.
+    prior_unit: (S', 3) draws of the prior (same measured information).
+
+  Returns:
+    ``{field: stats, 'load_ratio': stats}``; stats hold ``median``,
+    ``interval_50``, ``interval_90``, ``std`` and ``narrowing_90`` (the
+    prior's 90% width over the posterior's, log scale for bending and the
+    ratio: 1 means the data told nothing).
+  """
+  post, prior = physical(samples_unit, space), physical(prior_unit, space)
+  out = {
+    name: _stats(post[:, i], prior[:, i], log=name == 'bending_scale')
+    for i, name in enumerate(FIELDS)
+  }
+  ratio = lambda p: physsim.load_ratio(p[:, 1], p[:, 2])
+  out['load_ratio'] = _stats(ratio(post), ratio(prior), log=True)
+  return out
+
+
+def prior_samples(key, grid, log_prior_grid, n: int) -> np.ndarray:
+  """Draws of the prior on the grid (as the posterior's are drawn)."""
+  pts = bo.posterior.grid_points(grid)
+  with jax.enable_x64(True):  # float64, as the posterior's draws
+    lp = bo.posterior.log_normalise(jax.numpy.asarray(log_prior_grid))
+    return np.asarray(
+      bo.posterior.sample_grid(key, jax.numpy.asarray(pts), lp, grid, n)
+    )
+
+
+def joint(log_liks, grid, log_prior_grid, key, n: int = 4096) -> dict:
+  """The joint posterior of recordings of one fabric: shared bending and area
+  weight, one wind each.
+
+  Args:
+    log_liks: per recording, (G,) log likelihood on the grid (C order over
+      bending, wind, area weight), all on the same grid and box.
+    grid: (nb, nv, nw) cells per dimension.
+    log_prior_grid: (G,) the log prior of one recording's (b, v, w).
+    key: PRNG key for the draws.
+    n: draws per recording.
+
+  Returns:
+    ``{'samples': [(n, 3) unit draws of (b, v_k, w) per recording],
+    'log_post_bw': (nb, nw)}``: each recording's draws share (b, w) from the
+    joint and draw their own wind given them.
+  """
+  nb, nv, nw = grid
+  lp = np.asarray(log_prior_grid).reshape(nb, nv, nw)
+  # Prior of (b, w) and of v given (b, w) from the recordings' common prior.
+  ll = [np.asarray(x).reshape(nb, nv, nw) for x in log_liks]
+  lp_bw = logsumexp(lp, axis=1)  # (nb, nw)
+  lp_v = lp - lp_bw[:, None, :]  # log p(v | b, w)
+  # Each recording's evidence for (b, w), its wind integrated out.
+  ev = [logsumexp(x + lp_v, axis=1) for x in ll]  # (nb, nw) each
+  log_bw = np.asarray(lp_bw + sum(ev))
+  log_bw = log_bw - logsumexp(log_bw)
+  k_bw, k_v, k_jit = jax.random.split(key, 3)
+  idx = np.asarray(jax.random.categorical(k_bw, log_bw.ravel(), shape=(n,)))
+  ib, iw = np.unravel_index(idx, (nb, nw))
+  out = []
+  for k, x in enumerate(ll):
+    cond = x[ib, :, iw] + lp_v[ib, :, iw]  # (n, nv): wind given (b, w)
+    iv = np.asarray(jax.random.categorical(jax.random.fold_in(k_v, k), cond, axis=1))
+    cells = np.stack([ib, iv, iw], axis=1).astype(np.float64)
+    jit = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, k), (n, 3)))
+    out.append(-1.0 + 2.0 * (cells + jit) / np.asarray(grid, np.float64))
+  return {'samples': out, 'log_post_bw': log_bw}
+
+
+# -------------------------------------------------------------------- figures
+
+LABELS = {
+  'bending_scale': 'bending (x measured)',
+  'wind_speed': 'wind speed (m/s)',
+  'area_weight': 'area weight (kg/m$^2$)',
+  'load_ratio': r'load ratio $\rho v^2/(w g)$',
+}
+
+
+def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '') -> None:
+  """Marginals (bending, wind, area weight, load ratio) over the prior, and the
+  pairs: wind x area weight with the load ratio's iso-lines (the ridge the
+  video measures), bending x wind, bending x area weight."""
+  post, prior = physical(samples_unit, space), physical(prior_unit, space)
+  ratio = lambda p: physsim.load_ratio(p[:, 1], p[:, 2])
+  cols = [*(post[:, i] for i in range(3)), ratio(post)]
+  pcols = [*(prior[:, i] for i in range(3)), ratio(prior)]
+  names = [*FIELDS, 'load_ratio']
+  fig, axes = plt.subplots(2, 4, figsize=(17, 7.4), layout='constrained')
+  true = None
+  if truth is not None:
+    true = [truth[f] for f in FIELDS]
+    true.append(float(physsim.load_ratio(truth['wind_speed'], truth['area_weight'])))
+  for j, (ax, x, px, name) in enumerate(zip(axes[0], cols, pcols, names, strict=True)):
+    log = name in ('bending_scale', 'load_ratio')
+    lo, hi = np.quantile(np.concatenate([x, px]), [0.001, 0.999])
+    bins = np.geomspace(lo, hi, 40) if log else np.linspace(lo, hi, 40)
+    # probability per bin, bins equal in the plotted scale: a log-uniform
+    # prior is flat on a log axis
+    ax.hist(px, bins=bins, weights=np.full(len(px), 1 / len(px)), color='0.85',
+            label='prior')  # fmt: skip
+    ax.hist(x, bins=bins, weights=np.full(len(x), 1 / len(x)), alpha=0.75,
+            color='C0', label='posterior')  # fmt: skip
+    for level, ls in ((90, ':'), (50, '--')):
+      q = np.quantile(x, [(1 - level / 100) / 2, (1 + level / 100) / 2])
+      for v in q:
+        ax.axvline(v, color='C0', ls=ls, lw=1)
+    ax.axvline(np.median(x), color='C0', lw=1.5, label='median; 50%, 90%')
+    if true is not None:
+      ax.axvline(true[j], color='r', lw=1.5, label='truth')
+    ax.set(xlabel=LABELS[name], yticks=[], xscale='log' if log else 'linear')
+    if j == 0:
+      ax.legend(fontsize=7)
+  pairs = ((1, 2), (0, 1), (0, 2))
+
+  def edges(k):  # the posterior's range (padded), equal bins in the plotted scale
+    lo, hi = np.quantile(post[:, k], [0.005, 0.995])
+    blo, bhi = space.bounds()[k]
+    if k == 0:
+      pad = (np.log(hi) - np.log(lo)) * 0.15
+      return np.geomspace(max(blo, lo * np.exp(-pad)), min(bhi, hi * np.exp(pad)), 41)
+    pad = (hi - lo) * 0.15 + 1e-9
+    return np.linspace(max(blo, lo - pad), min(bhi, hi + pad), 41)
+
+  for ax, (i, j) in zip(axes[1], pairs, strict=False):
+    ex, ey = edges(i), edges(j)
+    ax.hist2d(post[:, i], post[:, j], bins=[ex, ey], cmap='viridis')
+    if (i, j) == (1, 2):  # iso-lines of the load ratio: w = rho v^2 / (g r)
+      v = np.linspace(ex[0], ex[-1], 100)
+      for r in np.quantile(ratio(post), [0.05, 0.5, 0.95]):
+        w = physsim.params.AIR_DENSITY * v**2 / (physsim.params.GRAVITY * r)
+        ax.plot(v, w, 'w--', lw=0.8)
+      ax.set_ylim(ey[0], ey[-1])
+    if true is not None:
+      ax.plot(true[i], true[j], 'r+', ms=14, mew=2)
+    ax.set(xlabel=LABELS[FIELDS[i]], ylabel=LABELS[FIELDS[j]])
+    if i == 0:
+      ax.set_xscale('log')
+  axes[1, 3].axis('off')
+  axes[1, 3].text(
+    0.0, 0.9,
+    'grey: prior (the search box, times any\nmeasured wind or area weight)\n'
+    'blue: posterior given the video\n'
+    'white dashes: the load ratio\'s median\nand 90% interval (iso-lines)\n'
+    'red: truth (simulated recordings)',
+    va='top', fontsize=9,
+  )  # fmt: skip
+  if title:
+    fig.suptitle(title)
+  files.savefig(fig, path, dpi=80)
+  plt.close(fig)

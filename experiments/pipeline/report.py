@@ -1,0 +1,344 @@
+"""What an estimate reports: summaries, errors against a known truth, tables, figures.
+
+Figures: ``plot_trace`` (the paper's Figure 3: PSD and each parameter per
+iteration) and ``plot_montage`` (the recording beside the simulation at the
+estimate, on one depth colour scale with frame times).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import matplotlib
+import numpy as np
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+
+import model as model_lib  # noqa: E402
+import physsim  # noqa: E402
+from experiments.pipeline import files  # noqa: E402
+
+LABELS = {
+  'bending_scale': 'bending (x measured)',
+  'wind_speed': 'wind speed (m/s)',
+  'area_weight': 'area weight (kg/m$^2$)',
+}
+SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weight'}
+# Coverage of the posterior's intervals measured on held-out simulated
+# recordings (written by experiments/calibrate.py, shipped with the package).
+CALIBRATION_FILE = os.path.join(os.path.dirname(__file__), 'calibration.json')
+_RETRIEVAL_MEANING = (
+  'near 1: the video barely constrains that parameter; trust its interval, '
+  'not its value'
+)
+
+
+def stats(value, samples: np.ndarray) -> dict:
+  """A value with the median, 90% interval and spread of ``samples``."""
+  return {
+    'value': float(np.asarray(value).ravel()[0]),
+    'posterior_median': float(np.median(samples)),
+    'interval_90': [
+      float(np.quantile(samples, 0.05)),
+      float(np.quantile(samples, 0.95)),
+    ],
+    'std': float(samples.std()),
+  }
+
+
+def summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
+  """Per parameter, ``stats`` of the best point and of (S, 3) physical samples."""
+  return {n: stats(best[i], samples_phys[:, i]) for i, n in enumerate(best._fields)}
+
+
+def load_ratio_summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
+  """rho v^2 / (w g) of the best candidate and of the samples: the
+  combination of wind and area weight a sheet's shape constrains best."""
+  i, j = (
+    physsim.Params._fields.index('wind_speed'),
+    physsim.Params._fields.index('area_weight'),
+  )
+  ratio = physsim.load_ratio(samples_phys[:, i], samples_phys[:, j])
+  return stats(physsim.load_ratio(best.wind_speed, best.area_weight), ratio)
+
+
+def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace) -> dict:
+  """Percent errors of wind and area weight, the bending factor, the percent
+  error of the load ratio rho v^2 / (w g) (what a sheet's shape constrains
+  best), and the same for the trivial estimate (the centre of the search range)."""
+  centre = space.center()
+  true_ratio = float(physsim.load_ratio(truth['wind_speed'], truth['area_weight']))
+
+  def one(p):
+    b = float(np.asarray(p.bending_scale).ravel()[0])
+    ratio = float(physsim.load_ratio(p.wind_speed, p.area_weight))
+    pct = lambda k: 100 * abs(float(getattr(p, k)) - truth[k]) / truth[k]
+    return {
+      'wind_speed_pct': pct('wind_speed'),
+      'area_weight_pct': pct('area_weight'),
+      'bending_factor': float(np.exp(abs(np.log(b / truth['bending_scale'])))),  # >= 1
+      'load_ratio_pct': 100 * abs(ratio - true_ratio) / true_ratio,
+    }
+
+  return {'estimate': one(best), 'range_centre': one(centre)}
+
+
+def covered(result: dict, truth: dict) -> dict:
+  """Per parameter and the load ratio: does each credible interval hold the truth?"""
+  out = {}
+  rows = dict(result['estimate'], load_ratio=result.get('load_ratio', {}))
+  true = dict(truth)
+  true['load_ratio'] = float(
+    physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
+  )
+  for name, e in rows.items():
+    out[name] = {
+      k: bool(e[k][0] <= true[name] <= e[k][1]) for k in e if k.startswith('interval_')
+    }
+  return out
+
+
+def calibration_note() -> dict | None:
+  """What the held-out simulations showed about the intervals' coverage
+  (``calibration.json``), or None when no calibration has been run."""
+  if not os.path.isfile(CALIBRATION_FILE):
+    return None
+  with open(CALIBRATION_FILE) as f:
+    return json.load(f)
+
+
+def describe(x_best, y_best, space) -> str:
+  """One progress line's worth: the best PSD and its parameters."""
+  if not np.isfinite(y_best):
+    return 'every simulation so far blew up'
+  p = physsim.from_unit(x_best, space)
+  return (
+    f'best PSD {y_best:.4g} at bending x{float(p.bending_scale):.3g}, wind '
+    f'{float(p.wind_speed):.2f} m/s, area weight {float(p.area_weight):.3f} kg/m^2'
+  )
+
+
+def report_table(result: dict) -> str:
+  """A markdown table of an estimate: the point, its credible intervals, and
+  how much narrower than the prior they are (posterior), or the GP's interval
+  (argmin); with ground truth also the truth, the range-centre guess and the
+  errors of both."""
+  space = physsim.search_space(result['material'])
+  centre = space.center()
+  retrieval = result.get('network_retrieval_vs_chance', {})
+  truth = result.get('truth')
+  posterior = result.get('point', 'argmin') == 'median'
+  rows = list(physsim.Params._fields) + ['load_ratio']
+  head = ['parameter']
+  head += ['true'] if truth else []
+  if posterior:
+    head += ['median', '50% interval', '90% interval', 'prior/posterior width']
+  else:
+    head += ['estimated (argmin)', 'GP 90% interval (not calibrated)']
+  head += ['range centre'] if truth else []
+  head += ['network retrieval (1 = chance)']
+  lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+  true = dict(truth or {})
+  if truth:
+    true['load_ratio'] = float(
+      physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
+    )
+  guess = dict(zip(physsim.Params._fields, map(float, centre), strict=True))
+  guess['load_ratio'] = float(physsim.load_ratio(centre.wind_speed, centre.area_weight))
+  iv = lambda e, k: f'[{e[k][0]:.3g}, {e[k][1]:.3g}]'
+  for name in rows:
+    e = result['load_ratio'] if name == 'load_ratio' else result['estimate'][name]
+    cells = [name if name != 'load_ratio' else 'load ratio rho v^2/(w g)']
+    cells += [f'{true[name]:.3g}'] if truth else []
+    if posterior:
+      cells += [f'{e["value"]:.3g}', iv(e, 'interval_50'), iv(e, 'interval_90'),
+                f'x{e["narrowing_90"]:.1f}']  # fmt: skip
+    else:
+      cells += [f'{e["value"]:.3g}', iv(e, 'interval_90')]
+    cells += [f'{guess[name]:.3g}'] if truth else []
+    na = '-' if name == 'load_ratio' else 'n/a'
+    cells += [f'{retrieval[name]:.2f}' if name in retrieval else na]
+    lines.append('| ' + ' | '.join(cells) + ' |')
+  lines.append('')
+  if posterior:
+    lines.append(
+      "prior/posterior width: the prior's 90% width over the posterior's "
+      "(x1.0: the video told nothing about it; the interval is the prior's)."
+    )
+    lines.append(calibration_line(result.get('calibration')))
+  if truth:
+    err = result['errors']
+    lines.append(
+      'errors (estimate vs range centre): '
+      + json.dumps(
+        {
+          k: [round(err['estimate'][k], 2), round(err['range_centre'][k], 2)]
+          for k in err['estimate']
+        }
+      )
+    )
+  if retrieval:
+    lines.append(
+      'network retrieval: how well the network tells each parameter apart between '
+      f'held-out simulations ({_RETRIEVAL_MEANING})'
+    )
+  return '\n'.join(lines)
+
+
+def joint_table(joint: dict) -> str:
+  """A markdown table of a joint estimate: shared bending and area weight, each
+  recording's wind and load ratio, beside each recording estimated alone."""
+  iv = lambda e: f'[{e["interval_90"][0]:.3g}, {e["interval_90"][1]:.3g}]'
+  lines = [
+    '| quantity | median | 90% interval | prior/posterior width | alone: median [90%] |',
+    '|---|---|---|---|---|',
+  ]
+  for name in ('bending_scale', 'area_weight'):
+    e = joint[name]
+    alone = '; '.join(
+      f'{r["alone"][name]["value"]:.3g} {iv(r["alone"][name])}'
+      for r in joint['recordings']
+    )
+    lines.append(
+      f'| {name} (shared) | {e["median"]:.3g} | {iv(e)} | x{e["narrowing_90"]:.1f} | {alone} |'
+    )
+  for k, r in enumerate(joint['recordings']):
+    for name in ('wind_speed', 'load_ratio'):
+      e = r[name]
+      a = r['alone'][name] if name in r['alone'] else None
+      alone = f'{a["value"]:.3g} {iv(a)}' if a else '-'
+      lines.append(
+        f'| {name}, recording {k} | {e["median"]:.3g} | {iv(e)} | '
+        f'x{e["narrowing_90"]:.1f} | {alone} |'
+      )
+  lines += ['', calibration_line(joint.get('calibration'))]
+  return '\n'.join(lines)
+
+
+def calibration_line(cal: dict | None) -> str:
+  """One line on how often such intervals held the truth in held-out simulations."""
+  if not cal:
+    return (
+      'calibration: not measured for these settings (experiments/calibrate.py); '
+      'treat the intervals as indicative.'
+    )
+  cov = cal['coverage']
+  parts = ', '.join(
+    f'{SHORT.get(k, k)} {100 * v["interval_90"]:.0f}%/{100 * v["interval_50"]:.0f}%'
+    for k, v in cov.items()
+  )
+  return (
+    f'calibration ({cal["n"]} held-out simulated recordings, {cal["setting"]}): 90%/50% '
+    f'intervals held the truth in {parts} of them.'
+  )
+
+
+def retrieval_note(retrieval: dict[str, float]) -> str:
+  """One line saying which parameters the network barely tells apart."""
+  cells = model_lib.retrieval.describe(retrieval)
+  return (
+    f'network retrieval on held-out simulations, over chance: {cells} '
+    f'({_RETRIEVAL_MEANING})'
+  )
+
+
+# -------------------------------------------------------------------- figures
+
+
+def iterations_of(n_evals: int, n_init: int, q: int) -> np.ndarray:
+  """(n_evals,) the iteration each evaluation belongs to (0: initial design),
+  as the console counts them."""
+  it = np.zeros(n_evals, np.int64)
+  it[n_init:] = 1 + np.arange(max(n_evals - n_init, 0)) // q
+  return it
+
+
+def plot_trace(X_unit, Y, iteration, space, truth, path: str) -> None:
+  """PSD and each parameter per iteration (the paper's Figure 3).
+
+  Args:
+    X_unit: (n, 3) evaluated unit-cube points, in order.
+    Y: (n,) their PSDs (NaN: blew up).
+    iteration: (n,) the iteration of each (``iterations_of``).
+    space: the search space (axis limits).
+    truth: true parameters or None.
+    path: PNG path.
+  """
+  X = np.asarray(physsim.from_unit(X_unit, space))  # (3, n)
+  Y = np.asarray(Y, np.float64)
+  ok = np.isfinite(Y)
+  best = np.fmin.accumulate(np.where(ok, Y, np.inf))
+  last_of = {
+    int(i): j for j, i in enumerate(iteration)
+  }  # last evaluation per iteration
+  its = np.array(sorted(last_of))
+  jitter = (np.random.default_rng(0).random(len(Y)) - 0.5) * 0.3
+  xs = iteration + jitter
+  fig, axes = plt.subplots(1, 4, figsize=(17, 3.8), layout='constrained')
+  ax = axes[0]
+  ax.plot(xs[ok], Y[ok], '.', color='0.55', label='candidate')
+  ax.plot(its, best[[last_of[i] for i in its]], '-o', ms=3, color='k',
+          label='best so far')  # fmt: skip
+  if (~ok).any():
+    ax.plot(xs[~ok], np.full((~ok).sum(), np.nanmax(Y) if ok.any() else 1), 'x',
+            color='r', label='blew up')  # fmt: skip
+  ax.set(xlabel='iteration (0 = initial design)',
+         ylabel='physics similarity distance', yscale='log')  # fmt: skip
+  ax.legend(fontsize=8)
+  colour = np.log10(np.where(ok, Y, np.nan))
+  for i, (ax, name) in enumerate(zip(axes[1:], physsim.Params._fields, strict=True)):
+    sc = ax.scatter(xs, X[i], c=colour, s=14, cmap='viridis')
+    ax.set(xlabel='iteration (0 = initial design)', ylabel=LABELS[name],
+           ylim=space.bounds()[i])  # fmt: skip
+    if name == 'bending_scale':
+      ax.set_yscale('log')
+    if truth is not None:
+      ax.axhline(truth[name], color='r', lw=1, label='truth')
+      ax.legend(fontsize=8, loc='best')
+  fig.colorbar(sc, ax=axes[1:], label='log$_{10}$ PSD (dark: low)', shrink=0.9)
+  files.savefig(fig, path, dpi=90)
+  plt.close(fig)
+
+
+def plot_montage(
+  recorded: np.ndarray, simulated: np.ndarray, fps: float, path: str, n: int = 6,
+  sim_label: str = 'simulation at the estimate',
+) -> None:  # fmt: skip
+  """Rows: the recording and a simulation, ``n`` frames each at the same times,
+  depth on one colour scale (white: no return) or colour frames.
+
+  Args:
+    recorded: (T, H, W) depth in metres or (T, H, W, 3) uint8 colour.
+    simulated: the same for the simulation.
+    fps: frame rate of both (for the frame times).
+    path: PNG path.
+    n: frames shown.
+    sim_label: the second row's label.
+  """
+  idx = np.unique(np.linspace(0, min(len(recorded), len(simulated)) - 1, n).astype(int))
+  colour = recorded.ndim == 4
+  both = np.concatenate([np.ravel(recorded[idx]), np.ravel(simulated[idx])])
+  valid = both[both > 0]
+  lo, hi = np.quantile(valid, [0.01, 0.99]) if valid.size else (0.0, 1.0)
+  cmap = plt.get_cmap('viridis').with_extremes(bad='white')
+  fig, axes = plt.subplots(2, len(idx), figsize=(2.1 * len(idx) + 1.2, 4.6),
+                           squeeze=False, layout='constrained')  # fmt: skip
+  im = None
+  for r, (frames, name) in enumerate(((recorded, 'recording'), (simulated, sim_label))):
+    for c, t in enumerate(idx):
+      ax = axes[r, c]
+      if colour:
+        ax.imshow(frames[t])
+      else:
+        im = ax.imshow(np.ma.masked_equal(frames[t], 0.0), cmap=cmap, vmin=lo, vmax=hi)
+      ax.set(xticks=[], yticks=[])
+      if r == 0:
+        ax.set_title(f't = {t / fps:.2f} s', fontsize=9)
+      if c == 0:
+        ax.set_ylabel(name, fontsize=9)
+  if im is not None:
+    fig.colorbar(im, ax=axes, shrink=0.8, label='depth (m); white: no return')
+  files.savefig(fig, path, dpi=80)
+  plt.close(fig)

@@ -1,0 +1,645 @@
+"""Searches over the fused objective: one recording, or many in lockstep.
+
+Each recording has its own search: a ``bo.PosteriorSearch`` (the default,
+``point='median'``: the posterior of bending, wind and area weight) or a
+``bo.Minimizer`` (``point='argmin'``, the paper's protocol), with its own state
+file, stopping rule and resume. Searches advance together: each step asks
+every unfinished search for its candidates, scores all candidates of
+recordings of one ``Problem.structure`` in one call of that structure's
+``Objective`` (MJX costs about the same per step for 4 worlds as for ~64), and
+tells each search its values. A candidate's score does not depend on which
+batch it was in (per-candidate keys), so each search goes as it would alone.
+
+  from experiments.pipeline import search
+  result = search.estimate(config, recording, model_dir, workdir)
+  results = search.estimate_many([search.Job(config, recording, model_dir, workdir)])
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import hashlib
+import json
+import os
+import time
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+import bo
+import physsim
+from experiments.pipeline import embedding, files, report
+from experiments.pipeline import objective as obj_lib
+from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline.objective import EstimateConfig
+from experiments.pipeline.recording import Recording, read_json
+
+RUN_FILE = 'run.json'
+ESTIMATE_FILE = 'estimate.json'
+POSTERIOR_FILE = 'posterior.npz'  # draws and the grid posterior/likelihood
+POSTERIOR_STATE = 'posterior_state.npz'
+BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
+# Config fields that do not change what an estimate computes.
+_RESUMABLE_FIELDS = ('workers',)
+
+
+class Job(NamedTuple):
+  """One recording to estimate.
+
+  Attributes:
+    config: its settings.
+    recording: the video (``recording.load_recording``).
+    model_dir: its material's trained network.
+    workdir: where its state, JSON and pictures go.
+  """
+
+  config: EstimateConfig
+  recording: Recording
+  model_dir: str
+  workdir: str
+
+
+def gp_device():
+  """Where estimates fit their GPs: the CPU. The GP holds tens of points, so
+  on a GPU its L-BFGS loops only wait on kernel launches, while the GPU has
+  the simulations to run."""
+  return jax.devices('cpu')[0]
+
+
+def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: str,
+                  *, gp_on_cpu: bool = True):  # fmt: skip
+  """The search of an estimate: ``bo.PosteriorSearch`` or ``bo.Minimizer``."""
+  device = gp_device() if gp_on_cpu else None
+  if config.point == 'argmin':
+    return bo.Minimizer(BOUNDS, **minimizer_settings(config, workdir), device=device)
+  pc = posterior_config(config)
+  points = bo.posterior.grid_points(pc.grid)
+  return bo.PosteriorSearch(
+    pc, n_init=config.n_init, n_iter=config.max_iter,
+    log_prior=posterior_lib.log_prior(points, space, config.measured),
+    x0=np.zeros(3), seed=config.seed, stop_tol=2.0 * config.stop_rel_change,
+    stop_window=config.stop_window, min_iter=config.min_iter,
+    state_path=os.path.join(workdir, POSTERIOR_STATE), device=device,
+  )  # fmt: skip
+
+
+def posterior_config(config: EstimateConfig) -> bo.PosteriorConfig:
+  """The ``bo.PosteriorConfig`` of an estimate."""
+  return bo.PosteriorConfig(
+    d=3, grid=tuple(config.posterior_grid), q=config.q, replicates=config.replicates,
+    likelihood=config.likelihood, sharpness=config.sharpness,
+  )  # fmt: skip
+
+
+def minimizer_settings(config: EstimateConfig, workdir: str) -> dict:
+  """``bo.Minimizer`` settings of an estimate."""
+  return dict(
+    n_init=config.n_init,
+    n_iter=config.max_iter,
+    q=config.q,
+    x0=np.zeros(3),  # the paper starts from the range centre
+    seed=config.seed,
+    acquisition='logei',
+    stop_rel_change=config.stop_rel_change,
+    stop_window=config.stop_window,
+    stop_min_iter=config.min_iter,
+    state_path=os.path.join(workdir, 'bo_state.npz'),
+  )
+
+
+def _digest(a) -> str:
+  return hashlib.sha1(np.ascontiguousarray(a).tobytes()).hexdigest()
+
+
+def check_run(job: Job, problem) -> None:
+  """Writes what defines the run; refuses a workdir holding another run.
+
+  ``bo_state.npz`` alone only knows the optimiser's settings, so without this
+  a rerun with another recording, camera, model or material would silently
+  continue the old search.
+  """
+  workdir, config, recording = job.workdir, job.config, job.recording
+  d = problem.data
+  run = {
+    'config': {
+      k: v for k, v in dataclasses.asdict(config).items() if k not in _RESUMABLE_FIELDS
+    },
+    'recording_sha1': _digest(np.asarray(recording.depth, np.float32)),
+    'camera': {
+      'intrinsics': problem.intr.to_dict(),
+      'poses_sha1': _digest(np.asarray(d.poses.rotation, np.float32))
+      + _digest(np.asarray(d.poses.position, np.float32)),
+    },
+    'model_dir': os.path.abspath(job.model_dir),
+  }
+  if recording.rgb is not None and problem.net.modality == 'rgb':
+    run['recording_rgb_sha1'] = _digest(recording.rgb)
+  run = json.loads(json.dumps(run))  # tuples -> lists, as read back
+  path = os.path.join(workdir, RUN_FILE)
+  if os.path.exists(path):
+    old = read_json(path)
+    diff = sorted(
+      k for k in set(run) | set(old) if k != 'config' and run.get(k) != old.get(k)
+    )
+    diff += sorted(
+      f'config.{k}'
+      for k in set(run['config']) | set(old.get('config', {}))
+      if run['config'].get(k) != old.get('config', {}).get(k)
+    )
+    if diff:
+      raise ValueError(
+        f'{path}: the workdir holds an estimate with different {diff}; use a '
+        'new workdir'
+      )
+    return
+  files.write_json(path, run)
+
+
+@dataclasses.dataclass
+class _Search:
+  """One job's search as it advances (``state`` and ``best`` change)."""
+
+  index: int  # into ``jobs``
+  problem: obj_lib.Problem
+  opt: bo.Minimizer | bo.PosteriorSearch
+  state: bo.State | bo.posterior.State
+  best: obj_lib.BestSeen
+
+  def done(self) -> bool:
+    return self.opt.done(self.state)
+
+  def argmin(self) -> tuple[np.ndarray, float]:
+    """The lowest-PSD candidate so far and its PSD (inf: none finite)."""
+    y = np.where(np.isfinite(self.state.Y), self.state.Y, np.inf)
+    if not len(y) or not np.isfinite(y).any():
+      return np.full(3, np.nan), float('inf')
+    i = int(np.argmin(y))
+    return self.state.X[i], float(y[i])
+
+  def describe(self) -> str:
+    """Where the search stands, in one line."""
+    space = self.problem.space
+    if isinstance(self.opt, bo.Minimizer):
+      return report.describe(*self.argmin(), space)
+    h = self.state.history
+    if h is None or not len(h):
+      return 'initial design scored'
+    q = posterior_lib.physical(h[-1], space)  # (3, 3): 5/50/95% x fields
+    return 'posterior median (90%): ' + ', '.join(
+      f'{report.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
+      for i, f in enumerate(posterior_lib.FIELDS)
+    )
+
+
+def _pad(n: int) -> int:
+  """Rows for ``n`` problems: the next power of two, so that a shrinking set
+  of searches recompiles O(log n) times."""
+  return 1 << max(0, int(np.ceil(np.log2(max(n, 1)))))
+
+
+class Evaluator:
+  """Scores candidates of many problems, one fused call per structure.
+
+  Holds one ``Objective`` per structure it has seen (built on first use).
+  """
+
+  def __init__(self):
+    self.objectives: dict[tuple, obj_lib.Objective] = {}
+    self.seconds = 0.0  # wall time inside the fused calls
+
+  def objective(self, problem: obj_lib.Problem) -> obj_lib.Objective:
+    k = problem.structure()
+    if k not in self.objectives:
+      self.objectives[k] = obj_lib.Objective(problem)
+    return self.objectives[k]
+
+  def __call__(self, problems, us, firsts, *, frames: bool = False,
+               positions: bool = False) -> list[obj_lib.Scores]:  # fmt: skip
+    """Per problem, the ``Scores`` of its candidates ``us[i] (q_i, 3)`` (its
+    evaluations ``firsts[i] ..`` for the keys)."""
+    groups: dict[tuple, list[int]] = {}
+    for i, p in enumerate(problems):
+      if len(us[i]):
+        groups.setdefault(p.structure(), []).append(i)
+    out: list = [None] * len(problems)
+    for members in groups.values():
+      rows = members + [members[0]] * (_pad(len(members)) - len(members))
+      q = max(len(us[i]) for i in members)
+      u = np.stack([np.concatenate([us[i], np.repeat(us[i][:1], q - len(us[i]), 0)])
+                    for i in rows])  # fmt: skip
+      keys = [obj_lib.candidate_keys(problems[i].config, firsts[i], q) for i in rows]
+      gust = jax.numpy.stack([k[0] for k in keys])
+      noise = jax.numpy.stack([k[1] for k in keys])
+      data = obj_lib.stack([problems[i].data for i in rows])
+      t0 = time.perf_counter()
+      s = self.objective(problems[members[0]])(
+        data, u, gust, noise, frames=frames, positions=positions
+      )
+      self.seconds += time.perf_counter() - t0
+      for r, i in enumerate(members):
+        n = len(us[i])
+        out[i] = obj_lib.Scores(
+          s.psd[r, :n], s.valid[r, :n],
+          None if s.frames is None else s.frames[r],
+          None if s.positions is None else s.positions[r, :n],
+        )  # fmt: skip
+    return out
+
+
+def score(problem: obj_lib.Problem, u, *, evaluator: Evaluator | None = None,
+          first: int = 0, **outputs) -> obj_lib.Scores:  # fmt: skip
+  """Scores unit-cube points ``u (q, 3)`` of one problem in one fused call
+  (evaluations ``first ..`` for the keys); pass one ``evaluator`` to calls of
+  one structure so that they share its compile. ``outputs``: ``frames`` or
+  ``positions`` (see ``Objective``)."""
+  evaluator = evaluator or Evaluator()
+  return evaluator([problem], [np.asarray(u, np.float64)], [first], **outputs)[0]
+
+
+def estimate(
+  config: EstimateConfig,
+  recording: Recording,
+  model_dir: str,
+  workdir: str,
+  *,
+  progress: bool = True,
+  gp_on_cpu: bool = True,
+  evaluator: Evaluator | None = None,
+) -> dict:
+  """Runs (or resumes) one estimate; returns and writes ``estimate.json``.
+
+  Args:
+    config: settings.
+    recording: the video (``load_recording``; with ``rgb=True`` for an RGB
+      network).
+    model_dir: a trained run of this material's network (PhySNet or SDN,
+      depth or RGB).
+    workdir: where state, JSON and pictures go.
+    progress: print one line per iteration.
+    gp_on_cpu: fit the GP and propose on the CPU (``gp_device``).
+    evaluator: an ``Evaluator`` to reuse (its compiled objectives) across
+      estimates in one process; default a new one.
+
+  Returns:
+    The result dict written to ``estimate.json``.
+
+  Raises:
+    ValueError: ``model_dir`` is not a trained run or takes another frame
+      size, an RGB network and a recording without colour frames, a recording
+      shorter than an SDN clip, ``workdir`` holds an estimate of another
+      recording, camera, model or config, or every candidate simulation blew
+      up (naming the recording).
+  """
+  (out,) = estimate_many(
+    [Job(config, recording, model_dir, workdir)], progress=progress,
+    gp_on_cpu=gp_on_cpu, evaluator=evaluator,
+  )  # fmt: skip
+  if isinstance(out, Exception):
+    raise out
+  return out
+
+
+def estimate_many(
+  jobs: list[Job],
+  *,
+  progress: bool = True,
+  gp_on_cpu: bool = True,
+  nets: dict[str, embedding.EmbeddingNet] | None = None,
+  evaluator: Evaluator | None = None,
+) -> list[dict | Exception]:
+  """Runs (or resumes) every job's estimate, scoring their candidates together.
+
+  Args:
+    jobs: the recordings.
+    progress: print one line per step.
+    gp_on_cpu: fit the GPs and propose on the CPU.
+    nets: networks the caller has loaded already, by ``model_dir``.
+    evaluator: an ``Evaluator`` to reuse across calls (default a new one).
+
+  Returns:
+    Per job, its ``estimate.json`` dict, or the exception that stopped it (a
+    bad recording or model, another run in its workdir, every candidate blown
+    up): one job's failure does not stop the others. Each search's files are
+    written at the end of the step in which it stopped.
+  """
+  t_start = time.perf_counter()
+  out: list[dict | Exception | None] = [None] * len(jobs)
+  nets = dict(nets or {})
+  live: list[_Search] = []
+  for i, job in enumerate(jobs):
+    try:
+      if job.model_dir not in nets:
+        nets[job.model_dir] = embedding.load_embedding(job.model_dir)
+      problem = obj_lib.make_problem(job.config, nets[job.model_dir], job.recording)
+      opt = make_searcher(job.config, problem.space, job.workdir, gp_on_cpu=gp_on_cpu)
+      os.makedirs(job.workdir, exist_ok=True)
+      check_run(job, problem)
+      live.append(_Search(i, problem, opt, opt.start(), obj_lib.BestSeen()))
+    except (ValueError, OSError) as e:
+      out[i] = e
+  evaluate = evaluator or Evaluator()
+  seconds_before = evaluate.seconds
+  gp_seconds = 0.0
+
+  def finish(finished):
+    """Writes the results of searches that just ended. Their best candidates'
+    frames were kept while scoring; one batch re-simulates those found before
+    a resume."""
+    ok = []
+    for s in finished:
+      if np.isfinite(s.argmin()[1]):
+        ok.append(s)
+      else:
+        out[s.index] = ValueError(
+          f'{jobs[s.index].recording.source}: every candidate simulation blew up'
+        )
+    frames = {s.index: s.best.frames_of(s.argmin()[0]) for s in ok}
+    redo = [s for s in ok if frames[s.index] is None]
+    if redo:
+      scores = evaluate(
+        [s.problem for s in redo], [s.argmin()[0][None] for s in redo],
+        [len(s.state.Y) for s in redo], frames=True,
+      )  # fmt: skip
+      frames.update({s.index: sc.frames for s, sc in zip(redo, scores, strict=True)})
+    for s in ok:
+      job = jobs[s.index]
+      t0 = time.perf_counter()
+      res = s.opt.result(s.state)
+      timing = dict(
+        seconds=time.perf_counter() - t_start,
+        seconds_in_objective=evaluate.seconds - seconds_before,
+        seconds_in_search=gp_seconds + time.perf_counter() - t0,
+        recordings_in_batch=len(jobs),
+      )
+      out[s.index] = write_result(
+        job, s, res, frames[s.index],
+        retrieval=embedding.network_retrieval(job.model_dir), **timing,
+      )  # fmt: skip
+      if progress:
+        print(f'{job.recording.source}: {s.describe()}', flush=True)
+
+  # Searches that finished before: their result stands (run.json matched).
+  ended = [s for s in live if s.done()]
+  for s in ended:
+    path = os.path.join(jobs[s.index].workdir, ESTIMATE_FILE)
+    if os.path.isfile(path):
+      out[s.index] = read_json(path)
+  finish([s for s in ended if out[s.index] is None])
+  step = 0
+  # Searches propose in threads (their GP work is JAX on the CPU, which
+  # releases the GIL), so many recordings use the host's cores.
+  pool = concurrent.futures.ThreadPoolExecutor(min(len(live), os.cpu_count() or 1) or 1)
+  while active := [s for s in live if not s.done()]:
+    t0 = time.perf_counter()
+    asked = []
+    for s, (x, state) in zip(
+      active, pool.map(lambda s: s.opt.ask(s.state), active), strict=True
+    ):
+      s.state = state
+      asked.append(x)
+    t1 = time.perf_counter()
+    gp_seconds += t1 - t0
+    scores = evaluate(
+      [s.problem for s in active], asked, [len(s.state.Y) for s in active],
+      frames=True,
+    )  # fmt: skip
+    t2 = time.perf_counter()
+    for s, x, sc in zip(active, asked, scores, strict=True):
+      s.best.update(x, sc.psd, sc.frames)
+      s.state = s.opt.tell(s.state, x, sc.psd)
+    ended = [s for s in active if s.done()]
+    if progress:
+      if len(active) == 1:
+        head, what = f'iteration {active[0].state.iteration:3d}', active[0].describe()
+      else:
+        head = f'step {step:3d}'
+        what = f'{len(active)} searches, {len(active) - len(ended)} still searching'
+      print(
+        f'{head}: {what} ({sum(map(len, asked))} simulations {t2 - t1:.1f} s, '
+        f'search {t1 - t0:.1f} s)',
+        flush=True,
+      )
+    finish(ended)
+    step += 1
+  pool.shutdown()
+  return out
+
+
+def write_result(
+  job: Job,
+  search: _Search,
+  res,
+  best_frames: np.ndarray,
+  retrieval: dict[str, float] | None = None,
+  **timing,
+) -> dict:
+  """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
+  posterior ``posterior.png`` and ``posterior.npz``) of a finished search;
+  returns the result dict.
+
+  Args:
+    job: the estimate.
+    search: its finished search.
+    res: ``search.opt.result(...)``: a ``bo.Result`` or ``bo.posterior.Result``.
+    best_frames: the lowest-PSD candidate's camera-0 frames as its network saw
+      them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
+    retrieval: the network's ``network_retrieval``, recorded beside the
+      estimate (a parameter near 1 is not constrained by the video).
+    **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
+  """
+  config, recording, workdir = job.config, job.recording, job.workdir
+  space = search.problem.space
+  x_best, y_best = search.argmin()
+  result = {
+    'recording': recording.source,
+    'material': config.material,
+    'garment': config.garment,
+    'point': config.point,
+  }
+  if config.point == 'argmin':
+    result.update(_argmin_summary(config, space, res, x_best))
+  else:
+    result.update(_posterior_summary(config, space, res, workdir, recording.truth))
+  material = physsim.load_material(physsim.fabric(config.material).material)
+  point = result['point_unit']
+  bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
+  result.update({
+    'bending_matrix_Nm': (bending * material.bending).tolist(),
+    'argmin': {
+      f: float(np.ravel(v)[0])
+      for f, v in zip(posterior_lib.FIELDS, physsim.from_unit(x_best, space), strict=True)
+    },
+    'psd_best': float(y_best),
+    'evaluations': int(len(res.Y)),
+    'failed_evaluations': int(np.sum(~np.isfinite(res.Y))),
+    'iterations': int(res.n_iter),
+    'stopped_by_rule': bool(res.stopped_early),
+    **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
+    **{k: float(v) for k, v in timing.items()},
+    'config': dataclasses.asdict(config),
+  })  # fmt: skip
+  if recording.truth is not None:
+    result['truth'] = recording.truth
+    result['errors'] = report.errors(
+      physsim.from_unit(point, space), recording.truth, space
+    )
+    result['covered'] = report.covered(result, recording.truth)
+  files.write_json(os.path.join(workdir, ESTIMATE_FILE), result)
+  n_init = config.n_init
+  iteration = report.iterations_of(len(res.Y), n_init, config.q)
+  report.plot_trace(
+    res.X, res.Y, iteration, space, recording.truth, os.path.join(workdir, 'trace.png')
+  )
+  report.plot_montage(
+    recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
+    best_frames, recording.fps, os.path.join(workdir, 'montage.png'),
+    sim_label='best simulation',
+  )  # fmt: skip
+  return result
+
+
+def _argmin_summary(config, space, res: bo.Result, x_best) -> dict:
+  """The paper's point (the best evaluation) and where the GP puts the minimum."""
+  post = bo.minimizer_samples(res.X, res.Y, BOUNDS, jax.random.key(config.seed))
+  samples = posterior_lib.physical(post.samples, space)
+  best = physsim.from_unit(x_best, space)
+  return {
+    'point_unit': np.asarray(x_best, np.float64).tolist(),
+    'estimate': report.summary(samples, best),
+    'load_ratio': report.load_ratio_summary(samples, best),
+    'interval_meaning': 'where the GP puts the minimum of the PSD, not where '
+    'the parameters are; not calibrated',
+  }
+
+
+def _posterior_summary(config, space, res, workdir: str, truth) -> dict:
+  """The posterior median as the point, credible intervals, the prior's width;
+  writes ``posterior.npz`` and ``posterior.png``."""
+  key = jax.random.key(config.seed)
+  pc = posterior_config(config)
+  points = bo.posterior.grid_points(pc.grid)
+  lp = posterior_lib.log_prior(points, space, config.measured)
+  prior = posterior_lib.prior_samples(
+    jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
+  )
+  summary = posterior_lib.summarise(res.samples, space, prior)
+  median = np.median(res.samples, axis=0)  # per-parameter medians (unit cube)
+  estimate = {}
+  for name in posterior_lib.FIELDS:
+    s = summary[name]
+    estimate[name] = {'value': s['median'], **s}
+  files.write_atomic(
+    os.path.join(workdir, POSTERIOR_FILE),
+    lambda p: np.savez(
+      p, samples=res.samples, prior_samples=prior, log_post=res.log_post,
+      log_lik=res.log_lik, log_prior=lp, grid=np.asarray(pc.grid),
+      bounds=space.bounds(), gp_mean=res.mean, gp_var=res.var,
+      noise_sd=res.noise_sd, floor=res.floor,
+    ),
+  )  # fmt: skip
+  posterior_lib.plot(
+    res.samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
+    title=f'{config.material}: posterior given {os.path.basename(workdir)}',
+  )  # fmt: skip
+  return {
+    'point_unit': median.tolist(),
+    'estimate': estimate,
+    'load_ratio': {'value': summary['load_ratio']['median'], **summary['load_ratio']},
+    'noise_sd_log_psd': res.noise_sd,
+    'interval_meaning': 'central credible intervals of the posterior given the '
+    'video (and any measured wind or area weight)',
+    'calibration': report.calibration_note(),
+  }
+
+
+JOINT_FILE = 'joint.json'
+
+
+def estimate_joint(
+  config: EstimateConfig,
+  recordings: list[Recording],
+  model_dir: str,
+  workdir: str,
+  **kw,
+) -> dict:
+  """One fabric seen in several recordings (e.g. two fan settings): a joint
+  posterior with one bending and area weight and one wind per recording.
+
+  Each recording gets its own posterior search (in lockstep, under
+  ``<workdir>/recording_<k>``); their likelihoods on the shared grid are then
+  multiplied over bending and area weight, each recording's wind integrated
+  out (``posterior.joint``). Writes ``joint.json`` and ``joint.png``.
+
+  Args:
+    config: settings (``point='median'``; a measured area weight applies to
+      all recordings; a measured wind cannot, as each recording has its own).
+    recordings: two or more recordings of the same fabric.
+    model_dir: the fabric's trained network.
+    workdir: where everything goes.
+    **kw: ``estimate_many``'s keywords.
+
+  Returns:
+    The dict written to ``joint.json``: per recording its own estimate and its
+    wind and load ratio under the joint posterior, and the shared bending and
+    area weight.
+
+  Raises:
+    ValueError: fewer than two recordings, ``point='argmin'``, a measured
+      wind, or a recording whose estimate failed (named).
+  """
+  if len(recordings) < 2:
+    raise ValueError(
+      f'a joint estimate needs two or more recordings, got {len(recordings)}'
+    )
+  if config.point != 'median':
+    raise ValueError("a joint estimate combines posteriors: use point='median'")
+  if config.measured.wind_speed_sd > 0:
+    raise ValueError(
+      "a measured wind is one recording's: estimate that recording alone, or "
+      'give the joint estimate without --wind_speed'
+    )
+  jobs = [
+    Job(config, r, model_dir, os.path.join(workdir, f'recording_{k}'))
+    for k, r in enumerate(recordings)
+  ]
+  results = estimate_many(jobs, **kw)
+  for job, r in zip(jobs, results, strict=True):
+    if isinstance(r, Exception):
+      raise ValueError(f'{job.recording.source}: {r}') from r
+  npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
+  grid = tuple(int(g) for g in npz[0]['grid'])
+  key = jax.random.fold_in(jax.random.key(config.seed), 11)
+  combined = posterior_lib.joint(
+    [z['log_lik'] for z in npz], grid, npz[0]['log_prior'], key,
+    n=len(npz[0]['samples']),
+  )  # fmt: skip
+  space = physsim.search_space(config.material)
+  prior = npz[0]['prior_samples']
+  per = []
+  for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):
+    s = posterior_lib.summarise(samples, space, prior)
+    per.append({
+      'recording': job.recording.source,
+      'alone': results[k]['estimate'],
+      'wind_speed': s['wind_speed'],
+      'load_ratio': s['load_ratio'],
+      **({'truth': job.recording.truth} if job.recording.truth else {}),
+    })  # fmt: skip
+    posterior_lib.plot(
+      samples, prior, space, job.recording.truth,
+      os.path.join(workdir, f'joint_recording_{k}.png'),
+      title=f'{config.material}: joint posterior, recording {k}',
+    )  # fmt: skip
+  shared = posterior_lib.summarise(combined['samples'][0], space, prior)
+  out = {
+    'material': config.material,
+    'recordings': per,
+    'bending_scale': shared['bending_scale'],
+    'area_weight': shared['area_weight'],
+    'calibration': report.calibration_note(),
+    'config': dataclasses.asdict(config),
+  }
+  files.write_json(os.path.join(workdir, JOINT_FILE), out)
+  return out

@@ -1,0 +1,1 @@
+"""Studies built on the pipeline: the paper's tables, identifiability, calibration, motion."""
