@@ -45,7 +45,7 @@ case "$stage" in
     python -m experiments.generate_dataset --out="$R/eval/fabrics" $EV 2>&1 | tail -8 | tee "$OUT/eval.log"
     ;;
   latency)
-    python benchmarks/estimate_latency.py --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
+    [ -z "${SMOKE:-}" ] && python benchmarks/estimate_latency.py --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
       --model="$R/t1/physnet_depth/simulation/$GI" --out="$OUT/latency.json" $LAT 2>&1 \
       | tee "$OUT/latency.log"
     for p in paper default; do

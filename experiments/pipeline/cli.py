@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import os
 import re
 import sys
 import types
@@ -240,9 +241,24 @@ def parse(cls, presets: Mapping[str, object], argv: list[str]):
   return from_flags(cls, presets, fv)
 
 
+def host_devices(n: int | None = None) -> None:
+  """Asks XLA for ``n`` CPU devices (default: one per core) unless the
+  environment already says how many, so that independent host work (one GP
+  per recording in a lockstep estimate) runs in parallel: one CPU device runs
+  its programs one at a time. Takes effect only before JAX starts its backends."""
+  flags_ = os.environ.get('XLA_FLAGS', '')
+  if 'xla_force_host_platform_device_count' in flags_:
+    return
+  n = n or os.cpu_count() or 1
+  os.environ['XLA_FLAGS'] = (
+    f'{flags_} --xla_force_host_platform_device_count={n}'.strip()
+  )
+
+
 def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) -> None:
   """A script's whole ``__main__``: flags from ``cls``, ``main(config)``, and
   user errors as one line (exit status 2) unless ``--verbose``."""
+  host_devices()
   define_flags(cls, presets, module_name=sys.argv[0])
 
   def _main(argv):

@@ -43,6 +43,9 @@ from experiments.pipeline.posterior import Measured
 from experiments.pipeline.recording import Recording
 
 BACKENDS = ('auto', 'mjx', 'c')
+# Pixels of frames scored at once (render, sensor, network): the first conv's
+# activations are 32 floats per pixel, so about 8 GiB of them at this budget.
+_FRAME_BUDGET_PIXELS = 1 << 26
 DISTANCES = ('energy', 'centroid')
 POINTS = ('median', 'argmin')
 LIKELIHOODS = ('gibbs', 'threshold')
@@ -109,7 +112,7 @@ class EstimateConfig:
   cameras: int = 2
   q: int = 24
   n_init: int = 48
-  max_iter: int = 5
+  max_iter: int = 3
   stop_rel_change: float = 0.05
   stop_window: int = 2
   min_iter: int = 2
@@ -368,9 +371,27 @@ class Objective:
     self._net = net
     self._sensor = c.sensor_noise and net.modality == 'depth'
     self._distance = c.distance
+    cams, (h, w) = (
+      problem.data.poses.position.shape[0],
+      (problem.intr.height, problem.intr.width),
+    )
+    self._chunk = max(1, _FRAME_BUDGET_PIXELS // (cams * problem.n_frames * h * w))
     self._program = jax.jit(
       self._fused, static_argnames=('with_frames', 'with_positions')
     )
+
+  def _frames(self, positions, poses, noise_keys, colors):
+    """Worlds' frames as their network sees them: (B, C, T, H, W) depth after
+    the sensor model, or (B, C, T, H, W, 3) uint8 colour."""
+    faces = jnp.asarray(self.mesh.faces, jnp.int32)
+    if self._net.modality == 'rgb':  # each fabric's colour, 8 bits, as datasets are
+      return physsim.render_rgb8(positions, faces, self._intr, poses, colors)
+    frames = physsim.render_depth(positions, faces, self._intr, poses)
+    if self._sensor:
+      frames = jax.vmap(lambda k, f: physsim.apply_noise_frames(k, f, self._intr))(
+        noise_keys, frames
+      )
+    return frames
 
   def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
              with_positions):  # fmt: skip
@@ -385,39 +406,33 @@ class Objective:
     positions, valid = self._rollout(w)  # (Pq, T, V, 3), (Pq,)
     rest = jnp.asarray(self.mesh.vertices, positions.dtype)
     positions = jnp.where(valid[:, None, None, None], positions, rest)
-    poses = jax.tree.map(lambda a: jnp.repeat(a, q, axis=0), data.poses)  # (Pq, C)
-    faces = jnp.asarray(self.mesh.faces, jnp.int32)
+    owner = jnp.arange(p * q) // q  # each world's problem
+    noise_keys = noise_keys.reshape(-1)
     net = self._net
-    if net.modality == 'depth':
-      frames = physsim.render_depth(positions, faces, self._intr, poses)
-      if self._sensor:
-        frames = jax.vmap(lambda k, f: physsim.apply_noise_frames(k, f, self._intr))(
-          noise_keys.reshape(-1), frames
-        )  # (Pq, C, T, H, W)
-    else:  # each fabric's colour, 8 bits, as datasets are written
-      colors = jnp.repeat(data.color, q, axis=0)
-      frames = physsim.render_rgb8(positions, faces, self._intr, poses, colors)
-    inputs = embedding.network_inputs(frames, net.modality, net.input_mode)
-    inputs = inputs.reshape(p, q, *inputs.shape[1:])  # (P, q, C, T, H, W, ch)
 
-    def score(params, rec_points, x):  # one problem's q candidates
-      c, t = x.shape[1:3]
-      pts = embedding.embed_video(
-        net.network, params, x.reshape(q * c, t, *x.shape[3:]), net.clip_frames
-      )  # cameras pooled: (q, C * N, D)
-      pts = pts.reshape(q, -1, rec_points.shape[-1])
-      return jax.vmap(lambda a: model_lib.psd.psd(a, rec_points, self._distance))(pts)
+    def score(args):  # one world: render, sense, embed with its problem's net, PSD
+      i, pos, key = args
+      pose = jax.tree.map(lambda a: a[i][None], data.poses)  # (1, C)
+      frames = self._frames(pos[None], pose, key[None], data.color[i][None])[0]
+      x = embedding.network_inputs(frames, net.modality, net.input_mode)
+      params = jax.tree.map(lambda a: a[i], data.params)
+      pts = embedding.embed_video(net.network, params, x, net.clip_frames)  # (C, N, D)
+      pts = pts.reshape(-1, pts.shape[-1])  # cameras pooled
+      return model_lib.psd.psd(pts, data.rec_points[i], self._distance)
 
-    d = jax.vmap(score)(data.params, data.rec_points, inputs)  # (P, q)
+    # Worlds in chunks of about a frame budget: the network's activations of
+    # every frame at once would not fit (paper size: ~8 MB per frame).
+    d = jax.lax.map(score, (owner, positions, noise_keys), batch_size=self._chunk)
+    d = d.reshape(p, q)
     ok = valid.reshape(p, q) & jnp.isfinite(d)
     d = jnp.where(ok, d, jnp.nan)
     out = {'psd': d, 'valid': valid.reshape(p, q)}
-    if with_frames:
-      best = jnp.argmin(jnp.where(ok, d, jnp.inf), axis=1)  # (P,)
-      cam0 = frames.reshape(p, q, *frames.shape[1:])[:, :, 0]  # (P, q, T, H, W[, 3])
-      out['frames'] = jnp.take_along_axis(
-        cam0, best.reshape((p, 1) + (1,) * (cam0.ndim - 2)), axis=1
-      )[:, 0]
+    if with_frames:  # the best candidate of each problem, rendered again (same keys)
+      best = jnp.arange(p) * q + jnp.argmin(jnp.where(ok, d, jnp.inf), axis=1)
+      frames = self._frames(
+        positions[best], data.poses, noise_keys[best], data.color
+      )  # (P, C, T, ...)
+      out['frames'] = frames[:, 0]
     if with_positions:
       out['positions'] = positions.reshape(p, q, *positions.shape[1:])
     return out

@@ -61,17 +61,21 @@ class Job(NamedTuple):
   workdir: str
 
 
-def gp_device():
-  """Where estimates fit their GPs: the CPU. The GP holds tens of points, so
-  on a GPU its L-BFGS loops only wait on kernel launches, while the GPU has
-  the simulations to run."""
-  return jax.devices('cpu')[0]
+def gp_device(i: int = 0):
+  """Where search ``i`` fits its GP: a CPU device. The GP holds tens to
+  hundreds of points, so on a GPU its L-BFGS loops only wait on kernel
+  launches, while the GPU has the simulations to run. Searches are spread over
+  the CPU devices (``cli.host_devices`` makes one per core), as one device runs
+  its programs one at a time."""
+  cpus = jax.devices('cpu')
+  return cpus[i % len(cpus)]
 
 
 def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: str,
-                  *, gp_on_cpu: bool = True):  # fmt: skip
-  """The search of an estimate: ``bo.PosteriorSearch`` or ``bo.Minimizer``."""
-  device = gp_device() if gp_on_cpu else None
+                  *, gp_on_cpu: bool = True, index: int = 0):  # fmt: skip
+  """The search of an estimate: ``bo.PosteriorSearch`` or ``bo.Minimizer``
+  (``index``: the search's number in a lockstep run, for its GP's device)."""
+  device = gp_device(index) if gp_on_cpu else None
   if config.point == 'argmin':
     return bo.Minimizer(BOUNDS, **minimizer_settings(config, workdir), device=device)
   pc = posterior_config(config)
@@ -308,6 +312,7 @@ def estimate_many(
   gp_on_cpu: bool = True,
   nets: dict[str, embedding.EmbeddingNet] | None = None,
   evaluator: Evaluator | None = None,
+  figures: bool = True,
 ) -> list[dict | Exception]:
   """Runs (or resumes) every job's estimate, scoring their candidates together.
 
@@ -317,6 +322,7 @@ def estimate_many(
     gp_on_cpu: fit the GPs and propose on the CPU.
     nets: networks the caller has loaded already, by ``model_dir``.
     evaluator: an ``Evaluator`` to reuse across calls (default a new one).
+    figures: draw each estimate's pictures (a study of hundreds may not want them).
 
   Returns:
     Per job, its ``estimate.json`` dict, or the exception that stopped it (a
@@ -333,7 +339,9 @@ def estimate_many(
       if job.model_dir not in nets:
         nets[job.model_dir] = embedding.load_embedding(job.model_dir)
       problem = obj_lib.make_problem(job.config, nets[job.model_dir], job.recording)
-      opt = make_searcher(job.config, problem.space, job.workdir, gp_on_cpu=gp_on_cpu)
+      opt = make_searcher(
+        job.config, problem.space, job.workdir, gp_on_cpu=gp_on_cpu, index=i
+      )
       os.makedirs(job.workdir, exist_ok=True)
       check_run(job, problem)
       live.append(_Search(i, problem, opt, opt.start(), obj_lib.BestSeen()))
@@ -363,23 +371,28 @@ def estimate_many(
         [len(s.state.Y) for s in redo], frames=True,
       )  # fmt: skip
       frames.update({s.index: sc.frames for s, sc in zip(redo, scores, strict=True)})
-    for s in ok:
+    t0 = time.perf_counter()
+    results = list(pool.map(lambda s: s.opt.result(s.state), ok))
+    t_result = time.perf_counter() - t0
+    for s, res in zip(ok, results, strict=True):
       job = jobs[s.index]
-      t0 = time.perf_counter()
-      res = s.opt.result(s.state)
       timing = dict(
         seconds=time.perf_counter() - t_start,
         seconds_in_objective=evaluate.seconds - seconds_before,
-        seconds_in_search=gp_seconds + time.perf_counter() - t0,
+        seconds_in_search=gp_seconds + t_result,
         recordings_in_batch=len(jobs),
       )
       out[s.index] = write_result(
         job, s, res, frames[s.index],
-        retrieval=embedding.network_retrieval(job.model_dir), **timing,
+        retrieval=embedding.network_retrieval(job.model_dir), figures=figures,
+        **timing,
       )  # fmt: skip
       if progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
+  # Searches propose in threads, each on its own CPU device (gp_device), so
+  # many recordings use the host's cores.
+  pool = concurrent.futures.ThreadPoolExecutor(min(len(live), os.cpu_count() or 1) or 1)
   # Searches that finished before: their result stands (run.json matched).
   ended = [s for s in live if s.done()]
   for s in ended:
@@ -388,9 +401,6 @@ def estimate_many(
       out[s.index] = read_json(path)
   finish([s for s in ended if out[s.index] is None])
   step = 0
-  # Searches propose in threads (their GP work is JAX on the CPU, which
-  # releases the GIL), so many recordings use the host's cores.
-  pool = concurrent.futures.ThreadPoolExecutor(min(len(live), os.cpu_count() or 1) or 1)
   while active := [s for s in live if not s.done()]:
     t0 = time.perf_counter()
     asked = []
@@ -433,6 +443,7 @@ def write_result(
   res,
   best_frames: np.ndarray,
   retrieval: dict[str, float] | None = None,
+  figures: bool = True,
   **timing,
 ) -> dict:
   """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
@@ -447,6 +458,7 @@ def write_result(
       them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
     retrieval: the network's ``network_retrieval``, recorded beside the
       estimate (a parameter near 1 is not constrained by the video).
+    figures: draw the pictures (else only the JSON and ``posterior.npz``).
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
   config, recording, workdir = job.config, job.recording, job.workdir
@@ -461,7 +473,9 @@ def write_result(
   if config.point == 'argmin':
     result.update(_argmin_summary(config, space, res, x_best))
   else:
-    result.update(_posterior_summary(config, space, res, workdir, recording.truth))
+    result.update(
+      _posterior_summary(config, space, res, workdir, recording.truth, figures)
+    )
   material = physsim.load_material(physsim.fabric(config.material).material)
   point = result['point_unit']
   bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
@@ -487,6 +501,8 @@ def write_result(
     )
     result['covered'] = report.covered(result, recording.truth)
   files.write_json(os.path.join(workdir, ESTIMATE_FILE), result)
+  if not figures:
+    return result
   n_init = config.n_init
   iteration = report.iterations_of(len(res.Y), n_init, config.q)
   report.plot_trace(
@@ -514,7 +530,7 @@ def _argmin_summary(config, space, res: bo.Result, x_best) -> dict:
   }
 
 
-def _posterior_summary(config, space, res, workdir: str, truth) -> dict:
+def _posterior_summary(config, space, res, workdir: str, truth, figures=True) -> dict:
   """The posterior median as the point, credible intervals, the prior's width;
   writes ``posterior.npz`` and ``posterior.png``."""
   key = jax.random.key(config.seed)
@@ -539,10 +555,11 @@ def _posterior_summary(config, space, res, workdir: str, truth) -> dict:
       noise_sd=res.noise_sd, floor=res.floor,
     ),
   )  # fmt: skip
-  posterior_lib.plot(
-    res.samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
-    title=f'{config.material}: posterior given {os.path.basename(workdir)}',
-  )  # fmt: skip
+  if figures:
+    posterior_lib.plot(
+      res.samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
+      title=f'{config.material}: posterior given {os.path.basename(workdir)}',
+    )  # fmt: skip
   return {
     'point_unit': median.tolist(),
     'estimate': estimate,
