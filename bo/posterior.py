@@ -14,8 +14,8 @@ quadrature:
   its own noise near the best fit (``sd(d) ~ d sn``). Where a discrepancy rises
   quadratically away from the truth (a squared distance between summaries, as
   the energy distance of embeddings is near its minimum), it is Gaussian with
-  the true likelihood's shape, so one constant ``c`` sets the scale for every
-  direction and problem (calibrated on simulations).
+  the true likelihood's shape, so one constant ``c`` sets the scale (calibrated on
+  simulations: ``choose_sharpness``).
 * ``'threshold'``: BOLFI's ``L = P(d < h) = Phi((log h - f) / sn)`` with
   ``log h = m + c sn``. Its shape is a plateau with light tails, so one ``c``
   can match one credible level but not every level; kept for comparison.
@@ -130,6 +130,27 @@ def log_likelihood(mean, var, floor, noise_sd, *, form='gibbs', sharpness=1.0):
     log_m1, _ = _moments(f64(mean), f64(var), f64(floor), f64(noise_sd), form,
                          sharpness)  # fmt: skip
     return np.asarray(log_m1)
+
+
+def choose_sharpness(coverage, levels) -> float:
+  """The likelihood constant a calibration set supports: the sharpest candidate
+  whose every interval holds the truth at least as often as its level says.
+
+  Intervals then err wide, never narrow: an approximate posterior cannot match
+  every level and direction with one constant, and an overconfident interval
+  misleads where a wide one only says "less is known".
+
+  Args:
+    coverage: ``{sharpness: (n_levels, n_params) coverage}`` measured on
+      calibration problems (e.g. held-out simulations).
+    levels: ``(n_levels,)`` the nominal levels, e.g. ``(0.5, 0.9)``.
+
+  Returns:
+    That sharpness, or the least sharp candidate if none qualifies.
+  """
+  lv = np.asarray(levels, np.float64)[:, None]
+  ok = [c for c, cov in coverage.items() if np.all(np.asarray(cov) >= lv)]
+  return float(max(ok) if ok else min(coverage))
 
 
 def likelihood(

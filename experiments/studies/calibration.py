@@ -16,7 +16,9 @@ What a measured wind or area weight adds is measured too: a reading with 2%
 error (``measured_sd``) enters as a prior.
 
 The likelihood's one constant (``sharpness``) is chosen on the first
-``calibration_share`` of the pairs and reported on the rest: the posterior of
+``calibration_share`` of the pairs (``bo.posterior.choose_sharpness``: the
+sharpest value whose intervals hold the truth at least as often as they say)
+and reported on the rest: the posterior of
 every recording is formed again from its saved GP for each candidate value,
 without new simulations (the searches ran with the default value, which only
 steers where they simulated). ``experiments/calibrate.py`` is its command line.
@@ -154,7 +156,7 @@ def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
     jobs.append(search.Job(est, rec, model_dir, wd))
     meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd})
   print(f'{len(jobs)} recordings in lockstep', flush=True)
-  results = search.estimate_many(jobs)
+  results = search.estimate_many(jobs, figures=False)
   out = []
   for m, res in zip(meta, results, strict=True):
     if isinstance(res, Exception):
@@ -296,10 +298,9 @@ def summarise(scores: list[dict], space: physsim.SearchSpace) -> dict:
   return out
 
 
-def _miscalibration(summary: dict) -> float:
-  """Squared distance of the coverages from their levels, over fields."""
-  return float(sum((summary[f][f'interval_{lv}'] - lv / 100) ** 2
-                   for f in FIELDS for lv in LEVELS))  # fmt: skip
+def _coverages(summary: dict) -> np.ndarray:
+  """(levels, fields) interval coverage of a summary."""
+  return np.array([[summary[f][f'interval_{lv}'] for f in FIELDS] for lv in LEVELS])
 
 
 def analyse(config: Config, runs: list[dict]) -> dict:
@@ -316,9 +317,12 @@ def analyse(config: Config, runs: list[dict]) -> dict:
         'calibration': summarise(split(scores['video'], False), space),
         'held_out': {m: summarise(split(scores[m], True), space) for m in MODES},
       }
+  levels = [lv / 100 for lv in LEVELS]
   best = {
-    form: min(config.sharpness_grid, key=lambda c: _miscalibration(sweep[form][c]['calibration'])
-              if sweep[form][c]['calibration'] else np.inf)
+    form: bo.posterior.choose_sharpness(
+      {c: _coverages(v['calibration']) for c, v in sweep[form].items()
+       if v['calibration']}, levels,
+    ) if any(v['calibration'] for v in sweep[form].values()) else None
     for form in sweep
   }  # fmt: skip
   return {'sweep': sweep, 'best_sharpness': best, 'n_calibration_pairs': n_cal}
