@@ -100,13 +100,22 @@ def covered(result: dict, truth: dict) -> dict:
   return out
 
 
-def calibration_note() -> dict | None:
+def calibration_note(config=None) -> dict | None:
   """What the held-out simulations showed about the intervals' coverage
-  (``calibration.json``), or None when no calibration has been run."""
+  (``calibration.json``), or None when no calibration has been run. With an
+  ``EstimateConfig`` whose likelihood or sharpness differs from the calibrated
+  one, the note says so (``'matches': False``) instead of quoting coverage
+  that was measured for other settings."""
   if not os.path.isfile(CALIBRATION_FILE):
     return None
   with open(CALIBRATION_FILE) as f:
-    return json.load(f)
+    cal = json.load(f)
+  if config is not None and (
+    config.likelihood != cal.get('likelihood', 'gibbs')
+    or not np.isclose(config.sharpness, cal['sharpness'])
+  ):
+    return {'matches': False, 'setting': cal['setting'], 'sharpness': cal['sharpness']}
+  return {'matches': True, **cal}
 
 
 def describe(x_best, y_best, space) -> str:
@@ -223,6 +232,11 @@ def calibration_line(cal: dict | None) -> str:
     return (
       'calibration: not measured for these settings (experiments/calibrate.py); '
       'treat the intervals as indicative.'
+    )
+  if not cal.get('matches', True):
+    return (
+      f'calibration: measured for {cal["setting"]}, not for this likelihood and '
+      'sharpness; treat the intervals as indicative.'
     )
   cov = cal['coverage']
   parts = ', '.join(

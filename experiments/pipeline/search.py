@@ -567,7 +567,7 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True) ->
     'noise_sd_log_psd': res.noise_sd,
     'interval_meaning': 'central credible intervals of the posterior given the '
     'video (and any measured wind or area weight)',
-    'calibration': report.calibration_note(),
+    'calibration': report.calibration_note(config),
   }
 
 
@@ -655,7 +655,7 @@ def estimate_joint(
     'recordings': per,
     'bending_scale': shared['bending_scale'],
     'area_weight': shared['area_weight'],
-    'calibration': report.calibration_note(),
+    'calibration': report.calibration_note(config),
     'config': dataclasses.asdict(config),
   }
   files.write_json(os.path.join(workdir, JOINT_FILE), out)

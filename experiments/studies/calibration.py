@@ -342,6 +342,7 @@ def run(config: Config, workdir: str) -> dict:
     'n': held['video'].get('n', 0),
     'setting': f'{form} likelihood, sharpness {c:g}, demo-size {config.material} '
     f'(estimate sharpness default {est.sharpness:g})',
+    'likelihood': form,
     'sharpness': c,
     'coverage': {
       f: {f'interval_{lv}': held['video'][f][f'interval_{lv}'] for lv in LEVELS}

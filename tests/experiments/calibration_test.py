@@ -11,6 +11,7 @@ choice must not be the sharper one.
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -18,7 +19,7 @@ import pytest
 
 import bo
 import physsim
-from experiments.pipeline import search
+from experiments.pipeline import report, search
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
 
@@ -71,3 +72,24 @@ def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
   known = gibbs[C_TRUE]['held_out']['known wind']['wind_speed']
   assert abs(known['interval_90'] - 0.9) < 0.09
   assert known['median_error_pct'] < held[C_TRUE]['wind_speed']['median_error_pct']
+
+
+def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
+  tmp_path, monkeypatch
+):
+  cal = {
+    'n': 50, 'setting': 'gibbs likelihood, sharpness 0.7, demo-size', 'likelihood': 'gibbs',
+    'sharpness': 0.7, 'coverage': {'wind_speed': {'interval_50': 0.48, 'interval_90': 0.88}},
+  }  # fmt: skip
+  path = tmp_path / 'calibration.json'
+  path.write_text(json.dumps(cal))
+  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(path))
+  same = report.calibration_note(EstimateConfig(sharpness=0.7))
+  assert 'wind 88%/48%' in report.calibration_line(same)
+  other = report.calibration_note(EstimateConfig(sharpness=1.4))
+  assert other['matches'] is False
+  assert 'not for this likelihood and sharpness' in report.calibration_line(other)
+  other = report.calibration_note(EstimateConfig(sharpness=0.7, likelihood='threshold'))
+  assert other['matches'] is False
+  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
+  assert 'not measured' in report.calibration_line(report.calibration_note())
