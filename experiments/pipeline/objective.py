@@ -86,7 +86,8 @@ class EstimateConfig:
     likelihood: the posterior's approximate likelihood, 'gibbs' or
       'threshold' (BOLFI's; see bo.posterior).
     sharpness: the likelihood's constant, calibrated on simulations
-      (experiments/calibrate.py; docs/calibration.md).
+      (experiments/calibrate.py; docs/calibration.md): the default is the
+      value the shipped calibration chose.
     replicates: candidates per iteration that repeat the most probable cell
       with fresh randomness (they measure the simulator's noise).
     distance: PSD between embedding sets ('energy' or 'centroid').
@@ -118,7 +119,7 @@ class EstimateConfig:
   min_iter: int = 2
   posterior_grid: tuple[int, ...] = (12, 64, 24)
   likelihood: str = cli.choice('gibbs', LIKELIHOODS)
-  sharpness: float = 0.5
+  sharpness: float = 0.15
   replicates: int = 1
   distance: str = cli.choice('energy', DISTANCES)
   backend: str = cli.choice('auto', BACKENDS)

@@ -100,21 +100,48 @@ def covered(result: dict, truth: dict) -> dict:
   return out
 
 
+# Estimate settings that change what a score means; coverage measured with
+# other values does not carry over.
+_CALIBRATED_FIELDS = (
+  'likelihood', 'sharpness', 'material', 'garment', 'cloth_resolution', 'frames',
+  'fps', 'distance',
+)  # fmt: skip
+
+
 def calibration_note(config=None) -> dict | None:
   """What the held-out simulations showed about the intervals' coverage
   (``calibration.json``), or None when no calibration has been run. With an
-  ``EstimateConfig`` whose likelihood or sharpness differs from the calibrated
-  one, the note says so (``'matches': False``) instead of quoting coverage
-  that was measured for other settings."""
+  ``EstimateConfig`` that differs from the calibrated one in a setting that
+  changes the likelihood (``_CALIBRATED_FIELDS``), the note says so
+  (``'matches': False``, ``'differs'``) instead of quoting coverage that was
+  measured for other settings."""
   if not os.path.isfile(CALIBRATION_FILE):
     return None
   with open(CALIBRATION_FILE) as f:
     cal = json.load(f)
-  if config is not None and (
-    config.likelihood != cal.get('likelihood', 'gibbs')
-    or not np.isclose(config.sharpness, cal['sharpness'])
-  ):
-    return {'matches': False, 'setting': cal['setting'], 'sharpness': cal['sharpness']}
+  if config is None:
+    return {'matches': True, **cal}
+  calibrated = dict(cal.get('config', {}).get('estimate', {}))
+  calibrated.update(
+    likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
+  )
+  differs = []
+  for name in _CALIBRATED_FIELDS:
+    if name not in calibrated:
+      continue
+    mine, theirs = getattr(config, name), calibrated[name]
+    same = (
+      np.isclose(mine, theirs)
+      if isinstance(mine, float)
+      else mine == type(mine)(theirs)
+    )
+    if not same:
+      differs.append(name)
+  if differs:
+    return {
+      'matches': False, 'differs': differs, 'setting': cal['setting'],
+      'sharpness': cal['sharpness'],
+    }  # fmt: skip
   return {'matches': True, **cal}
 
 
@@ -235,8 +262,9 @@ def calibration_line(cal: dict | None) -> str:
     )
   if not cal.get('matches', True):
     return (
-      f'calibration: measured for {cal["setting"]}, not for this likelihood and '
-      'sharpness; treat the intervals as indicative.'
+      f'calibration: measured for {cal["setting"]}, not for this '
+      f'{", ".join(cal.get("differs", ["likelihood"]))}; treat the intervals as '
+      'indicative.'
     )
   cov = cal['coverage']
   parts = ', '.join(

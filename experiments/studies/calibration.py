@@ -336,12 +336,11 @@ def run(config: Config, workdir: str) -> dict:
   analysis = analyse(config, runs)
   form, c = 'gibbs', analysis['best_sharpness']['gibbs']
   held = analysis['sweep'][form][c]['held_out']
-  est = _configs(config)[3]
   out = {
     'material': config.material,
     'n': held['video'].get('n', 0),
-    'setting': f'{form} likelihood, sharpness {c:g}, demo-size {config.material} '
-    f'(estimate sharpness default {est.sharpness:g})',
+    'setting': f'{form} likelihood, sharpness {c:g}, {config.material} network '
+    f'of {config.sequences} training sequences',
     'likelihood': form,
     'sharpness': c,
     'coverage': {

@@ -88,8 +88,15 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   assert 'wind 88%/48%' in report.calibration_line(same)
   other = report.calibration_note(EstimateConfig(sharpness=1.4))
   assert other['matches'] is False
-  assert 'not for this likelihood and sharpness' in report.calibration_line(other)
+  assert 'not for this sharpness' in report.calibration_line(other)
   other = report.calibration_note(EstimateConfig(sharpness=0.7, likelihood='threshold'))
   assert other['matches'] is False
+  assert other['differs'] == ['likelihood']
+  # A setting that changes what a score means (the mesh) also voids the quote.
+  cal['config'] = {'estimate': {'cloth_resolution': 25, 'frames': 60}}
+  path.write_text(json.dumps(cal))
+  assert report.calibration_note(EstimateConfig(sharpness=0.7))['matches'] is True
+  other = report.calibration_note(EstimateConfig(sharpness=0.7, cloth_resolution=10))
+  assert other['differs'] == ['cloth_resolution']
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
   assert 'not measured' in report.calibration_line(report.calibration_note())
