@@ -101,6 +101,9 @@ def _save(path: str, payload: dict[str, Any]):
   try:
     with os.fdopen(fd, 'wb') as f:
       np.savez(f, **payload)
+    umask = os.umask(0)  # mkstemp's 0600 -> the user's usual mode
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     os.replace(tmp, path)
   except BaseException:
     if os.path.exists(tmp):

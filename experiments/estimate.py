@@ -3,17 +3,27 @@ r"""Estimate a fabric's bending, area weight and the wind from one depth video.
   python -m experiments.estimate --recording=PATH --material=gray_interlock \
       --model=out/table1/physnet_depth/simulation/gray_interlock --workdir=out/estimate
 
-Writes ``estimate.json``, ``trace.png`` and ``montage.png`` into ``--workdir``
-and resumes from what it holds (``experiments.pipeline.search``).
+  # a camera's own recording: its camera file, only the intake (no network)
+  python -m experiments.estimate --recording=rec/depth --camera_json=rec/camera.json \
+      --intake_only --workdir=out/intake
+
+A recording with a camera file (or any recording that is not a dataset
+sequence) is first taken in (``experiments.pipeline.intake``): clipped,
+background removed, the cloth found and the camera placed in the simulator's
+world; its summary is printed and ``intake.json``, ``overlay.png`` and the
+cleaned frames are written before the search. Writes ``estimate.json``,
+``trace.png`` and ``montage.png`` into ``--workdir`` and resumes from what it
+holds (``experiments.pipeline.search``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 
 from absl import logging
 
-from experiments.pipeline import cli, embedding, report, search
+from experiments.pipeline import cli, embedding, intake, report, search
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 
@@ -28,30 +38,66 @@ class Args:
       Several, comma-separated: one fabric in several recordings (e.g. two
       fan settings), estimated jointly (one bending and area weight, one wind
       each).
-    model: the material's trained network (a train or table1 run folder).
+    model: the material's trained network (a train or table1 run folder);
+      not needed with intake_only.
     workdir: where the search state, estimate.json and the pictures go.
-    camera_json: the recording's camera as {"intrinsics": ..., "extrinsics":
-      ...}; empty: unknown (training-like cameras are used).
+    camera_json: the recording's camera file: OpenCV JSON {"width",
+      "height", "fx", "fy", "cx", "cy", "cam_to_world"}, ROS CameraInfo YAML,
+      RealSense or Open3D intrinsics JSON, or this project's {"intrinsics",
+      "extrinsics"} (physsim.camera_files); empty: unknown (training-like
+      cameras are used).
     allow_other_material: search with a network trained on another fabric
       than material.
+    intake_only: take the recording in (camera, clip, background, alignment),
+      write intake.json, overlay.png and the cleaned frames, and stop.
+    intake: how the recording is read, cleaned and aligned.
     search: the estimate's settings.
   """
 
   recording: tuple[str, ...] = ()
-  model: str = cli.required()
+  model: str = ''
   workdir: str = 'out/estimate'
   camera_json: str = ''
   allow_other_material: bool = False
+  intake_only: bool = False
+  intake: intake.IntakeConfig = intake.IntakeConfig()
   search: objective_lib.EstimateConfig = objective_lib.EstimateConfig()
 
 
 PRESETS = {k: Args(search=v) for k, v in objective_lib.PRESETS.items()}
 
 
+def _take_in(args: Args, path: str, workdir: str, size=None, frames: bool = True):
+  """One recording taken in; its summary printed and its files written."""
+  ik = intake.take_in(path, args.intake, args.camera_json, args.search, workdir=workdir)
+  print(intake.summary(ik))
+  intake.write(ik, workdir, frames=frames, est=args.search)
+  if size is None:
+    return ik
+  return intake.to_recording(ik, args.search.fps, size, args.search.frames)
+
+
+def _needs_intake(args: Args, path: str) -> bool:
+  """Everything but this project's own simulated sequences without a camera
+  file is taken in."""
+  return bool(args.camera_json) or not intake.is_sequence(path)
+
+
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   config = args.search
   config.check()
+  args.intake.check()
+  if not args.recording:
+    raise ValueError('missing --recording (see --help)')
+  if args.intake_only:
+    for i, path in enumerate(args.recording):
+      workdir = args.workdir if len(args.recording) == 1 else f'{args.workdir}/{i}'
+      _take_in(args, path, workdir)
+    print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
+    return
+  if not args.model:
+    raise ValueError('missing --model (see --help), or pass --intake_only')
   net = embedding.load_embedding(args.model)
   if (
     net.materials
@@ -62,26 +108,35 @@ def main(args: Args) -> None:
       f'{args.model} was trained on {list(net.materials)}, not {config.material}; '
       'pass --allow_other_material to search with it anyway'
     )
-  if not args.recording:
-    raise ValueError('missing --recording (see --help)')
-  recs = [
-    recording_lib.load_recording(
-      path,
-      fps=config.fps,
-      size=net.image_size,
-      frames=config.frames,
-      camera_json=args.camera_json or None,
-      rgb=net.modality == 'rgb',
-    )  # fmt: skip
-    for path in args.recording
-  ]
+  recs = []
+  for i, path in enumerate(args.recording):
+    if _needs_intake(args, path):
+      if net.modality == 'rgb':
+        raise ValueError(
+          f'{path}: an RGB network needs a dataset sequence with colour frames; '
+          'the intake reads depth only'
+        )
+      workdir = (
+        args.workdir if len(args.recording) == 1 else f'{args.workdir}/intake_{i}'
+      )
+      recs.append(_take_in(args, path, workdir, size=net.image_size))
+    else:
+      recs.append(
+        recording_lib.load_recording(
+          path,
+          fps=config.fps,
+          size=net.image_size,
+          frames=config.frames,
+          rgb=net.modality == 'rgb',
+        )  # fmt: skip
+      )
   if len(recs) > 1:
     result = search.estimate_joint(config, recs, args.model, args.workdir)
     print(report.joint_table(result))
     return
   result = search.estimate(config, recs[0], args.model, args.workdir)
   print(report.report_table(result))
-  print(f'estimate.json and pictures in {args.workdir}')
+  print(f'estimate.json and pictures in {os.path.abspath(args.workdir)}')
 
 
 if __name__ == '__main__':

@@ -49,4 +49,10 @@ def restore(
   step = mngr.latest_step() if step is None else step
   if step is None:
     return None
-  return mngr.restore(int(step), args=ocp.args.StandardRestore(target))
+  try:
+    return mngr.restore(int(step), args=ocp.args.StandardRestore(target))
+  except Exception as e:  # noqa: BLE001 - orbax raises many kinds for a bad file
+    raise ValueError(
+      f'{mngr.directory}: checkpoint step {step} cannot be read, corrupt or from '
+      f'another network ({type(e).__name__}: {str(e).splitlines()[0][:200]})'
+    ) from e

@@ -54,6 +54,9 @@ def write_json(path: str, data: Any) -> None:
     with os.fdopen(fd, 'w') as f:
       json.dump(data, f, indent=2, sort_keys=True)
       f.write('\n')
+    umask = os.umask(0)  # mkstemp's 0600 -> the user's usual mode
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     os.replace(tmp, path)
   except BaseException:
     os.unlink(tmp)

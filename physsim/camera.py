@@ -27,19 +27,28 @@ import numpy as np
 class Intrinsics:
   """A pinhole camera's image size and field of view (hashable, static).
 
-  The defaults are the paper's Asus Xtion (58 x 45 degrees) at 256 x 256.
+  The defaults are the paper's Asus Xtion (58 x 45 degrees) at 256 x 256. The
+  focal lengths are held as fields of view and the principal point as a share
+  of the image, so resizing a video (``resized``) keeps the same camera. A
+  camera in OpenCV's terms (fx, fy, cx, cy in pixels) is ``from_pinhole``.
 
   Attributes:
     width: image width, pixels.
     height: image height, pixels.
-    fov_x_deg: horizontal field of view across the full image width, degrees.
-    fov_y_deg: vertical field of view across the full image height, degrees.
+    fov_x_deg: 2 atan(width / (2 fx)), degrees (the horizontal field of view
+      when the principal point is centred).
+    fov_y_deg: 2 atan(height / (2 fy)), degrees.
+    principal_x: the principal point's column as a share of the image width,
+      measured from the image's left edge: (cx + 0.5) / width; 0.5 is centred.
+    principal_y: its row as a share of the height: (cy + 0.5) / height.
   """
 
   width: int = 256
   height: int = 256
   fov_x_deg: float = 58.0
   fov_y_deg: float = 45.0
+  principal_x: float = 0.5
+  principal_y: float = 0.5
 
   def __post_init__(self):
     for name in ('width', 'height'):
@@ -50,6 +59,35 @@ class Intrinsics:
       v = getattr(self, name)
       if not 0.0 < v < 180.0:
         raise ValueError(f'Intrinsics.{name} must be in (0, 180) degrees, got {v!r}')
+    for name in ('principal_x', 'principal_y'):
+      v = getattr(self, name)
+      if not -1.0 < v < 2.0:
+        raise ValueError(
+          f'Intrinsics.{name} must be a share of the image near [0, 1], got {v!r}'
+        )
+
+  @classmethod
+  def from_pinhole(cls, width, height, fx, fy, cx, cy) -> Intrinsics:
+    """OpenCV's pinhole camera (focal lengths and principal point in pixels,
+    pixel centres at integer coordinates)."""
+    for name, v in (('fx', fx), ('fy', fy)):
+      if not (math.isfinite(v) and v > 0):
+        raise ValueError(f'{name} must be a positive focal length in pixels, got {v!r}')
+    for name, v in (('cx', cx), ('cy', cy)):
+      if not math.isfinite(v):
+        raise ValueError(f'{name} must be finite, got {v!r}')
+    return cls(
+      width=int(width),
+      height=int(height),
+      fov_x_deg=math.degrees(2 * math.atan(0.5 * width / fx)),
+      fov_y_deg=math.degrees(2 * math.atan(0.5 * height / fy)),
+      principal_x=(cx + 0.5) / width,
+      principal_y=(cy + 0.5) / height,
+    )
+
+  def resized(self, width: int, height: int) -> Intrinsics:
+    """The same camera seeing the image resampled to ``width`` x ``height``."""
+    return dataclasses.replace(self, width=int(width), height=int(height))
 
   @property
   def fx(self) -> float:
@@ -63,13 +101,13 @@ class Intrinsics:
 
   @property
   def cx(self) -> float:
-    """Principal point column (the image centre), pixels."""
-    return 0.5 * (self.width - 1)
+    """Principal point column, pixels."""
+    return self.principal_x * self.width - 0.5
 
   @property
   def cy(self) -> float:
-    """Principal point row (the image centre), pixels."""
-    return 0.5 * (self.height - 1)
+    """Principal point row, pixels."""
+    return self.principal_y * self.height - 0.5
 
   def matrix(self) -> np.ndarray:
     """(3, 3) float64 camera matrix K, mapping camera coordinates to pixels."""
@@ -81,17 +119,16 @@ class Intrinsics:
 
   @classmethod
   def from_dict(cls, d: dict[str, Any]) -> Intrinsics:
-    """Inverse of `to_dict`; unknown keys are a ValueError."""
+    """Inverse of `to_dict`. The fields of view are required (a camera is
+    never silently given the default's); unknown keys are a ValueError."""
     fields = {f.name for f in dataclasses.fields(cls)}
     extra = set(d) - fields
     if extra:
       raise ValueError(f'Intrinsics: unknown fields {sorted(extra)}')
-    return cls(
-      width=int(d.get('width', cls.width)),
-      height=int(d.get('height', cls.height)),
-      fov_x_deg=float(d.get('fov_x_deg', cls.fov_x_deg)),
-      fov_y_deg=float(d.get('fov_y_deg', cls.fov_y_deg)),
-    )
+    missing = [f for f in ('fov_x_deg', 'fov_y_deg') if f not in d]
+    if missing:
+      raise ValueError(f'Intrinsics: missing {missing}')
+    return cls(**{f: type(getattr(cls, f))(d[f]) for f in fields if f in d})
 
 
 class Pose(NamedTuple):

@@ -22,6 +22,7 @@ import io
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -34,6 +35,7 @@ import cv2
 import numpy as np
 
 from physsim import params as params_lib
+from physsim.materials import FABRICS
 
 GENERATOR_VERSION = 'physsim-dataset/1'
 MM_PER_M = 1000.0
@@ -53,6 +55,7 @@ INDEX_COLUMNS = (
   'n_cameras',
   'n_frames',
 )
+_SAFE_NAME = re.compile(r'[A-Za-z0-9_.-]+')
 _COLUMN_TYPES = {
   'seq_id': str,
   'material': str,
@@ -105,6 +108,10 @@ def write_atomic(path: str, write) -> None:
   os.close(fd)
   try:
     write(tmp)
+    # mkstemp makes the file private (0600); give it the user's usual mode.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     os.replace(tmp, path)
   except BaseException:
     if os.path.exists(tmp):
@@ -126,7 +133,8 @@ def write_json_atomic(path: str, obj: Any) -> None:
   write_text_atomic(path, json.dumps(obj, indent=1, sort_keys=True) + '\n')
 
 
-def _read_json(path: str) -> dict:
+def read_json(path: str) -> dict:
+  """A JSON object from ``path``; missing or corrupt is a ValueError naming it."""
   try:
     with open(path) as f:
       out = json.load(f)
@@ -367,7 +375,7 @@ def rebuild_index(root: str) -> list[dict]:
   """Rewrites ``index.csv`` from every finished sequence's ``meta.json``."""
   rows = []
   for path in finished_sequences(root):
-    meta = _read_json(os.path.join(path, 'meta.json'))
+    meta = read_json(os.path.join(path, 'meta.json'))
     missing = [c for c in INDEX_COLUMNS if c not in meta]
     if missing:
       raise ValueError(f'{path}/meta.json lacks the fields {missing}')
@@ -435,7 +443,7 @@ def open_dataset(root: str) -> DatasetIndex:
   if not os.path.isfile(path):
     raise ValueError(f'{path}: file not found (run rebuild_index on the folder?)')
   info_path = os.path.join(root, 'dataset.json')
-  info = _read_json(info_path) if os.path.isfile(info_path) else {}
+  info = read_json(info_path) if os.path.isfile(info_path) else {}
   rows = []
   with open(path, newline='') as f:
     reader = csv.DictReader(f)
@@ -446,6 +454,17 @@ def open_dataset(root: str) -> DatasetIndex:
         rows.append({k: _COLUMN_TYPES.get(k, float)(v) for k, v in raw.items()})
       except (KeyError, ValueError, TypeError, AttributeError) as e:
         raise ValueError(f'{path}:{line}: malformed row {raw} ({e})') from None
+      # Both name folders under the root: a path in them would escape it.
+      for key in ('material', 'seq_id'):
+        if not _SAFE_NAME.fullmatch(rows[-1][key]) or rows[-1][key] in ('.', '..'):
+          raise ValueError(
+            f'{path}:{line}: {key} {rows[-1][key]!r} is not a plain name'
+          )
+      if rows[-1]['material'] not in FABRICS:
+        raise ValueError(
+          f'{path}:{line}: material {rows[-1]["material"]!r} is not one of '
+          f'{sorted(FABRICS)}'
+        )
   return DatasetIndex(root, info, tuple(rows))
 
 
@@ -504,7 +523,7 @@ def read_sequence(
     ValueError: naming the file: no ``meta.json``, a sequence without frames
       (an invalid simulation), indices out of range, a missing or corrupt PNG.
   """
-  meta = _read_json(os.path.join(path, 'meta.json'))
+  meta = read_json(os.path.join(path, 'meta.json'))
   if not meta.get('has_depth', True):
     raise ValueError(
       f'{path}/meta.json: sequence has no frames (valid={meta.get("valid")})'

@@ -1,8 +1,11 @@
 """Loads depth videos (real captures or simulated frames) into one checked form.
 
 Formats, chosen by the path:
-  * a folder of 16-bit PNGs, millimetres, 0 = invalid (this project's format,
-    e.g. ``<seq>/cam0``; files named ``rgb_*`` are skipped);
+  * a folder of 16-bit PNGs, 0 = invalid, in millimetres unless ``depth_scale``
+    says otherwise (this project's format, e.g. ``<seq>/cam0``). Frames are the
+    files matching ``pattern`` whose names hold a number, in natural order
+    (``2.png`` before ``10.png``); ``rgb_*``, ``color*``, ``mask*`` and
+    ``preview*`` files are never frames;
   * a folder of 8-bit PNGs, each frame min-max normalised (the original paper's
     real captures): absolute depth is lost, so values are returned in [0, 1]
     with ``normalised=True``; 0 (the masked background) counts as invalid;
@@ -18,9 +21,11 @@ arrays and videos), else the ``.npz`` ``fps`` or the video's CAP_PROP_FPS.
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import math
 import os
+import re
 from typing import NamedTuple
 
 import cv2
@@ -28,6 +33,15 @@ import numpy as np
 
 # Depth beyond this in a file said to be in metres is almost surely millimetres.
 MAX_METRES = 20.0
+# The nearest surfaces of a cloth recording (5th percentile of valid depth)
+# outside this range mean a wrong unit: TUM's 5000 per metre read as mm puts a
+# cloth at 2-4 m at 5-10 m.
+PLAUSIBLE_METRES = (0.1, 5.0)
+# Source frame rates outside this range are a typo, not a camera.
+FPS_RANGE = (1.0, 1000.0)
+# The most decoded frames (float32 bytes) one video may expand to.
+MAX_BYTES = 8 << 30
+_NOT_FRAMES = ('rgb_', 'color', 'colour', 'mask', 'preview')
 VIDEO_EXTENSIONS = ('.mp4', '.avi', '.mov', '.mkv', '.m4v', '.webm', '.mpg', '.mpeg')
 
 
@@ -63,14 +77,33 @@ def _to_grey(image: np.ndarray) -> np.ndarray:
   return image
 
 
-def _read_png_folder(path: str) -> _Raw:
-  files = sorted(
+def natural_key(name: str) -> list:
+  """Sort key that orders the numbers in names by value: 2 before 10."""
+  return [int(t) if t.isdigit() else t.lower() for t in re.split(r'(\d+)', name)]
+
+
+def frame_files(path: str, pattern: str = '*.png') -> list[str]:
+  """The frame files of a folder in natural order: names matching ``pattern``
+  that hold a number and are not colour, mask or preview images."""
+  files = [
     f
     for f in os.listdir(path)
-    if f.lower().endswith('.png') and not f.startswith('rgb_')
-  )
+    if fnmatch.fnmatch(f.lower(), pattern.lower())
+    and any(c.isdigit() for c in f)
+    and not f.lower().startswith(_NOT_FRAMES)
+  ]
+  return sorted(files, key=natural_key)
+
+
+def _read_png_folder(path: str, pattern: str, depth_scale: float, start: int) -> _Raw:
+  files = frame_files(path, pattern)
   if not files:
-    raise ValueError(f'{path}: no PNG frames in the folder')
+    raise ValueError(
+      f'{path}: no frames (files matching {pattern!r} with a number in the name)'
+    )
+  if start >= len(files):
+    raise ValueError(f'{path}: start {start} but only {len(files)} frames')
+  files = files[start:]
   frames, first = [], None
   for name in files:
     file = os.path.join(path, name)
@@ -92,10 +125,27 @@ def _read_png_folder(path: str) -> _Raw:
       )
     frames.append(image)
   if first[1] == np.uint16:
-    depth = np.stack(frames).astype(np.float32) / np.float32(1000.0)
+    depth = np.stack(frames).astype(np.float32) / np.float32(1.0 / depth_scale)
+    _check_scale(path, depth, depth_scale)
     return _Raw(depth, files, False, None, 'png16')
   grey = np.stack([_to_grey(f) for f in frames]).astype(np.float32) / np.float32(255)
   return _Raw(grey, files, True, None, 'png8')
+
+
+def _check_scale(path: str, depth: np.ndarray, depth_scale: float) -> None:
+  """A wrong unit (TUM's 5000 per metre read as mm) shows as implausibly far
+  (or near) nearest surfaces."""
+  valid = depth[depth > 0]
+  if valid.size == 0:
+    return
+  near = float(np.quantile(valid, 0.05))
+  lo, hi = PLAUSIBLE_METRES
+  if not lo <= near <= hi:
+    raise ValueError(
+      f'{path}: the nearest surfaces lie at {near:.3g} m with depth_scale '
+      f'{depth_scale:g} m per unit, outside [{lo:g}, {hi:g}] m; give the file '
+      'unit with depth_scale (0.001: mm, 0.0002: TUM 5000 per metre)'
+    )
 
 
 def _check_metres(path: str, depth: np.ndarray) -> np.ndarray:
@@ -195,8 +245,11 @@ def _positive_fps(where: str, value) -> float:
     fps = float(value)
   except (TypeError, ValueError):
     fps = math.nan
-  if not (math.isfinite(fps) and fps > 0):
-    raise ValueError(f'{where}: fps must be a positive number, got {value!r}')
+  lo, hi = FPS_RANGE
+  if not (math.isfinite(fps) and lo <= fps <= hi):
+    raise ValueError(
+      f'{where}: fps must be a number in [{lo:g}, {hi:g}], got {value!r}'
+    )
   return fps
 
 
@@ -214,7 +267,11 @@ def resample_indices(n: int, source_fps: float, fps: float) -> np.ndarray:
   return np.minimum(np.arange(n_out) * ratio, n - 1)
 
 
-def _resample(frames: np.ndarray, pos: np.ndarray, interpolation: str) -> np.ndarray:
+def resample_frames(
+  frames: np.ndarray, pos: np.ndarray, interpolation: str
+) -> np.ndarray:
+  """Frames at fractional source positions ``pos`` (``resample_indices``):
+  ``'nearest'`` or ``'linear'`` (where both neighbours are valid)."""
   nearest = np.minimum(np.floor(pos + 0.5 + 1e-9).astype(int), len(frames) - 1)
   if interpolation == 'nearest':
     return frames[nearest]
@@ -227,7 +284,9 @@ def _resample(frames: np.ndarray, pos: np.ndarray, interpolation: str) -> np.nda
   return np.where(both, (1 - a) * f0 + a * f1, frames[nearest]).astype(np.float32)
 
 
-def _resize(frames: np.ndarray, size: tuple[int, int], method: str) -> np.ndarray:
+def resize_frames(frames: np.ndarray, size: tuple[int, int], method: str) -> np.ndarray:
+  """(T, H, W) frames resized to ``size`` (H, W): ``'nearest'`` or
+  ``'valid_area'`` (area average of the valid pixels)."""
   h, w = size
   if frames.shape[1:] == (h, w):
     return frames
@@ -263,6 +322,9 @@ def load_depth_video(
   depth_range: tuple[float, float] | None = None,
   interpolation: str = 'nearest',
   resize: str = 'nearest',
+  depth_scale: float = 0.001,
+  start: int = 0,
+  pattern: str = '*.png',
 ) -> DepthVideo:
   """Loads, checks, masks, resamples in time and resizes a depth video.
 
@@ -282,6 +344,9 @@ def load_depth_video(
     resize: ``'nearest'`` (every output pixel is a real measurement) or
       ``'valid_area'`` (area average of valid pixels; invalid where under half
       the cell is valid).
+    depth_scale: metres per unit of 16-bit PNGs (0.001: mm; TUM: 0.0002).
+    start: source frames skipped at the beginning (before resampling).
+    pattern: which files of a PNG folder are frames (a glob).
 
   Returns:
     ``DepthVideo``; ``depth`` is (T, H, W) float32.
@@ -311,8 +376,15 @@ def load_depth_video(
     if not (0 <= lo < hi):
       raise ValueError(f'depth_range must be 0 <= min < max metres, got {depth_range}')
 
+  if not (math.isfinite(depth_scale) and 1e-6 <= depth_scale <= 1.0):
+    raise ValueError(
+      f'depth_scale must be metres per unit in [1e-6, 1], got {depth_scale}'
+    )
+  if start < 0:
+    raise ValueError(f'start must be >= 0, got {start}')
   if os.path.isdir(path):
-    raw = _read_png_folder(path)
+    raw = _read_png_folder(path, pattern, depth_scale, start)
+    start = 0  # applied while reading
     beside = _fps_beside(path)
   elif os.path.isfile(path):
     ext = os.path.splitext(path)[1].lower()
@@ -329,7 +401,10 @@ def load_depth_video(
   else:
     raise ValueError(f'{path}: no such file or folder')
 
-  depth = raw.frames
+  if start >= len(raw.frames):
+    raise ValueError(f'{path}: start {start} but only {len(raw.frames)} frames')
+  depth = raw.frames[start:]
+  raw = raw._replace(names=raw.names[start:])
   _check_some_valid(path, depth, raw.names, '')
   if depth_range is not None:
     if raw.normalised:
@@ -350,7 +425,14 @@ def load_depth_video(
         f'{path}: source frame rate unknown; pass source_fps or put fps.txt / '
         'meta.json {"fps": ...} beside the frames'
       )
-    depth = _resample(depth, resample_indices(len(depth), src, fps), interpolation)
+    pos = resample_indices(len(depth), src, fps)
+    if len(pos) * depth[0].nbytes > MAX_BYTES:
+      raise ValueError(
+        f'{path}: {len(depth)} frames at {src:g} fps resampled to {fps:g} fps would '
+        f'be {len(pos)} frames ({len(pos) * depth[0].nbytes / 2**30:.1f} GiB); is '
+        'the source fps right?'
+      )
+    depth = resample_frames(depth, pos, interpolation)
     out_fps = fps
   if frames is not None:
     if len(depth) < frames:
@@ -359,7 +441,7 @@ def load_depth_video(
       )
     depth = depth[:frames]
   if size is not None:
-    depth = _resize(depth, tuple(int(s) for s in size), resize)
+    depth = resize_frames(depth, tuple(int(s) for s in size), resize)
   return DepthVideo(
     np.ascontiguousarray(depth, np.float32),
     out_fps,

@@ -40,6 +40,7 @@ from absl import app, flags
 _REQUIRED = 'required'
 _CHOICES = 'choices'
 _SKIP = 'skip'
+_FLAG = 'flag'
 
 
 def required(default: str = ''):
@@ -50,6 +51,12 @@ def required(default: str = ''):
 def choice(default: str, choices):
   """A string field restricted to ``choices`` (an enum flag)."""
   return dataclasses.field(default=default, metadata={_CHOICES: tuple(choices)})
+
+
+def renamed(default, flag: str):
+  """A field whose flag has another name than the field (``--flag``): where a
+  script's word for a setting differs from the library's."""
+  return dataclasses.field(default=default, metadata={_FLAG: flag})
 
 
 def nested(default, *, skip=()):
@@ -98,6 +105,10 @@ class _Leaf(typing.NamedTuple):
   type: object
   doc: str
 
+  @property
+  def flag(self) -> str:
+    return self.field.metadata.get(_FLAG, self.path[-1])
+
 
 def _is_config(t) -> bool:
   return isinstance(t, type) and dataclasses.is_dataclass(t)
@@ -129,7 +140,7 @@ def leaves(cls) -> list[_Leaf]:
       out.append(_Leaf(path + (f.name,), f, t, docs[f.name]))
 
   walk(cls, ())
-  names = [leaf.path[-1] for leaf in out]
+  names = [leaf.flag for leaf in out]
   dup = sorted({n for n in names if names.count(n) > 1})
   if dup:
     raise ValueError(f'{cls.__name__}: flag names {dup} appear in more than one config')
@@ -185,7 +196,7 @@ def define_flags(
   )  # fmt: skip
   flags.DEFINE_bool('verbose', False, 'show the traceback of an error', **kw)
   for leaf in leaves(cls):
-    name, doc = leaf.path[-1], leaf.doc
+    name, doc = leaf.flag, leaf.doc
     default = _get(first, leaf.path)
     kind, elem = _parser(leaf.type, name)
     choices = leaf.field.metadata.get(_CHOICES)
@@ -214,7 +225,7 @@ def from_flags(
   config = presets[flag_values.preset]
   missing = []
   for leaf in leaves(cls):
-    name = leaf.path[-1]
+    name = leaf.flag
     flag = flag_values[name]
     if flag.present:
       value = flag.value

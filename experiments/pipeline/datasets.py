@@ -17,7 +17,6 @@ from __future__ import annotations
 import concurrent.futures
 import dataclasses
 import functools
-import json
 import os
 import time
 import zlib
@@ -284,8 +283,7 @@ def _open_workdir(workdir: str, config: Config, backend: str, params=None) -> di
     }
   info_path = os.path.join(workdir, 'dataset.json')
   if os.path.isfile(info_path):
-    with open(info_path) as f:
-      info = json.load(f)
+    info = dataset.read_json(info_path)
     old = info.get('config', {})
     diff = sorted(k for k in set(old) | set(ident) if old.get(k) != ident.get(k))
     if diff:

@@ -68,7 +68,9 @@ class EstimateConfig:
     garment_spacing: garment grid spacing, metres.
     frames: most frames compared (at fps); a longer recording is cut, a
       shorter one sets how many frames are simulated.
-    fps: frame rate the recording is resampled to, Hz.
+    fps: frame rate of the comparison, Hz: simulations render at it and the
+      recording is resampled to it (flag ``--sim_fps``; ``--fps`` is the
+      recording's own rate).
     warmup: simulated seconds before the first frame.
     gusts: RMS relative gust intensity of the simulated wind.
     cameras: training-like cameras to render from when the recording's camera
@@ -107,7 +109,7 @@ class EstimateConfig:
   cloth_resolution: int = 25
   garment_spacing: float = 0.04
   frames: int = 60
-  fps: float = 20.0
+  fps: float = cli.renamed(20.0, 'sim_fps')
   warmup: float = 1.0
   gusts: float = 0.2
   cameras: int = 2

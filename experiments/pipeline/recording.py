@@ -51,6 +51,13 @@ def read_json(path: str) -> dict:
     raise ValueError(f'{path}: cannot read JSON ({e})') from e
 
 
+def truth_of(meta: dict) -> dict | None:
+  """The ground-truth parameters a ``meta.json`` holds, or None."""
+  if 'wind_speed' not in meta:
+    return None
+  return {k: float(meta[k]) for k in ('bending_scale', 'wind_speed', 'area_weight')}
+
+
 def _camera(cam: dict, where: str, size, *, required: bool):
   """(intrinsics resized to ``size``, camera-0 pose) of a camera dict, or Nones.
 
@@ -153,9 +160,7 @@ def load_recording(
     intr, pose = _camera(meta, meta_path, size, required=False)
   else:
     intr = pose = None
-  truth = None
-  if meta is not None and 'wind_speed' in meta:
-    truth = {k: float(meta[k]) for k in ('bending_scale', 'wind_speed', 'area_weight')}
+  truth = truth_of(meta) if meta is not None else None
   colour = _load_rgb(path, meta, fps, size, len(vid.depth)) if rgb else None
   if colour is not None and len(colour) != len(vid.depth):
     raise ValueError(

@@ -1,8 +1,6 @@
 """Tests for physsim.render against analytic planes, MuJoCo's renderer and itself."""
 
-import importlib
 import math
-import os
 
 import jax
 import jax.numpy as jnp
@@ -11,6 +9,7 @@ import numpy as np
 import pytest
 
 from physsim import camera, mesh, render
+from tests import mujoco_gl
 
 _DEPTH_TOL = 2e-5  # metres: float32 projection and 1/z interpolation at ~2 m
 _MUJOCO_DEPTH_TOL = 2e-4  # metres: OpenGL depth buffer precision (measured 2e-6 here)
@@ -77,8 +76,10 @@ def _tilted_plane_reference(intr, pose, origin, axis_a, axis_b, half):
 
 
 @pytest.mark.parametrize('method', render.METHODS)
-def test_tilted_plane_matches_float64_ray_plane_intersection(method):
-  intr = camera.Intrinsics(40, 40, 50.0, 50.0)
+@pytest.mark.parametrize('principal', [(0.5, 0.5), (0.62, 0.41)])
+def test_tilted_plane_matches_float64_ray_plane_intersection(method, principal):
+  # An off-centre principal point (OpenCV cx, cy) moves the image, not the rays.
+  intr = camera.Intrinsics(40, 40, 50.0, 50.0, *principal)
   # A 0.8 m square mesh, rotated 25 degrees about z and tilted 30 degrees.
   rz, rx = math.radians(25.0), math.radians(30.0)
   a = np.array([math.cos(rz), math.sin(rz), 0.0])
@@ -190,35 +191,6 @@ def test_batched_renderer_matches_loop_and_does_not_recompile():
 # --- MuJoCo's OpenGL renderer as an independent reference -------------------------
 
 
-def _mujoco_renderer(model, height, width):
-  """A mujoco.Renderer on an offscreen GL (EGL, else OSMesa), else pytest.skip.
-
-  The context class is chosen here rather than through MUJOCO_GL, which MuJoCo
-  reads once at import (other tests may import it first); its default, GLFW,
-  aborts the process without a display, so it is never tried.
-  """
-  from mujoco.rendering.classic import gl_context
-
-  order = ['egl', 'osmesa']
-  if os.environ.get('MUJOCO_GL', '').lower() == 'osmesa':
-    order.reverse()
-  errors = []
-  for backend in order:
-    try:
-      context = importlib.import_module(f'mujoco.{backend}').GLContext
-      old, gl_context.GLContext = gl_context.GLContext, context
-      try:
-        return mujoco.Renderer(model, height, width)
-      finally:
-        gl_context.GLContext = old
-    except Exception as e:  # noqa: BLE001 - any GL failure means "try the next"
-      errors.append(f'{backend}: {type(e).__name__}: {e}')
-  pytest.skip(
-    'no offscreen OpenGL for MuJoCo (needs libegl1 + libgl1-mesa-dri for EGL, or '
-    'libosmesa6 with MUJOCO_GL=osmesa): ' + '; '.join(errors)
-  )
-
-
 def _mjcf(verts, faces, pose, fovy):
   both = np.concatenate([faces, faces[:, ::-1]])  # both sides, whatever GL culls
   r = np.asarray(pose.rotation, np.float64)
@@ -250,7 +222,7 @@ def test_depth_matches_mujoco_opengl_renderer():
   model = mujoco.MjModel.from_xml_string(_mjcf(v, m.faces, pose, fov))
   data = mujoco.MjData(model)
   mujoco.mj_forward(model, data)
-  renderer = _mujoco_renderer(model, size, size)
+  renderer = mujoco_gl.offscreen_renderer(model, size, size)
   try:
     renderer.enable_depth_rendering()
     renderer.update_scene(data, camera='cam')

@@ -164,7 +164,7 @@ def test_bad_inputs_name_the_file(tmp_path):
   with pytest.raises(ValueError, match='nothing: no such file'):
     video.load_depth_video(str(tmp_path / 'nothing'))
   (tmp_path / 'empty').mkdir()
-  with pytest.raises(ValueError, match='empty: no PNG frames'):
+  with pytest.raises(ValueError, match='empty: no frames'):
     video.load_depth_video(str(tmp_path / 'empty'))
 
   corrupt = _png_folder(tmp_path / 'corrupt', mm)
@@ -209,3 +209,46 @@ def test_bad_inputs_name_the_file(tmp_path):
   (tmp_path / 'broken.mp4').write_bytes(b'\x00' * 100)
   with pytest.raises(ValueError, match='broken.mp4'):
     video.load_depth_video(str(tmp_path / 'broken.mp4'), source_fps=20)
+
+
+def test_frame_names_natural_order_and_non_frames_skipped(tmp_path):
+  folder = tmp_path / 'rec'
+  folder.mkdir()
+  for t in range(1, 11):  # 1.png ... 10.png: lexical order would put 10 second
+    cv2.imwrite(str(folder / f'{t}.png'), np.full((4, 4), 1000 + t, np.uint16))
+  for extra in ('preview.png', 'mask.png', 'mask_0001.png', 'rgb_0001.png'):
+    cv2.imwrite(str(folder / extra), np.full((4, 4), 7, np.uint16))
+  (folder / 'notes.txt').write_text('not a frame')
+  out = video.load_depth_video(str(folder), source_fps=20, fps=None, size=None)
+  np.testing.assert_allclose(
+    out.depth[:, 0, 0], 1.0 + 0.001 * np.arange(1, 11), atol=1e-6
+  )
+  assert video.frame_files(str(folder))[:3] == ['1.png', '2.png', '3.png']
+  clip = video.load_depth_video(
+    str(folder), source_fps=20, fps=None, size=None, start=4
+  )
+  assert clip.depth.shape[0] == 6 and abs(clip.depth[0, 0, 0] - 1.005) < 1e-6
+  only_ten = video.load_depth_video(
+    str(folder), source_fps=20, fps=None, size=None, pattern='1*.png'
+  )
+  assert only_ten.depth.shape[0] == 2  # 1.png and 10.png
+  with pytest.raises(ValueError, match='start 10 but only 10 frames'):
+    video.load_depth_video(str(folder), source_fps=20, start=10)
+
+
+def test_depth_units_and_frame_rate_are_checked(tmp_path):
+  folder = tmp_path / 'tum'
+  folder.mkdir()
+  for t in range(3):  # 1.5 m in TUM's 5000 units per metre
+    cv2.imwrite(str(folder / f'{t}.png'), np.full((4, 4), 7500, np.uint16))
+  with pytest.raises(ValueError, match=r'nearest surfaces lie at 7.5 m .*depth_scale'):
+    video.load_depth_video(str(folder), source_fps=20)
+  out = video.load_depth_video(
+    str(folder), source_fps=20, depth_scale=0.0002, size=None
+  )
+  np.testing.assert_allclose(out.depth, 1.5, atol=1e-6)
+  (folder / 'fps.txt').write_text('1e-9')
+  with pytest.raises(ValueError, match=r'fps.txt: fps must be a number in \[1, 1000\]'):
+    video.load_depth_video(str(folder), depth_scale=0.0002)
+  with pytest.raises(ValueError, match='depth_scale must be'):
+    video.load_depth_video(str(folder), source_fps=20, depth_scale=0.0)

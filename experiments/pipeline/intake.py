@@ -1,0 +1,544 @@
+"""A user's recording in: its camera, its clip, its background, its cloth.
+
+``take_in`` turns a depth recording as a camera wrote it into what the search
+compares against simulations, in the recording's own terms (resolution, frame
+rate), and checks it before any simulation runs:
+
+1. **camera**: any form ``physsim.camera_files`` reads (OpenCV JSON, ROS
+   CameraInfo YAML, RealSense/Open3D intrinsics, this project's); lens
+   distortion is undone with OpenCV; the file's ``fps`` is the recording's
+   frame rate unless ``--fps`` says otherwise;
+2. **clip**: frames from ``start`` covering the compared duration (``frames``
+   at the comparison rate), their unit from ``depth_scale``;
+3. **background** (``physsim.scene``): ``depth_range``, a mask image or
+   folder, floor and wall planes, and all but the largest region removed;
+   the kept cloth share of each frame reported;
+4. **alignment** (``physsim.alignment``): the pins given by the user or
+   fitted, up from a floor (else the cloth plane), and from them the camera's
+   pose in the simulator's world. A camera file in this project's own form
+   (a simulated recording) already has that pose and is not refitted;
+5. **checks**: the pins as far apart as the simulated cloth's (within 20%),
+   the cloth in view from the pose, and the simulated cloth's silhouette
+   overlapping the recording's (IoU >= ``min_overlap``); else it refuses,
+   after writing the overlay that shows why.
+
+A dataset sequence folder (``meta.json`` beside ``cam0/``) is this project's
+own simulation: it has no background and its camera is in the simulator's
+world, so it passes through unchanged.
+
+``write`` saves ``intake.json``, ``overlay.png`` and the cleaned frames
+(``intake/NNNN.png``, 16-bit mm, own resolution); ``to_recording`` resamples
+the cleaned frames to the comparison's rate and the network's image size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import shutil
+import tempfile
+from typing import NamedTuple
+
+import cv2
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import physsim
+from experiments.pipeline import files
+from experiments.pipeline import recording as recording_lib
+from physsim import alignment, camera_files, dataset, scene, video
+
+# Pin spacing may differ from the simulated cloth's by this share.
+PIN_SPACING_TOL = 0.2
+# Least share of the simulated cloth's vertices in view from the pose.
+MIN_VISIBLE = 0.5
+# ... and the fewest pixels it may cover (a camera 100 m away sees a speck).
+MIN_PIXELS = 100
+INTAKE_FILE = 'intake.json'
+OVERLAY_FILE = 'overlay.png'
+FRAMES_DIR = 'intake'
+
+
+@dataclasses.dataclass(frozen=True)
+class IntakeConfig:
+  """How a recording is read, cleaned and aligned (module docstring).
+
+  Attributes:
+    fps: the recording's frame rate, Hz; 0: from the camera file, meta.json
+      or fps.txt beside the frames.
+    start: source frames skipped at the beginning of the recording.
+    depth_scale: metres per unit of 16-bit PNG frames (0.001: millimetres;
+      0.0002: TUM's 5000 per metre).
+    frame_glob: which files of a frame folder are frames (a glob; names must
+      also hold a number).
+    depth_range: (min, max) metres kept; empty: everything.
+    mask: an image (non-zero where the cloth may be) or a folder of one per
+      frame; empty: none.
+    remove_planes: find and remove floor and wall planes.
+    plane_tol: metres from a floor or wall plane that count as on it.
+    pins: the two pinned top corners in the camera frame (OpenCV axes, x
+      right, y down, z forward), x1,y1,z1,x2,y2,z2 metres; empty: fitted.
+    up: the upward direction in the camera frame (OpenCV axes), x,y,z;
+      empty: from a floor in view, else the cloth's plane.
+    wind_toward_camera: the wind blows toward the camera (default: away).
+    min_overlap: least IoU of the recording's cloth in the first frame with
+      the simulated cloth seen from the fitted pose, at rest or swung about
+      its top edge (the best of 0-90 degrees); below it the search is
+      refused.
+  """
+
+  fps: float = 0.0
+  start: int = 0
+  depth_scale: float = 0.001
+  frame_glob: str = '*.png'
+  depth_range: tuple[float, ...] = ()
+  mask: str = ''
+  remove_planes: bool = True
+  plane_tol: float = 0.03
+  pins: tuple[float, ...] = ()
+  up: tuple[float, ...] = ()
+  wind_toward_camera: bool = False
+  min_overlap: float = 0.5
+
+  def check(self) -> None:
+    """Raises ValueError naming the first bad field."""
+    if self.fps and not 1 <= self.fps <= 1000:
+      raise ValueError(
+        f'fps must be 0 (from the files) or in [1, 1000] Hz, got {self.fps}'
+      )
+    if self.start < 0:
+      raise ValueError(f'start must be >= 0, got {self.start}')
+    if self.depth_range and (
+      len(self.depth_range) != 2 or not 0 <= self.depth_range[0] < self.depth_range[1]
+    ):
+      raise ValueError(f'depth_range must be min,max metres, got {self.depth_range}')
+    if self.pins and (len(self.pins) != 6 or not all(map(math.isfinite, self.pins))):
+      raise ValueError(f'pins must be 6 numbers x1,y1,z1,x2,y2,z2, got {self.pins}')
+    if self.up and (len(self.up) != 3 or not np.linalg.norm(self.up) > 0):
+      raise ValueError(f'up must be 3 numbers x,y,z not all 0, got {self.up}')
+    if not 0 < self.plane_tol < 0.5 or not 0 <= self.min_overlap <= 1:
+      raise ValueError(
+        f'need 0 < plane_tol < 0.5 m and 0 <= min_overlap <= 1, got '
+        f'{self.plane_tol}, {self.min_overlap}'
+      )
+
+
+class Intake(NamedTuple):
+  """A recording taken in, in its own resolution and frame rate.
+
+  Attributes:
+    depth: (T, H, W) metres, background removed (0).
+    fps: its frame rate.
+    source_frames: (T,) index of each frame in the recording (after ``start``
+      skipped none).
+    intrinsics: its camera, or None (unknown: training-like cameras).
+    pose: its camera's pose in the simulator's world, or None.
+    pins_camera: (2, 3) the pins in the camera frame, left first, or None.
+    up_from: where up came from ('floor', 'cloth plane', 'user', 'camera file').
+    valid_fraction: (T,) share of valid pixels before the background went.
+    cloth_fraction: (T,) share of pixels kept as cloth.
+    overlap: IoU of the first frame's cloth with the simulated cloth at its
+      best swing angle.
+    planes: background planes removed, (normal, offset) in the camera frame.
+    source: the recording's path.
+    truth: ground truth when the recording carries it.
+    camera_form: the camera file's form, or ''.
+    passthrough: a dataset sequence, taken as it is.
+  """
+
+  depth: np.ndarray
+  fps: float
+  source_frames: np.ndarray
+  intrinsics: physsim.Intrinsics | None
+  pose: physsim.Pose | None
+  pins_camera: np.ndarray | None
+  up_from: str
+  valid_fraction: np.ndarray
+  cloth_fraction: np.ndarray
+  overlap: float | None
+  planes: list
+  source: str
+  truth: dict | None
+  camera_form: str
+  passthrough: bool = False
+  swing_deg: float | None = None
+
+
+def is_sequence(path: str) -> bool:
+  """A dataset sequence folder (``meta.json`` beside ``cam0/``)."""
+  return os.path.isfile(os.path.join(path, 'meta.json')) and os.path.isdir(
+    os.path.join(path, 'cam0')
+  )
+
+
+def _mask(path: str, index: np.ndarray, shape) -> np.ndarray:
+  """(T, H, W) bool of a mask image or folder (one per recording frame)."""
+  if os.path.isdir(path):
+    names = video.frame_files(path)
+    if not names:
+      raise ValueError(f'{path}: no mask images (PNG files with a number in the name)')
+    if index.max() >= len(names):
+      raise ValueError(
+        f'{path}: {len(names)} masks but frame {index.max()} of the recording is used'
+      )
+    picked = [os.path.join(path, names[i]) for i in index]
+  else:
+    picked = [path] * len(index)
+  out = []
+  for file in picked:
+    m = cv2.imread(file, cv2.IMREAD_GRAYSCALE)
+    if m is None:
+      raise ValueError(f'{file}: not a readable mask image')
+    if m.shape != tuple(shape):
+      raise ValueError(
+        f'{file}: mask is {m.shape[::-1]} (w x h), frames are {shape[::-1]}'
+      )
+    out.append(m > 0)
+  return np.stack(out)
+
+
+def _undistort(depth: np.ndarray, cam: camera_files.CameraFile) -> np.ndarray:
+  intr = cam.intrinsics
+  k = intr.matrix()
+  maps = cv2.initUndistortRectifyMap(
+    k, np.asarray(cam.distortion), None, k, (intr.width, intr.height), cv2.CV_32FC1
+  )
+  return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])
+
+
+def simulated_pins(config) -> tuple[np.ndarray, np.ndarray]:
+  """((2, 3) the simulated cloth's outer pins, left first; (V, 3) its rest
+  vertices) for an ``EstimateConfig``."""
+  mesh = (
+    physsim.garment(config.garment, config.garment_spacing)
+    if config.garment
+    else physsim.square(config.cloth_resolution)
+  )
+  return outer_pins(mesh), mesh
+
+
+def outer_pins(mesh) -> np.ndarray:
+  """(2, 3) the outermost pinned vertices of ``mesh``, left (-x) first."""
+  pinned = mesh.vertices[mesh.pinned]
+  return pinned[np.argsort(pinned[:, 0])[[0, -1]]].astype(np.float64)
+
+
+SWINGS_DEG = tuple(range(0, 91, 10))
+
+
+def swung(vertices: np.ndarray, pins_world: np.ndarray, deg: float) -> np.ndarray:
+  """Rest vertices turned by ``deg`` about the pins' line, downwind (+y)."""
+  a = np.deg2rad(deg)
+  rel = vertices - pins_world.mean(axis=0)
+  y = rel[:, 1] * np.cos(a) - rel[:, 2] * np.sin(a)
+  z = rel[:, 1] * np.sin(a) + rel[:, 2] * np.cos(a)
+  return np.stack([rel[:, 0], y, z], axis=1) + pins_world.mean(axis=0)
+
+
+def silhouettes(mesh, pins_world, intr, pose, degs=SWINGS_DEG) -> np.ndarray:
+  """(len(degs), H, W) bool: the simulated cloth swung by each angle, seen
+  by the camera."""
+  render = physsim.make_depth_renderer(mesh.faces, intr)
+  positions = np.stack([swung(mesh.vertices, pins_world, d) for d in degs])
+  poses = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32)[None, None], pose)
+  out = render(jnp.asarray(positions, jnp.float32)[None], poses)  # (1, 1, S, H, W)
+  return np.asarray(out)[0, 0] > 0
+
+
+def best_swing(mesh, pins_world, intr, pose, cloth: np.ndarray) -> tuple[float, float]:
+  """(swing angle, IoU) of the simulated cloth pose that best covers the
+  recording's ``cloth`` mask."""
+  ious = [alignment.iou(cloth, s) for s in silhouettes(mesh, pins_world, intr, pose)]
+  i = int(np.argmax(ious))
+  return float(SWINGS_DEG[i]), float(ious[i])
+
+
+def _passthrough(path: str, est) -> Intake:
+  first = video.frame_files(os.path.join(path, 'cam0'))
+  shape = cv2.imread(os.path.join(path, 'cam0', first[0]), cv2.IMREAD_UNCHANGED).shape
+  rec = recording_lib.load_recording(
+    path, fps=est.fps, size=tuple(shape[:2]), frames=est.frames
+  )
+  pins_world, _ = simulated_pins(est)
+  pins = (
+    alignment.pins_in_camera(rec.pose, pins_world) if rec.pose is not None else None
+  )
+  valid = (rec.depth > 0).reshape(len(rec.depth), -1).mean(axis=1)
+  return Intake(
+    rec.depth, rec.fps, np.arange(len(rec.depth)), rec.intrinsics, rec.pose, pins,
+    'camera file', valid, valid, None, [], path, rec.truth, 'project', True,
+  )  # fmt: skip
+
+
+def take_in(
+  path: str, config: IntakeConfig, camera_json: str, est, *, workdir: str | None = None
+) -> Intake:
+  """Reads, cleans, aligns and checks a recording (module docstring).
+
+  Args:
+    path: the recording (a frame folder, .npy/.npz, or a dataset sequence).
+    config: the intake settings.
+    camera_json: its camera file ('' for none).
+    est: the ``EstimateConfig`` (comparison rate and length, cloth).
+    workdir: where a refused alignment writes its overlay, or None.
+
+  Raises:
+    ValueError: naming the file or setting, for anything that would make the
+      estimate meaningless.
+  """
+  config.check()
+  if is_sequence(path) and not camera_json:
+    return _passthrough(path, est)
+  cam = camera_files.read_camera(camera_json) if camera_json else None
+  src_fps = config.fps or (cam.fps if cam else None) or None
+  frames_path, truth = path, None
+  if is_sequence(path):  # a dataset sequence with another camera file: camera 0
+    frames_path = os.path.join(path, 'cam0')
+    truth = recording_lib.truth_of(
+      recording_lib.read_json(os.path.join(path, 'meta.json'))
+    )
+  vid = video.load_depth_video(
+    frames_path, source_fps=src_fps, fps=None, size=None, depth_scale=config.depth_scale,
+    start=config.start, pattern=config.frame_glob,
+  )  # fmt: skip
+  if vid.normalised:
+    raise ValueError(
+      f'{path}: normalised (8-bit) depth has no absolute scale; the estimate '
+      'needs metric depth (16-bit PNG, .npy/.npz in metres)'
+    )
+  if vid.fps is None:
+    raise ValueError(
+      f'{path}: frame rate unknown; give --fps, "fps" in the camera file, or '
+      'fps.txt beside the frames'
+    )
+  # The recording's frames that cover the compared clip.
+  pos = video.resample_indices(len(vid.depth), vid.fps, est.fps)[: est.frames]
+  index = np.arange(int(math.floor(pos[-1] + 0.5 + 1e-9)) + 1)
+  depth = vid.depth[index]
+  h, w = depth.shape[1:]
+  intr = None
+  if cam is not None:
+    cam = camera_files.scaled_to(cam, w, h)
+    intr = cam.intrinsics
+    if cam.distorted:
+      depth = _undistort(depth, cam)
+  valid = (depth > 0).reshape(len(depth), -1).mean(axis=1)
+  mask = _mask(config.mask, index + config.start, (h, w)) if config.mask else None
+  bg = scene.remove_background(
+    depth,
+    intr or physsim.Intrinsics(width=w, height=h),
+    depth_range=tuple(config.depth_range) or None,
+    mask=mask,
+    planes=config.remove_planes and intr is not None,
+    plane_tol=config.plane_tol,
+  )
+  empty = np.flatnonzero(bg.fraction == 0)
+  if empty.size:
+    raise ValueError(
+      f'{path}: no cloth left in frame {int(index[empty[0]]) + config.start} after '
+      'background removal; check depth_range, mask and plane_tol'
+    )
+  planes = [(p.normal.tolist(), p.offset) for p in bg.planes]
+  intake = Intake(
+    bg.depth, vid.fps, index + config.start, intr, None, None, '', valid,
+    bg.fraction, None, planes, path, truth, cam.form if cam else '',
+  )  # fmt: skip
+  if cam is None:
+    return intake
+  return _align(intake, cam, config, est, bg.planes, workdir)
+
+
+def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> Intake:
+  pins_world, mesh = simulated_pins(est)
+  intr = intake.intrinsics
+  if config.pins or cam.world == 'user' or cam.pose is None:
+    if est.garment and not config.pins:
+      raise ValueError(
+        'a garment cannot be found by the square-cloth fit; give --pins (the two '
+        'pinned corners in the camera frame)'
+      )
+    user = np.asarray(config.pins, np.float64).reshape(2, 3) if config.pins else None
+    fit = alignment.fit_pins(
+      intake.depth, intr, pins=user, background=planes, plane_tol=config.plane_tol,
+      up=np.asarray(config.up, np.float64) if config.up else None,
+    )  # fmt: skip
+    pose, pins = alignment.camera_pose(
+      fit.pins, fit.up, pins_world, wind_toward_camera=config.wind_toward_camera
+    )
+    spacing = float(np.linalg.norm(pins[1] - pins[0]))
+    want = float(np.linalg.norm(pins_world[1] - pins_world[0]))
+    if abs(spacing / want - 1) > PIN_SPACING_TOL:
+      raise ValueError(
+        f'{intake.source}: the pins are {spacing:.3f} m apart but the simulated '
+        f"cloth's are {want:.3f} m; check the camera file's intrinsics, the "
+        'depth_scale and --pins'
+      )
+    up_from = fit.up_from
+  else:
+    pose, up_from = cam.pose, 'camera file'
+    pins = alignment.pins_in_camera(pose, pins_world)
+  seen = alignment.visible_share(mesh.vertices, pose, intr)
+  area = int(silhouettes(mesh, pins_world, intr, pose, (0.0,))[0].sum())
+  if seen < MIN_VISIBLE or area < MIN_PIXELS:
+    raise ValueError(
+      f'{cam.path}: from this camera {100 * seen:.0f}% of the simulated cloth is in '
+      f'view, covering {area} pixels; check the camera pose (cam_to_world) or --pins'
+    )
+  swing, overlap = best_swing(mesh, pins_world, intr, pose, intake.depth[0] > 0)
+  out = intake._replace(
+    pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap, swing_deg=swing
+  )
+  if overlap < config.min_overlap:
+    where = ''
+    if workdir:
+      write(out, workdir, frames=False)
+      where = f'; see {os.path.join(workdir, OVERLAY_FILE)}'
+    raise ValueError(
+      f'{intake.source}: the simulated cloth at the fitted pose overlaps the '
+      f"recording's by IoU {overlap:.2f} < min_overlap {config.min_overlap}{where}"
+    )
+  return out
+
+
+def summary(intake: Intake) -> str:
+  """What was taken in, in a few lines, for the user to check before a search."""
+  d = intake.depth[intake.depth > 0]
+  t, h, w = intake.depth.shape
+  lines = [
+    f'recording {intake.source}: {t} frames at {intake.fps:g} fps, {w} x {h} px, '
+    f'cloth depth {d.min():.2f}-{d.max():.2f} m',
+    f'  valid pixels {100 * intake.valid_fraction.mean():.0f}%, kept as cloth '
+    f'{100 * intake.cloth_fraction.min():.1f}-{100 * intake.cloth_fraction.max():.1f}% '
+    f'per frame, {len(intake.planes)} background plane(s) removed',
+  ]
+  if intake.camera_form:
+    lines.append(f'  camera: {intake.camera_form}')
+  if intake.pins_camera is not None:
+    p = intake.pins_camera
+    spacing = np.linalg.norm(p[1] - p[0])
+    lines.append(
+      '  pins (camera frame, m): '
+      + ', '.join('(' + ', '.join(f'{v:.3f}' for v in q) + ')' for q in p)
+      + f'; {spacing:.3f} m apart; up from the {intake.up_from}'
+    )
+  if intake.pose is not None:
+    c = np.asarray(intake.pose.position)
+    lines.append(
+      f"  camera in the simulator's world: ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) m"
+      + (
+        f', overlap with the simulated cloth IoU {intake.overlap:.2f}'
+        if intake.overlap is not None
+        else ''
+      )
+    )
+  elif intake.intrinsics is None:
+    lines.append('  camera unknown: training-like cameras will be simulated')
+  return '\n'.join(lines)
+
+
+def to_json(intake: Intake) -> dict:
+  """``intake.json``'s content."""
+  pose = physsim.pose_to_dict(intake.pose) if intake.pose is not None else None
+  pins = intake.pins_camera.tolist() if intake.pins_camera is not None else None
+  return {
+    'source': os.path.abspath(intake.source),
+    'fps': intake.fps,
+    'frames': int(len(intake.depth)),
+    'source_frames': intake.source_frames.tolist(),
+    'resolution': [int(intake.depth.shape[2]), int(intake.depth.shape[1])],
+    'pins_camera': pins,
+    'up_from': intake.up_from,
+    'camera_form': intake.camera_form,
+    'intrinsics': intake.intrinsics.to_dict() if intake.intrinsics else None,
+    'pose_in_simulator': pose,
+    'valid_fraction': intake.valid_fraction.tolist(),
+    'cloth_fraction': intake.cloth_fraction.tolist(),
+    'overlap_iou': intake.overlap,
+    'swing_deg': intake.swing_deg,
+    'background_planes': [{'normal': n, 'offset': o} for n, o in intake.planes],
+  }
+
+
+def overlay(intake: Intake, mesh) -> np.ndarray:
+  """BGR picture: the first frame's depth (grey, removed background dark
+  blue) with the simulated cloth's outline (red) and the pins (green)."""
+  first = intake.depth[0]
+  valid = first > 0
+  img = np.zeros(first.shape + (3,), np.uint8)
+  if valid.any():
+    lo, hi = np.quantile(first[valid], [0.02, 0.98])
+    grey = np.clip(255 * (1 - (first - lo) / max(hi - lo, 1e-6)), 40, 255).astype(
+      np.uint8
+    )
+    img[valid] = grey[valid, None]
+  img[~valid] = (60, 20, 0)
+  scale = max(1, 480 // max(first.shape))
+  img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
+  if intake.pose is not None and intake.intrinsics is not None:
+    pins_world = outer_pins(mesh)
+    deg = (intake.swing_deg or 0.0,)
+    sim = silhouettes(mesh, pins_world, intake.intrinsics, intake.pose, deg)[0]
+    sim = sim.astype(np.uint8)
+    sim = cv2.resize(sim, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
+    contours, _ = cv2.findContours(sim, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    cv2.drawContours(img, contours, -1, (0, 0, 255), 1)
+  if intake.pins_camera is not None and intake.intrinsics is not None:
+    k = intake.intrinsics.matrix()
+    for p in intake.pins_camera:
+      u, v, z = k @ p
+      if z > 0:
+        centre = (int(round((u / z + 0.5) * scale)), int(round((v / z + 0.5) * scale)))
+        cv2.circle(img, centre, max(3, scale), (0, 255, 0), 2)
+  return img
+
+
+def write(intake: Intake, workdir: str, *, frames: bool = True, est=None) -> None:
+  """Saves ``intake.json``, ``overlay.png`` and (``frames``) the cleaned
+  frames as 16-bit mm PNGs in ``intake/``, each under its final name only
+  when complete."""
+  os.makedirs(workdir, exist_ok=True)
+  mesh = simulated_pins(est)[1] if est is not None else physsim.square(25)
+  img = overlay(intake, mesh)
+  files.write_atomic(
+    os.path.join(workdir, OVERLAY_FILE),
+    lambda p: _imwrite(p, img),
+  )
+  if frames:
+    final = os.path.join(workdir, FRAMES_DIR)
+    tmp = tempfile.mkdtemp(prefix='.intake-', dir=workdir)
+    try:
+      mm = dataset.depth_to_mm(intake.depth)
+      for t, f in enumerate(mm):
+        _imwrite(os.path.join(tmp, f'{t:04d}.png'), f)
+      with open(os.path.join(tmp, 'fps.txt'), 'w') as f:
+        f.write(f'{intake.fps:g}\n')
+      umask = os.umask(0)
+      os.umask(umask)
+      os.chmod(tmp, 0o777 & ~umask)
+      if os.path.isdir(final):
+        shutil.rmtree(final)
+      os.replace(tmp, final)
+    finally:
+      if os.path.isdir(tmp):
+        shutil.rmtree(tmp)
+  files.write_json(os.path.join(workdir, INTAKE_FILE), to_json(intake))
+
+
+def _imwrite(path: str, image: np.ndarray) -> None:
+  if not cv2.imwrite(path, image, [cv2.IMWRITE_PNG_COMPRESSION, 3]):
+    raise OSError(f'{path}: could not write the image')
+
+
+def to_recording(intake: Intake, fps: float, size: tuple[int, int], frames: int):
+  """The ``recording.Recording`` the search compares: the cleaned frames at
+  ``fps`` (nearest in time) and ``size`` (nearest), the camera resized."""
+  pos = video.resample_indices(len(intake.depth), intake.fps, fps)[:frames]
+  depth = video.resample_frames(intake.depth, pos, 'nearest')
+  depth = video.resize_frames(depth, tuple(size), 'nearest')
+  intr = intake.intrinsics.resized(size[1], size[0]) if intake.intrinsics else None
+  return recording_lib.Recording(
+    np.ascontiguousarray(depth, np.float32), fps, intr, intake.pose, intake.source,
+    intake.truth,
+  )  # fmt: skip

@@ -1,0 +1,276 @@
+"""Camera files as depth-camera tools write them, read into one checked form.
+
+Accepted forms (``read_camera``), told apart by their keys:
+
+* **OpenCV JSON**: ``{"width", "height", "fx", "fy", "cx", "cy"}`` (or a 3x3
+  ``"K"`` / ``"camera_matrix"``), optionally ``"cam_to_world"`` or
+  ``"world_to_cam"`` (4x4, the user's world frame), ``"axes"`` (``"opencv"``,
+  the default: x right, y down, z forward; or ``"opengl"``: x right, y up,
+  looking along -z), ``"distortion"`` (OpenCV's k1 k2 p1 p2 [k3 ...]) and
+  ``"fps"`` (the recording's frame rate). Other keys (notes, frame counts) are
+  ignored.
+* **ROS CameraInfo YAML**: ``camera_calibration``'s file (``image_width``,
+  ``image_height``, ``camera_matrix: {data}``, ``distortion_coefficients``)
+  or a CameraInfo message (``width``, ``height``, ``K``/``k``, ``D``/``d``).
+* **RealSense intrinsics JSON**: ``width``, ``height``, ``fx``, ``fy``,
+  ``ppx``, ``ppy`` and optionally ``coeffs``.
+* **Open3D PinholeCameraIntrinsic JSON**: ``width``, ``height`` and
+  ``intrinsic_matrix`` (9 numbers, column-major).
+* **this project's**: ``{"intrinsics": {...fields of view...}, "extrinsics":
+  {"rotation", "position"}}`` as in a dataset's ``meta.json``; its pose is in
+  the simulator's world frame.
+
+Pixel centres sit at integer coordinates in all of them (OpenCV's and ROS's
+convention). Poses are returned in OpenCV axes as camera-to-world rotation and
+camera centre (``physsim.Pose``), checked finite and orthonormal.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from physsim.camera import Intrinsics, Pose
+
+FORMS = (
+  'OpenCV JSON {"width", "height", "fx", "fy", "cx", "cy" (or "K"), optional '
+  '"cam_to_world" or "world_to_cam" 4x4, "axes": "opencv"|"opengl", "distortion", '
+  '"fps"}',
+  'ROS CameraInfo YAML (image_width, image_height, camera_matrix, '
+  'distortion_coefficients; or width, height, K, D)',
+  'RealSense intrinsics JSON {"width", "height", "fx", "fy", "ppx", "ppy", "coeffs"}',
+  'Open3D intrinsics JSON {"width", "height", "intrinsic_matrix"}',
+  'this project\'s {"intrinsics": {"fov_x_deg", "fov_y_deg", ...}, "extrinsics": '
+  '{"rotation", "position"}}',
+)
+# OpenGL camera axes (x right, y up, looking along -z) in OpenCV's.
+_GL_TO_CV = np.diag([1.0, -1.0, -1.0])
+ORTHONORMAL_TOL = 1e-3
+
+
+class CameraFile(NamedTuple):
+  """A camera as a file describes it.
+
+  Attributes:
+    intrinsics: the pinhole camera at the file's image size.
+    distortion: OpenCV distortion coefficients (k1, k2, p1, p2, ...), () if none.
+    pose: the camera's pose (OpenCV axes) or None: in the simulator's world
+      when ``world == 'simulator'``, else in the user's.
+    world: ``'simulator'`` (this project's form) or ``'user'``.
+    fps: the recording's frame rate when the file gives it, else None.
+    form: which accepted form the file was read as.
+    path: the file.
+  """
+
+  intrinsics: Intrinsics
+  distortion: tuple[float, ...]
+  pose: Pose | None
+  world: str
+  fps: float | None
+  form: str
+  path: str
+
+  @property
+  def distorted(self) -> bool:
+    return any(abs(c) > 0 for c in self.distortion)
+
+
+def _error(path: str, why: str) -> ValueError:
+  forms = '\n  '.join(FORMS)
+  return ValueError(f'{path}: {why}. Accepted camera files:\n  {forms}')
+
+
+def _load(path: str) -> dict:
+  if not os.path.isfile(path):
+    raise ValueError(f'{path}: no such camera file')
+  with open(path) as f:
+    text = f.read()
+  if path.lower().endswith(('.yaml', '.yml')):
+    import yaml  # noqa: PLC0415 - only YAML camera files need it
+
+    try:
+      data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+      raise ValueError(f'{path}: not readable YAML ({e})') from None
+  else:
+    try:
+      data = json.loads(text)
+    except ValueError as e:
+      raise ValueError(f'{path}: not readable JSON ({e})') from None
+  if not isinstance(data, dict):
+    raise _error(path, f'holds a {type(data).__name__}, not a mapping')
+  return data
+
+
+def _numbers(path: str, key: str, value, shape) -> np.ndarray:
+  if isinstance(value, dict) and 'data' in value:  # ROS / OpenCV YAML matrices
+    value = value['data']
+  try:
+    a = np.asarray(value, np.float64)
+  except (TypeError, ValueError):
+    raise _error(path, f'"{key}" is not numbers: {value!r}') from None
+  if shape is not None:
+    if a.size != math.prod(shape):
+      raise _error(path, f'"{key}" must hold {math.prod(shape)} numbers, has {a.size}')
+    a = a.reshape(shape)
+  if not np.all(np.isfinite(a)):
+    raise _error(path, f'"{key}" holds non-finite values')
+  return a
+
+
+def check_rotation(r: np.ndarray, where: str) -> None:
+  """A ValueError naming ``where`` unless ``r`` is a proper rotation."""
+  r = np.asarray(r, np.float64)
+  if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+    raise ValueError(f'{where}: rotation must be a finite 3x3 matrix')
+  err = float(np.abs(r.T @ r - np.eye(3)).max())
+  if err > ORTHONORMAL_TOL or np.linalg.det(r) <= 0:
+    raise ValueError(
+      f'{where}: rotation is not orthonormal with det +1 (|R^T R - I| = {err:.3g}, '
+      f'det {np.linalg.det(r):.3g})'
+    )
+
+
+def _pose(path: str, d: dict) -> Pose | None:
+  keys = [k for k in ('cam_to_world', 'world_to_cam') if k in d]
+  if not keys:
+    return None
+  if len(keys) == 2:
+    raise _error(path, 'give "cam_to_world" or "world_to_cam", not both')
+  m = _numbers(path, keys[0], d[keys[0]], (4, 4))
+  if not np.allclose(m[3], [0, 0, 0, 1], atol=1e-6):
+    raise _error(path, f'"{keys[0]}" last row must be [0, 0, 0, 1], got {m[3]}')
+  if keys[0] == 'world_to_cam':
+    check_rotation(m[:3, :3], f'{path}: "world_to_cam"')
+    m = np.linalg.inv(m)
+  axes = str(d.get('axes', 'opencv')).lower()
+  if axes not in ('opencv', 'opengl'):
+    raise _error(path, f'"axes" must be "opencv" or "opengl", got {axes!r}')
+  r = m[:3, :3] @ _GL_TO_CV if axes == 'opengl' else m[:3, :3]
+  check_rotation(r, f'{path}: "{keys[0]}"')
+  return Pose(r.astype(np.float32), m[:3, 3].astype(np.float32))
+
+
+def _fps(path: str, d: dict) -> float | None:
+  if 'fps' not in d or d['fps'] is None:
+    return None
+  try:
+    fps = float(d['fps'])
+  except (TypeError, ValueError):
+    fps = math.nan
+  if not (math.isfinite(fps) and 1.0 <= fps <= 1000.0):
+    raise _error(path, f'"fps" must be in [1, 1000] Hz, got {d["fps"]!r}')
+  return fps
+
+
+def _size(path: str, d: dict, w_key: str, h_key: str) -> tuple[int, int]:
+  try:
+    w, h = int(d[w_key]), int(d[h_key])
+  except (KeyError, TypeError, ValueError):
+    raise _error(path, f'needs integer "{w_key}" and "{h_key}"') from None
+  if w < 1 or h < 1:
+    raise _error(path, f'image size must be positive, got {w} x {h}')
+  return w, h
+
+
+def _pinhole(path, w, h, k: np.ndarray) -> Intrinsics:
+  if abs(k[0, 1]) > 1e-6 * abs(k[0, 0]) or not np.allclose(k[2], [0, 0, 1]):
+    raise _error(
+      path,
+      f'camera matrix must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {k.tolist()}',
+    )
+  try:
+    return Intrinsics.from_pinhole(w, h, k[0, 0], k[1, 1], k[0, 2], k[1, 2])
+  except ValueError as e:
+    raise _error(path, str(e)) from None
+
+
+def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
+  """A camera mapping (the content of a camera file) in any accepted form."""
+  if 'intrinsics' in d:
+    try:
+      intr = Intrinsics.from_dict(d['intrinsics'])
+    except (ValueError, TypeError, AttributeError) as e:
+      raise _error(path, f'bad "intrinsics" ({e})') from None
+    pose = None
+    ext = d.get('extrinsics')
+    if ext is not None:
+      if isinstance(ext, list):
+        if not ext:
+          raise _error(path, 'empty "extrinsics" list')
+        ext = ext[0]
+      try:
+        r = _numbers(path, 'rotation', ext['rotation'], (3, 3))
+        p = _numbers(path, 'position', ext['position'], (3,))
+      except (KeyError, TypeError):
+        raise _error(path, '"extrinsics" needs "rotation" and "position"') from None
+      check_rotation(r, f'{path}: "extrinsics"')
+      pose = Pose(r.astype(np.float32), p.astype(np.float32))
+    return CameraFile(intr, (), pose, 'simulator', _fps(path, d), 'project', path)
+  if 'image_width' in d or 'camera_matrix' in d and 'width' not in d:
+    w, h = _size(path, d, 'image_width', 'image_height')
+    k = _numbers(path, 'camera_matrix', d.get('camera_matrix'), (3, 3))
+    dist = d.get('distortion_coefficients', ())
+    form = 'ROS CameraInfo YAML'
+  elif any(key in d for key in ('K', 'k')) and 'fx' not in d:
+    w, h = _size(path, d, 'width', 'height')
+    k = _numbers(path, 'K', d.get('K', d.get('k')), (3, 3))
+    dist = d.get('D', d.get('d', d.get('distortion', ())))
+    form = 'ROS CameraInfo' if any(x in d for x in ('D', 'd')) else 'OpenCV JSON'
+  elif 'intrinsic_matrix' in d:
+    w, h = _size(path, d, 'width', 'height')
+    k = _numbers(path, 'intrinsic_matrix', d['intrinsic_matrix'], (3, 3)).T
+    dist, form = (), 'Open3D intrinsics JSON'
+  elif 'ppx' in d:
+    w, h = _size(path, d, 'width', 'height')
+    vals = [_numbers(path, key, d.get(key), ()) for key in ('fx', 'fy', 'ppx', 'ppy')]
+    k = np.array([[vals[0], 0, vals[2]], [0, vals[1], vals[3]], [0, 0, 1]])
+    dist, form = d.get('coeffs', ()), 'RealSense intrinsics JSON'
+  elif 'fx' in d or 'camera_matrix' in d:
+    w, h = _size(path, d, 'width', 'height')
+    if 'camera_matrix' in d:
+      k = _numbers(path, 'camera_matrix', d['camera_matrix'], (3, 3))
+    else:
+      try:
+        vals = [float(d[key]) for key in ('fx', 'fy', 'cx', 'cy')]
+      except (KeyError, TypeError, ValueError):
+        raise _error(path, 'needs numbers "fx", "fy", "cx" and "cy"') from None
+      k = np.array([[vals[0], 0, vals[2]], [0, vals[1], vals[3]], [0, 0, 1]])
+    dist = d.get('distortion', d.get('dist_coeffs', ()))
+    form = 'OpenCV JSON'
+  else:
+    raise _error(path, f'no camera found among its keys {sorted(d)}')
+  intr = _pinhole(path, w, h, k)
+  distortion = tuple(
+    float(c) for c in _numbers(path, 'distortion', dist or [], None).ravel()
+  )
+  return CameraFile(intr, distortion, _pose(path, d), 'user', _fps(path, d), form, path)
+
+
+def read_camera(path: str) -> CameraFile:
+  """Reads a camera file in any accepted form (module docstring).
+
+  Raises:
+    ValueError: naming the file: missing, unreadable, or in no accepted form
+      (the message lists them), or a camera that cannot be (non-positive
+      focal length, non-orthonormal rotation, non-finite values).
+  """
+  return parse_camera(_load(path), path)
+
+
+def scaled_to(camera: CameraFile, width: int, height: int) -> CameraFile:
+  """The camera for frames of ``width`` x ``height``: the file's own size, or
+  the same image resampled (aspect ratio within 1%)."""
+  intr = camera.intrinsics
+  if (intr.width, intr.height) == (width, height):
+    return camera
+  if abs(intr.width / intr.height - width / height) > 0.01 * width / height:
+    raise ValueError(
+      f'{camera.path}: the camera is {intr.width} x {intr.height} but the frames are '
+      f'{width} x {height} (another aspect ratio)'
+    )
+  return camera._replace(intrinsics=intr.resized(width, height))
