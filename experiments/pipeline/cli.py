@@ -268,8 +268,12 @@ def host_devices(n: int | None = None) -> None:
 
 def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) -> None:
   """A script's whole ``__main__``: flags from ``cls``, ``main(config)``, and
-  user errors as one line (exit status 2) unless ``--verbose``."""
+  user errors as one line (exit status 2) unless ``--verbose``. Under a
+  multi-process launch (``distributed``) the processes are joined first."""
+  from experiments.pipeline import distributed  # noqa: PLC0415 - imports jax
+
   host_devices()
+  distributed.initialize()
   define_flags(cls, presets, module_name=sys.argv[0])
 
   def _main(argv):

@@ -67,7 +67,7 @@ def gp_device(i: int = 0):
   launches, while the GPU has the simulations to run. Searches are spread over
   the CPU devices (``cli.host_devices`` makes one per core), as one device runs
   its programs one at a time."""
-  cpus = jax.devices('cpu')
+  cpus = jax.local_devices(backend='cpu')  # this process's, under jax.distributed
   return cpus[i % len(cpus)]
 
 

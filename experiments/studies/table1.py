@@ -44,11 +44,12 @@ import os
 import matplotlib
 
 matplotlib.use('Agg')
+import jax  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import model as model_lib  # noqa: E402
-from experiments.pipeline import cli, files  # noqa: E402
+from experiments.pipeline import cli, distributed, files  # noqa: E402
 from experiments.pipeline import training as train_lib  # noqa: E402
 from physsim import dataset  # noqa: E402
 from physsim import params as params_lib  # noqa: E402
@@ -173,26 +174,34 @@ def train_all(
         f'{root}: no material {m!r} (materials: {list(index.materials)})'
       )
     _check_labels(config, index, m)
-  out = {}
-  for m in materials:
-    out[m] = {}
-    for network, modality in selected_columns(config):
-      name = COLUMN_NAMES[network, modality]
-      out[m][name], data = {}, None
-      for split in SPLITS:
-        if config.splits and split not in config.splits:
-          continue
-        cfg = _run_config(config, m, network, modality, split)
-        folder = run_dir(workdir, network, modality, split, m)
-        row = train_lib.finished_eval(cfg, root, folder, [m])
-        if row is None:
-          if data is None:  # both splits share the inputs
-            data = train_lib.load_inputs(cfg, root, [m])
-          print(f'{m} / {name} / {split}: training on {data[0].shape}', flush=True)
-          _, row = train_lib.fit_run(cfg, root, folder, [m], data, progress=progress)
-        else:
-          print(f'{m} / {name} / {split}: finished run reused', flush=True)
-        out[m][name][split] = row
+  jobs = [
+    (m, network, modality, split)
+    for m in materials
+    for network, modality in selected_columns(config)
+    for split in SPLITS
+    if not config.splits or split in config.splits
+  ]
+  # Under several processes each trains a contiguous share (the splits of a
+  # material and column share their inputs); the others' runs are left out
+  # until they finish.
+  mine = set(distributed.share(jobs))
+  out, data = {}, {}
+  for m, network, modality, split in jobs:
+    name = COLUMN_NAMES[network, modality]
+    cfg = _run_config(config, m, network, modality, split)
+    folder = run_dir(workdir, network, modality, split, m)
+    row = train_lib.finished_eval(cfg, root, folder, [m])
+    if row is None and (m, network, modality, split) not in mine:
+      continue
+    if row is None:
+      if (m, network, modality) not in data:  # both splits share the inputs
+        data = {(m, network, modality): train_lib.load_inputs(cfg, root, [m])}
+      inputs = data[m, network, modality]
+      print(f'{m} / {name} / {split}: training on {inputs[0].shape}', flush=True)
+      _, row = train_lib.fit_run(cfg, root, folder, [m], inputs, progress=progress)
+    else:
+      print(f'{m} / {name} / {split}: finished run reused', flush=True)
+    out.setdefault(m, {}).setdefault(name, {})[split] = row
   return out
 
 
@@ -474,6 +483,11 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
     if sp not in SPLITS:
       raise ValueError(f'split {sp!r}: choose from {SPLITS}')
   results = train_all(config, root, workdir, progress=progress)
+  distributed.barrier('table1: training done')
+  if not distributed.is_main():
+    return {'results': results, 'markdown': '', 'maps': {}}
+  if jax.process_count() > 1:  # the other processes' runs are on disk now
+    results = train_all(config, root, workdir, progress=progress)
   if config.train_only:
     return {'results': results, 'markdown': '', 'maps': {}}
   # The maps show the PhySNet (depth) simulation-split runs: only when trained here.

@@ -20,8 +20,9 @@ lines through the truth, ``experiments.studies.landscape``). Each estimate
 resumes from its own folder. All estimates run in lockstep in this process
 (``search.estimate_many``): every recording's candidates of an iteration are
 scored together, which on a GPU costs about what one estimate does.
-``shard=i, num_shards=n`` takes the i-th of n contiguous chunks of the
-estimates; a last run without them writes the tables of everything finished.
+Under several processes (``experiments.pipeline.distributed``: one per GPU,
+or a cluster) each takes a contiguous share of the estimates, and process 0
+writes the tables once every process has finished its share.
 """
 
 from __future__ import annotations
@@ -33,11 +34,20 @@ import os
 import matplotlib
 
 matplotlib.use('Agg')
+import jax  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments.pipeline import cli, embedding, eval_set, files, report, search  # noqa: E402
+from experiments.pipeline import (  # noqa: E402
+  cli,
+  distributed,
+  embedding,
+  eval_set,
+  files,
+  report,
+  search,
+)  # fmt: skip
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.pipeline.objective import EstimateConfig  # noqa: E402
 from experiments.studies import table1  # noqa: E402
@@ -70,16 +80,11 @@ class Config:
     methods: networks to evaluate, '<network>_<modality>' run folders of table1.
     estimate: settings of every estimate (material and garment come from
       each recording).
-    shard: this process takes the shard-th of num_shards contiguous chunks of
-      the estimates.
-    num_shards: processes sharing the estimates.
     report_only: write the tables of what has finished; run nothing.
   """
 
   methods: tuple[str, ...] = METHODS
   estimate: EstimateConfig = cli.nested(EstimateConfig(), skip=('material', 'garment'))
-  shard: int = 0
-  num_shards: int = 1
   report_only: bool = False
 
 
@@ -164,17 +169,16 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
       elif model_dir not in missing:
         missing.add(model_dir)
         print(f'{m}: no network at {model_dir}; its cells stay -', flush=True)
-  if not 0 <= config.shard < config.num_shards:
-    raise ValueError(f'shard {config.shard} of {config.num_shards}')
   results, mine = {}, []
+  # Contiguous shares: jobs come sorted by set, so a process sees few meshes
+  # (each mesh is a simulation batch of its own per iteration).
+  share = set(distributed.share(range(len(jobs))))
   for i, (r, m) in enumerate(jobs):
     done = os.path.join(_out_dir(workdir, r, m), 'estimate.json')
     if os.path.isfile(done):
       with open(done) as f:
         results[_key(r, m)] = json.load(f)
-    elif i * config.num_shards // len(jobs) == config.shard:
-      # Contiguous chunks: jobs come sorted by set, so a shard sees few meshes
-      # (each mesh is a simulation batch of its own per iteration).
+    elif i in share:
       mine.append((r, m))
   if config.report_only:
     print(f'{len(mine)} estimates unfinished (not run: --report_only)', flush=True)
@@ -465,11 +469,18 @@ def plot_candidate_landscapes(landscapes: dict, method: str, path: str) -> None:
 
 
 def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
+  """Runs this process's share of the estimates; process 0 then writes the
+  tables of every finished one (returns '' in the others)."""
   os.makedirs(workdir, exist_ok=True)
-  results = {
-    k: rescore(v) for k, v in run_all(config, eval_root, models, workdir).items()
-  }
-  return write_report(results, config, workdir)
+  results = run_all(config, eval_root, models, workdir)
+  distributed.barrier('tables: estimates done')
+  if not distributed.is_main():
+    return ''
+  if jax.process_count() > 1:  # the other processes' results are on disk
+    results = run_all(
+      dataclasses.replace(config, report_only=True), eval_root, models, workdir
+    )
+  return write_report({k: rescore(v) for k, v in results.items()}, config, workdir)
 
 
 def from_json(paths) -> dict:

@@ -1,0 +1,106 @@
+"""experiments.pipeline.distributed: discovery from the environment, shares of
+jobs, and two real processes on this machine's CPU joined by jax.distributed."""
+
+import json
+import os
+import socket
+import sys
+
+import pytest
+
+from experiments.pipeline import distributed
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def test_launch_settings_from_the_environment():
+  explicit = {
+    'JAX_COORDINATOR_ADDRESS': 'node0:1234', 'JAX_NUM_PROCESSES': '4', 'JAX_PROCESS_ID': '3',
+  }  # fmt: skip
+  assert distributed.launch_settings(explicit) == dict(
+    coordinator_address='node0:1234', num_processes=4, process_id=3
+  )
+  assert distributed.launch_settings({}) is None
+  assert distributed.launch_settings({'SLURM_NTASKS': '8', 'SLURM_PROCID': '2'}) == {}
+  assert distributed.launch_settings({'SLURM_NTASKS': '1', 'SLURM_PROCID': '0'}) is None
+  assert (
+    distributed.launch_settings(
+      dict(explicit, JAX_NUM_PROCESSES='1', JAX_PROCESS_ID='0')
+    )
+    is None
+  )
+  with pytest.raises(ValueError, match='set all of'):
+    distributed.launch_settings({'JAX_NUM_PROCESSES': '2'})
+  with pytest.raises(ValueError, match='not in'):
+    distributed.launch_settings(dict(explicit, JAX_PROCESS_ID='4'))
+
+
+def test_shares_are_contiguous_disjoint_and_cover_every_job():
+  jobs = list(range(11))
+  shares = [distributed.share(jobs, i, 3) for i in range(3)]
+  assert sum(shares, []) == jobs
+  assert [len(s) for s in shares] in ([4, 4, 3], [4, 3, 4], [3, 4, 4])
+  assert distributed.share([], 0, 2) == []
+
+
+def _free_port():
+  with socket.socket() as s:
+    s.bind(('localhost', 0))
+    return s.getsockname()[1]
+
+
+def test_two_processes_share_the_jobs_and_a_global_mesh(tmp_path, capsys):
+  env = dict(os.environ, JAX_PLATFORMS='cpu', PYTHONPATH=_ROOT,
+             XLA_FLAGS='--xla_force_host_platform_device_count=2')  # fmt: skip
+  worker = os.path.join(_ROOT, 'tests/experiments/distributed_worker.py')
+  code = distributed.launch(
+    [sys.executable, worker, str(tmp_path)], 2, port=_free_port(), env=env
+  )
+  out = capsys.readouterr().out
+  assert code == 0, out[-3000:]
+  line = next(x for x in out.splitlines() if x.startswith('[0] {'))
+  result = json.loads(line[4:])
+  assert result['count'] == 2 and result['jobs'] == list(range(7))
+  # Rows 0, 1 (process 0) and 10, 11 (process 1) on four devices.
+  assert result['total'] == 22.0
+  owners = {
+    json.loads((tmp_path / f'job{j}.json').read_text())['process'] for j in range(7)
+  }
+  assert owners == {0, 1}
+  # A failing process's exit status is the launch's.
+  fail = [
+    sys.executable,
+    '-c',
+    'import os, sys; sys.exit(3 * int(os.environ["JAX_PROCESS_ID"]))',
+  ]
+  assert distributed.launch(fail, 2, port=_free_port(), env=env) == 3
+
+
+def test_table1_as_two_processes_trains_each_run_once(rgb_dataset, tmp_path, capsys):
+  # The real script under the launcher: each process trains its share, its
+  # checkpoints its own (orbax's shared multi-host writer does not fit), and
+  # process 0 writes the table once both have finished.
+  env = dict(os.environ, JAX_PLATFORMS='cpu', PYTHONPATH=_ROOT)
+  workdir = tmp_path / 't1'
+  command = [
+    sys.executable, '-m', 'experiments.table1', '--preset=smoke',
+    f'--dataset={rgb_dataset}', f'--workdir={workdir}', '--columns=physnet_depth',
+    '--splits=simulation,random', '--epochs=2',
+  ]  # fmt: skip
+  code = distributed.launch(command, 2, port=_free_port(), env=env)
+  out = capsys.readouterr().out
+  assert code == 0, out[-3000:]
+  trained = [x for x in out.splitlines() if 'training on' in x]
+  assert sorted(x[:3] for x in trained) == ['[0]', '[1]']  # one run each
+  assert (workdir / 'table1.md').is_file()
+  for split in ('simulation', 'random'):  # one fabric, two runs
+    run = workdir / 'physnet_depth' / split / 'gray_interlock'
+    steps = os.listdir(run / 'checkpoints')
+    assert steps and all(
+      (run / 'checkpoints' / s / 'state.msgpack').is_file() for s in steps
+    )
+  # A later single-process estimate loads what a process trained.
+  from experiments.pipeline import embedding
+
+  net = embedding.load_embedding(str(run))
+  assert net.image_size == (32, 32)
