@@ -67,6 +67,13 @@ def test_intake_finds_the_pins_and_only_the_cloth(scene):
   assert np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1)) < _POSE_ANGLE_TOL
   assert ik.intrinsics.cx != pytest.approx(0.5 * (ik.intrinsics.width - 1))
   assert ik.fps == 20.0  # the camera file's
+  # --fps names the recording's own rate over the file's: at 40 fps its 8
+  # frames last 0.175 s, 4 frames at the comparison's 20 fps, which take
+  # recording frames 0, 2, 4, 6 (so 7 are kept).
+  fast = intake.take_in(
+    scene.frames, intake.IntakeConfig(fps=40), scene.camera_json, ef.CONFIG
+  )
+  assert fast.fps == 40.0 and len(fast.depth) == 7
   text = intake.summary(ik)
   assert 'up from the floor' in text and '160 x 120' in text
 
@@ -104,6 +111,11 @@ def test_estimate_runs_on_the_recording_and_a_resume_must_match_its_camera(
   other.write_text(json.dumps(dict(cam, fx=cam['fx'] * 1.1, fy=cam['fy'] * 1.1)))
   with pytest.raises(ValueError, match='different.*camera'):
     estimate.main(dataclasses.replace(args, camera_json=str(other)))
+  # Nor may it drop the camera (training-like cameras would score differently).
+  with pytest.raises(ValueError, match='different'):
+    estimate.main(
+      dataclasses.replace(args, camera_json='', intake=intake.IntakeConfig(fps=20))
+    )
 
 
 def _write_frames(folder, depth_m, scale=1000.0):
