@@ -16,7 +16,7 @@ import shutil
 
 from absl import logging
 
-from experiments.pipeline import cli, report
+from experiments.pipeline import cli, distributed, report
 from experiments.studies import calibration
 
 
@@ -42,7 +42,7 @@ PRESETS = {k: Args(study=v) for k, v in calibration.PRESETS.items()}
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
   calibration.run(args.study, args.workdir)
-  if args.install:
+  if args.install and distributed.is_main():
     shutil.copyfile(
       f'{args.workdir}/{calibration.RESULT_FILE}', report.CALIBRATION_FILE
     )

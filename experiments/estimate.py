@@ -92,7 +92,9 @@ def main(args: Args) -> None:
     raise ValueError('missing --recording (see --help)')
   if args.intake_only:
     for i, path in enumerate(args.recording):
-      workdir = args.workdir if len(args.recording) == 1 else f'{args.workdir}/{i}'
+      workdir = (
+        args.workdir if len(args.recording) == 1 else f'{args.workdir}/intake_{i}'
+      )
       _take_in(args, path, workdir)
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return

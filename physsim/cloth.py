@@ -4,10 +4,11 @@ Modelling choices (measured; see BENCHMARKS.md and experiments/fabric_motion.py)
   * Stretching: flex edge equality constraints, slightly soft (``solref`` 4 ms)
     so edges may strain about 1% (p99) and a few percent next to the pins, like
     ArcSim's 0.95-1.05 strain limit. Softer (20 ms) let pin edges stretch >100%.
-    Solver: CG with an iteration cap of 100 (it stops early on tolerance). MuJoCo
-    C converges in ~20 on a 25x25 cloth; MuJoCo Warp's float32 CG did not, and
-    its worlds blew up at 20 (matched C at 100; Newton x5 also matched, 7x slower
-    on CPU).
+    Solver: CG with an iteration cap of 50 (it stops early on tolerance). MuJoCo
+    C converges in ~20 on a 25x25 cloth; MuJoCo Warp's float32 CG does not: with
+    these stiff edges 62% of its worlds blew up at 20 and 1 in 1024 at 40, while
+    50 held every world with the same edge strain as 100 (p99 1.2%) at 1.4x the
+    speed (BENCHMARKS.md). Softer edges let 20 iterations run, at 6-48% strain.
   * Bending: MuJoCo's own 2-D flex bending (``elastic2d="bend"``) is compiled
     once at the reference rigidity D0 of the material (``reference_rigidity``)
     but turned off in MuJoCo; the rollout applies the same compiled 4x4 stencil
@@ -61,7 +62,7 @@ class SimConfig:
   """
 
   timestep: float = 0.002
-  iterations: int = 100
+  iterations: int = 50
   solver: str = 'CG'
   edge_solref: float = 0.004
   air_density: float = 1.0

@@ -39,7 +39,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, files, search  # noqa: E402
+from experiments.pipeline import cli, distributed, files, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo as demo_lib  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
@@ -132,17 +132,23 @@ def _configs(config: Config):
 def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
   """Trains the network, makes the recordings and estimates each (resumable).
 
+  Under several processes (``distributed``) process 0 makes the data, the
+  network and the recordings, each process estimates its share of the
+  recordings, and process 0 gathers every result (the others return []).
+
   Returns:
     Per recording: ``{'seq', 'truth', 'workdir', 'result'}``.
   """
   data_cfg, rec_cfg, train_cfg, est = _configs(config)
-  gen.run(data_cfg, os.path.join(workdir, 'data'))
-  train_lib.run(
-    train_cfg, os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
-  )
   model_dir = os.path.join(workdir, 'model', config.material)
   rec_root = os.path.join(workdir, 'recordings')
-  gen.run(rec_cfg, rec_root, params={config.material: truths(config)})
+  if distributed.is_main():
+    gen.run(data_cfg, os.path.join(workdir, 'data'))
+    train_lib.run(
+      train_cfg, os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
+    )
+    gen.run(rec_cfg, rec_root, params={config.material: truths(config)})
+  distributed.barrier('calibration: network and recordings made')
   index = physsim.dataset.open_dataset(rec_root)
   rows = sorted(index.filter(material=config.material).rows, key=lambda r: r['seq_id'])
   jobs, meta = [], []
@@ -155,8 +161,16 @@ def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
     wd = os.path.join(workdir, 'estimates', r['seq_id'])
     jobs.append(search.Job(est, rec, model_dir, wd))
     meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd})
-  print(f'{len(jobs)} recordings in lockstep', flush=True)
-  results = search.estimate_many(jobs, figures=False)
+  if jax.process_count() > 1:
+    mine = distributed.share(jobs)
+    print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)
+    search.estimate_many(mine, figures=False)
+    distributed.barrier('calibration: estimates done')
+    if not distributed.is_main():
+      return []
+  else:
+    print(f'{len(jobs)} recordings in lockstep', flush=True)
+  results = search.estimate_many(jobs, figures=False)  # finished ones read back
   out = []
   for m, res in zip(meta, results, strict=True):
     if isinstance(res, Exception):
@@ -333,6 +347,8 @@ def run(config: Config, workdir: str) -> dict:
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
   runs = simulate_and_estimate(config, workdir)
+  if not distributed.is_main():
+    return {}
   analysis = analyse(config, runs)
   form, c = 'gibbs', analysis['best_sharpness']['gibbs']
   held = analysis['sweep'][form][c]['held_out']

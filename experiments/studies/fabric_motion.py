@@ -81,7 +81,7 @@ VARIANTS = {
   'chosen': (
     {},
     None,
-  ),  # edge solref 4 ms (= 2 dt, MuJoCo's stiffest), dt 2 ms, CG x100
+  ),  # edge solref 4 ms (= 2 dt, MuJoCo's stiffest), dt 2 ms, CG x50
   'edges_10ms': ({'edge_solref': 0.01}, None),
   'edges_20ms': ({'edge_solref': 0.02}, None),
   'dt_1ms': ({'timestep': 0.001, 'edge_solref': 0.002}, None),
