@@ -106,12 +106,27 @@ def share(
   return [job for k, job in enumerate(jobs) if k * n // max(len(jobs), 1) == i]
 
 
-def barrier(name: str) -> None:
-  """Waits until every process has reached the barrier ``name``."""
-  if jax.process_count() > 1:
-    from jax.experimental import multihost_utils  # noqa: PLC0415
+# A barrier waits for the slowest process's share (hours of training at most).
+BARRIER_TIMEOUT_S = 24 * 3600
+_barriers = 0
 
-    multihost_utils.sync_global_devices(name)
+
+def barrier(name: str, timeout_s: float = BARRIER_TIMEOUT_S) -> None:
+  """Waits until every process has reached the barrier ``name``.
+
+  It waits at the coordination service (``jax.distributed``'s client, as JAX's
+  own array serialization does), not through a device collective, whose
+  transport (gloo on CPU) gives up on a peer after seconds when the other
+  process is still busy with its share."""
+  global _barriers
+  if jax.process_count() == 1:
+    return
+  _barriers += 1  # every process passes the same barriers in the same order
+  from jax._src import distributed as jax_distributed  # noqa: PLC0415
+
+  jax_distributed.global_state.client.wait_at_barrier(
+    f'physnet:{_barriers}:{name}', int(timeout_s * 1000)
+  )
 
 
 def launch(

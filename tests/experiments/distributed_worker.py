@@ -22,6 +22,10 @@ jobs = list(range(7))
 for job in distributed.share(jobs):
   with open(os.path.join(out, f'job{job}.json'), 'w') as f:
     json.dump({'job': job, 'process': index}, f)
+if index == 1:  # the other process waits at the barrier meanwhile
+  import time
+
+  time.sleep(40)  # a long share: a device-collective barrier timed out here
 distributed.barrier('jobs written')
 # A global mesh over every process's devices: each holds its own rows.
 mesh = Mesh(np.array(jax.devices()), ('worlds',))
