@@ -232,3 +232,21 @@ def test_a_network_of_another_fabric_is_refused(scene, tmp_path):
   ):
     estimate.main(args)
   assert not os.path.exists(tmp_path / 'w')
+
+
+def test_a_dataset_sequence_with_its_own_camera_file_keeps_its_pose_and_truth(tmp_path):
+  seq = ef.write_recording(str(tmp_path), ef.TRUTH)
+  with open(os.path.join(seq, 'meta.json')) as f:
+    meta = json.load(f)
+  cam = tmp_path / 'camera.json'
+  cam.write_text(json.dumps({k: meta[k] for k in ('intrinsics', 'extrinsics', 'fps')}))
+  ik = intake.take_in(seq, intake.IntakeConfig(), str(cam), ef.CONFIG)
+  assert ik.up_from == 'camera file' and ik.truth == pytest.approx(ef.TRUTH)
+  pose = physsim.pose_from_dict(meta['extrinsics'][0])
+  np.testing.assert_allclose(ik.pose.position, pose.position, atol=1e-6)
+  # The simulator's pins, seen from that camera, come back as the pins.
+  pins = intake.outer_pins(physsim.square(ef.CONFIG.cloth_resolution))
+  want = (pins - np.asarray(pose.position)) @ np.asarray(pose.rotation, np.float64)
+  np.testing.assert_allclose(ik.pins_camera, want, atol=1e-5)
+  passthrough = intake.take_in(seq, intake.IntakeConfig(), '', ef.CONFIG)
+  assert passthrough.passthrough and passthrough.truth == pytest.approx(ef.TRUTH)
