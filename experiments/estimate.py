@@ -71,7 +71,7 @@ def _take_in(args: Args, path: str, workdir: str, size=None, frames: bool = True
   """One recording taken in; its summary printed and its files written."""
   ik = intake.take_in(path, args.intake, args.camera_json, args.search, workdir=workdir)
   print(intake.summary(ik))
-  intake.write(ik, workdir, frames=frames, est=args.search)
+  intake.write(ik, workdir, args.search, frames=frames)
   if size is None:
     return ik
   return intake.to_recording(ik, args.search.fps, size, args.search.frames)

@@ -27,14 +27,13 @@ top edge along +x, up along +z.
 
 from __future__ import annotations
 
-import warnings
 from typing import NamedTuple
 
 import cv2
 import numpy as np
 
 from physsim.camera import Intrinsics, Pose
-from physsim.scene import Plane, backproject, fit_plane, plane_basis
+from physsim.scene import Plane, backproject, fit_plane, median_frame, plane_basis
 
 # A floor's normal: |cos| to the top edge below this (square to it) ...
 _FLOOR_EDGE_COS = 0.3
@@ -65,11 +64,7 @@ def _unit(v):
 
 def _cloth_points(depth: np.ndarray, intrinsics: Intrinsics, frames: int) -> np.ndarray:
   """(N, 3) points of the per-pixel median of the first ``frames`` frames."""
-  first = np.asarray(depth[:frames], np.float64)
-  stack = np.where(first > 0, first, np.nan)
-  with np.errstate(all='ignore'), warnings.catch_warnings():
-    warnings.simplefilter('ignore', RuntimeWarning)  # all-NaN pixels: never cloth
-    median = np.nan_to_num(np.nanmedian(stack, axis=0), nan=0.0)
+  median = median_frame(depth[:frames])
   points = backproject(median, intrinsics)[median > 0]
   if len(points) < 30:
     raise ValueError(

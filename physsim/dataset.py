@@ -93,6 +93,13 @@ def mm_to_depth(mm) -> np.ndarray:
 # ----------------------------------------------------------------- atomic I/O
 
 
+def user_mode(mode: int) -> int:
+  """``mode`` as the user's umask would have it for a newly created file."""
+  umask = os.umask(0)
+  os.umask(umask)
+  return mode & ~umask
+
+
 def write_atomic(path: str, write) -> None:
   """Calls ``write(tmp)`` on a temporary sibling of ``path``, then renames it.
 
@@ -108,10 +115,7 @@ def write_atomic(path: str, write) -> None:
   os.close(fd)
   try:
     write(tmp)
-    # mkstemp makes the file private (0600); give it the user's usual mode.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    os.chmod(tmp, user_mode(0o666))  # mkstemp makes it private (0600)
     os.replace(tmp, path)
   except BaseException:
     if os.path.exists(tmp):
@@ -147,7 +151,8 @@ def read_json(path: str) -> dict:
   return out
 
 
-def _imwrite(path: str, image: np.ndarray) -> None:
+def imwrite(path: str, image: np.ndarray) -> None:
+  """``cv2.imwrite``, with a ValueError naming the file when it fails."""
   if not cv2.imwrite(path, image):
     raise ValueError(f'{path}: OpenCV could not write the image')
 
@@ -294,10 +299,10 @@ def write_sequence(
         cam = os.path.join(tmp, f'cam{c}')
         os.makedirs(cam)
         for t in range(n_frames):
-          _imwrite(os.path.join(cam, f'{t:04d}.png'), mm[c, t])
+          imwrite(os.path.join(cam, f'{t:04d}.png'), mm[c, t])
           if rgb is not None:
             bgr = cv2.cvtColor(rgb[c, t], cv2.COLOR_RGB2BGR)
-            _imwrite(os.path.join(cam, f'rgb_{t:04d}.png'), bgr)
+            imwrite(os.path.join(cam, f'rgb_{t:04d}.png'), bgr)
     # meta.json last: its presence marks the folder complete.
     with open(os.path.join(tmp, 'meta.json'), 'w') as f:
       json.dump(meta, f, indent=1, sort_keys=True, allow_nan=True)

@@ -83,6 +83,15 @@ def fit_plane(
   return best, inliers
 
 
+def median_frame(depth: np.ndarray) -> np.ndarray:
+  """(H, W) per-pixel median of the valid (> 0) depths of (T, H, W) frames; 0
+  where a pixel is never valid."""
+  stack = np.where(depth > 0, np.asarray(depth, np.float64), np.nan)
+  with np.errstate(all='ignore'), warnings.catch_warnings():
+    warnings.simplefilter('ignore', RuntimeWarning)  # all-NaN pixels: never seen
+    return np.nan_to_num(np.nanmedian(stack, axis=0), nan=0.0)
+
+
 def plane_basis(normal: np.ndarray) -> np.ndarray:
   """(2, 3) orthonormal in-plane axes of a plane with ``normal``."""
   helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
@@ -124,11 +133,7 @@ def background_planes(
   seed: int = 0,
 ) -> list[Plane]:
   """Planes of the median frame that reach farther than the cloth could."""
-  valid = depth > 0
-  stack = np.where(valid, depth, np.nan)
-  with np.errstate(all='ignore'), warnings.catch_warnings():
-    warnings.simplefilter('ignore', RuntimeWarning)  # all-NaN pixels: background
-    median = np.nan_to_num(np.nanmedian(stack, axis=0), nan=0.0)
+  median = median_frame(depth)
   rows, cols = np.nonzero(median > 0)
   points = backproject(median, intrinsics)[rows, cols]
   least = max(50, 0.02 * median.size)

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from experiments.pipeline import files
+from experiments.pipeline import files, objective
 from experiments.pipeline import recording as recording_lib
 from physsim import alignment, camera_files, dataset, scene, video
 
@@ -146,6 +146,8 @@ class Intake(NamedTuple):
     truth: ground truth when the recording carries it.
     camera_form: the camera file's form, or ''.
     passthrough: a dataset sequence, taken as it is.
+    swing_deg: the swing angle of that best overlap.
+    silhouette: (H, W) bool, the simulated cloth at that angle, or None.
   """
 
   depth: np.ndarray
@@ -164,6 +166,7 @@ class Intake(NamedTuple):
   camera_form: str
   passthrough: bool = False
   swing_deg: float | None = None
+  silhouette: np.ndarray | None = None
 
 
 def is_sequence(path: str) -> bool:
@@ -208,14 +211,10 @@ def _undistort(depth: np.ndarray, cam: camera_files.CameraFile) -> np.ndarray:
   return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])
 
 
-def simulated_pins(config) -> tuple[np.ndarray, np.ndarray]:
-  """((2, 3) the simulated cloth's outer pins, left first; (V, 3) its rest
-  vertices) for an ``EstimateConfig``."""
-  mesh = (
-    physsim.garment(config.garment, config.garment_spacing)
-    if config.garment
-    else physsim.square(config.cloth_resolution)
-  )
+def simulated_pins(config) -> tuple[np.ndarray, physsim.Mesh]:
+  """((2, 3) the simulated cloth's outer pins, left first; its rest mesh) for
+  an ``EstimateConfig``."""
+  mesh = objective.mesh(config)
   return outer_pins(mesh), mesh
 
 
@@ -245,14 +244,6 @@ def silhouettes(mesh, pins_world, intr, pose, degs=SWINGS_DEG) -> np.ndarray:
   poses = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32)[None, None], pose)
   out = render(jnp.asarray(positions, jnp.float32)[None], poses)  # (1, 1, S, H, W)
   return np.asarray(out)[0, 0] > 0
-
-
-def best_swing(mesh, pins_world, intr, pose, cloth: np.ndarray) -> tuple[float, float]:
-  """(swing angle, IoU) of the simulated cloth pose that best covers the
-  recording's ``cloth`` mask."""
-  ious = [alignment.iou(cloth, s) for s in silhouettes(mesh, pins_world, intr, pose)]
-  i = int(np.argmax(ious))
-  return float(SWINGS_DEG[i]), float(ious[i])
 
 
 def _passthrough(path: str, est) -> Intake:
@@ -380,20 +371,24 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
     pose, up_from = cam.pose, 'camera file'
     pins = alignment.pins_in_camera(pose, pins_world)
   seen = alignment.visible_share(mesh.vertices, pose, intr)
-  area = int(silhouettes(mesh, pins_world, intr, pose, (0.0,))[0].sum())
+  sims = silhouettes(mesh, pins_world, intr, pose)  # at rest first, then swung
+  area = int(sims[0].sum())
   if seen < MIN_VISIBLE or area < MIN_PIXELS:
     raise ValueError(
       f'{cam.path}: from this camera {100 * seen:.0f}% of the simulated cloth is in '
       f'view, covering {area} pixels; check the camera pose (cam_to_world) or --pins'
     )
-  swing, overlap = best_swing(mesh, pins_world, intr, pose, intake.depth[0] > 0)
+  ious = [alignment.iou(intake.depth[0] > 0, sim) for sim in sims]
+  best = int(np.argmax(ious))
+  overlap = float(ious[best])
   out = intake._replace(
-    pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap, swing_deg=swing
-  )
+    pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap,
+    swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best],
+  )  # fmt: skip
   if overlap < config.min_overlap:
     where = ''
     if workdir:
-      write(out, workdir, frames=False)
+      write(out, workdir, est, frames=False)
       where = f'; see {os.path.join(workdir, OVERLAY_FILE)}'
     raise ValueError(
       f'{intake.source}: the simulated cloth at the fitted pose overlaps the '
@@ -476,10 +471,10 @@ def overlay(intake: Intake, mesh) -> np.ndarray:
   img[~valid] = (60, 20, 0)
   scale = max(1, 480 // max(first.shape))
   img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
-  if intake.pose is not None and intake.intrinsics is not None:
-    pins_world = outer_pins(mesh)
-    deg = (intake.swing_deg or 0.0,)
-    sim = silhouettes(mesh, pins_world, intake.intrinsics, intake.pose, deg)[0]
+  sim = intake.silhouette
+  if sim is None and intake.pose is not None and intake.intrinsics is not None:
+    sim = silhouettes(mesh, outer_pins(mesh), intake.intrinsics, intake.pose, (0.0,))[0]
+  if sim is not None:
     sim = sim.astype(np.uint8)
     sim = cv2.resize(sim, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     contours, _ = cv2.findContours(sim, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
@@ -494,16 +489,14 @@ def overlay(intake: Intake, mesh) -> np.ndarray:
   return img
 
 
-def write(intake: Intake, workdir: str, *, frames: bool = True, est=None) -> None:
+def write(intake: Intake, workdir: str, est, *, frames: bool = True) -> None:
   """Saves ``intake.json``, ``overlay.png`` and (``frames``) the cleaned
   frames as 16-bit mm PNGs in ``intake/``, each under its final name only
-  when complete."""
+  when complete (``est``: the ``EstimateConfig``, for the simulated cloth)."""
   os.makedirs(workdir, exist_ok=True)
-  mesh = simulated_pins(est)[1] if est is not None else physsim.square(25)
-  img = overlay(intake, mesh)
+  img = overlay(intake, objective.mesh(est))
   files.write_atomic(
-    os.path.join(workdir, OVERLAY_FILE),
-    lambda p: _imwrite(p, img),
+    os.path.join(workdir, OVERLAY_FILE), lambda p: dataset.imwrite(p, img)
   )
   if frames:
     final = os.path.join(workdir, FRAMES_DIR)
@@ -511,12 +504,10 @@ def write(intake: Intake, workdir: str, *, frames: bool = True, est=None) -> Non
     try:
       mm = dataset.depth_to_mm(intake.depth)
       for t, f in enumerate(mm):
-        _imwrite(os.path.join(tmp, f'{t:04d}.png'), f)
+        dataset.imwrite(os.path.join(tmp, f'{t:04d}.png'), f)
       with open(os.path.join(tmp, 'fps.txt'), 'w') as f:
         f.write(f'{intake.fps:g}\n')
-      umask = os.umask(0)
-      os.umask(umask)
-      os.chmod(tmp, 0o777 & ~umask)
+      os.chmod(tmp, dataset.user_mode(0o777))  # mkdtemp makes it private
       if os.path.isdir(final):
         shutil.rmtree(final)
       os.replace(tmp, final)
@@ -524,11 +515,6 @@ def write(intake: Intake, workdir: str, *, frames: bool = True, est=None) -> Non
       if os.path.isdir(tmp):
         shutil.rmtree(tmp)
   files.write_json(os.path.join(workdir, INTAKE_FILE), to_json(intake))
-
-
-def _imwrite(path: str, image: np.ndarray) -> None:
-  if not cv2.imwrite(path, image, [cv2.IMWRITE_PNG_COMPRESSION, 3]):
-    raise OSError(f'{path}: could not write the image')
 
 
 def to_recording(intake: Intake, fps: float, size: tuple[int, int], frames: int):

@@ -206,16 +206,18 @@ PRESETS = {
 }
 
 
+def mesh(config: EstimateConfig) -> physsim.Mesh:
+  """The rest mesh an estimate simulates: the square or the garment."""
+  if config.garment:
+    return physsim.garment(config.garment, config.garment_spacing)
+  return physsim.square(config.cloth_resolution)
+
+
 def cloth(config: EstimateConfig) -> physsim.ClothModel:
   """The compiled cloth of an estimate's mesh. Worlds name their fabric's
   bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
   model and its compiles."""
-  mesh = (
-    physsim.garment(config.garment, config.garment_spacing)
-    if config.garment
-    else physsim.square(config.cloth_resolution)
-  )
-  return physsim.build(mesh, 'gray_interlock')
+  return physsim.build(mesh(config), 'gray_interlock')
 
 
 class ProblemData(NamedTuple):

@@ -8,7 +8,6 @@ truth.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 from typing import NamedTuple
@@ -17,7 +16,7 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import embedding
-from physsim import dataset, video
+from physsim import camera_files, dataset, video
 
 
 class Recording(NamedTuple):
@@ -59,36 +58,22 @@ def truth_of(meta: dict) -> dict | None:
 
 
 def _camera(cam: dict, where: str, size, *, required: bool):
-  """(intrinsics resized to ``size``, camera-0 pose) of a camera dict, or Nones.
+  """(intrinsics resized to ``size``, camera-0 pose) of a camera dict in this
+  project's form (``physsim.camera_files``), or Nones.
 
   A camera file must hold intrinsics; a ``meta.json`` without them means an
-  unknown camera. Broken fields are a ValueError naming ``where``.
+  unknown camera. Broken fields are a ValueError naming ``where``. Cameras in
+  other forms (a user's world frame) go through the intake.
   """
   if not isinstance(cam, dict) or 'intrinsics' not in cam:
     if required:
       raise ValueError(
-        f'{where}: no "intrinsics" (want {{"intrinsics", "extrinsics"}})'
+        f'{where}: no "intrinsics" (want {{"intrinsics", "extrinsics"}}; a '
+        "camera in a tool's own form goes through experiments.pipeline.intake)"
       )
     return None, None
-  try:
-    intr = physsim.Intrinsics.from_dict(cam['intrinsics'])
-    intr = dataclasses.replace(intr, width=size[1], height=size[0])
-    pose = None
-    ext = cam.get('extrinsics')
-    if ext is not None:
-      if isinstance(ext, list):
-        if not ext:
-          raise ValueError('empty extrinsics list')
-        ext = ext[0]
-      p = physsim.pose_from_dict(ext)
-      pose = physsim.Pose(p.rotation.reshape(3, 3), p.position.reshape(3))
-      if not (
-        np.all(np.isfinite(pose.rotation)) and np.all(np.isfinite(pose.position))
-      ):
-        raise ValueError('non-finite pose')
-  except (ValueError, TypeError, AttributeError) as e:
-    raise ValueError(f'{where}: bad camera ({e})') from e
-  return intr, pose
+  found = camera_files.parse_camera(cam, where)
+  return found.intrinsics.resized(size[1], size[0]), found.pose
 
 
 def _load_rgb(path: str, meta: dict | None, fps: float, size, n: int) -> np.ndarray:
