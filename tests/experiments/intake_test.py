@@ -94,8 +94,11 @@ def test_intake_only_writes_what_the_issue_lists(scene, tmp_path):
   assert (first > 0).sum() == pytest.approx(data['cloth_fraction'][0] * first.size)
   assert cv2.imread(str(w / 'overlay.png')) is not None
   # Files with the user's usual permissions, not mkstemp's private 0600.
-  mode = stat.S_IMODE(os.stat(w / 'intake.json').st_mode)
-  assert mode & stat.S_IRGRP or os.umask(0o022) & stat.S_IRGRP
+  umask = os.umask(0)
+  os.umask(umask)
+  for path in (w / 'intake.json', w / 'overlay.png', w / 'intake' / frames[0]):
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o666 & ~umask, path
+  assert stat.S_IMODE(os.stat(w / 'intake').st_mode) == 0o777 & ~umask
 
 
 def test_estimate_runs_on_the_recording_and_a_resume_must_match_its_camera(
