@@ -5,10 +5,20 @@ ask/tell steps, for drivers that batch many searches) and ``PosteriorSearch``
 (a likelihood-free posterior from a GP of a noisy discrepancy, with the same
 ask/tell interface); the GP (``gp``), kernels (``kernels``), acquisition
 functions (``acquisition``) and the proposal step (``propose``) are exposed as
-building blocks.
+building blocks; ``calibration`` recalibrates a posterior's credible levels
+on simulations whose truth is known.
 """
 
-from bo import acquisition, gp, kernels, posterior, propose, qmc, uncertainty
+from bo import (
+  acquisition,
+  calibration,
+  gp,
+  kernels,
+  posterior,
+  propose,
+  qmc,
+  uncertainty,
+)
 from bo.loop import IterationInfo, Minimizer, Result, State, minimize
 from bo.posterior import PosteriorConfig, PosteriorSearch
 from bo.uncertainty import MinimizerSamples, minimizer_samples
@@ -22,6 +32,7 @@ __all__ = [
   'Result',
   'State',
   'acquisition',
+  'calibration',
   'gp',
   'kernels',
   'minimize',

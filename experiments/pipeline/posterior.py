@@ -82,25 +82,40 @@ def physical(samples_unit, space: physsim.SearchSpace) -> np.ndarray:
   return np.stack([np.ravel(a) for a in p], axis=1)
 
 
-def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False) -> dict:
-  """Median, central intervals, sd, and how much narrower than the prior."""
-  out = {'median': float(np.median(x)), 'std': float(np.std(x))}
+def _stats(
+  x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None
+) -> dict:
+  """Median, central intervals, sd, and how much narrower than the prior.
+
+  ``cdf_levels``: the CDF levels of ``bo.calibration.PROBS`` at which to read
+  ``x`` (recalibrated); default the probs themselves."""
+  probs = bo.calibration.PROBS
+  lv = bo.calibration.nominal_levels() if cdf_levels is None else np.asarray(cdf_levels)
+  q = np.quantile(x, np.clip(lv, 0.0, 1.0))
+  at = lambda p: float(q[probs.index(p)])
+  out = {'median': at(0.5), 'std': float(np.std(x))}
   for level in LEVELS:
-    q = np.quantile(x, [(1 - level / 100) / 2, (1 + level / 100) / 2])
-    out[f'interval_{level}'] = [float(q[0]), float(q[1])]
+    a = level / 100
+    out[f'interval_{level}'] = [at(round((1 - a) / 2, 2)), at(round((1 + a) / 2, 2))]
   f = np.log if log else (lambda a: a)
-  width = lambda a: float(np.diff(f(np.quantile(a, [0.05, 0.95])))[0])
-  out['narrowing_90'] = width(prior) / max(width(x), 1e-12)  # 1: the prior's width
+  lo, hi = out['interval_90']
+  prior_width = float(np.diff(f(np.quantile(prior, [0.05, 0.95])))[0])
+  out['narrowing_90'] = prior_width / max(float(f(hi) - f(lo)), 1e-12)  # 1: the prior's
   return out
 
 
-def summarise(samples_unit, space: physsim.SearchSpace, prior_unit) -> dict:
+def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
+              recalibration: dict | None = None) -> dict:  # fmt: skip
   """Physical summaries of posterior draws, each beside the prior's.
 
   Args:
     samples_unit: (S, 3) posterior draws, unit cube.
     space: the search box.
     prior_unit: (S', 3) draws of the prior (same measured information).
+    recalibration: ``{field: (len(PROBS),) CDF levels}`` from a calibration
+      on simulations (``bo.calibration``), or None. With it, each quantity is
+      read from the posterior's defensive mixture with the prior at those
+      levels, as the calibration read it; without, at the nominal levels.
 
   Returns:
     ``{field: stats, 'load_ratio': stats}``; stats hold ``median``,
@@ -108,14 +123,21 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit) -> dict:
     prior's 90% width over the posterior's, log scale for bending and the
     ratio: 1 means the data told nothing).
   """
-  post, prior = physical(samples_unit, space), physical(prior_unit, space)
-  out = {
-    name: _stats(post[:, i], prior[:, i], log=name == 'bending_scale')
-    for i, name in enumerate(FIELDS)
-  }
-  ratio = lambda p: physsim.load_ratio(p[:, 1], p[:, 2])
-  out['load_ratio'] = _stats(ratio(post), ratio(prior), log=True)
-  return out
+  with_ratio = lambda p: np.concatenate(
+    [p, physsim.load_ratio(p[:, 1], p[:, 2])[:, None]], axis=1
+  )
+  post = with_ratio(physical(samples_unit, space))
+  prior = with_ratio(physical(prior_unit, space))
+  names = [*FIELDS, 'load_ratio']
+  if recalibration is not None:
+    post = bo.calibration.defensive(post, prior)
+  return {
+    name: _stats(
+      post[:, i], prior[:, i], log=name in ('bending_scale', 'load_ratio'),
+      cdf_levels=None if recalibration is None else recalibration[name],
+    )
+    for i, name in enumerate(names)
+  }  # fmt: skip
 
 
 def prior_samples(key, grid, log_prior_grid, n: int) -> np.ndarray:
@@ -178,10 +200,13 @@ LABELS = {
 }
 
 
-def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '') -> None:
+def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
+         summary: dict | None = None) -> None:  # fmt: skip
   """Marginals (bending, wind, area weight, load ratio) over the prior, and the
   pairs: wind x area weight with the load ratio's iso-lines (the ridge the
-  video measures), bending x wind, bending x area weight."""
+  video measures), bending x wind, bending x area weight. The marked median
+  and intervals are ``summary``'s (``summarise``, e.g. recalibrated) where
+  given, else the draws' own."""
   post, prior = physical(samples_unit, space), physical(prior_unit, space)
   ratio = lambda p: physsim.load_ratio(p[:, 1], p[:, 2])
   cols = [*(post[:, i] for i in range(3)), ratio(post)]
@@ -202,11 +227,11 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '') -> 
             label='prior')  # fmt: skip
     ax.hist(x, bins=bins, weights=np.full(len(x), 1 / len(x)), alpha=0.75,
             color='C0', label='posterior')  # fmt: skip
+    s = summary[name] if summary else _stats(x, px, log)
     for level, ls in ((90, ':'), (50, '--')):
-      q = np.quantile(x, [(1 - level / 100) / 2, (1 + level / 100) / 2])
-      for v in q:
+      for v in s[f'interval_{level}']:
         ax.axvline(v, color='C0', ls=ls, lw=1)
-    ax.axvline(np.median(x), color='C0', lw=1.5, label='median; 50%, 90%')
+    ax.axvline(s['median'], color='C0', lw=1.5, label='median; 50%, 90%')
     if true is not None:
       ax.axvline(true[j], color='r', lw=1.5, label='truth')
     ax.set(xlabel=LABELS[name], yticks=[], xscale='log' if log else 'linear')

@@ -100,49 +100,91 @@ def covered(result: dict, truth: dict) -> dict:
   return out
 
 
-# Estimate settings that change what a score means; coverage measured with
-# other values does not carry over.
+# Estimate settings that change what a score means, or how well the search
+# pins the posterior down; coverage measured with other values does not carry
+# over.
 _CALIBRATED_FIELDS = (
   'likelihood', 'sharpness', 'material', 'garment', 'cloth_resolution', 'frames',
-  'fps', 'distance',
+  'fps', 'distance', 'warmup', 'gusts', 'sensor_noise', 'q', 'n_init', 'max_iter',
+  'posterior_grid',
 )  # fmt: skip
 
 
-def calibration_note(config=None) -> dict | None:
-  """What the held-out simulations showed about the intervals' coverage
-  (``calibration.json``), or None when no calibration has been run. With an
-  ``EstimateConfig`` that differs from the calibrated one in a setting that
-  changes the likelihood (``_CALIBRATED_FIELDS``), the note says so
-  (``'matches': False``, ``'differs'``) instead of quoting coverage that was
-  measured for other settings."""
+def calibration_mode(measured, joint: bool = False) -> str | None:
+  """The calibration study's mode (``experiments.studies.calibration.MODES``)
+  an estimate with these readings falls in: the video alone, with a measured
+  wind, with a measured area weight, or a joint pair; None where none fits
+  (both readings, or a joint estimate with a reading)."""
+  wind, weight = measured.wind_speed_sd > 0, measured.area_weight_sd > 0
+  if joint:
+    return None if wind or weight else 'joint pair'
+  if wind and weight:
+    return None
+  return 'known wind' if wind else 'known area weight' if weight else 'video'
+
+
+def _same(mine, theirs) -> bool:
+  if isinstance(mine, float):
+    return bool(np.isclose(mine, theirs))
+  if isinstance(mine, tuple):
+    return tuple(mine) == tuple(theirs)
+  return mine == type(mine)(theirs)
+
+
+def calibration_note(config=None, *, joint: bool = False, recordings: int = 1):
+  """What the held-out simulations showed about the intervals, for an
+  estimate with ``config`` (``calibration.json``); None when no calibration
+  has been run.
+
+  Where every setting that changes the likelihood (``_CALIBRATED_FIELDS``)
+  and the mode (what was measured, a reading's uncertainty within a factor
+  of two of the calibrated one, a joint estimate of two recordings) match,
+  the note carries the mode's recalibrated CDF levels (``'levels'``, which
+  the estimate applies) and the coverage they had on recordings held out
+  from them; else it says what differs (``'matches': False``).
+  """
   if not os.path.isfile(CALIBRATION_FILE):
     return None
   with open(CALIBRATION_FILE) as f:
     cal = json.load(f)
+  head = {k: cal[k] for k in ('n', 'setting', 'likelihood', 'sharpness') if k in cal}
   if config is None:
-    return {'matches': True, **cal}
+    return {'matches': True, **head, 'coverage': cal['coverage']}
   calibrated = dict(cal.get('config', {}).get('estimate', {}))
   calibrated.update(
     likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
   )
-  differs = []
-  for name in _CALIBRATED_FIELDS:
-    if name not in calibrated:
-      continue
-    mine, theirs = getattr(config, name), calibrated[name]
-    same = (
-      np.isclose(mine, theirs)
-      if isinstance(mine, float)
-      else mine == type(mine)(theirs)
-    )
-    if not same:
-      differs.append(name)
+  differs = [n for n in _CALIBRATED_FIELDS
+             if n in calibrated and not _same(getattr(config, n), calibrated[n])]  # fmt: skip
+  mode = calibration_mode(config.measured, joint)
+  if joint and recordings != 2:
+    differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
+  elif mode is None:
+    differs.append('combination of measurements')
+  rec = cal.get('recalibration')
+  if rec and mode in ('known wind', 'known area weight'):
+    name = 'wind_speed' if mode == 'known wind' else 'area_weight'
+    value, sd = getattr(config.measured, name), getattr(config.measured, f'{name}_sd')
+    ratio = (sd / value) / rec['measured_sd']
+    if not 0.5 <= ratio <= 2.0:
+      differs.append(
+        f'{name} reading uncertainty ({100 * sd / value:.1f}%; calibrated: '
+        f'{100 * rec["measured_sd"]:.0f}%)'
+      )
   if differs:
-    return {
-      'matches': False, 'differs': differs, 'setting': cal['setting'],
-      'sharpness': cal['sharpness'],
-    }  # fmt: skip
-  return {'matches': True, **cal}
+    return {'matches': False, 'differs': differs, **head}
+  if not rec or mode not in rec['modes']:  # a calibration without tables
+    return {'matches': True, **head, 'coverage': cal['coverage']}
+  held = cal['held_out'][mode]
+  levels = np.asarray(rec['modes'][mode])  # (len(PROBS), fields)
+  return {
+    'matches': True, **head, 'mode': mode, 'recalibrated': True,
+    'n_calibration_recordings': rec['n_calibration_recordings'],
+    'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
+    'coverage': {
+      f: {k: held[f][k] for k in ('interval_50', 'interval_90')} for f in rec['fields']
+    },
+  }  # fmt: skip
 
 
 def describe(x_best, y_best, space) -> str:
@@ -271,6 +313,13 @@ def calibration_line(cal: dict | None) -> str:
     f'{SHORT.get(k, k)} {100 * v["interval_90"]:.0f}%/{100 * v["interval_50"]:.0f}%'
     for k, v in cov.items()
   )
+  if cal.get('recalibrated'):
+    return (
+      f'calibration ({cal["mode"]}): intervals read at levels recalibrated on '
+      f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}); '
+      f'read so, recordings held out from that held the truth in their 90%/50% '
+      f'intervals: {parts}.'
+    )
   return (
     f'calibration ({cal["n"]} held-out simulated recordings, {cal["setting"]}): 90%/50% '
     f'intervals held the truth in {parts} of them.'

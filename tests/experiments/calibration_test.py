@@ -19,6 +19,7 @@ import pytest
 
 import bo
 import physsim
+from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import report, search
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
@@ -56,22 +57,64 @@ def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
     pairs=100, sharpness_grid=(0.25, C_TRUE, 4.0),
     estimate=EstimateConfig(posterior_grid=GRID),
   )  # fmt: skip
-  analysis = calibration.analyse(config, _fake_runs(config, str(tmp_path)))
+  runs = _fake_runs(config, str(tmp_path))
+  analysis = calibration.analyse(config, runs)
   gibbs = analysis['sweep']['gibbs']
-  held = {c: gibbs[c]['held_out']['video'] for c in config.sharpness_grid}
-  assert held[C_TRUE]['n'] == 100
-  for f in physsim.Params._fields:  # 100 held out: binomial sd 0.03 at 90%, 0.05 at 50%
-    assert abs(held[C_TRUE][f]['interval_90'] - 0.9) < 0.09, f
-    assert abs(held[C_TRUE][f]['interval_50'] - 0.5) < 0.15, f
-    assert held[4.0][f]['interval_90'] < 0.8, f  # sharper: too narrow
-  # Flatter tends to the prior, itself calibrated over prior draws: the 50%
-  # intervals hold the truth too often, the 90% ones hardly change.
-  assert np.mean([held[0.25][f]['interval_50'] for f in physsim.Params._fields]) > 0.57
-  assert analysis['best_sharpness']['gibbs'] in (0.25, C_TRUE)
+  raw = {c: gibbs[c]['uncalibrated']['video'] for c in config.sharpness_grid}
+  for (
+    f
+  ) in physsim.Params._fields:  # 200 recordings: binomial sd 0.02 at 90%, 0.035 at 50%
+    assert abs(raw[C_TRUE][f]['interval_90'] - 0.9) < 0.07, f
+    assert abs(raw[C_TRUE][f]['interval_50'] - 0.5) < 0.11, f
+    assert raw[4.0][f]['interval_90'] < 0.8, f  # sharper: too narrow
+  # The recalibrated intervals score best at the exact likelihood, on every
+  # fold; the older rule errs flat.
+  assert analysis['best_sharpness']['gibbs'] == C_TRUE
+  assert analysis['fold_sharpness']['gibbs'] == [C_TRUE] * analysis['folds']
+  # Cross-fitted (every recording read with tables chosen without it): the
+  # intervals hold the truth as often as they say, in every mode.
+  cross = analysis['cross_validated']['gibbs']
+  for mode in calibration.MODES:
+    assert cross[mode]['n'] == 200, mode
+    for f in calibration.FIELDS:
+      assert abs(cross[mode][f]['interval_90'] - 0.9) < 0.07, (mode, f)
+      assert abs(cross[mode][f]['interval_50'] - 0.5) < 0.11, (mode, f)
   # A measured wind (2%) narrows the wind's intervals and keeps them honest.
-  known = gibbs[C_TRUE]['held_out']['known wind']['wind_speed']
-  assert abs(known['interval_90'] - 0.9) < 0.09
-  assert known['median_error_pct'] < held[C_TRUE]['wind_speed']['median_error_pct']
+  known = cross['known wind']['wind_speed']
+  assert (
+    known['median_error_pct'] < cross['video']['wind_speed']['median_error_pct'] / 3
+  )
+  out = calibration.result(config, analysis)
+  assert out['sharpness'] == C_TRUE and out['n'] == 200
+  assert set(out['recalibration']['modes']) == set(calibration.MODES)
+  assert 'recalibrated (held out)' in calibration.table(out)
+
+
+@pytest.mark.slow
+def test_recalibration_repairs_a_too_sharp_likelihood_on_held_out_recordings(
+  tmp_path,
+):
+  config = calibration.Config(pairs=100, estimate=EstimateConfig(posterior_grid=GRID))
+  scores = calibration.posteriors(
+    config, _fake_runs(config, str(tmp_path)), 'gibbs', 4.0
+  )
+  video = scores['video']
+  halves = video[:100], video[100:]  # pairs 0-49 and 50-99
+  space = physsim.search_space(config.material)
+  raw = calibration.summarise(video, space)
+  # Two folds: each half read with the levels the other half chose.
+  held = [
+    {**s, 'levels': calibration.recalibration(halves[1 - k])}
+    for k in (0, 1)
+    for s in halves[k]
+  ]
+  fixed = calibration.summarise(held, space)
+  # 200 held out; pairs share bending and area weight, and an overconfident
+  # posterior's ranks pile up at the ends, so the 50% level varies most.
+  for f in calibration.FIELDS:
+    assert raw[f]['interval_90'] < 0.8, f
+    assert abs(fixed[f]['interval_90'] - 0.9) < 0.07, f
+    assert abs(fixed[f]['interval_50'] - 0.5) < 0.12, f
 
 
 def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
@@ -93,10 +136,84 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   assert other['matches'] is False
   assert other['differs'] == ['likelihood']
   # A setting that changes what a score means (the mesh) also voids the quote.
-  cal['config'] = {'estimate': {'cloth_resolution': 25, 'frames': 60}}
+  cal['config'] = {'estimate': {'cloth_resolution': 25, 'frames': 60, 'q': 24}}
   path.write_text(json.dumps(cal))
   assert report.calibration_note(EstimateConfig(sharpness=0.7))['matches'] is True
   other = report.calibration_note(EstimateConfig(sharpness=0.7, cloth_resolution=10))
   assert other['differs'] == ['cloth_resolution']
+  other = report.calibration_note(EstimateConfig(sharpness=0.7, q=8))  # the budget
+  assert other['differs'] == ['q']
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
   assert 'not measured' in report.calibration_line(report.calibration_note())
+
+
+def test_calibration_modes_follow_what_was_measured():
+  m = posterior_lib.Measured
+  assert report.calibration_mode(m()) == 'video'
+  assert report.calibration_mode(m(wind_speed=3.0, wind_speed_sd=0.06)) == 'known wind'
+  both = m(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2, area_weight_sd=0.004)
+  assert report.calibration_mode(both) is None
+  assert report.calibration_mode(m(area_weight=0.2, area_weight_sd=0.004)) == (
+    'known area weight'
+  )
+  assert report.calibration_mode(m(), joint=True) == 'joint pair'
+
+
+def _recalibrated_file(tmp_path, monkeypatch) -> dict:
+  levels = {mode: [[0.01] * 4, [0.1] * 4, [0.4] * 4, [0.9] * 4, [0.99] * 4]
+            for mode in calibration.MODES}  # fmt: skip
+  held = {mode: {f: {'interval_50': 0.5, 'interval_90': 0.9} for f in calibration.FIELDS}
+          for mode in calibration.MODES}  # fmt: skip
+  cal = {
+    'n': 200, 'setting': 'gibbs likelihood, sharpness 0.7, demo-size', 'likelihood': 'gibbs',
+    'sharpness': 0.7, 'coverage': held['video'], 'held_out': held,
+    'recalibration': {'probs': list(bo.calibration.PROBS), 'fields': list(calibration.FIELDS),
+                      'modes': levels, 'n_calibration_recordings': 200, 'measured_sd': 0.02},
+  }  # fmt: skip
+  path = tmp_path / 'calibration.json'
+  path.write_text(json.dumps(cal))
+  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(path))
+  return cal
+
+
+def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkeypatch):
+  _recalibrated_file(tmp_path, monkeypatch)
+  m = posterior_lib.Measured
+  note = report.calibration_note(EstimateConfig(sharpness=0.7))
+  assert note['recalibrated'] and note['mode'] == 'video'
+  assert note['levels']['wind_speed'] == [0.01, 0.1, 0.4, 0.9, 0.99]
+  assert 'recalibrated on 200' in report.calibration_line(note)
+  wind = EstimateConfig(sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.06))
+  assert report.calibration_note(wind)['mode'] == 'known wind'
+  # A reading five times less certain than the calibrated 2% is another mode.
+  loose = EstimateConfig(sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.3))
+  note = report.calibration_note(loose)
+  assert note['matches'] is False and 'uncertainty' in note['differs'][0]
+  joint = report.calibration_note(
+    EstimateConfig(sharpness=0.7), joint=True, recordings=3
+  )
+  assert joint['matches'] is False
+  assert report.calibration_note(EstimateConfig(sharpness=0.7), joint=True,
+                                 recordings=2)['mode'] == 'joint pair'  # fmt: skip
+
+
+def test_recalibrated_summaries_read_the_defensive_mixture_at_the_levels():
+  space = physsim.search_space('gray_interlock')
+  rng = np.random.default_rng(0)
+  post = np.clip(0.3 + 0.1 * rng.standard_normal((4000, 3)), -1, 1)
+  prior = rng.uniform(-1, 1, (4000, 3))
+  lv = [0.01, 0.1, 0.4, 0.9, 0.99]
+  levels = {f: lv for f in (*calibration.FIELDS,)}
+  got = posterior_lib.summarise(post, space, prior, levels)
+  mix = bo.calibration.defensive(
+    calibration._physical_with_ratio(post, space),
+    calibration._physical_with_ratio(prior, space),
+  )
+  for i, f in enumerate(calibration.FIELDS):
+    q = np.quantile(mix[:, i], lv)
+    np.testing.assert_allclose(got[f]['interval_90'], q[[0, 4]], rtol=1e-12)
+    np.testing.assert_allclose(got[f]['interval_50'], q[[1, 3]], rtol=1e-12)
+    assert got[f]['median'] == pytest.approx(q[2], rel=1e-12)
+  plain = posterior_lib.summarise(post, space, prior)  # nominal levels, no mixture
+  w = np.quantile(calibration._physical_with_ratio(post, space)[:, 1], [0.05, 0.95])
+  np.testing.assert_allclose(plain['wind_speed']['interval_90'], w, rtol=1e-12)

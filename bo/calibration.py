@@ -1,0 +1,171 @@
+"""Credible levels recalibrated on simulations, so intervals hold the truth as often as they say.
+
+An approximate posterior (``bo.posterior``: a GP of a noisy discrepancy and a
+tempered likelihood) has roughly the right shape but not the right scale in
+every direction: one constant cannot make every parameter's 50% and 90%
+intervals hold the truth 50% and 90% of the time. Simulation-based calibration
+measures how it errs. For each held-out simulated recording with known
+parameters, the truth's rank ``r`` is the share of posterior draws below it
+(Talts et al. 2018); a calibrated posterior has uniform ranks.
+
+Recalibration (Kuleshov et al. 2018, with split-conformal order statistics for
+a finite-sample guarantee): to report the central interval of level ``a``, ask
+the posterior for its quantiles at the CDF levels ``lo`` and ``hi`` where the
+calibration ranks put ``(1 - a) / 2`` of the truths below and above:
+
+  lo = r_(floor((n + 1) (1 - a) / 2)),  hi = r_(ceil((n + 1) (1 + a) / 2))
+
+with ``r_(k)`` the k-th smallest of the ``n`` calibration ranks (``r_(0) = 0``,
+``r_(n+1) = 1``). If the calibration and the new problem are exchangeable
+(the same prior and simulator), the truth falls below ``lo`` with probability
+at most ``(1 - a) / 2`` and above ``hi`` likewise, so the interval holds it at
+least ``a`` of the time, and at most about ``a + 2 / (n + 1)``. A posterior that
+is too narrow gets wider levels, one that is too wide narrower ones, and one
+that is shifted gets shifted levels; the median's level (``r`` median) moves
+the point estimate the same way.
+
+A posterior so narrow that the truth lies outside every draw (rank exactly 0
+or 1) cannot be widened by any level. So ranks and intervals are read from
+a defensive mixture (``defensive``): the posterior's draws with a share
+``DEFENSIVE`` of the prior's, so the far tails are the prior's and an
+overconfident posterior can be recalibrated into them. Where the posterior
+is honest the mixture moves its quantiles by about that share only. The
+calibration and every estimate must read the same mixture. Nothing here
+depends on JAX: a few hundred ranks and quantiles, on the host.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# The CDF levels a table stores: the point (0.5) and the bounds of the 50% and
+# 90% central intervals.
+PROBS = (0.05, 0.25, 0.5, 0.75, 0.95)
+# Share of prior draws in the defensive mixture.
+DEFENSIVE = 0.02
+
+
+def defensive(
+  draws, prior_draws, share: float = DEFENSIVE, seed: int = 0
+) -> np.ndarray:
+  """Posterior draws with ``share`` of the sample replaced by prior draws:
+  a sample of ``(1 - share) posterior + share prior``.
+
+  Args:
+    draws: (S, k) posterior draws.
+    prior_draws: (S', k) prior draws (the same quantities and information,
+      e.g. a measured wind, as the posterior's prior).
+    share: the prior's share, in ``[0, 1)``.
+    seed: which prior draws are taken.
+
+  Returns:
+    (S + m, k) with ``m = round(S share / (1 - share))`` prior rows.
+  """
+  draws = np.asarray(draws, np.float64)
+  prior_draws = np.asarray(prior_draws, np.float64)
+  if not 0.0 <= share < 1.0:
+    raise ValueError(f'share must be in [0, 1), got {share}')
+  if prior_draws.ndim != 2 or prior_draws.shape[1:] != draws.shape[1:]:
+    raise ValueError(
+      f'prior draws {prior_draws.shape} do not match draws {draws.shape}'
+    )
+  m = round(draws.shape[0] * share / (1.0 - share))
+  idx = np.random.default_rng(seed).integers(0, prior_draws.shape[0], m)
+  return np.concatenate([draws, prior_draws[idx]])
+
+
+def ranks(draws, truth) -> np.ndarray:
+  """The truth's rank among posterior draws, per column: the share of draws
+  below it (ties count half), in ``[0, 1]``.
+
+  Args:
+    draws: (S, k) posterior draws.
+    truth: (k,) the true values.
+
+  Returns:
+    (k,) ranks.
+  """
+  draws = np.asarray(draws, np.float64)
+  truth = np.asarray(truth, np.float64)
+  if draws.ndim != 2 or truth.shape != draws.shape[1:]:
+    raise ValueError(
+      f'need draws (S, k) and truth (k,), got {draws.shape}, {truth.shape}'
+    )
+  below = np.mean(draws < truth, axis=0)
+  ties = np.mean(draws == truth, axis=0)
+  return below + 0.5 * ties
+
+
+def levels(calibration_ranks, probs=PROBS) -> np.ndarray:
+  """The posterior CDF levels that hold ``probs`` of the calibration truths
+  below them, per column (the order statistics of the module doc).
+
+  Args:
+    calibration_ranks: (n, k) ranks of ``n`` calibration problems' truths,
+      ``k`` quantities.
+    probs: the wanted shares; below 0.5 a lower bound (rounded down, so
+      intervals err wide), above 0.5 an upper bound (rounded up), 0.5 the
+      median of the ranks.
+
+  Returns:
+    (len(probs), k) CDF levels in ``[0, 1]``.
+  """
+  r = np.sort(np.asarray(calibration_ranks, np.float64), axis=0)
+  if r.ndim != 2 or r.shape[0] < 1 or not np.all(np.isfinite(r)):
+    raise ValueError(f'need finite (n, k) ranks with n >= 1, got {r.shape}')
+  if np.any((r < 0) | (r > 1)):
+    raise ValueError('ranks must lie in [0, 1]')
+  n = r.shape[0]
+  padded = np.concatenate([np.zeros((1, r.shape[1])), r, np.ones((1, r.shape[1]))])
+  out = []
+  for p in probs:
+    if not 0.0 < p < 1.0:
+      raise ValueError(f'probs must lie in (0, 1), got {p}')
+    if p == 0.5:
+      out.append(np.median(r, axis=0))
+      continue
+    k = math.floor((n + 1) * p) if p < 0.5 else math.ceil((n + 1) * p)
+    out.append(padded[min(max(k, 0), n + 1)])
+  return np.stack(out)
+
+
+def quantiles(draws, cdf_levels) -> np.ndarray:
+  """Per column, the draws' quantiles at that column's CDF levels.
+
+  Args:
+    draws: (S, k) posterior draws.
+    cdf_levels: (m, k) levels (``levels``' output), or (m,) for every column.
+
+  Returns:
+    (m, k) quantiles.
+  """
+  draws = np.asarray(draws, np.float64)
+  lv = np.asarray(cdf_levels, np.float64)
+  if lv.ndim == 1:
+    lv = np.repeat(lv[:, None], draws.shape[1], axis=1)
+  if lv.shape[1] != draws.shape[1]:
+    raise ValueError(f'levels for {lv.shape[1]} columns, draws have {draws.shape[1]}')
+  return np.stack(
+    [np.quantile(draws[:, j], np.clip(lv[:, j], 0.0, 1.0)) for j in range(lv.shape[1])],
+    axis=1,
+  )
+
+
+def nominal_levels(probs=PROBS) -> np.ndarray:
+  """(len(probs),) the levels of an uncalibrated posterior: the probs themselves."""
+  return np.asarray(probs, np.float64)
+
+
+def interval_score(lo, hi, truth, level: float) -> np.ndarray:
+  """Gneiting & Raftery's (2007) interval score of central intervals (lower is
+  better): the width plus ``2 / (1 - level)`` times how far the truth lies
+  outside. It rewards narrow intervals only while they keep their coverage."""
+  lo, hi, truth = (np.asarray(a, np.float64) for a in (lo, hi, truth))
+  alpha = 1.0 - level
+  return (
+    (hi - lo)
+    + (2.0 / alpha) * np.maximum(lo - truth, 0.0)
+    + (2.0 / alpha) * np.maximum(truth - hi, 0.0)
+  )

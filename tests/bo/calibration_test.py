@@ -1,0 +1,113 @@
+"""Tests of bo.calibration: ranks and order statistics by hand, and recalibrated
+intervals on a Gaussian problem whose exact posterior is known in closed form.
+
+The problem: theta ~ N(0, 1), y ~ N(theta, SIGMA^2), so theta | y ~ N(m, s^2)
+with m = y / (1 + SIGMA^2), s^2 = SIGMA^2 / (1 + SIGMA^2). An approximate
+posterior that is too narrow, too wide or shifted is recalibrated on
+``_N_CAL`` problems and checked on ``_N_TEST`` held-out ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bo import calibration
+
+_SIGMA = 0.5
+_N_CAL, _N_TEST, _DRAWS = 300, 2000, 2000
+# Binomial sd of a coverage over _N_TEST problems: 0.011 at 50%, 0.0067 at 90%;
+# the calibration set's own randomness adds about sqrt(a(1-a)/_N_CAL) (0.029,
+# 0.017). Four combined sds:
+_TOL = {0.5: 0.12, 0.9: 0.075}
+
+
+def test_ranks_by_hand():
+  draws = np.array([[0.0, 1.0], [1.0, 1.0], [2.0, 1.0], [3.0, 1.0]])
+  r = calibration.ranks(draws, np.array([1.5, 1.0]))
+  np.testing.assert_allclose(r, [0.5, 0.5])  # 2 of 4 below; 4 ties count half
+  np.testing.assert_allclose(calibration.ranks(draws, np.array([-1.0, 9.0])), [0, 1])
+  with pytest.raises(ValueError, match='need draws'):
+    calibration.ranks(draws, np.zeros(3))
+
+
+def test_levels_are_the_conformal_order_statistics():
+  r = np.arange(1, 20)[:, None] / 20.0  # n = 19 ranks 0.05 .. 0.95
+  lv = calibration.levels(r, (0.05, 0.5, 0.95))[:, 0]
+  # (n + 1) p = 1 and 19: the 1st and 19th smallest; the median is the 10th
+  np.testing.assert_allclose(lv, [0.05, 0.5, 0.95])
+  lv = calibration.levels(r[:9], (0.05, 0.95))[:, 0]  # (n + 1) p = 0.5, 9.5
+  np.testing.assert_allclose(lv, [0.0, 1.0])  # too few problems: the whole posterior
+  with pytest.raises(ValueError, match=r'\[0, 1\]'):
+    calibration.levels(r + 1.0)
+  with pytest.raises(ValueError, match='probs'):
+    calibration.levels(r, (0.0, 0.5))
+
+
+def test_quantiles_per_column():
+  draws = np.stack([np.linspace(0, 1, 101), np.linspace(0, 10, 101)], axis=1)
+  q = calibration.quantiles(draws, np.array([[0.1, 0.5], [0.9, 1.0]]))
+  np.testing.assert_allclose(q, [[0.1, 5.0], [0.9, 10.0]], atol=1e-12)
+
+
+def test_defensive_mixture_holds_the_share_of_prior_draws():
+  post, prior = np.zeros((980, 2)), np.ones((50, 2))
+  mix = calibration.defensive(post, prior, share=0.02)
+  assert mix.shape == (1000, 2)  # 980 * 0.02 / 0.98 = 20 prior rows
+  assert np.mean(mix[:, 0]) == pytest.approx(0.02)
+  with pytest.raises(ValueError, match='share'):
+    calibration.defensive(post, prior, share=1.0)
+  with pytest.raises(ValueError, match='do not match'):
+    calibration.defensive(post, np.ones((5, 3)))
+
+
+def test_interval_score_by_hand():
+  # width 2; the truth 1 above the upper bound costs 2 / 0.1 * 1 = 20
+  assert calibration.interval_score(0.0, 2.0, 3.0, 0.9) == pytest.approx(22.0)
+  assert calibration.interval_score(0.0, 2.0, 1.0, 0.9) == pytest.approx(2.0)
+
+
+def _problems(rng, n, scale, shift):
+  """Truths and draws of an approximate posterior N(m + shift s, (scale s)^2)."""
+  theta = rng.standard_normal(n)
+  y = theta + _SIGMA * rng.standard_normal(n)
+  s = np.sqrt(_SIGMA**2 / (1 + _SIGMA**2))
+  m = y / (1 + _SIGMA**2)
+  draws = m + shift * s + scale * s * rng.standard_normal((_DRAWS, n))
+  return theta, draws  # (n,), (S, n)
+
+
+def _coverage(theta, draws, cdf_levels):
+  """Per level of ``PROBS``' intervals (50%, 90%): share of truths inside."""
+  lv = np.asarray(cdf_levels)
+  q = np.stack([np.quantile(draws[:, i], lv) for i in range(len(theta))])  # (n, 5)
+  out = {}
+  for a, (lo, hi) in ((0.5, (1, 3)), (0.9, (0, 4))):
+    out[a] = np.mean((q[:, lo] <= theta) & (theta <= q[:, hi]))
+  return out
+
+
+@pytest.mark.parametrize(
+  'scale, shift',
+  [(0.5, 0.0), (2.0, 0.0), (1.0, 0.8), (1.0, 0.0)],
+  ids=['too narrow', 'too wide', 'shifted', 'exact'],
+)
+def test_recalibrated_intervals_cover_held_out_problems(scale, shift):
+  rng = np.random.default_rng(0)
+  theta, draws = _problems(rng, _N_CAL, scale, shift)
+  r = np.array([calibration.ranks(draws[:, i : i + 1], theta[i : i + 1])[0]
+                for i in range(_N_CAL)])  # fmt: skip
+  lv = calibration.levels(r[:, None])[:, 0]
+  theta, draws = _problems(rng, _N_TEST, scale, shift)
+  raw = _coverage(theta, draws, calibration.nominal_levels())
+  cal = _coverage(theta, draws, lv)
+  for a in (0.5, 0.9):
+    assert abs(cal[a] - a) < _TOL[a], (a, cal, raw)
+  if (scale, shift) != (1.0, 0.0):  # the test has something to fix
+    assert max(abs(raw[a] - a) for a in (0.5, 0.9)) > 0.1, raw
+  else:  # an exact posterior keeps about its own levels
+    np.testing.assert_allclose(lv, calibration.PROBS, atol=0.06)
+  # The recalibrated median is the exact posterior median: for a shifted
+  # posterior its CDF level moves by Phi(-shift) (0.21 at 0.8).
+  if shift:
+    assert lv[2] == pytest.approx(0.212, abs=0.06)
