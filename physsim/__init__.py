@@ -13,9 +13,10 @@ Public API::
 
   ds = physsim.dataset.open_dataset('data/sim')   # 16-bit mm PNG sequences
   v = physsim.load_depth_video('capture/', source_fps=24)  # real depth video
+  mesh = physsim.devices.world_mesh()             # worlds split over local devices
 """
 
-from physsim import camera, dataset, motion, params, render, sensor, video
+from physsim import camera, dataset, devices, motion, params, render, sensor, video
 from physsim.camera import (
   Intrinsics,
   Pose,
@@ -85,6 +86,7 @@ __all__ = [
   'camera',
   'dataset',
   'depth_image',
+  'devices',
   'fabric',
   'face_wind_forces',
   'from_unit',

@@ -35,6 +35,7 @@ import numpy as np
 from physsim import forces
 from physsim import params as params_lib
 from physsim.cloth import ClothModel, build, reference_rigidity
+from physsim.devices import mesh_key, shard_worlds, world_mesh
 
 # A vertex further than this from its rest position, or faster than this, means
 # the integration blew up (the cloth is 1 m; real flapping is a few m/s).
@@ -494,14 +495,19 @@ def rollout_fn(
   return model.programs[key]
 
 
-def mjx_program(model: ClothModel, frames: int = 60, fps: float = 20.0, warmup=1.0):
+def mjx_program(
+  model: ClothModel, frames: int = 60, fps: float = 20.0, warmup=1.0, devices=None
+):
   """The jitted MJX rollout ``(WorldInputs) -> (positions, valid)`` that
-  ``simulate`` runs (kept with the model; exposed for benchmarks and tests)."""
+  ``simulate`` runs, its worlds split over ``devices`` (default: every local
+  device; ``physsim.devices``). Kept with the model; exposed for benchmarks
+  and tests."""
   substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
-  key = ('jit', frames, substeps, warm_frames)
+  mesh = world_mesh(devices)
+  key = ('jit', frames, substeps, warm_frames, mesh_key(mesh))
   if key not in model.programs:
     fn = rollout_fn(model, frames=frames, fps=fps, warmup=warmup, backend='mjx')
-    model.programs[key] = jax.jit(fn)
+    model.programs[key] = jax.jit(shard_worlds(fn, mesh))
   return model.programs[key]
 
 
@@ -529,6 +535,7 @@ def simulate(
   space: params_lib.SearchSpace | None = None,
   workers: int | None = None,
   material: str | Sequence[str] | None = None,
+  devices: Sequence[jax.Device] | None = None,
 ) -> Rollout:
   """Simulates a batch of parameter sets (host in, host out).
 
@@ -550,6 +557,8 @@ def simulate(
       means; default the model's. MuJoCo's bending stencil is linear in the
       rigidity, so one compiled model simulates every material of the same
       mesh: worlds of different fabrics share a batch and nothing recompiles.
+    devices: the devices the MJX backend splits the worlds over (default:
+      every local device, e.g. all GPUs of the machine).
 
   Returns:
     ``Rollout`` with positions (B, T, V, 3) and validity (B,).
@@ -574,7 +583,7 @@ def simulate(
   times = np.arange(frames) / fps
   if backend == 'mjx':
     w = world_inputs(model, *params, keys, wind, ratio)
-    xs, valid = mjx_program(model, frames, fps, warmup)(w)
+    xs, valid = mjx_program(model, frames, fps, warmup, devices)(w)
     return Rollout(np.asarray(xs), np.asarray(valid), times)
   # The oracle keeps float64 parameters and masses (the gusts are float32).
   w = world_inputs(model, *params, keys, wind, ratio)._asdict()

@@ -50,8 +50,10 @@ class Config:
     cloth_resolution: cloth vertices per side.
     seed: the only seed.
     backend: ``'auto'`` (MJX on a GPU, else MuJoCo C), ``'mjx'`` or ``'c'``.
-    batch_size: worlds simulated and rendered at once. The sequences of all
-      materials, in order, are grouped in fixed chunks of this size (one
+    batch_size: worlds simulated at once, split over every local device
+      (``physsim.devices``: with N GPUs give N times the one-GPU batch);
+      rendering goes in chunks that fit free device memory. The sequences of
+      all materials, in order, are grouped in fixed chunks of this size (one
       compiled model serves every material), and gusts are drawn per chunk,
       so a resume must use the same batch size (checked).
     workers: processes for the C backend (0: all cores).
@@ -185,10 +187,7 @@ def _frame_cameras(config: Config, draw, render, poses, frames, valid):
     new_poses = jax.tree.map(
       functools.partial(_where_cameras, low), draw(attempt), poses
     )
-    new_depth, new_rgb = (
-      None if x is None else np.asarray(x)
-      for x in jax.block_until_ready(render(new_poses))
-    )
+    new_depth, new_rgb = render(new_poses)
     new_cover = _coverage(new_depth)
     better = low & (new_cover > cover)
     pick = functools.partial(_where_cameras, better)
@@ -302,9 +301,9 @@ def _open_workdir(workdir: str, config: Config, backend: str, params=None) -> di
   )
 
 
-def _renderer(faces, intrinsics, config: Config):
-  """The jitted per-batch render stage: (positions, poses, key, (B, 3) colours)
-  -> depth[, rgb]."""
+def _renderer(faces, intrinsics, config: Config, mesh=None):
+  """The jitted per-batch render stage: (positions, poses, (B,) keys, (B, 3)
+  colours) -> depth[, rgb], its worlds split over ``mesh``'s devices."""
   noise = None
   if config.noise:
     try:
@@ -314,13 +313,14 @@ def _renderer(faces, intrinsics, config: Config):
     noise = sensor.SensorNoise()
   faces = jnp.asarray(faces, jnp.int32)
 
-  @jax.jit
-  def render(positions, poses, key, colors):
+  def render(positions, poses, keys, colors):
     depth = physsim.render_depth(
       positions, faces, intrinsics, poses, method=config.render_method
     )  # (B, C, T, H, W)
-    if noise is not None:
-      depth = sensor.apply_noise_frames(key, depth, intrinsics, noise)
+    if noise is not None:  # each world's own key: the same noise on any devices
+      depth = jax.vmap(lambda k, d: sensor.apply_noise_frames(k, d, intrinsics, noise))(
+        keys, depth
+      )
     rgb = None
     if config.rgb:  # a batch mixes materials: one colour per world
       rgb = physsim.render_rgb8(
@@ -328,7 +328,37 @@ def _renderer(faces, intrinsics, config: Config):
       )  # (B, C, T, H, W, 3)
     return depth, rgb
 
-  return render
+  return jax.jit(physsim.devices.shard_worlds(render, mesh))
+
+
+def _render_chunk(config: Config, batch: int, n_devices: int) -> int:
+  """Worlds rendered per call: what fits in free device memory (each world's
+  frames, colour too, with room for the renderer's buffers), a multiple of
+  the device count, at most the batch."""
+  pixels = config.cameras * config.frames * config.resolution**2
+  per_world = 3 * pixels * (4 + (3 if config.rgb else 0))
+  n = physsim.devices.chunk_size(per_world, cap=batch)
+  return max(n_devices, n // n_devices * n_devices)
+
+
+def _chunked(render, chunk: int):
+  """``render(positions, poses, keys, colors)`` over the worlds in chunks of
+  ``chunk`` (the last one padded with its last world, so one compile serves
+  every call); depth and colour come back as host arrays."""
+
+  def run(positions, poses, keys, colors):
+    b = positions.shape[0]
+    depth, rgb = [], []
+    for start in range(0, b, chunk):
+      idx = np.minimum(np.arange(start, start + chunk), b - 1)
+      take = lambda a: a[idx]  # noqa: B023 - used at once
+      d, c = render(take(positions), jax.tree.map(take, poses), keys[idx], colors[idx])
+      n = min(chunk, b - start)
+      depth.append(np.asarray(d)[:n])
+      rgb.append(None if c is None else np.asarray(c)[:n])
+    return np.concatenate(depth), None if rgb[0] is None else np.concatenate(rgb)
+
+  return run
 
 
 def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str | None:
@@ -397,10 +427,14 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     timestep=config.timestep,
     edge_solref=max(physsim.SimConfig.edge_solref, 2 * config.timestep),
   )
-  render = _renderer(mesh.faces, intrinsics, config)
+  world_mesh = physsim.devices.world_mesh()
+  bs = config.batch_size
+  render = _chunked(
+    _renderer(mesh.faces, intrinsics, config, world_mesh),
+    _render_chunk(config, bs, world_mesh.devices.size),
+  )
   wind = physsim.Wind(gust_intensity=config.gust_intensity)
   root_key = jax.random.key(config.seed)
-  bs = config.batch_size
   # One compiled model for every material (bending is scaled per world), so
   # batches run across materials: jobs are (material index, sequence index).
   model = physsim.build(mesh, config.materials[0], sim_config)
@@ -490,20 +524,19 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       )
       t0 = time.perf_counter()
       colors = jnp.asarray([embedding.rgb_color(n) for n in names], jnp.float32)
-      depth, rgb = jax.block_until_ready(render(positions, poses, k_noise, colors))
+      noise_keys = jax.random.split(k_noise, len(padded))
+      depth, rgb = render(positions, poses, noise_keys, colors)
       dt = time.perf_counter() - t0
       if seconds['first_render_call'] is None:
         seconds['first_render_call'] = dt  # includes the compile
       else:
         seconds['render'] += dt
         frames_rendered += depth.size // (config.resolution**2)
-      depth = np.asarray(depth)
-      rgb = None if rgb is None else np.asarray(rgb)
       t0 = time.perf_counter()
       poses, depth, rgb, draws, coverage = _frame_cameras(
         config,
         draw,
-        functools.partial(render, positions, key=k_noise, colors=colors),
+        functools.partial(render, positions, keys=noise_keys, colors=colors),
         poses,
         (depth, rgb),
         out.valid,

@@ -43,9 +43,6 @@ from experiments.pipeline.posterior import Measured
 from experiments.pipeline.recording import Recording
 
 BACKENDS = ('auto', 'mjx', 'c')
-# Pixels of frames scored at once (render, sensor, network): the first conv's
-# activations are 32 floats per pixel, so about 8 GiB of them at this budget.
-_FRAME_BUDGET_PIXELS = 1 << 26
 DISTANCES = ('energy', 'centroid')
 POINTS = ('median', 'argmin')
 LIKELIHOODS = ('gibbs', 'threshold')
@@ -380,7 +377,14 @@ class Objective:
       problem.data.poses.position.shape[0],
       (problem.intr.height, problem.intr.width),
     )
-    self._chunk = max(1, _FRAME_BUDGET_PIXELS // (cams * problem.n_frames * h * w))
+    # Worlds scored at once per device (render, sensor, network), from the
+    # device's free memory: the network's activations dominate.
+    per_world = cams * problem.n_frames * h * w * _bytes_per_pixel(net.params)
+    self._chunk = physsim.devices.chunk_size(per_world)
+    # The worlds of a call split over every local device (MJX); MuJoCo C runs
+    # on the host through a callback, whose process pool is the parallelism.
+    mjx = physsim.resolve_backend(c.backend) == 'mjx'
+    self.world_mesh = physsim.devices.world_mesh() if mjx else None
     self._program = jax.jit(
       self._fused, static_argnames=('with_frames', 'with_positions')
     )
@@ -398,21 +402,16 @@ class Objective:
       )
     return frames
 
-  def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
-             with_positions):  # fmt: skip
-    p, q = u.shape[:2]
-    x = physsim.params.from_unit_traced(
-      u, data.lo[:, None], data.hi[:, None], data.log[:, None]
-    ).reshape(p * q, 3)  # (Pq, 3) physical
-    ratio = jnp.repeat(data.rigidity_ratio, q)
+  def _worlds(self, data: ProblemData, x, ratio, gust_keys, owner, noise_keys):
+    """One device's worlds: simulate, render, sense, embed and score each
+    against its problem's recording. Returns PSDs (B,), validity (B,) and
+    positions (B, T, V, 3) (the rest mesh where a world blew up)."""
     w = physsim.world_inputs(
-      self.cloth, x[:, 0], x[:, 1], x[:, 2], gust_keys.reshape(-1), self._wind, ratio
+      self.cloth, x[:, 0], x[:, 1], x[:, 2], gust_keys, self._wind, ratio
     )
-    positions, valid = self._rollout(w)  # (Pq, T, V, 3), (Pq,)
+    positions, valid = self._rollout(w)  # (B, T, V, 3), (B,)
     rest = jnp.asarray(self.mesh.vertices, positions.dtype)
     positions = jnp.where(valid[:, None, None, None], positions, rest)
-    owner = jnp.arange(p * q) // q  # each world's problem
-    noise_keys = noise_keys.reshape(-1)
     net = self._net
 
     def score(args):  # one world: render, sense, embed with its problem's net, PSD
@@ -425,9 +424,26 @@ class Objective:
       pts = pts.reshape(-1, pts.shape[-1])  # cameras pooled
       return model_lib.psd.psd(pts, data.rec_points[i], self._distance)
 
-    # Worlds in chunks of about a frame budget: the network's activations of
+    # Worlds in chunks sized from free memory: the network's activations of
     # every frame at once would not fit (paper size: ~8 MB per frame).
     d = jax.lax.map(score, (owner, positions, noise_keys), batch_size=self._chunk)
+    return d, valid, positions
+
+  def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
+             with_positions):  # fmt: skip
+    p, q = u.shape[:2]
+    x = physsim.params.from_unit_traced(
+      u, data.lo[:, None], data.hi[:, None], data.log[:, None]
+    ).reshape(p * q, 3)  # (Pq, 3) physical
+    ratio = jnp.repeat(data.rigidity_ratio, q)
+    owner = jnp.arange(p * q) // q  # each world's problem
+    noise_keys = noise_keys.reshape(-1)
+    worlds = physsim.devices.shard_worlds(
+      self._worlds, self.world_mesh, replicated=(0,)
+    )
+    d, valid, positions = worlds(
+      data, x, ratio, gust_keys.reshape(-1), owner, noise_keys
+    )
     d = d.reshape(p, q)
     ok = valid.reshape(p, q) & jnp.isfinite(d)
     d = jnp.where(ok, d, jnp.nan)
@@ -485,6 +501,17 @@ class Objective:
       out.get('frames'),
       out.get('positions'),
     )
+
+
+def _bytes_per_pixel(params) -> int:
+  """Working memory per rendered pixel while a frame is sensed and embedded:
+  float32 activations of the widest convolution, in and out, plus the
+  renderer's and sensor's buffers."""
+  widest = max(
+    (leaf.shape[-1] for leaf in jax.tree.leaves(params) if np.ndim(leaf) == 4),
+    default=32,
+  )
+  return 4 * 2 * (int(widest) + 16)
 
 
 def stack(datas: list[ProblemData]) -> ProblemData:

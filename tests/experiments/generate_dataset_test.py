@@ -5,6 +5,8 @@ import json
 import os
 import shutil
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -180,3 +182,29 @@ def test_min_coverage_redraws_only_poorly_framed_cameras(tmp_path):
         assert got[c] > cover[seq][c]  # the best draw is kept
         assert new.meta['extrinsics'][c] != ref[seq].meta['extrinsics'][c]
   assert redrawn == 1 and s['cameras_redrawn'] == 1
+
+
+def test_rendering_split_over_devices_and_chunks_equals_one_call():
+  # The sweep renders its batch over both CPU devices (conftest) in chunks that
+  # fit memory; sensor noise is drawn per world, so neither changes a frame.
+  config = dataclasses.replace(_SMOKE, noise=True, rgb=True, resolution=24, frames=3)
+  mesh = physsim.square(6)
+  intr = physsim.Intrinsics(width=24, height=24)
+  b = 5
+  rng = np.random.default_rng(0)
+  positions = np.broadcast_to(mesh.vertices, (b, 3, *mesh.vertices.shape)).copy()
+  positions[..., 1] += 0.05 * rng.standard_normal(positions.shape[:-1])
+  positions = positions.astype(np.float32)
+  poses = jax.vmap(lambda k: physsim.sample_poses(k, 2))(
+    jax.random.split(jax.random.key(1), b)
+  )
+  keys = jax.random.split(jax.random.key(2), b)
+  colors = jnp.full((b, 3), 0.5)
+  whole = gd._renderer(mesh.faces, intr, config)(positions, poses, keys, colors)
+  split = gd._chunked(
+    gd._renderer(mesh.faces, intr, config, physsim.devices.world_mesh()), 2
+  )(positions, poses, keys, colors)
+  assert split[0].shape == (b, 2, 3, 24, 24) and split[1].shape == (b, 2, 3, 24, 24, 3)
+  np.testing.assert_allclose(split[0], np.asarray(whole[0]), atol=1e-6)
+  np.testing.assert_array_equal(split[1], np.asarray(whole[1]))
+  assert gd._render_chunk(config, 30, 2) % 2 == 0

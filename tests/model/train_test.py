@@ -26,6 +26,11 @@ _CONFIG = model.TrainConfig(
   eval_triplets=500,
   max_to_keep=5,
 )
+# One batch split over two devices vs whole on one: float32 sums in another
+# order, through 2 epochs of Adam. Losses agree closely; Adam divides by the
+# gradient's own scale, so where a gradient is near zero round-off can move a
+# parameter by up to the learning rate (1e-3) per step.
+_PARALLEL_RTOL, _PARALLEL_ATOL = 1e-4, 5e-3
 # A learnt embedding should order held-out triplets far above chance (0.5).
 _MIN_TOY_ACCURACY = 0.9
 
@@ -192,6 +197,27 @@ class CheckpointTest(absltest.TestCase):
           part,
           progress=False,
         )
+
+  def test_a_batch_split_over_devices_trains_as_on_one(self):
+    # conftest gives two CPU devices: fit splits each batch of 8 over both by
+    # default; the same global batch on one device gives the same update up
+    # to the order of float32 sums.
+    self.assertLen(jax.local_devices(), 2)
+    self.assertIsNotNone(train.data_parallel(_CONFIG.batch_size))
+    self.assertIsNone(train.data_parallel(7))  # 2 does not divide 7
+    self.assertIsNone(train.data_parallel(8, jax.local_devices()[:1]))
+    images, labels = toy_set(per_label=8)
+    with tempfile.TemporaryDirectory() as wd:
+      kw = dict(progress=False)
+      two = model.fit(images, labels, labels, _CONFIG, os.path.join(wd, 'two'), **kw)
+      one = model.fit(images, labels, labels, _CONFIG, os.path.join(wd, 'one'),
+                      devices=jax.local_devices()[:1], **kw)  # fmt: skip
+    loss = lambda r: [h['loss'] for h in r.history if 'loss' in h]
+    np.testing.assert_allclose(loss(two), loss(one), rtol=_PARALLEL_RTOL)
+    jax.tree.map(
+      lambda a, b: np.testing.assert_allclose(a, b, atol=_PARALLEL_ATOL),
+      two.state.params, one.state.params,
+    )  # fmt: skip
 
   def test_validation_split_holds_out_training_simulations(self):
     _, labels = toy_set(per_label=2)

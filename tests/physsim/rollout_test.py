@@ -63,6 +63,22 @@ def test_mjx_matches_mujoco_c(model, batch, mjx_out):
   assert np.median(err) < _PARITY_MEDIAN_TOL
 
 
+# The same worlds on one device and split over two (conftest gives two CPU
+# devices): the same float32 operations per world, up to the order XLA picks.
+_SHARDING_TOL = 1e-5  # m
+
+
+def test_worlds_split_over_devices_move_as_on_one(model, batch, mjx_out):
+  assert len(jax.local_devices()) == 2  # mjx_out ran split (5 worlds padded to 6)
+  one = sim.simulate(
+    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0,
+    wind=physsim.Wind(gust_intensity=0.2), key=jax.random.key(7),
+    devices=jax.local_devices()[:1],
+  )  # fmt: skip
+  np.testing.assert_array_equal(one.valid, mjx_out.valid)
+  np.testing.assert_allclose(one.positions, mjx_out.positions, atol=_SHARDING_TOL)
+
+
 def test_total_mass_is_area_times_area_weight(model):
   moving = model.vert_qadr >= 0
   for w in (0.1, 0.2, 0.37):

@@ -1,0 +1,58 @@
+"""Tests of physsim.devices: the world axis split over two CPU devices (as
+conftest makes them) against the same function on one, and memory budgets."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from physsim import devices
+
+_TOL = 1e-6
+
+
+def _per_world(x, keys, scale):
+  """A per-world function with a replicated argument and PRNG keys."""
+  noise = jax.vmap(lambda k: jax.random.normal(k, (3,)))(keys)
+  return {'y': jnp.tanh(x @ scale) + noise, 'n': jnp.sum(x, axis=1)}
+
+
+@pytest.mark.parametrize('b', [1, 3, 4, 7])
+def test_split_worlds_equal_one_device(b):
+  mesh = devices.world_mesh()
+  assert mesh.devices.size == 2
+  rng = np.random.default_rng(b)
+  x = jnp.asarray(rng.standard_normal((b, 4)), jnp.float32)
+  keys = jax.random.split(jax.random.key(0), b)
+  scale = jnp.asarray(rng.standard_normal((4, 3)), jnp.float32)
+  want = jax.jit(_per_world)(x, keys, scale)
+  fn = jax.jit(devices.shard_worlds(_per_world, mesh, replicated=(2,)))
+  got = fn(x, keys, scale)
+  for k in want:
+    assert got[k].shape == want[k].shape
+    np.testing.assert_allclose(got[k], want[k], atol=_TOL)
+
+
+def test_one_device_is_the_function_itself():
+  assert devices.shard_worlds(_per_world, None) is _per_world
+  mesh = devices.world_mesh(jax.local_devices()[:1])
+  assert devices.shard_worlds(_per_world, mesh) is _per_world
+  assert devices.mesh_key(mesh) == (jax.local_devices()[0].id,)
+
+
+def test_disagreeing_world_counts_are_refused():
+  fn = devices.shard_worlds(lambda a, b: a + b, devices.world_mesh())
+  with pytest.raises(ValueError, match='world count'):
+    jax.jit(fn)(jnp.zeros((3, 2)), jnp.zeros((4, 2)))
+
+
+def test_padding_and_chunk_sizes_by_hand():
+  assert devices.padded(5, 2) == 6 and devices.padded(6, 4) == 8
+  # half of 10 GiB free, 1 GiB per item: 5 items; at least 1; at most the cap
+  gib = 1 << 30
+  assert devices.chunk_size(gib, free=10 * gib) == 5
+  assert devices.chunk_size(100 * gib, free=10 * gib) == 1
+  assert devices.chunk_size(gib, free=10 * gib, cap=3) == 3
+  with pytest.raises(ValueError, match='bytes_per_item'):
+    devices.chunk_size(0)
+  assert devices.free_bytes() > 0  # the host's available memory on a CPU
