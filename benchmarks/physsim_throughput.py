@@ -1,16 +1,25 @@
-"""Cloth simulation throughput: MJX (impl='warp') batched vs MuJoCo C, side by side.
+"""Cloth simulation throughput: the project's MJX rollout vs MuJoCo Warp called
+directly and MuJoCo C, side by side in one process.
 
 Prints a markdown table and writes JSON. World-steps/s counts one MuJoCo step of
 one cloth (with the JAX or NumPy wind and bending forces of that step). Compile
 time is reported apart from run time. The paper's dataset is 7 materials x 30
 parameter sets x 3 s (plus our 1 s warm-up from rest).
 
+``--direct`` adds MuJoCo Warp called directly on the same MjModel (the copy MJX
+runs, so its kernels are compiled once): the same worlds, solver and settings,
+``mjw.step`` in a loop captured as one CUDA graph, a constant force in place of
+the project's per-step wind and bending (which MuJoCo Warp alone does not
+have); the project's rollout at the same batch is compared with it.
+
   python benchmarks/physsim_throughput.py --batch_sizes=1,8,64 --out=out/physsim_cpu.json
+  python benchmarks/physsim_throughput.py --batch_sizes=210,1024 --direct --paper_dataset
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import json
 import multiprocessing
 import os
@@ -39,6 +48,9 @@ flags.DEFINE_string('solver', None, "override the solver ('CG' or 'Newton')")
 flags.DEFINE_float(
   'edge_solref', None, "override the edges' constraint time constant, s"
 )
+flags.DEFINE_float('tolerance', None, "override the solver's relative tolerance")
+flags.DEFINE_enum('graph_mode', None, ['jax', 'warp'], "override MJX's graph mode")
+flags.DEFINE_bool('direct', False, 'also time MuJoCo Warp called directly (module doc)')
 flags.DEFINE_bool('c_baseline', True, 'also time MuJoCo C on 1 and all cores')
 flags.DEFINE_string('out', 'out/physsim_throughput.json', 'JSON output path')
 
@@ -96,6 +108,53 @@ def _mjx_row(model, b):
     'world_steps_per_s': steps / run_s,
     'valid_fraction': float(np.mean(valid)),
     'edge_strain_p99': edge_strain_p99(model.mesh, xs, valid),
+  }
+
+
+def _direct_row(model, b):
+  """MuJoCo Warp's own step on the same model, ``b`` worlds (module doc)."""
+  import mujoco
+  import warp as wp
+  from mujoco.mjx.third_party import mujoco_warp as mjw
+
+  mjm = model.mj_model
+  mjd = mujoco.MjData(mjm)
+  mujoco.mj_forward(mjm, mjd)
+  m = mjw.put_model(mjm)
+  m.opt.run_collision_detection = False  # as the project's rollout
+  d = mjw.put_data(mjm, mjd, nworld=b, njmax=mjm.nflexedge + 8)
+  bodies = model.vert_body[model.vert_qadr >= 0]
+  x = np.zeros((b, mjm.nbody, 6), np.float32)  # a steady push of half the weight
+  x[:, bodies, 1] = 0.5 * 9.81 * mjm.body_mass[bodies]
+  wp.copy(d.xfrc_applied, wp.array(x, dtype=wp.spatial_vector, device=d.qpos.device))
+  steps = max(1, round(FLAGS.seconds / model.config.timestep))
+  cuda = d.qpos.device.is_cuda
+  t0 = time.perf_counter()
+  if cuda:
+    with wp.ScopedCapture(device=d.qpos.device) as capture:
+      for _ in range(steps):
+        mjw.step(m, d)
+    run = lambda: wp.capture_launch(capture.graph)
+  else:
+    run = lambda: [mjw.step(m, d) for _ in range(steps)]
+  run()
+  wp.synchronize()
+  compile_s = time.perf_counter() - t0  # first pass: kernels, graph, caches
+  times = []
+  for _ in range(FLAGS.repeats):
+    t0 = time.perf_counter()
+    run()
+    wp.synchronize()
+    times.append(time.perf_counter() - t0)
+  run_s = float(np.median(times))
+  qpos = d.qpos.numpy()
+  return {
+    'backend': 'mujoco-warp direct',
+    'batch': b,
+    'compile_s': compile_s,
+    'run_s': run_s,
+    'world_steps_per_s': b * steps / run_s,
+    'valid_fraction': float(np.mean(np.all(np.isfinite(qpos), axis=1))),
   }
 
 
@@ -172,7 +231,8 @@ def main(argv):
     k: v
     for k, v in (
       ('iterations', FLAGS.iterations), ('solver', FLAGS.solver),
-      ('edge_solref', FLAGS.edge_solref),
+      ('edge_solref', FLAGS.edge_solref), ('tolerance', FLAGS.tolerance),
+      ('graph_mode', FLAGS.graph_mode),
     )
     if v
   }  # fmt: skip
@@ -184,6 +244,12 @@ def main(argv):
   for b in map(int, FLAGS.batch_sizes):
     rows.append(_mjx_row(model, b))
     print(rows[-1], flush=True)
+    if FLAGS.direct:
+      rows.append(_direct_row(model, b))
+      rows[-2]['x_direct'] = (
+        rows[-2]['world_steps_per_s'] / rows[-1]['world_steps_per_s']
+      )
+      print(rows[-1], flush=True)
   paper_steps = _PAPER_SEQUENCES * (_PAPER_SECONDS + _WARMUP) / model.config.timestep
   for r in rows:
     r['paper_dataset_s'] = paper_steps / r['world_steps_per_s']
@@ -198,6 +264,8 @@ def main(argv):
     'resolution': FLAGS.resolution,
     'timestep': model.config.timestep,
     'solver': f'{model.config.solver} x{model.config.iterations}',
+    'sim_config': dataclasses.asdict(model.config),
+    'devices': [str(d) for d in jax.local_devices()],
     'rows': rows,
   }
   if FLAGS.paper_dataset:
@@ -207,15 +275,15 @@ def main(argv):
     f'{result["solver"]}, device {device}, {cores} CPU cores'
   )
   print(
-    '| backend | batch | world-steps/s | x C all cores | compile s | paper dataset s '
-    '| valid | edge strain p99 |'
+    '| backend | batch | world-steps/s | x C all cores | x MuJoCo Warp direct | '
+    'compile s | paper dataset s | valid | edge strain p99 |'
   )
-  print('|---|---:|---:|---:|---:|---:|---:|---:|')
+  print('|---|---:|---:|---:|---:|---:|---:|---:|---:|')
   for r in rows:
     print(
       f'| {r["backend"]} | {r["batch"]} | {r["world_steps_per_s"]:,.0f} | '
-      f'{r["world_steps_per_s"] / c_all:.2f} | {r["compile_s"]:.1f} | '
-      f'{r["paper_dataset_s"]:,.1f} | {r["valid_fraction"]:.3f} | '
+      f'{r["world_steps_per_s"] / c_all:.2f} | {r.get("x_direct", float("nan")):.2f} | '
+      f'{r["compile_s"]:.1f} | {r["paper_dataset_s"]:,.1f} | {r["valid_fraction"]:.3f} | '
       f'{100 * r.get("edge_strain_p99", float("nan")):.2f}% |'
     )
   if FLAGS.paper_dataset:

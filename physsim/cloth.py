@@ -59,6 +59,13 @@ class SimConfig:
     air_density: ArcSim ``wind.density`` (its default 1, with no 1/2 factor).
     air_drag: ArcSim ``wind.drag`` on the tangential flow (default 0).
     bending_damping: Rayleigh damping on the bending stencil, seconds.
+    tolerance: the solver's relative tolerance (MuJoCo's ``opt.tolerance``):
+      it stops before ``iterations`` once an iteration improves the cost by
+      less than this (MuJoCo Warp exits the whole batch's loop once every
+      world has; at MuJoCo's 1e-8 float32 CG never does).
+    graph_mode: how MJX ``impl='warp'`` captures MuJoCo Warp's kernels:
+      ``'jax'`` (XLA's command buffers) or ``'warp'`` (a CUDA graph per call);
+      only the speed differs.
   """
 
   timestep: float = 0.002
@@ -68,6 +75,8 @@ class SimConfig:
   air_density: float = 1.0
   air_drag: float = 0.0
   bending_damping: float = 0.0
+  tolerance: float = 1e-8
+  graph_mode: str = 'jax'
 
 
 def reference_rigidity(material: str) -> float:
@@ -84,6 +93,11 @@ def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
   """
   if config.solver not in ('CG', 'Newton'):
     raise ValueError(f"solver must be 'CG' or 'Newton', got {config.solver!r}")
+  if config.graph_mode not in ('jax', 'warp') or not 0 <= config.tolerance < 1:
+    raise ValueError(
+      f"need graph_mode 'jax' or 'warp' and 0 <= tolerance < 1, got "
+      f'{config.graph_mode!r}, {config.tolerance}'
+    )
   if not (config.timestep > 0 and config.edge_solref >= 2 * config.timestep):
     raise ValueError(
       f'need timestep > 0 and edge_solref >= 2 * timestep, got '
@@ -95,7 +109,8 @@ def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
   pins = ' '.join(str(i) for i in mesh.pinned)
   return f"""<mujoco model="{mesh.name}">
   <option timestep="{config.timestep}" integrator="Euler" solver="{config.solver}"
-          iterations="{config.iterations}" ls_iterations="10" density="0" viscosity="0"/>
+          iterations="{config.iterations}" ls_iterations="10" tolerance="{config.tolerance:g}"
+          density="0" viscosity="0"/>
   <worldbody>
     <flexcomp name="cloth" type="direct" dim="2" radius="0.002" mass="{mesh.area * 0.2}"
               point="{points}" element="{elements}">

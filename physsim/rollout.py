@@ -235,8 +235,10 @@ def _mjx_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: int
 
   m = model.mj_model
   from mujoco.mjx.third_party import mujoco_warp as mjw
+  from mujoco.mjx.warp import types as mjx_warp_types
 
-  mx = mjx.put_model(m, impl='warp')
+  graph_mode = getattr(mjx_warp_types.GraphMode, model.config.graph_mode.upper())
+  mx = mjx.put_model(m, impl='warp', graph_mode=graph_mode)
   # The cloth has no contacts, and CG stopping at its iteration cap is expected
   # (the cap is the setting we chose): skip the collision pass, keep the other
   # overflow warnings (e.g. constraint buffers).

@@ -17,6 +17,7 @@ from __future__ import annotations
 import concurrent.futures
 import dataclasses
 import functools
+import json
 import os
 import time
 import zlib
@@ -31,7 +32,7 @@ import numpy as np  # noqa: E402
 from absl import logging  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments.pipeline import cli, embedding, files, progress  # noqa: E402
+from experiments.pipeline import cli, distributed, embedding, files, progress  # noqa: E402
 from physsim import dataset  # noqa: E402
 
 
@@ -301,6 +302,31 @@ def _open_workdir(workdir: str, config: Config, backend: str, params=None) -> di
   )
 
 
+def _check_workdir(workdir: str, config: Config, backend: str, params=None) -> None:
+  """What ``_open_workdir`` checks, read-only (processes other than 0)."""
+  info = dataset.read_json(os.path.join(workdir, 'dataset.json'))
+  ident = _identity(config, backend)
+  if params is not None:
+    ident['params'] = {
+      m: np.stack(list(p), 1).round(12).tolist() for m, p in params.items()
+    }
+  if info.get('config') != json.loads(json.dumps(ident)):
+    raise ValueError(f"{workdir}/dataset.json: another config than this process's")
+
+
+def _gathered_counts(workdir: str, materials) -> dict:
+  """Every process's counts summed (``.counts.<i>.json``)."""
+  total = {
+    m: {'existing': 0, 'written': 0, 'valid': 0, 'invalid': 0} for m in materials
+  }
+  for i in range(jax.process_count()):
+    part = dataset.read_json(os.path.join(workdir, f'.counts.{i}.json'))
+    for m, c in part.items():
+      for k, v in c.items():
+        total[m][k] += v
+  return total
+
+
 def _renderer(faces, intrinsics, config: Config, mesh=None):
   """The jitted per-batch render stage: (positions, poses, (B,) keys, (B, 3)
   colours) -> depth[, rgb], its worlds split over ``mesh``'s devices."""
@@ -419,7 +445,15 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   _check_config(config)
   backend = physsim.resolve_backend(config.backend)
   given = _check_params(config, params)
-  _open_workdir(workdir, config, backend, given)
+  # Several processes (jax.distributed) share the batches: process 0 opens
+  # (or checks) the folder first, each writes its batches' sequences, and
+  # process 0 indexes them all once every process is done.
+  many = jax.process_count() > 1
+  if distributed.is_main():
+    _open_workdir(workdir, config, backend, given)
+  distributed.barrier(f'dataset {workdir}: opened')
+  if not distributed.is_main():
+    _check_workdir(workdir, config, backend, given)
   intrinsics = physsim.Intrinsics(width=config.resolution, height=config.resolution)
   mesh = _mesh(config)
   # MuJoCo's stiffest safe constraint time constant is two steps.
@@ -464,9 +498,12 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   }
   frames_rendered = 0
   cameras_redrawn = 0
-  bar = progress.Bar(len(jobs), 'simulate + render', 'seq')
+  mine = distributed.share(list(range(n_batches)))
+  bar = progress.Bar(
+    sum(len(jobs[b * bs : (b + 1) * bs]) for b in mine), 'simulate + render', 'seq'
+  )
   with concurrent.futures.ThreadPoolExecutor(_WRITERS) as writers:
-    for b in range(n_batches):
+    for b in mine:
       chunk = jobs[b * bs : (b + 1) * bs]
       todo = [
         (k, i)
@@ -603,16 +640,25 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       for f in concurrent.futures.as_completed(pending):
         f.result()  # re-raises a failed write
       bar.done(len(pending))
-      dataset.rebuild_index(workdir)
+      if not many:  # one process: the index follows every batch
+        dataset.rebuild_index(workdir)
       seconds['write'] += time.perf_counter() - t0
   bar.close()
-  rows = dataset.rebuild_index(workdir)
+  if many:  # each process's counts, for process 0's summary
+    dataset.write_json_atomic(
+      os.path.join(workdir, f'.counts.{jax.process_index()}.json'), counts
+    )
+  distributed.barrier(f'dataset {workdir}: written')
+  if many:
+    counts = _gathered_counts(workdir, config.materials)
+  main = distributed.is_main()
+  rows = dataset.rebuild_index(workdir) if main else []
   montages = {}
   for material in config.materials:
     mrows = [r for r in rows if r['material'] == material]
     counts[material]['valid'] = sum(r['valid'] for r in mrows)
     counts[material]['invalid'] = sum(not r['valid'] for r in mrows)
-    montages[material] = _montage(workdir, material, mrows)
+    montages[material] = _montage(workdir, material, mrows) if main else None
   total = sum(c['written'] for c in counts.values())
   sim_total = seconds['simulate'] + seconds['simulate_first_batches']
   summary = {
@@ -634,8 +680,11 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       frames_simulated / seconds['simulate'] if seconds['simulate'] else None
     ),
     'montages': montages,
+    'processes': jax.process_count(),
   }
-  dataset.write_json_atomic(os.path.join(workdir, 'summary.json'), summary)
+  if main:
+    dataset.write_json_atomic(os.path.join(workdir, 'summary.json'), summary)
+  distributed.barrier(f'dataset {workdir}: indexed')  # the index is whole for all
   return summary
 
 

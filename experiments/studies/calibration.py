@@ -140,9 +140,10 @@ def _configs(config: Config):
 def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
   """Trains the network, makes the recordings and estimates each (resumable).
 
-  Under several processes (``distributed``) process 0 makes the data, the
-  network and the recordings, each process estimates its share of the
-  recordings, and process 0 gathers every result (the others return []).
+  Under several processes (``distributed``) the processes share the data's
+  and the recordings' simulations, process 0 trains the network, each process
+  estimates its share of the recordings, and process 0 gathers every result
+  (the others return []).
 
   Returns:
     Per recording: ``{'seq', 'truth', 'workdir', 'result'}``.
@@ -150,12 +151,14 @@ def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
   data_cfg, rec_cfg, train_cfg, est = _configs(config)
   model_dir = os.path.join(workdir, 'model', config.material)
   rec_root = os.path.join(workdir, 'recordings')
+  # Every process simulates its share of the data and of the recordings;
+  # process 0 trains the network in between.
+  gen.run(data_cfg, os.path.join(workdir, 'data'))
   if distributed.is_main():
-    gen.run(data_cfg, os.path.join(workdir, 'data'))
     train_lib.run(
       train_cfg, os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
     )
-    gen.run(rec_cfg, rec_root, params={config.material: truths(config)})
+  gen.run(rec_cfg, rec_root, params={config.material: truths(config)})
   distributed.barrier('calibration: network and recordings made')
   index = physsim.dataset.open_dataset(rec_root)
   rows = sorted(index.filter(material=config.material).rows, key=lambda r: r['seq_id'])
