@@ -16,7 +16,7 @@ R=${1:-/tmp/one}
 REC=${2:-$R/eval/fabrics/gray_interlock/0000}
 GI=gray_interlock
 SETTINGS=${SETTINGS:-default,gp_on_gpu,q8_init8}
-export PYTHONPATH=${PYTHONPATH:-/tmp/site:$PWD} PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
+export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 mkdir -p "$R/logs"
 T0=$SECONDS
 note() { echo "$((SECONDS - T0)) s: $*" >>"$R/status.txt"; }

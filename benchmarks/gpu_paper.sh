@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The paper-size pipeline on every GPU of one machine, as one background job:
-#   1. the paper dataset (depth + RGB) and the real-like evaluation set;
+#   1. the paper dataset (depth + RGB) and the real-like evaluation set, each
+#      one process whose worlds are split over every GPU;
 #   2. Table 1's simulation-split networks (four columns x seven fabrics) as one
 #      program in NG processes joined by jax.distributed (experiments.launch),
 #      each training its share; then one estimate timed after compile
@@ -34,24 +35,23 @@ fi
 [[ $COLUMNS == *rgb* ]] && DS_ARGS="$DS_ARGS --rgb"
 [ "${NOISE:-0}" = 1 ] && DS_ARGS="$DS_ARGS --noise"  # train on sensor-model frames
 note "start: $NG GPUs; columns $COLUMNS; table1 $T1_ARGS"
-# 1. The training set and the evaluation set side by side (GPUs 0 and 1).
-step 0 dataset 600 python -m experiments.generate_dataset --out="$R/ds" $DS_ARGS &
-step $((1 % NG)) eval_set 600 python -m experiments.make_eval_set --out="$R/eval" $EVAL_ARGS &
-wait
+# 1. The training set and the evaluation set, each one process over every GPU.
+step dataset 600 python -m experiments.generate_dataset --out="$R/ds" $DS_ARGS
+step eval_set 600 python -m experiments.make_eval_set --out="$R/eval" $EVAL_ARGS
 # 2. Table 1's simulation-split networks: one program, NG processes, each its share.
-step all table1 3000 "${LAUNCH[@]}" --command="python -m experiments.table1 \
+step table1 3000 "${LAUNCH[@]}" --command="python -m experiments.table1 \
   --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --columns=$COLUMNS --splits=simulation"
-if [ "$LATENCY" = 1 ]; then  # one estimate after compile, alone on GPU 0
+if [ "$LATENCY" = 1 ]; then  # one estimate after compile
   gi=${FABRICS[1]}
-  step 0 latency 900 python benchmarks/estimate_latency.py \
+  step latency 900 python benchmarks/estimate_latency.py \
     --recording="$R/eval/fabrics/$gi/0000" --material="$gi" $EST_ARGS \
     --model="$R/t1/physnet_depth/simulation/$gi" --out="$R/latency.json" \
     --settings=default,q8_warmup0.5
 fi
 # 3. Tables 2 and 3: every recording x method, each process its share in lockstep.
-step all tables 3000 "${LAUNCH[@]}" --command="python -m experiments.tables \
+step tables 3000 "${LAUNCH[@]}" --command="python -m experiments.tables \
   --eval=$R/eval --models=$R/t1 --workdir=$R/tables --methods=$COLUMNS $EST_ARGS"
 # 4. The random-split runs of Table 1's k-NN column.
-[ "$RANDOM_SPLIT" = 1 ] && step all table1_all 3000 "${LAUNCH[@]}" --command="python -m \
+[ "$RANDOM_SPLIT" = 1 ] && step table1_all 3000 "${LAUNCH[@]}" --command="python -m \
   experiments.table1 --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --columns=$COLUMNS"
 note "all done"

@@ -3,11 +3,12 @@
 #   calibration  experiments.calibrate at the demo's size: 100 pairs of held-out
 #                simulated recordings (the evaluation recipe), coverage and ranks.
 #   paper        a paper-size PhySNet-depth for gray interlock (its 30 training
-#                simulations x 6 cameras x 60 frames at 256x256) and 3 real-like
-#                recordings (generate_dataset --preset=eval);
+#                simulations x 6 cameras x 60 frames at 256x256) and NREC
+#                (default 3) real-like recordings (generate_dataset --preset=eval);
 #   latency      then, on the same machine: benchmarks/estimate_latency.py (the
-#                default posterior and the paper's argmin, after compile) and
-#                Tables 2-style estimates of the 3 recordings with both.
+#                default posterior, and with PAPER=1 the paper's argmin, after
+#                compile) and Tables 2-style estimates of the NREC recordings in
+#                lockstep with the default posterior (and with PAPER=1 the argmin).
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
@@ -28,9 +29,9 @@ else
   CAL="--backend=mjx"
   DS="--materials=$GI --batch_size=30"
   TR="--val_fraction=0.2 --patience=4"
-  EV="--preset=eval --materials=$GI --sequences=3"
+  EV="--preset=eval --materials=$GI --sequences=${NREC:-3} --batch_size=${NREC:-3}"
   EST=""
-  LAT="--backend=mjx --settings=default,paper --repeats=1"
+  LAT="--backend=mjx --settings=default${PAPER:+,paper} --repeats=1"
 fi
 case "$stage" in
   calibration)
@@ -48,7 +49,7 @@ case "$stage" in
     [ -z "${SMOKE:-}" ] && python benchmarks/estimate_latency.py --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
       --model="$R/t1/physnet_depth/simulation/$GI" --out="$OUT/latency.json" $LAT 2>&1 \
       | tee "$OUT/latency.log"
-    for p in paper default; do
+    for p in ${PAPER:+paper} default; do
       pre=$p; [ -n "${SMOKE:-}" ] && pre=smoke
       python -m experiments.tables --eval="$R/eval" --models="$R/t1" --workdir="$R/tables_$p" \
         --methods=physnet_depth --preset=$pre ${EST:+--backend=c} 2>&1 | tail -30 | tee "$OUT/tables_$p.log"

@@ -7,7 +7,7 @@
 # The device image had no working EGL: MuJoCo's own renderer is timed on the CPU
 # only (render_throughput.py there), and MUJOCO_GL=glfw lets mujoco import.
 set -uo pipefail
-export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
+export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 OUT=${OUT:-out/gpu}
 mkdir -p "$OUT"
 step() {  # name seconds command...

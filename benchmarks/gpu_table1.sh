@@ -15,8 +15,8 @@ DS_ARGS="--batch_size=210"
 [ -n "${SMOKE:-}" ] && DS_ARGS="--preset=smoke --sequences=10 --materials=gray_interlock,black_denim"
 [[ $COLUMNS == *rgb* ]] && DS_ARGS="$DS_ARGS --rgb"
 note "start: $NG GPUs; columns $COLUMNS; splits $SPLITS; table1 $T1_ARGS"
-step 0 dataset 900 python -m experiments.generate_dataset --out="$R/ds" $DS_ARGS \
+step dataset 900 python -m experiments.generate_dataset --out="$R/ds" $DS_ARGS \
   || { note "no dataset: stopped"; exit 1; }
-step all table1 3000 "${LAUNCH[@]}" --command="python -m experiments.table1 \
+step table1 3000 "${LAUNCH[@]}" --command="python -m experiments.table1 \
   --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --columns=$COLUMNS --splits=$SPLITS"
 note "all done"

@@ -49,7 +49,9 @@ flags.DEFINE_float(
   'edge_solref', None, "override the edges' constraint time constant, s"
 )
 flags.DEFINE_float('tolerance', None, "override the solver's relative tolerance")
-flags.DEFINE_enum('graph_mode', None, ['jax', 'warp'], "override MJX's graph mode")
+flags.DEFINE_enum(
+  'graph_mode', None, ['auto', 'jax', 'warp'], "override MJX's graph mode"
+)
 flags.DEFINE_bool('direct', False, 'also time MuJoCo Warp called directly (module doc)')
 flags.DEFINE_bool('c_baseline', True, 'also time MuJoCo C on 1 and all cores')
 flags.DEFINE_string('out', 'out/physsim_throughput.json', 'JSON output path')

@@ -3,6 +3,7 @@
   python -m experiments.calibrate --workdir=out/calibration            # GPU: 200 recordings
   python -m experiments.calibrate --workdir=/tmp/cal --preset=smoke    # CPU, minutes
   python -m experiments.calibrate --workdir=out/calibration --install  # ship its coverage
+  python -m experiments.calibrate --workdir=out/calibration --analyse_only  # no simulation
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -28,11 +29,14 @@ class Args:
     workdir: network, recordings, estimates and results (resumed).
     install: copy the held-out coverage into the package, where estimates
       quote it.
+    analyse_only: analyse the estimates the workdir holds, simulating
+      nothing (e.g. searches run on a GPU machine, analysis elsewhere).
     study: what is simulated and estimated.
   """
 
   workdir: str = 'out/calibration'
   install: bool = False
+  analyse_only: bool = False
   study: calibration.Config = calibration.Config()
 
 
@@ -41,7 +45,7 @@ PRESETS = {k: Args(study=v) for k, v in calibration.PRESETS.items()}
 
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
-  calibration.run(args.study, args.workdir)
+  calibration.run(args.study, args.workdir, analyse_only=args.analyse_only)
   if args.install and distributed.is_main():
     shutil.copyfile(
       f'{args.workdir}/{calibration.RESULT_FILE}', report.CALIBRATION_FILE

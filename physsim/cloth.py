@@ -45,6 +45,7 @@ from physsim import materials
 from physsim.mesh import Mesh
 
 _THICKNESS = 1e-3  # m; only the product E t^3 matters for bending.
+GRAPH_MODES = ('auto', 'jax', 'warp')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,8 +65,9 @@ class SimConfig:
       less than this (MuJoCo Warp exits the whole batch's loop once every
       world has; at MuJoCo's 1e-8 float32 CG never does).
     graph_mode: how MJX ``impl='warp'`` captures MuJoCo Warp's kernels:
-      ``'jax'`` (XLA's command buffers) or ``'warp'`` (a CUDA graph per call);
-      only the speed differs.
+      ``'auto'`` (MJX's choice for the device), ``'jax'`` (XLA's command
+      buffers; on a GPU it cannot hold the solver's conditional loop) or
+      ``'warp'`` (a CUDA graph per call); only the speed differs.
   """
 
   timestep: float = 0.002
@@ -76,7 +78,7 @@ class SimConfig:
   air_drag: float = 0.0
   bending_damping: float = 0.0
   tolerance: float = 1e-8
-  graph_mode: str = 'jax'
+  graph_mode: str = 'auto'
 
 
 def reference_rigidity(material: str) -> float:
@@ -93,9 +95,9 @@ def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
   """
   if config.solver not in ('CG', 'Newton'):
     raise ValueError(f"solver must be 'CG' or 'Newton', got {config.solver!r}")
-  if config.graph_mode not in ('jax', 'warp') or not 0 <= config.tolerance < 1:
+  if config.graph_mode not in GRAPH_MODES or not 0 <= config.tolerance < 1:
     raise ValueError(
-      f"need graph_mode 'jax' or 'warp' and 0 <= tolerance < 1, got "
+      f'need graph_mode in {GRAPH_MODES} and 0 <= tolerance < 1, got '
       f'{config.graph_mode!r}, {config.tolerance}'
     )
   if not (config.timestep > 0 and config.edge_solref >= 2 * config.timestep):

@@ -237,7 +237,10 @@ def _mjx_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: int
   from mujoco.mjx.third_party import mujoco_warp as mjw
   from mujoco.mjx.warp import types as mjx_warp_types
 
-  graph_mode = getattr(mjx_warp_types.GraphMode, model.config.graph_mode.upper())
+  mode = model.config.graph_mode
+  graph_mode = (
+    None if mode == 'auto' else getattr(mjx_warp_types.GraphMode, mode.upper())
+  )
   mx = mjx.put_model(m, impl='warp', graph_mode=graph_mode)
   # The cloth has no contacts, and CG stopping at its iteration cap is expected
   # (the cap is the setting we chose): skip the collision pass, keep the other

@@ -254,8 +254,10 @@ def _score(draws_phys: np.ndarray, prior_phys: np.ndarray, truth_row: np.ndarray
 
 
 def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
-               n: int = 2000) -> dict[str, list[dict]]:  # fmt: skip
-  """Every recording's scores under each mode, at one likelihood setting."""
+               n: int = 2000, pairs: bool = True) -> dict[str, list[dict]]:  # fmt: skip
+  """Every recording's scores under each mode, at one likelihood setting
+  (``pairs``: recordings 2k and 2k+1 share bending and area weight, and
+  their joint posterior is scored too)."""
   space = physsim.search_space(config.material)
   grid = tuple(config.estimate.posterior_grid)
   points = bo.posterior.grid_points(grid)
@@ -286,7 +288,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
       draws = _physical_with_ratio(_draws(rng, grid, np.asarray(post), n), space)
       score = _score(draws, prior_draws[mode], row, r['seq'])
       out[mode].append({'seq': r['seq'], 'truth': row, **score})
-    mate = by_seq.get(r['seq'] ^ 1)  # the pair's other recording
+    mate = by_seq.get(r['seq'] ^ 1) if pairs else None  # the pair's other recording
     if mate is not None and r['seq'] % 2 == 0:
       zm = _saved(mate['workdir'])
       j = posterior_lib.joint(
@@ -466,11 +468,39 @@ def _coverage_of(summary: dict) -> dict:
   } if summary else {}  # fmt: skip
 
 
-def run(config: Config, workdir: str) -> dict:
-  """The whole study; writes ``calibration.json``, ``calibration.md`` and figures."""
+def saved_runs(workdir: str) -> list[dict]:
+  """The finished estimates a study's workdir holds (``estimates/<seq>/``
+  with ``estimate.json`` and ``posterior.npz``), as ``simulate_and_estimate``
+  returns them: the analysis can run on another machine than the searches.
+
+  Raises:
+    ValueError: no finished estimate there.
+  """
+  root = os.path.join(workdir, 'estimates')
+  runs = []
+  for seq in sorted(os.listdir(root)) if os.path.isdir(root) else []:
+    wd = os.path.join(root, seq)
+    est = os.path.join(wd, search.ESTIMATE_FILE)
+    if (
+      seq.isdigit()
+      and os.path.isfile(est)
+      and os.path.isfile(os.path.join(wd, search.POSTERIOR_FILE))
+    ):
+      runs.append(
+        {'seq': int(seq), 'truth': recording_lib.read_json(est)['truth'], 'workdir': wd}
+      )
+  if not runs:
+    raise ValueError(f'{root}: no finished estimates to analyse')
+  return runs
+
+
+def run(config: Config, workdir: str, analyse_only: bool = False) -> dict:
+  """The whole study (or, with ``analyse_only``, its analysis of the
+  estimates ``workdir`` already holds); writes ``calibration.json``,
+  ``calibration.md`` and figures."""
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
-  runs = simulate_and_estimate(config, workdir)
+  runs = saved_runs(workdir) if analyse_only else simulate_and_estimate(config, workdir)
   if not distributed.is_main():
     return {}
   analysis = analyse(config, runs)

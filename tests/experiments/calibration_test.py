@@ -217,3 +217,17 @@ def test_recalibrated_summaries_read_the_defensive_mixture_at_the_levels():
   plain = posterior_lib.summarise(post, space, prior)  # nominal levels, no mixture
   w = np.quantile(calibration._physical_with_ratio(post, space)[:, 1], [0.05, 0.95])
   np.testing.assert_allclose(plain['wind_speed']['interval_90'], w, rtol=1e-12)
+
+
+def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
+  # The analysis can run apart from the searches (--analyse_only).
+  with pytest.raises(ValueError, match='no finished estimates'):
+    calibration.saved_runs(str(tmp_path))
+  config = calibration.Config(pairs=2, estimate=EstimateConfig(posterior_grid=GRID))
+  runs = _fake_runs(config, str(tmp_path / 'estimates'))
+  for r in runs[:3]:  # the fourth has no estimate.json: not finished
+    with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
+      json.dump({'truth': r['truth']}, f)
+  got = calibration.saved_runs(str(tmp_path))
+  assert [r['seq'] for r in got] == [0, 1, 2]
+  assert got[1]['truth'] == runs[1]['truth']
