@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh
+from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 AXIS = 'worlds'
@@ -114,6 +114,16 @@ def shard_worlds(
     return jax.tree.map(lambda x: x[:b], out)
 
   return sharded
+
+
+def replicate(tree, mesh: Mesh | None):
+  """``tree`` placed whole on every device of ``mesh`` (unchanged without a
+  mesh of several devices). Arrays committed to one device (a restored
+  checkpoint, another jit's output) cannot enter a program sharded over the
+  mesh; placed like this they can, and shard_map splits them inside."""
+  if mesh is None or mesh.devices.size == 1:
+    return tree
+  return jax.device_put(tree, NamedSharding(mesh, P()))
 
 
 def free_bytes(device: jax.Device | None = None) -> int:

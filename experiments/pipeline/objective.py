@@ -490,10 +490,10 @@ class Objective:
       raise ValueError(
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
-    out = self._program(
-      data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys,
-      with_frames=frames, with_positions=positions,
-    )  # fmt: skip
+    args = physsim.devices.replicate(
+      (data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys), self.world_mesh
+    )
+    out = self._program(*args, with_frames=frames, with_positions=positions)
     out = jax.device_get(out)
     return Scores(
       np.asarray(out['psd'], np.float64),

@@ -56,3 +56,19 @@ def test_padding_and_chunk_sizes_by_hand():
   with pytest.raises(ValueError, match='bytes_per_item'):
     devices.chunk_size(0)
   assert devices.free_bytes() > 0  # the host's available memory on a CPU
+
+
+def test_arrays_committed_to_one_device_enter_a_sharded_program():
+  # A checkpoint's parameters live on device 0; a program sharded over both
+  # devices refuses them as they are and takes them once replicated.
+  mesh = devices.world_mesh()
+  x = jnp.ones((3, 4), jnp.float32)
+  keys = jax.random.split(jax.random.key(1), 3)
+  scale = jax.device_put(jnp.eye(4, 3), jax.local_devices()[0])
+  fn = jax.jit(devices.shard_worlds(_per_world, mesh, replicated=(2,)))
+  with pytest.raises(ValueError, match='incompatible devices'):
+    fn(x, keys, scale)
+  got = fn(*devices.replicate((x, keys, scale), mesh))
+  want = _per_world(x, keys, jnp.eye(4, 3))
+  np.testing.assert_allclose(got['y'], want['y'], atol=_TOL)
+  assert devices.replicate(scale, None) is scale
