@@ -76,21 +76,65 @@ def log_prior(points, space: physsim.SearchSpace, measured: Measured) -> np.ndar
   return out
 
 
+def prior_points(space: physsim.SearchSpace, measured: Measured, n: int = 2001) -> dict:
+  """Per field and for the load ratio, the prior's own least-error point
+  (``bo.calibration.bayes_point``: percent error, the factor for bending),
+  by quadrature: the prior is a product over the fields (uniform in the box,
+  bending log-uniform, times each reading's Gaussian), so each marginal is a
+  1-D integral and the load ratio's a 2-D one.
+
+  Args:
+    space: the search box.
+    measured: the readings in the prior.
+    n: nodes per field.
+  """
+  u = -1.0 + (2.0 * np.arange(n) + 1.0) / n  # cell centres of [-1, 1]
+  nodes, weights = [], []
+  for i in range(3):
+    pts = np.zeros((n, 3))
+    pts[:, i] = u
+    lp = log_prior(pts, space, measured)  # other fields at 0: a constant here
+    nodes.append(physical(pts, space)[:, i])
+    weights.append(np.exp(lp - lp.max()))
+  out = {
+    name: bo.calibration.bayes_point(
+      nodes[i], 'factor' if name == 'bending_scale' else 'relative', weights=weights[i]
+    )
+    for i, name in enumerate(FIELDS)
+  }
+  k = slice(None, None, max(1, n // 301))  # the ratio on a coarser 2-D grid
+  v, w = np.meshgrid(nodes[1][k], nodes[2][k], indexing='ij')
+  wt = np.outer(weights[1][k], weights[2][k])
+  out['load_ratio'] = bo.calibration.bayes_point(
+    physsim.load_ratio(v, w).ravel(), 'relative', weights=wt.ravel()
+  )
+  return out
+
+
 def physical(samples_unit, space: physsim.SearchSpace) -> np.ndarray:
   """(S, 3) unit-cube draws -> (S, 3) physical values in ``FIELDS`` order."""
   p = physsim.params.from_unit(np.clip(samples_unit, -1, 1), space)
   return np.stack([np.ravel(a) for a in p], axis=1)
 
 
-def _stats(
-  x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None
-) -> dict:
-  """Median, central intervals, sd, and how much narrower than the prior.
+_U = (np.arange(400) + 0.5) / 400  # shares of the calibrated distribution
+
+
+def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None,
+           weight: float = 1.0, factor: bool = False,
+           prior_point: float | None = None) -> dict:  # fmt: skip
+  """Median, central intervals, sd, how much narrower than the prior (on a
+  log scale with ``log``), and the point with the least expected error
+  (``bayes``: percent error, or with ``factor`` the factor error), moved
+  towards the prior's own (``prior_point``, default from the ``prior``
+  draws) by ``1 - weight`` (``bo.calibration.shrink``; 1: the posterior's
+  alone).
 
   ``cdf_levels``: the CDF levels of ``bo.calibration.PROBS`` at which to read
   ``x`` (recalibrated); default the probs themselves."""
   probs = bo.calibration.PROBS
-  lv = bo.calibration.nominal_levels() if cdf_levels is None else np.asarray(cdf_levels)
+  nominal = cdf_levels is None
+  lv = bo.calibration.nominal_levels() if nominal else np.asarray(cdf_levels)
   q = np.quantile(x, np.clip(lv, 0.0, 1.0))
   at = lambda p: float(q[probs.index(p)])
   out = {'median': at(0.5), 'std': float(np.std(x))}
@@ -101,11 +145,19 @@ def _stats(
   lo, hi = out['interval_90']
   prior_width = float(np.diff(f(np.quantile(prior, [0.05, 0.95])))[0])
   out['narrowing_90'] = prior_width / max(float(f(hi) - f(lo)), 1e-12)  # 1: the prior's
+  calibrated = x if nominal else np.quantile(x, bo.calibration.warp(_U, lv))
+  loss = 'factor' if factor else 'relative'
+  own = bo.calibration.bayes_point(calibrated, loss)
+  if prior_point is None:
+    prior_point = bo.calibration.bayes_point(prior, loss)
+  out['bayes'] = float(bo.calibration.shrink(own, prior_point, weight, loss))
+  out['bayes_weight'] = float(weight)
   return out
 
 
 def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
-              recalibration: dict | None = None) -> dict:  # fmt: skip
+              recalibration: dict | None = None, weights: dict | None = None,
+              measured: Measured | None = None) -> dict:  # fmt: skip
   """Physical summaries of posterior draws, each beside the prior's.
 
   Args:
@@ -116,12 +168,17 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
       on simulations (``bo.calibration``), or None. With it, each quantity is
       read from the posterior's defensive mixture with the prior at those
       levels, as the calibration read it; without, at the nominal levels.
+    weights: ``{field: weight}`` of each posterior point against the prior's
+      own (``bo.calibration.choose_weight`` on the calibration), or None (1).
+    measured: the readings in the prior, for its own points by quadrature
+      (``prior_points``); None: from the prior draws.
 
   Returns:
     ``{field: stats, 'load_ratio': stats}``; stats hold ``median``,
-    ``interval_50``, ``interval_90``, ``std`` and ``narrowing_90`` (the
+    ``interval_50``, ``interval_90``, ``std``, ``narrowing_90`` (the
     prior's 90% width over the posterior's, log scale for bending and the
-    ratio: 1 means the data told nothing).
+    ratio: 1 means the data told nothing) and ``bayes`` (the value with the
+    least expected percent error, factor error for bending).
   """
   with_ratio = lambda p: np.concatenate(
     [p, physsim.load_ratio(p[:, 1], p[:, 2])[:, None]], axis=1
@@ -129,12 +186,15 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
   post = with_ratio(physical(samples_unit, space))
   prior = with_ratio(physical(prior_unit, space))
   names = [*FIELDS, 'load_ratio']
+  points = None if measured is None else prior_points(space, measured)
   if recalibration is not None:
     post = bo.calibration.defensive(post, prior)
   return {
     name: _stats(
       post[:, i], prior[:, i], log=name in ('bending_scale', 'load_ratio'),
       cdf_levels=None if recalibration is None else recalibration[name],
+      weight=(weights or {}).get(name, 1.0), factor=name == 'bending_scale',
+      prior_point=None if points is None else points[name],
     )
     for i, name in enumerate(names)
   }  # fmt: skip

@@ -181,6 +181,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1):
     'matches': True, **head, 'mode': mode, 'recalibrated': True,
     'n_calibration_recordings': rec['n_calibration_recordings'],
     'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
+    'weights': rec.get('weights', {}).get(mode, {}),
     'coverage': {
       f: {k: held[f][k] for k in ('interval_50', 'interval_90')} for f in rec['fields']
     },
@@ -207,12 +208,13 @@ def report_table(result: dict) -> str:
   centre = space.center()
   retrieval = result.get('network_retrieval_vs_chance', {})
   truth = result.get('truth')
-  posterior = result.get('point', 'argmin') == 'median'
+  posterior = result.get('point', 'argmin') != 'argmin'
   rows = list(physsim.Params._fields) + ['load_ratio']
   head = ['parameter']
   head += ['true'] if truth else []
   if posterior:
-    head += ['median', '50% interval', '90% interval', 'prior/posterior width']
+    point = 'least expected error' if result.get('point') == 'bayes' else 'median'
+    head += [point, '50% interval', '90% interval', 'prior/posterior width']
   else:
     head += ['estimated (argmin)', 'GP 90% interval (not calibrated)']
   head += ['range centre'] if truth else []

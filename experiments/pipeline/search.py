@@ -541,14 +541,17 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True) ->
     jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
   )
   note = report.calibration_note(config)
-  summary = posterior_lib.summarise(res.samples, space, prior, _levels(note))
-  # The point: each parameter's (recalibrated) median, in the unit cube.
-  point = physsim.params.make(*(summary[f]['median'] for f in posterior_lib.FIELDS))
+  summary = posterior_lib.summarise(
+    res.samples, space, prior, _levels(note), _weights(note), config.measured
+  )
+  # The point: each parameter's (recalibrated) median or Bayes point.
+  which = 'bayes' if config.point == 'bayes' else 'median'
+  point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
   median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
   estimate = {}
   for name in posterior_lib.FIELDS:
     s = summary[name]
-    estimate[name] = {'value': s['median'], **s}
+    estimate[name] = {'value': s[which], **s}
   files.write_atomic(
     os.path.join(workdir, POSTERIOR_FILE),
     lambda p: np.savez(
@@ -568,7 +571,7 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True) ->
   return {
     'point_unit': np.ravel(median).tolist(),
     'estimate': estimate,
-    'load_ratio': {'value': summary['load_ratio']['median'], **summary['load_ratio']},
+    'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
     'noise_sd_log_psd': res.noise_sd,
     'interval_meaning': 'central credible intervals of the posterior given the '
     'video (and any measured wind or area weight)'
@@ -585,6 +588,11 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True) ->
 def _levels(note: dict | None) -> dict | None:
   """The recalibrated CDF levels a calibration note carries (it matched), else None."""
   return note.get('levels') if note and note.get('matches') else None
+
+
+def _weights(note: dict | None) -> dict | None:
+  """The calibrated weights of the posterior's points (it matched), else None."""
+  return note.get('weights') if note and note.get('matches') else None
 
 
 JOINT_FILE = 'joint.json'
@@ -626,8 +634,10 @@ def estimate_joint(
     raise ValueError(
       f'a joint estimate needs two or more recordings, got {len(recordings)}'
     )
-  if config.point != 'median':
-    raise ValueError("a joint estimate combines posteriors: use point='median'")
+  if not config.posterior:
+    raise ValueError(
+      "a joint estimate combines posteriors: use point='median' or 'bayes'"
+    )
   if config.measured.wind_speed_sd > 0:
     raise ValueError(
       "a measured wind is one recording's: estimate that recording alone, or "
@@ -654,7 +664,9 @@ def estimate_joint(
   levels = _levels(note)
   per = []
   for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):
-    s = posterior_lib.summarise(samples, space, prior, levels)
+    s = posterior_lib.summarise(
+      samples, space, prior, levels, _weights(note), config.measured
+    )
     per.append({
       'recording': job.recording.source,
       'alone': results[k]['estimate'],
@@ -667,7 +679,9 @@ def estimate_joint(
       os.path.join(workdir, f'joint_recording_{k}.png'),
       title=f'{config.material}: joint posterior, recording {k}',
     )  # fmt: skip
-  shared = posterior_lib.summarise(combined['samples'][0], space, prior, levels)
+  shared = posterior_lib.summarise(
+    combined['samples'][0], space, prior, levels, _weights(note), config.measured
+  )
   out = {
     'material': config.material,
     'recordings': per,

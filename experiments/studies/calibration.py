@@ -35,6 +35,7 @@ them.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import time
 
@@ -197,6 +198,9 @@ def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
 # CDF levels, so intervals at any (recalibrated) level come without redrawing.
 _QGRID = np.linspace(0.0, 1.0, 1001)
 _LOG_FIELDS = ('bending_scale', 'load_ratio')  # compared on a log scale
+# The error each point is judged by: bending as a factor, the rest in percent
+# (the load ratio too, as the tables report it).
+_LOSS = {f: 'factor' if f == 'bending_scale' else 'relative' for f in FIELDS}
 
 
 def _saved(workdir: str) -> dict:
@@ -232,24 +236,32 @@ def _truth_row(t: dict) -> np.ndarray:
                   + [physsim.load_ratio(t['wind_speed'], t['area_weight'])])  # fmt: skip
 
 
-def _measured_prior(
-  points, space, name: str, truth: dict, sd: float, rng
-) -> np.ndarray:
-  """The log prior of a reading of ``name`` with relative error ``sd``."""
+def _reading(name: str, truth: dict, sd: float, seed: int, seq: int):
+  """A reading of ``name`` with relative error ``sd`` around the truth, the
+  same for a recording whatever likelihood setting is being analysed."""
+  rng = np.random.default_rng([seed, 13, seq, FIELDS.index(name)])
   v = truth[name] * (1.0 + sd * rng.standard_normal())
-  m = posterior_lib.Measured(**{name: v, f'{name}_sd': sd * truth[name]})
-  return posterior_lib.log_prior(points, space, m)
+  return posterior_lib.Measured(**{name: v, f'{name}_sd': sd * truth[name]})
+
+
+@functools.lru_cache(maxsize=4096)
+def _prior_point(material: str, measured: posterior_lib.Measured) -> np.ndarray:
+  """The prior's own least-error points in ``FIELDS`` order (quadrature)."""
+  p = posterior_lib.prior_points(physsim.search_space(material), measured, n=1001)
+  return np.array([p[f] for f in FIELDS])
 
 
 def _score(draws_phys: np.ndarray, prior_phys: np.ndarray, truth_row: np.ndarray,
-           seed: int) -> dict:  # fmt: skip
+           seed: int, prior_point: np.ndarray) -> dict:  # fmt: skip
   """The truth's rank and the quantile function, per field, of the posterior's
   defensive mixture with its prior (``bo.calibration.defensive``, as an
-  estimate reads it); intervals at any level are read off it later."""
+  estimate reads it); intervals at any level are read off it later. With
+  the prior's own least-error point (the reading's, for a measured mode)."""
   mix = bo.calibration.defensive(draws_phys, prior_phys, seed=seed)
   return {
     'rank': bo.calibration.ranks(mix, truth_row),
     'qf': np.quantile(mix, _QGRID, axis=0),  # (len(_QGRID), fields)
+    'prior_point': prior_point,
   }
 
 
@@ -269,16 +281,14 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     t = r['truth']
     row = _truth_row(t)
     ll = _log_lik(z, form, sharpness)
-    base = posterior_lib.log_prior(points, space, posterior_lib.Measured())
-    priors = {
-      'video': base,
-      'known wind': _measured_prior(
-        points, space, 'wind_speed', t, config.measured_sd, rng
-      ),
-      'known area weight': _measured_prior(
-        points, space, 'area_weight', t, config.measured_sd, rng
-      ),
+    sd = config.measured_sd
+    measured = {
+      'video': posterior_lib.Measured(),
+      'known wind': _reading('wind_speed', t, sd, config.seed, r['seq']),
+      'known area weight': _reading('area_weight', t, sd, config.seed, r['seq']),
     }
+    priors = {m: posterior_lib.log_prior(points, space, v) for m, v in measured.items()}
+    base = priors['video']
     prior_draws = {
       mode: _physical_with_ratio(_draws(rng, grid, lp, n // 4), space)
       for mode, lp in priors.items()
@@ -286,7 +296,8 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     for mode, lp in priors.items():
       post = bo.posterior.log_normalise(lp + ll)
       draws = _physical_with_ratio(_draws(rng, grid, np.asarray(post), n), space)
-      score = _score(draws, prior_draws[mode], row, r['seq'])
+      point = _prior_point(config.material, measured[mode])
+      score = _score(draws, prior_draws[mode], row, r['seq'], point)
       out[mode].append({'seq': r['seq'], 'truth': row, **score})
     mate = by_seq.get(r['seq'] ^ 1) if pairs else None  # the pair's other recording
     if mate is not None and r['seq'] % 2 == 0:
@@ -298,7 +309,8 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
       for k, (rr, samples) in enumerate(zip((r, mate), j['samples'], strict=True)):
         trow = _truth_row(rr['truth'])
         draws = _physical_with_ratio(samples, space)
-        score = _score(draws, prior_draws['video'], trow, rr['seq'])
+        point = _prior_point(config.material, measured['video'])
+        score = _score(draws, prior_draws['video'], trow, rr['seq'], point)
         out['joint pair'].append({'seq': rr['seq'], 'pair_member': k, 'truth': trow,
                                   **score})  # fmt: skip
   return out
@@ -330,11 +342,15 @@ def recalibration(scores: list[dict]) -> np.ndarray:
   return bo.calibration.levels(np.stack([s['rank'] for s in scores]))
 
 
-def summarise(scores: list[dict], space: physsim.SearchSpace, cdf_levels=None) -> dict:
+def summarise(
+  scores: list[dict], space: physsim.SearchSpace, cdf_levels=None, bayes: bool = True
+) -> dict:
   """Coverage, rank uniformity, point errors and interval scores over
   recordings, per field, with intervals and point read at ``cdf_levels``
   (``(len(PROBS), fields)``; a score's own ``'levels'`` wins; default the
-  nominal levels: uncalibrated)."""
+  nominal levels: uncalibrated). With ``bayes``, also the error of the point
+  that minimises each posterior's expected error (``bo.calibration.bayes_point``
+  on the recalibrated distribution)."""
   if not scores:
     return {}
   probs = bo.calibration.PROBS
@@ -375,7 +391,46 @@ def summarise(scores: list[dict], space: physsim.SearchSpace, cdf_levels=None) -
     else:  # percent
       cell['median_error_pct'] = float(np.mean(100 * np.abs(median[:, i] - t) / t))
       cell['centre_error_pct'] = float(np.mean(100 * np.abs(centre[i] - t) / t))
+    if bayes:  # the least-error point, moved towards the prior's by the weight
+      loss = _LOSS[f]
+      bp = np.array(
+        [_bayes(s, s.get('levels', default)[:, i], i, loss) for s in scores]
+      )
+      pp = np.array([s['prior_point'][i] for s in scores])
+      w = np.array([s.get('weights', {}).get(f, 1.0) for s in scores])
+      pt = bo.calibration.shrink(bp, pp, w, loss)
+      key = 'factor' if loss == 'factor' else 'pct'
+      cell[f'bayes_error_{key}'] = float(np.mean(bo.calibration.error(bp, t, loss)))
+      cell[f'point_error_{key}'] = float(np.mean(bo.calibration.error(pt, t, loss)))
+      cell[f'prior_point_error_{key}'] = float(
+        np.mean(bo.calibration.error(pp, t, loss))
+      )
+      cell['weight'] = float(np.mean(w))
     out[f] = cell
+  return out
+
+
+_U = (np.arange(400) + 0.5) / 400  # shares of the recalibrated distribution
+
+
+def _bayes(score: dict, cdf_levels, i: int, loss: str) -> float:
+  """The Bayes point of field ``i`` of one recording: its quantile function
+  read at the recalibrated levels of evenly spaced shares."""
+  u = bo.calibration.warp(_U, cdf_levels)
+  return bo.calibration.bayes_point(np.interp(u, _QGRID, score['qf'][:, i]), loss)
+
+
+def weights(scores: list[dict], cdf_levels) -> dict[str, float]:
+  """Per field, the weight of the posterior's least-error point against the
+  prior's own (``bo.calibration.choose_weight``) over these recordings, their
+  posteriors read at ``cdf_levels``."""
+  truth = np.stack([s['truth'] for s in scores])
+  out = {}
+  for i, f in enumerate(FIELDS):
+    loss = _LOSS[f]
+    bp = np.array([_bayes(s, np.asarray(cdf_levels)[:, i], i, loss) for s in scores])
+    pp = np.array([s['prior_point'][i] for s in scores])
+    out[f] = bo.calibration.choose_weight(bp, pp, truth[:, i], loss)
   return out
 
 
@@ -401,7 +456,9 @@ def _choose(by_c: dict, space, rows) -> tuple[float, dict]:
     if not mine['video']:
       continue
     recal = {m: recalibration(v) for m, v in mine.items() if v}
-    score = _mean_interval_score(summarise(mine['video'], space, recal['video']))
+    score = _mean_interval_score(
+      summarise(mine['video'], space, recal['video'], bayes=False)
+    )
     if score < best_score:
       best, best_score, best_recal = c, score, recal
   return best, best_recal
@@ -434,13 +491,17 @@ def analyse(config: Config, runs: list[dict]) -> dict:
     for c, scores in by_c.items():
       recal = {m: recalibration(v) for m, v in scores.items() if v}
       sweep[form][c] = {
-        'uncalibrated': {m: summarise(v, space) for m, v in scores.items()},
+        'uncalibrated': {m: summarise(v, space, bayes=False) for m, v in scores.items()},
         'recalibrated_in_sample': {
-          m: summarise(v, space, recal[m]) if v else {} for m, v in scores.items()
+          m: summarise(v, space, recal[m], bayes=False) if v else {}
+          for m, v in scores.items()
         },
         'recalibration': {m: v.tolist() for m, v in recal.items()},
       }  # fmt: skip
-    best[form], _ = _choose(by_c, space, everyone)
+    best[form], recal_all = _choose(by_c, space, everyone)
+    sweep[form][best[form]]['weights'] = {
+      m: weights(by_c[best[form]][m], recal_all[m]) for m in recal_all
+    }
     cov = {c: _coverages(v['uncalibrated']['video']) for c, v in sweep[form].items()}
     never_under[form] = bo.posterior.choose_sharpness(cov, levels)
     # Cross-fitted: each fold read with what the other folds chose.
@@ -451,9 +512,13 @@ def analyse(config: Config, runs: list[dict]) -> dict:
       c_k, recal_k = _choose(by_c, space, train)
       fold_choice[form].append(c_k)
       for m in MODES:
+        if m not in recal_k:
+          continue
+        train_m = [s for s in by_c[c_k][m] if fold_of(s['seq']) != k]
+        w_k = weights(train_m, recal_k[m])
         for s in by_c[c_k][m]:
-          if fold_of(s['seq']) == k and m in recal_k:
-            held[m].append({**s, 'levels': recal_k[m]})
+          if fold_of(s['seq']) == k:
+            held[m].append({**s, 'levels': recal_k[m], 'weights': w_k})
     cross[form] = {m: summarise(v, space) for m, v in held.items()}
   return {
     'sweep': sweep, 'best_sharpness': best, 'folds': folds,
@@ -536,13 +601,19 @@ def result(config: Config, analysis: dict, seconds: float = 0.0) -> dict:
       'probs': list(bo.calibration.PROBS),
       'fields': list(FIELDS),
       'modes': chosen['recalibration'],
+      'weights': chosen['weights'],
       'n_calibration_recordings': raw['video'].get('n', 0),
       'measured_sd': config.measured_sd,
     },
     'held_out': held,
     'held_out_uncalibrated': raw,
     'analysis': analysis,
-    'config': dataclasses.asdict(config),
+    # the settings the searches ran with (the demo's cloth and clock), which
+    # an estimate must share for these tables to apply
+    'config': {
+      **dataclasses.asdict(config),
+      'estimate': dataclasses.asdict(_configs(config)[3]),
+    },  # fmt: skip
     'seconds': seconds,
   }
 
@@ -552,19 +623,27 @@ def _cell(s: dict, raw: dict, f: str) -> str:
     return '- | - | - | -'
   cov = lambda x: f'{100 * x[f]["interval_50"]:.0f}% / {100 * x[f]["interval_90"]:.0f}%'
   if 'median_error_factor' in s[f]:
-    err = (f'x{s[f]["median_error_factor"]:.2f} (x{raw[f]["median_error_factor"]:.2f}; '
-           f'x{s[f]["centre_error_factor"]:.2f})')  # fmt: skip
+    fmt = lambda v: f'x{v:.2f}'
+    key = 'factor'
   else:
-    err = (f'{s[f]["median_error_pct"]:.1f}% ({raw[f]["median_error_pct"]:.1f}%; '
-           f'{s[f]["centre_error_pct"]:.1f}%)')  # fmt: skip
+    fmt = lambda v: f'{v:.1f}%'
+    key = 'pct'
+  err = (f'{fmt(s[f].get("point_error_" + key, float("nan")))} (weight '
+         f'{s[f].get("weight", float("nan")):.2f}) | {fmt(s[f]["median_error_" + key])} | '
+         f'{fmt(raw[f]["median_error_" + key])} | '
+         f'{fmt(s[f].get("prior_point_error_" + key, float("nan")))} | '
+         f'{fmt(s[f]["centre_error_" + key])}')  # fmt: skip
   return f'{cov(s)} | {cov(raw)} | {err} | {raw[f]["rank_chi2"]:.1f}'
 
 
 def table(out: dict) -> str:
   """Markdown: per mode and field, coverage of the 50% / 90% intervals with
-  the recalibration and without, the point's error (recalibrated median;
-  uncalibrated median; range centre), and the uncalibrated ranks' chi^2 (9
-  dof; above 21.7 rejects uniform ranks at 1%)."""
+  the recalibration and without; the mean error (percent; bending as the
+  factor exp|log(est / true)|) of the estimate's point (the least-error point
+  moved towards the prior's own by the weight, cross-fitted), of the
+  recalibrated and the uncalibrated median, of the prior's own point and of
+  the range centre; and the uncalibrated ranks' chi^2 (9 dof; above 21.7
+  rejects uniform ranks at 1%)."""
   rc = out['recalibration']
   lines = [
     f'Simulated recordings: {out["n"]} ({out["setting"]}); each read with the '
@@ -573,9 +652,9 @@ def table(out: dict) -> str:
     f'{rc["n_calibration_recordings"]}',
     '',
     '| mode | parameter | 50% / 90% hold the truth, recalibrated (held out) | '
-    'uncalibrated | '
-    'point error: recalibrated median (median; range centre) | rank chi^2 |',
-    '|---|---|---|---|---|---|',
+    'uncalibrated | mean error: point (weight) | recalibrated median | '
+    "uncalibrated median | prior's point | range centre | rank chi^2 |",
+    '|---|---|---|---|---|---|---|---|---|---|',
   ]
   for mode, s in out['held_out'].items():
     for f in FIELDS:

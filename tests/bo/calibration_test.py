@@ -111,3 +111,34 @@ def test_recalibrated_intervals_cover_held_out_problems(scale, shift):
   # posterior its CDF level moves by Phi(-shift) (0.21 at 0.8).
   if shift:
     assert lv[2] == pytest.approx(0.212, abs=0.06)
+
+
+def test_bayes_point_by_hand():
+  # Relative error: the median weighted by 1/x. Samples 1 and 3 (equal mass):
+  # |c - 1| + |c - 3| / 3 is least at c = 1.
+  x = np.array([1.0] * 50 + [3.0] * 50)
+  assert calibration.bayes_point(x, 'relative') == pytest.approx(1.0)
+  # Factor error on a log-symmetric sample: its geometric centre.
+  y = np.exp(np.linspace(-1, 1, 2001))
+  assert calibration.bayes_point(y, 'factor') == pytest.approx(1.0, rel=0.01)
+  with pytest.raises(ValueError, match='positive'):
+    calibration.bayes_point(np.array([0.0, 1.0]), 'relative')
+
+
+def test_error_and_shrink_by_hand():
+  np.testing.assert_allclose(
+    calibration.error([3.0, 1.0], [2.0, 2.0], 'relative'), [50, 50]
+  )
+  np.testing.assert_allclose(calibration.error(4.0, 1.0, 'factor'), 4.0)
+  assert calibration.shrink(4.0, 1.0, 0.5, 'factor') == pytest.approx(2.0)  # log-midway
+  assert calibration.shrink(4.0, 1.0, 0.5, 'relative') == pytest.approx(2.5)
+
+
+def test_weights_trust_a_posterior_only_where_it_knows_something():
+  rng = np.random.default_rng(0)
+  truth = rng.uniform(1.0, 6.0, 500)
+  prior_point = np.full(500, 3.0)
+  informed = truth * (1 + 0.05 * rng.standard_normal(500))  # 5% error
+  blind = rng.uniform(1.0, 6.0, 500)  # scatter that knows nothing of the truth
+  assert calibration.choose_weight(informed, prior_point, truth, 'relative') == 1.0
+  assert calibration.choose_weight(blind, prior_point, truth, 'relative') == 0.0

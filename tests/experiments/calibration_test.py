@@ -214,6 +214,15 @@ def test_recalibrated_summaries_read_the_defensive_mixture_at_the_levels():
     np.testing.assert_allclose(got[f]['interval_90'], q[[0, 4]], rtol=1e-12)
     np.testing.assert_allclose(got[f]['interval_50'], q[[1, 3]], rtol=1e-12)
     assert got[f]['median'] == pytest.approx(q[2], rel=1e-12)
+  # Weight 0: the prior's own least-error point; 1: the posterior's.
+  zero = posterior_lib.summarise(post, space, prior, levels, dict.fromkeys(levels, 0.0))
+  prior_phys = calibration._physical_with_ratio(prior, space)
+  for i, f in enumerate(calibration.FIELDS):
+    loss = 'factor' if f == 'bending_scale' else 'relative'
+    assert zero[f]['bayes'] == pytest.approx(
+      bo.calibration.bayes_point(prior_phys[:, i], loss), rel=1e-12
+    )
+    assert got[f]['bayes_weight'] == 1.0 and zero[f]['bayes_weight'] == 0.0
   plain = posterior_lib.summarise(post, space, prior)  # nominal levels, no mixture
   w = np.quantile(calibration._physical_with_ratio(post, space)[:, 1], [0.05, 0.95])
   np.testing.assert_allclose(plain['wind_speed']['interval_90'], w, rtol=1e-12)
