@@ -11,6 +11,9 @@ runs, so its kernels are compiled once): the same worlds, solver and settings,
 ``mjw.step`` in a loop captured as one CUDA graph, a constant force in place of
 the project's per-step wind and bending (which MuJoCo Warp alone does not
 have); the project's rollout at the same batch is compared with it.
+``--ablate_forces`` adds the project's rollout with that same constant force in
+place of its JAX wind and bending (an ablation, patched in this benchmark only):
+what the per-step hand-over between JAX and MuJoCo Warp costs without the forces.
 
   python benchmarks/physsim_throughput.py --batch_sizes=1,8,64 --out=out/physsim_cpu.json
   python benchmarks/physsim_throughput.py --batch_sizes=210,1024 --direct --paper_dataset
@@ -26,8 +29,10 @@ import os
 import platform
 import tempfile
 import time
+from unittest import mock
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from absl import app, flags
 
@@ -53,6 +58,9 @@ flags.DEFINE_enum(
   'graph_mode', None, ['auto', 'jax', 'warp'], "override MJX's graph mode"
 )
 flags.DEFINE_bool('direct', False, 'also time MuJoCo Warp called directly (module doc)')
+flags.DEFINE_bool(
+  'ablate_forces', False, "also time the rollout with the direct run's constant force"
+)
 flags.DEFINE_bool('c_baseline', True, 'also time MuJoCo C on 1 and all cores')
 flags.DEFINE_string('out', 'out/physsim_throughput.json', 'JSON output path')
 
@@ -83,6 +91,23 @@ def edge_strain_p99(mesh, xs, valid) -> float:
     return float('nan')
   length = np.linalg.norm(last[:, edges[:, 0]] - last[:, edges[:, 1]], axis=-1)
   return float(np.quantile(np.abs(length / rest - 1), 0.99))
+
+
+def _constant_force(c, model, qpos, qvel, t, w):
+  """The direct run's force (a steady push of half the weight) on the moving
+  vertices, in place of ``rollout._applied_forces`` (same signature)."""
+  del model, qpos, qvel, t
+  lift = 0.5 * 9.81 * w.body_mass[c.body]
+  return jnp.zeros((c.body.shape[0], 3), lift.dtype).at[:, 1].set(lift)
+
+
+def _ablated_row(model, b):
+  """``_mjx_row`` with ``_constant_force`` traced in (programs rebuilt)."""
+  model.programs.clear()
+  with mock.patch.object(sim, '_applied_forces', _constant_force):
+    row = _mjx_row(model, b)
+  model.programs.clear()
+  return {**row, 'backend': 'mjx, constant force (ablation)'}
 
 
 def _mjx_row(model, b):
@@ -247,10 +272,14 @@ def main(argv):
     rows.append(_mjx_row(model, b))
     print(rows[-1], flush=True)
     if FLAGS.direct:
+      mjx_rows = [rows[-1]]
+      if FLAGS.ablate_forces:
+        rows.append(_ablated_row(model, b))
+        mjx_rows.append(rows[-1])
+        print(rows[-1], flush=True)
       rows.append(_direct_row(model, b))
-      rows[-2]['x_direct'] = (
-        rows[-2]['world_steps_per_s'] / rows[-1]['world_steps_per_s']
-      )
+      for r in mjx_rows:
+        r['x_direct'] = r['world_steps_per_s'] / rows[-1]['world_steps_per_s']
       print(rows[-1], flush=True)
   paper_steps = _PAPER_SEQUENCES * (_PAPER_SECONDS + _WARMUP) / model.config.timestep
   for r in rows:
