@@ -48,7 +48,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, distributed, files, search  # noqa: E402
+from experiments.pipeline import cli, distributed, files, report, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo as demo_lib  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
@@ -60,6 +60,7 @@ FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
 LEVELS = (50, 90)
 MODES = ('video', 'known wind', 'known area weight', 'joint pair')
 RESULT_FILE = 'calibration.json'
+CHECK_FILE = 'check.json'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,7 +123,7 @@ def truths(config: Config) -> physsim.Params:
   return physsim.from_unit(u.reshape(-1, 3), physsim.search_space(config.material))
 
 
-def _configs(config: Config):
+def _configs(config: Config, point: str = 'median'):
   data, rec, training, est = demo_lib.configs(
     config.material, config.sequences, config.seed, config.backend
   )
@@ -133,13 +134,16 @@ def _configs(config: Config):
   est = dataclasses.replace(
     config.estimate, material=config.material,
     cloth_resolution=est.cloth_resolution, frames=est.frames, warmup=est.warmup,
-    backend=config.backend, seed=config.seed, point='median',
+    backend=config.backend, seed=config.seed, point=point,
   )  # fmt: skip
   return data, rec, training, est
 
 
-def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
-  """Trains the network, makes the recordings and estimates each (resumable).
+def simulate_and_estimate(
+  config: Config, workdir: str, point: str = 'median'
+) -> list[dict]:
+  """Trains the network, makes the recordings and estimates each (resumable),
+  reporting the estimates' ``point`` (the analysis forms its own points).
 
   Under several processes (``distributed``) the processes share the data's
   and the recordings' simulations, process 0 trains the network, each process
@@ -149,7 +153,7 @@ def simulate_and_estimate(config: Config, workdir: str) -> list[dict]:
   Returns:
     Per recording: ``{'seq', 'truth', 'workdir', 'result'}``.
   """
-  data_cfg, rec_cfg, train_cfg, est = _configs(config)
+  data_cfg, rec_cfg, train_cfg, est = _configs(config, point)
   model_dir = os.path.join(workdir, 'model', config.material)
   rec_root = os.path.join(workdir, 'recordings')
   # Every process simulates its share of the data and of the recordings;
@@ -723,3 +727,192 @@ def plot_sweep(analysis: dict, path: str) -> None:
                title='recalibrated (red: chosen)')  # fmt: skip
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
+
+
+# ------------------------------------------- the shipped tables, held out
+
+
+def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
+  """How often a calibration's intervals hold the truth on ``runs``, recordings
+  it never saw: per mode, each recording's posterior formed from its saved GP
+  at the calibration's likelihood and sharpness and read at its CDF levels
+  with its weights, as an estimate reads it. Nothing is fitted here.
+
+  Returns:
+    ``{mode: summarise(...)}``, each coverage with its 95% binomial interval
+    (``'interval_50_ci'``, ``'interval_90_ci'``).
+
+  Raises:
+    ValueError: the calibration has no tables, or for other quantities.
+  """
+  rc = shipped.get('recalibration')
+  if not rc or tuple(rc['fields']) != FIELDS:
+    raise ValueError(f'the calibration has no recalibration tables for {FIELDS}')
+  space = physsim.search_space(config.material)
+  scores = posteriors(config, runs, shipped['likelihood'], float(shipped['sharpness']))
+  out = {}
+  for mode, v in scores.items():
+    if mode not in rc['modes'] or not v:
+      continue
+    levels = np.asarray(rc['modes'][mode])
+    w = rc.get('weights', {}).get(mode, {})
+    s = summarise([{**x, 'levels': levels, 'weights': w} for x in v], space)
+    for f in FIELDS:
+      for lv in LEVELS:
+        k = round(s[f][f'interval_{lv}'] * s['n'])
+        s[f][f'interval_{lv}_ci'] = list(bo.calibration.binomial_interval(k, s['n']))
+    out[mode] = s
+  return out
+
+
+# estimate.json's error keys, per field
+_ERROR_KEY = {'bending_scale': 'bending_factor', 'wind_speed': 'wind_speed_pct',
+              'area_weight': 'area_weight_pct', 'load_ratio': 'load_ratio_pct'}  # fmt: skip
+
+
+def printed(runs: list[dict]) -> dict:
+  """What the estimates themselves printed (the video alone): how often their
+  50% and 90% intervals held the truth (with 95% binomial intervals), their
+  points' mean errors beside the range centre's, and how many of them applied
+  the shipped tables (an estimate whose settings differ does not).
+
+  Raises:
+    ValueError: no runs, or an estimate without intervals (``--point=argmin``).
+  """
+  if not runs:
+    raise ValueError('no finished estimates to check')
+  rows = []
+  for r in runs:
+    path = os.path.join(r['workdir'], search.ESTIMATE_FILE)
+    e = recording_lib.read_json(path)
+    if 'covered' not in e or 'interval_50' not in e['covered']['wind_speed']:
+      raise ValueError(f'{path}: no credible intervals with a truth to check')
+    rows.append(e)
+  note = lambda e: e.get('calibration') or {}
+  n = len(rows)
+  out = {
+    'n': n,
+    'recalibrated': sum(
+      bool(note(e).get('matches') and note(e).get('recalibrated')) for e in rows
+    ),
+  }
+  for f in FIELDS:
+    cell = {}
+    for lv in LEVELS:
+      k = sum(bool(e['covered'][f][f'interval_{lv}']) for e in rows)
+      cell[f'interval_{lv}'] = k / n
+      cell[f'interval_{lv}_ci'] = list(bo.calibration.binomial_interval(k, n))
+    for who in ('estimate', 'range_centre'):
+      cell[f'{who}_error'] = float(
+        np.mean([e['errors'][who][_ERROR_KEY[f]] for e in rows])
+      )
+    out[f] = cell
+  return out
+
+
+def check(
+  config: Config, workdir: str, shipped_file: str | None = None,
+  analyse_only: bool = False,
+) -> dict:  # fmt: skip
+  """Checks a calibration (default: the shipped one) on recordings it never saw.
+
+  Makes and estimates ``2 * config.pairs`` new recordings as the study does,
+  with ``config.seed`` other than the calibration's (so the network, truths,
+  recordings and searches are all new) and the estimate's own defaults (the
+  Bayes point; the shipped tables applied where the settings match), then
+  reports how often the intervals hold the truth: those the estimates printed
+  (video alone) and every mode's, read from the saved GPs with the
+  calibration's sharpness, levels and weights (``check_analysis``). Writes
+  ``check.json``, ``check.md`` and ``check_ranks.png`` in ``workdir``.
+
+  Raises:
+    ValueError: no calibration there, or ``config.seed`` is its own.
+  """
+  path = shipped_file or report.CALIBRATION_FILE
+  if not os.path.isfile(path):
+    raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
+  shipped = recording_lib.read_json(path)
+  if shipped.get('config', {}).get('seed') == config.seed:
+    raise ValueError(
+      f"seed {config.seed} is the calibration's own ({path}): its recordings "
+      'are not held out; pass another --study.seed'
+    )
+  t0 = time.time()
+  os.makedirs(workdir, exist_ok=True)
+  if analyse_only:
+    runs = saved_runs(workdir)
+  else:
+    runs = simulate_and_estimate(config, workdir, point='bayes')
+  if not distributed.is_main():
+    return {}
+  held = shipped.get('held_out', {})
+  out = {
+    'material': config.material,
+    'seed': config.seed,
+    'n': len(runs),
+    'shipped_file': path,
+    'shipped': {
+      **{k: shipped.get(k) for k in ('setting', 'n', 'likelihood', 'sharpness')},
+      'held_out': {m: _coverage_of(v) for m, v in held.items()},
+    },
+    'printed': printed(runs),
+    'modes': check_analysis(config, runs, shipped),
+    'config': dataclasses.asdict(config),
+    'seconds': time.time() - t0,
+  }
+  files.write_json(os.path.join(workdir, CHECK_FILE), out)
+  text = check_table(out)
+  files.write_text(os.path.join(workdir, 'check.md'), text + '\n')
+  plot_ranks(out['modes'], os.path.join(workdir, 'check_ranks.png'))
+  print(text)
+  return out
+
+
+def _pct_ci(cell: dict, lv: int) -> str:
+  lo, hi = cell[f'interval_{lv}_ci']
+  return f'{100 * cell[f"interval_{lv}"]:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]'
+
+
+def _err(f: str, v: float) -> str:
+  return f'x{v:.2f}' if f == 'bending_scale' else f'{v:.1f}%'
+
+
+def check_table(out: dict) -> str:
+  """Markdown: per mode and quantity, how often the 50% and 90% intervals held
+  the truth on the new recordings (95% binomial intervals in brackets), what
+  the calibration's own cross-fitted coverage promised, and the mean error of
+  the point beside the range centre's; the estimates' printed intervals
+  first."""
+  sh, pr = out['shipped'], out['printed']
+  lines = [
+    f'Calibration checked: {sh["setting"]} (sharpness {sh["sharpness"]:g}, '
+    f'{sh["n"]} calibration recordings) on {out["n"]} recordings it never saw '
+    f'(seed {out["seed"]}); {pr["recalibrated"]} of {pr["n"]} estimates applied '
+    'its tables. Brackets: 95% binomial intervals.',
+    '',
+    '| mode | quantity | 50% hold the truth | 90% hold the truth | '
+    'promised (cross-fitted) | mean error: point | range centre |',
+    '|---|---|---|---|---|---|---|',
+  ]
+  promised = lambda m, f: (
+    '{:.0f}% / {:.0f}%'.format(
+      100 * sh['held_out'][m][f]['interval_50'], 100 * sh['held_out'][m][f]['interval_90']
+    ) if f in sh['held_out'].get(m, {}) else '-'
+  )  # fmt: skip
+  for f in FIELDS:
+    c = pr[f]
+    lines.append(
+      f'| video, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
+      f'{promised("video", f)} | {_err(f, c["estimate_error"])} | '
+      f'{_err(f, c["range_centre_error"])} |'
+    )
+  for mode, s in out['modes'].items():
+    for f in FIELDS:
+      c = s[f]
+      key = 'factor' if f == 'bending_scale' else 'pct'
+      lines.append(
+        f'| {mode} | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
+        f'{promised(mode, f)} | {_err(f, c["point_error_" + key])} | '
+        f'{_err(f, c["centre_error_" + key])} |'
+      )
+  return '\n'.join(lines)

@@ -142,3 +142,22 @@ def test_weights_trust_a_posterior_only_where_it_knows_something():
   blind = rng.uniform(1.0, 6.0, 500)  # scatter that knows nothing of the truth
   assert calibration.choose_weight(informed, prior_point, truth, 'relative') == 1.0
   assert calibration.choose_weight(blind, prior_point, truth, 'relative') == 0.0
+
+
+@pytest.mark.parametrize('k,n', [(90, 100), (27, 30), (30, 30), (0, 12), (5, 18)])
+def test_binomial_interval_matches_scipys_wilson(k, n):
+  from scipy import stats
+
+  want = stats.binomtest(k, n).proportion_ci(confidence_level=0.95, method='wilson')
+  lo, hi = calibration.binomial_interval(k, n)
+  np.testing.assert_allclose([lo, hi], [want.low, want.high], atol=1e-3)  # z=1.96
+  # By hand at the ends: none of n gives [0, z^2 / (n + z^2)].
+  if k == 0:
+    np.testing.assert_allclose(hi, 1.96**2 / (n + 1.96**2), rtol=1e-12)
+    assert lo == 0.0
+
+
+def test_binomial_interval_refuses_impossible_counts():
+  for k, n in ((3, 0), (-1, 5), (6, 5)):
+    with pytest.raises(ValueError, match='0 <= k <= n'):
+      calibration.binomial_interval(k, n)

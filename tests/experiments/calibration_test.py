@@ -30,11 +30,13 @@ A = SN / (2 * S**2 * C_TRUE)  # makes c = C_TRUE exact
 GRID = (20, 20, 20)
 
 
-def _fake_runs(config: calibration.Config, root: str) -> list[dict]:
+def _fake_runs(
+  config: calibration.Config, root: str, noise_seed: int = 1
+) -> list[dict]:
   space = physsim.search_space(config.material)
   truths = calibration.truths(config)
   units = physsim.to_unit(truths, space)
-  rng = np.random.default_rng(1)
+  rng = np.random.default_rng(noise_seed)
   points = bo.posterior.grid_points(GRID)
   runs = []
   for seq, u in enumerate(units):
@@ -240,3 +242,101 @@ def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
   got = calibration.saved_runs(str(tmp_path))
   assert [r['seq'] for r in got] == [0, 1, 2]
   assert got[1]['truth'] == runs[1]['truth']
+
+
+def _tables(sharpness: float, seed: int = 0) -> dict:
+  """A calibration that reads every mode's posterior at the nominal levels,
+  with full weight on the posterior's point (right at the exact sharpness)."""
+  nominal = np.repeat(
+    bo.calibration.nominal_levels()[:, None], len(calibration.FIELDS), axis=1
+  )
+  held = {m: {f: {'interval_50': 0.5, 'interval_90': 0.9} for f in calibration.FIELDS}
+          for m in calibration.MODES}  # fmt: skip
+  return {
+    'n': 200, 'setting': f'gibbs likelihood, sharpness {sharpness:g}, exact',
+    'likelihood': 'gibbs', 'sharpness': sharpness, 'held_out': held,
+    'recalibration': {
+      'fields': list(calibration.FIELDS),
+      'modes': {m: nominal.tolist() for m in calibration.MODES},
+      'weights': {m: dict.fromkeys(calibration.FIELDS, 1.0) for m in calibration.MODES},
+      'n_calibration_recordings': 200, 'measured_sd': 0.02,
+    },
+    'config': {'seed': seed},
+  }  # fmt: skip
+
+
+@pytest.mark.slow
+def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
+  # New recordings (another seed and noise) read with tables calibrated
+  # elsewhere: the exact likelihood's intervals hold the truth as often as
+  # they say; a four-times sharper one's are caught short.
+  config = calibration.Config(
+    pairs=60, seed=1, estimate=EstimateConfig(posterior_grid=GRID)
+  )  # fmt: skip
+  runs = _fake_runs(config, str(tmp_path), noise_seed=2)
+  good = calibration.check_analysis(config, runs, _tables(C_TRUE))
+  bad = calibration.check_analysis(config, runs, _tables(4.0))
+  # 120 recordings in 60 pairs: binomial sd 0.027 at 90%, 0.046 at 50%; the
+  # pairs' shared parameters add to it; 3.5 sd.
+  for mode in calibration.MODES:
+    assert good[mode]['n'] == 120, mode
+    for f in calibration.FIELDS:
+      c = good[mode][f]
+      assert abs(c['interval_90'] - 0.9) < 0.095, (mode, f)
+      assert abs(c['interval_50'] - 0.5) < 0.16, (mode, f)
+      lo, hi = c['interval_90_ci']
+      assert lo < c['interval_90'] < hi or c['interval_90'] == 1.0, (mode, f)
+  for f in physsim.Params._fields:
+    assert bad['video'][f]['interval_90'] < 0.8, f
+    assert bad['video'][f]['interval_90_ci'][1] < 0.9, f  # significantly short
+
+
+def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
+  config = calibration.Config(
+    pairs=5, seed=3, estimate=EstimateConfig(posterior_grid=GRID)
+  )
+  shipped = tmp_path / 'calibration.json'
+  shipped.write_text(json.dumps(_tables(C_TRUE, seed=3)))
+  with pytest.raises(ValueError, match="seed 3 is the calibration's own"):
+    calibration.check(config, str(tmp_path / 'w'), str(shipped), analyse_only=True)
+  shipped.write_text(json.dumps(_tables(C_TRUE, seed=0)))
+  runs = _fake_runs(config, str(tmp_path / 'w' / 'estimates'))
+  # What the estimates printed, by hand: 9 of 10 90% intervals and 4 of 10 50%
+  # intervals hold the truth; 8 of 10 applied the tables.
+  for r in runs:
+    k = r['seq']
+    covered = {
+      f: {'interval_50': k < 4, 'interval_90': k < 9} for f in calibration.FIELDS
+    }
+    errors = {'estimate': {'wind_speed_pct': 10.0 * k, 'area_weight_pct': 5.0,
+                           'bending_factor': 2.0, 'load_ratio_pct': 1.0},
+              'range_centre': {'wind_speed_pct': 40.0, 'area_weight_pct': 9.0,
+                               'bending_factor': 4.0, 'load_ratio_pct': 100.0}}  # fmt: skip
+    est = {'truth': r['truth'], 'covered': covered, 'errors': errors,
+           'calibration': {'matches': k < 8, 'recalibrated': True}}  # fmt: skip
+    with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
+      json.dump(est, f)
+  out = calibration.check(config, str(tmp_path / 'w'), str(shipped), analyse_only=True)
+  pr = out['printed']
+  assert pr['n'] == 10 and pr['recalibrated'] == 8
+  assert (
+    pr['wind_speed']['interval_90'] == 0.9 and pr['load_ratio']['interval_50'] == 0.4
+  )
+  assert pr['wind_speed']['estimate_error'] == pytest.approx(45.0)  # mean of 0..90
+  np.testing.assert_allclose(
+    pr['bending_scale']['interval_90_ci'], bo.calibration.binomial_interval(9, 10)
+  )
+  assert set(out['modes']) == set(calibration.MODES)
+  saved = json.loads((tmp_path / 'w' / calibration.CHECK_FILE).read_text())
+  assert saved['printed'] == pr and saved['n'] == 10
+  text = (tmp_path / 'w' / 'check.md').read_text()
+  assert '| video, as printed | wind_speed | 40% [' in text
+  assert '8 of 10 estimates applied' in text
+  assert (tmp_path / 'w' / 'check_ranks.png').stat().st_size > 0
+  # An estimate without intervals (the paper's argmin) cannot be checked.
+  est = json.loads(open(os.path.join(runs[0]['workdir'], search.ESTIMATE_FILE)).read())
+  del est['covered']
+  with open(os.path.join(runs[0]['workdir'], search.ESTIMATE_FILE), 'w') as f:
+    json.dump(est, f)
+  with pytest.raises(ValueError, match='no credible intervals'):
+    calibration.printed(calibration.saved_runs(str(tmp_path / 'w')))
