@@ -4,8 +4,8 @@
   python -m experiments.calibrate --workdir=/tmp/cal --preset=smoke    # CPU, minutes
   python -m experiments.calibrate --workdir=out/calibration --install  # ship its coverage
   python -m experiments.calibrate --workdir=out/calibration --analyse_only  # no simulation
-  python -m experiments.calibrate --workdir=out/check --check --study.seed=1 \
-      --study.pairs=30                    # the shipped tables on new recordings
+  python -m experiments.calibrate --workdir=out/check --check --seed=1 \
+      --pairs=30                          # the shipped tables on new recordings
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -36,7 +36,7 @@ class Args:
       quote it.
     analyse_only: analyse the estimates the workdir holds, simulating
       nothing (e.g. searches run on a GPU machine, analysis elsewhere).
-    check: check the shipped calibration on new recordings (``study.seed``
+    check: check the shipped calibration on new recordings (``--seed``
       other than its own) instead of calibrating; nothing is fitted.
     study: what is simulated and estimated.
   """

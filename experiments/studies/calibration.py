@@ -835,7 +835,7 @@ def check(
   if shipped.get('config', {}).get('seed') == config.seed:
     raise ValueError(
       f"seed {config.seed} is the calibration's own ({path}): its recordings "
-      'are not held out; pass another --study.seed'
+      'are not held out; pass another --seed'
     )
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
