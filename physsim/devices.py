@@ -116,13 +116,21 @@ def shard_worlds(
   return sharded
 
 
-def replicate(tree, mesh: Mesh | None):
-  """``tree`` placed whole on every device of ``mesh`` (unchanged without a
-  mesh of several devices). Arrays committed to one device (a restored
-  checkpoint, another jit's output) cannot enter a program sharded over the
-  mesh; placed like this they can, and shard_map splits them inside."""
-  if mesh is None or mesh.devices.size == 1:
-    return tree
+def place(tree, mesh: Mesh | None):
+  """``tree`` placed whole where a program over ``mesh`` runs: on every device
+  of a mesh of several (arrays committed to one device, such as another jit's
+  output, cannot enter a program sharded over the mesh; placed like this they
+  can, and shard_map splits them inside); on the one device of a one-device
+  mesh; with no mesh, on the first local device. The last two matter as much:
+  arrays replicated over several devices (a checkpoint restored with its
+  data-parallel training's sharding) spread every program they enter over all
+  of those devices, which then computes everything on each and runs host
+  callbacks on one while the others wait at a collective (XLA's CPU client
+  aborts a collective kept waiting 40 s)."""
+  if mesh is None:
+    return jax.device_put(tree, jax.local_devices()[0])
+  if mesh.devices.size == 1:
+    return jax.device_put(tree, mesh.devices.flat[0])
   return jax.device_put(tree, NamedSharding(mesh, P()))
 
 

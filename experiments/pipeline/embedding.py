@@ -81,7 +81,11 @@ def modality(run_dir: str) -> str:
 
 
 def load_embedding(model_dir: str) -> EmbeddingNet:
-  """Loads any trained run (PhySNet or SDN, depth or RGB).
+  """Loads any trained run (PhySNet or SDN, depth or RGB), its parameters on
+  one device (``physsim.devices.place``): a data-parallel training's
+  checkpoint restores them replicated over its devices, which would spread
+  every inference program over all of them. Programs that split worlds over
+  a mesh place them there themselves.
 
   Raises:
     ValueError: not a trained run, or an unknown modality, naming ``model_dir``.
@@ -92,6 +96,7 @@ def load_embedding(model_dir: str) -> EmbeddingNet:
       f'{model_dir}/{INPUTS_FILE}: modality {mod!r} is none of {MODALITIES}'
     )
   network, params, cfg = model_lib.load_network(model_dir)
+  params = physsim.devices.place(params, None)
   sdn = cfg.network == 'sdn'
   trunk = cfg.sdn.trunk if sdn else cfg.physnet
   return EmbeddingNet(

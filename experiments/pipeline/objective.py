@@ -497,7 +497,7 @@ class Objective:
       raise ValueError(
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
-    args = physsim.devices.replicate(
+    args = physsim.devices.place(
       (data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys), self.world_mesh
     )
     out = self._program(*args, with_frames=frames, with_positions=positions)

@@ -66,6 +66,12 @@ def test_run_records_inputs_and_restores(runs, rgb_dataset, modality):
   # the restored net is the trained one: its embedding differs from a fresh init's
   fresh = network.init(jax.random.PRNGKey(123))
   assert not np.allclose(emb, np.asarray(network.apply(fresh, x[:5])))
+  # Trained data-parallel over both test devices; loaded for inference, its
+  # parameters sit on one (over two, every program using them would run on
+  # each device, host callbacks on one only).
+  net = embedding.load_embedding(run_dir)
+  for leaf in jax.tree.leaves(net.params):
+    assert leaf.devices() == {jax.local_devices()[0]}
 
 
 @pytest.mark.parametrize('modality', train.MODALITIES)

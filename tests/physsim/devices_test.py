@@ -68,7 +68,23 @@ def test_arrays_committed_to_one_device_enter_a_sharded_program():
   fn = jax.jit(devices.shard_worlds(_per_world, mesh, replicated=(2,)))
   with pytest.raises(ValueError, match='incompatible devices'):
     fn(x, keys, scale)
-  got = fn(*devices.replicate((x, keys, scale), mesh))
+  got = fn(*devices.place((x, keys, scale), mesh))
   want = _per_world(x, keys, jnp.eye(4, 3))
   np.testing.assert_allclose(got['y'], want['y'], atol=_TOL)
-  assert devices.replicate(scale, None) is scale
+
+
+def test_without_a_mesh_a_program_runs_on_one_device():
+  # Parameters replicated over both devices (a data-parallel checkpoint)
+  # spread a plain jit over both; placed without a mesh, it runs on one.
+  mesh = devices.world_mesh()
+  scale = devices.place(jnp.eye(4, 3), mesh)
+  assert len(scale.devices()) == 2
+  x = jnp.ones((3, 4), jnp.float32)
+  keys = jax.random.split(jax.random.key(1), 3)
+  spread = jax.jit(_per_world)(x, keys, scale)
+  assert len(spread['y'].devices()) == 2
+  one = jax.jit(_per_world)(*devices.place((x, keys, scale), None))
+  assert one['y'].devices() == {jax.local_devices()[0]}
+  np.testing.assert_allclose(one['y'], spread['y'], atol=_TOL)
+  single = devices.world_mesh(jax.local_devices()[1:])
+  assert devices.place(scale, single).devices() == {jax.local_devices()[1]}
