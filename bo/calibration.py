@@ -165,6 +165,14 @@ def warp(u, cdf_levels, probs=PROBS) -> np.ndarray:
   return np.interp(u, [0.0, *probs, 1.0], [0.0, *np.asarray(cdf_levels), 1.0])
 
 
+def unwarp(rank, cdf_levels, probs=PROBS) -> np.ndarray:
+  """The inverse of ``warp``: a truth's rank under the recalibrated
+  distribution, from its rank ``rank`` among the posterior's draws. Uniform
+  over recordings when the recalibration holds (the check of a calibration
+  on recordings it never saw)."""
+  return np.interp(rank, [0.0, *np.asarray(cdf_levels), 1.0], [0.0, *probs, 1.0])
+
+
 LOSSES = ('relative', 'factor')
 
 

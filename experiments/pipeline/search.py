@@ -191,7 +191,7 @@ class _Search:
     if h is None or not len(h):
       return 'initial design scored'
     q = posterior_lib.physical(h[-1], space)  # (3, 3): 5/50/95% x fields
-    return 'posterior median (90%): ' + ', '.join(
+    return 'posterior so far, before recalibration: median [90%] ' + ', '.join(
       f'{report.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
       for i, f in enumerate(posterior_lib.FIELDS)
     )

@@ -676,8 +676,11 @@ def table(out: dict) -> str:
   return '\n'.join(lines)
 
 
-def plot_ranks(held: dict, path: str) -> None:
-  """Rank histograms of the truth among posterior draws (uniform: calibrated)."""
+def plot_ranks(
+  held: dict, path: str, key: str = 'rank_histogram', xlabel: str = 'rank of the truth'
+) -> None:
+  """Rank histograms of the truth (``key`` of each summary: among the posterior's
+  draws, or under the recalibrated distribution; uniform: calibrated)."""
   fig, axes = plt.subplots(len(MODES), len(FIELDS), figsize=(14, 2.4 * len(MODES)),
                            layout='constrained', squeeze=False)  # fmt: skip
   for r, mode in enumerate(MODES):
@@ -687,10 +690,10 @@ def plot_ranks(held: dict, path: str) -> None:
       if not s:
         ax.axis('off')
         continue
-      h = s[f]['rank_histogram']
+      h = s[f][key]
       ax.bar(np.arange(10) / 10 + 0.05, h, width=0.09, color='C0')
       ax.axhline(s['n'] / 10, color='k', lw=1, ls='--')
-      ax.set(xlim=(0, 1), title=f'{mode}: {f}', xlabel='rank of the truth')
+      ax.set(xlim=(0, 1), title=f'{mode}: {f}', xlabel=xlabel)
       ax.title.set_fontsize(8)
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
@@ -757,7 +760,11 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
     levels = np.asarray(rc['modes'][mode])
     w = rc.get('weights', {}).get(mode, {})
     s = summarise([{**x, 'levels': levels, 'weights': w} for x in v], space)
-    for f in FIELDS:
+    ranks = np.stack([x['rank'] for x in v])  # (n, fields)
+    for i, f in enumerate(FIELDS):
+      r = bo.calibration.unwarp(ranks[:, i], levels[:, i])
+      hist, _ = np.histogram(r, bins=10, range=(0, 1))
+      s[f]['recalibrated_rank_histogram'] = hist.tolist()
       for lv in LEVELS:
         k = round(s[f][f'interval_{lv}'] * s['n'])
         s[f][f'interval_{lv}_ci'] = list(bo.calibration.binomial_interval(k, s['n']))
@@ -863,7 +870,10 @@ def check(
   files.write_json(os.path.join(workdir, CHECK_FILE), out)
   text = check_table(out)
   files.write_text(os.path.join(workdir, 'check.md'), text + '\n')
-  plot_ranks(out['modes'], os.path.join(workdir, 'check_ranks.png'))
+  plot_ranks(
+    out['modes'], os.path.join(workdir, 'check_ranks.png'),
+    key='recalibrated_rank_histogram', xlabel='rank, recalibrated',
+  )  # fmt: skip
   print(text)
   return out
 

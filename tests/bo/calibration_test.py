@@ -161,3 +161,14 @@ def test_binomial_interval_refuses_impossible_counts():
   for k, n in ((3, 0), (-1, 5), (6, 5)):
     with pytest.raises(ValueError, match='0 <= k <= n'):
       calibration.binomial_interval(k, n)
+
+
+def test_unwarp_inverts_warp():
+  levels = np.array([0.01, 0.1, 0.4, 0.9, 0.99])
+  u = np.linspace(0, 1, 41)
+  np.testing.assert_allclose(
+    calibration.unwarp(calibration.warp(u, levels), levels), u, atol=1e-12
+  )
+  # By hand: a rank at the table's 0.1 level is the recalibrated 25% point;
+  # halfway between 0.4 and 0.9 is halfway between 50% and 75%.
+  np.testing.assert_allclose(calibration.unwarp([0.1, 0.65], levels), [0.25, 0.625])

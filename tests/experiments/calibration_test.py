@@ -286,6 +286,8 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
       assert abs(c['interval_50'] - 0.5) < 0.16, (mode, f)
       lo, hi = c['interval_90_ci']
       assert lo < c['interval_90'] < hi or c['interval_90'] == 1.0, (mode, f)
+      hist = c['recalibrated_rank_histogram']  # ranks in [0.1, 0.9]: 80%
+      assert sum(hist) == 120 and abs(sum(hist[1:9]) / 120 - 0.8) < 0.11, (mode, f)
   for f in physsim.Params._fields:
     assert bad['video'][f]['interval_90'] < 0.8, f
     assert bad['video'][f]['interval_90_ci'][1] < 0.9, f  # significantly short
