@@ -11,7 +11,8 @@ What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
 calibration.json``), where every estimate's report quotes it. With
 ``--check`` nothing is fitted: new recordings (another seed) are estimated
-with the estimate's defaults and the shipped tables, and the study reports
+with the estimate's defaults and the shipped tables (``--network_seed``:
+with another network too), and the study reports
 how often their intervals held the truth (``calibration.check``).
 """
 

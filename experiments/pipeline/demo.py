@@ -32,8 +32,14 @@ _CLOTH = 10  # vertices per side
 IMAGE_SIZE = (_RES, _RES)
 
 
-def configs(material: str, sequences: int, seed: int, backend: str):
-  """(training set, recording, training, estimate) configs of the demo."""
+def configs(
+  material: str, sequences: int, seed: int, backend: str, network_seed: int = 0
+):
+  """(training set, recording, training, estimate) configs of the demo.
+
+  ``seed`` draws the recording and seeds the search; ``network_seed`` the
+  training simulations and the network's training (the demo's network: 0).
+  """
   data = dataclasses.replace(
     gen.PRESETS['paper'],
     materials=(material,),
@@ -47,6 +53,7 @@ def configs(material: str, sequences: int, seed: int, backend: str):
     # A few batches, so that the bar shows progress (MuJoCo C runs them at the
     # same speed per world; MJX pays a step per batch, still seconds).
     batch_size=8 if physsim.resolve_backend(backend) == 'c' else sequences,
+    seed=network_seed,
   )
   recording = dataclasses.replace(
     gen.PRESETS['eval'],
@@ -67,6 +74,7 @@ def configs(material: str, sequences: int, seed: int, backend: str):
     epochs=10,
     lr_step_epochs=6,
     batch_size=32,
+    seed=network_seed,
   )
   est = dataclasses.replace(
     EstimateConfig(material=material),

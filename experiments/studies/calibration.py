@@ -79,7 +79,9 @@ class Config:
     sequences: training simulations of the network (the demo's recipe).
     batch_size: recordings simulated per batch when making them.
     backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
-    seed: the study's seed (truths, recordings, network, searches).
+    seed: the study's seed (truths, recordings, searches).
+    network_seed: seed of the network's training simulations and training
+      (0: the demo's own network).
     estimate: the estimate settings (material, cloth and clock follow the
       demo's).
   """
@@ -93,6 +95,7 @@ class Config:
   batch_size: int = 64
   backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
   seed: int = 0
+  network_seed: int = 0
   estimate: EstimateConfig = cli.nested(
     EstimateConfig(q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24)),
     skip=('material', 'cloth_resolution', 'frames', 'warmup', 'backend', 'seed',
@@ -125,8 +128,9 @@ def truths(config: Config) -> physsim.Params:
 
 def _configs(config: Config, point: str = 'median'):
   data, rec, training, est = demo_lib.configs(
-    config.material, config.sequences, config.seed, config.backend
-  )
+    config.material, config.sequences, config.seed, config.backend,
+    config.network_seed,
+  )  # fmt: skip
   n = 2 * config.pairs
   rec = dataclasses.replace(
     rec, sequences=n, batch_size=min(config.batch_size, n), seed=5000 + config.seed
@@ -824,8 +828,9 @@ def check(
   """Checks a calibration (default: the shipped one) on recordings it never saw.
 
   Makes and estimates ``2 * config.pairs`` new recordings as the study does,
-  with ``config.seed`` other than the calibration's (so the network, truths,
-  recordings and searches are all new) and the estimate's own defaults (the
+  with ``config.seed`` other than the calibration's (so the truths, recordings
+  and searches are all new; ``config.network_seed`` other than 0 trains another
+  network too) and the estimate's own defaults (the
   Bayes point; the shipped tables applied where the settings match), then
   reports how often the intervals hold the truth: those the estimates printed
   (video alone) and every mode's, read from the saved GPs with the

@@ -31,6 +31,13 @@ def test_recording_differs_from_training_like_reality_and_search_matches_trainin
   many = demo.configs('black_denim', 24, 3, 'c')[0]
   assert many.batch_size < many.sequences
   assert demo.configs('black_denim', 24, 3, 'mjx')[0].batch_size == 24
+  # The network's seeds are their own: the study's seed changes the
+  # recording and the search, not the network; network_seed the network.
+  other = demo.configs('black_denim', 8, 4, 'c')
+  assert (other[0], other[2]) == (data, training) and other[1].seed != rec.seed
+  d1, r1, t1, e1 = demo.configs('black_denim', 8, 3, 'c', network_seed=1)
+  assert d1.seed != data.seed and t1.fit.seed != training.fit.seed
+  assert (r1, e1) == (rec, est)
 
 
 def test_command_line_takes_the_demo_settings():
