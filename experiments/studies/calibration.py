@@ -626,22 +626,27 @@ def result(config: Config, analysis: dict, seconds: float = 0.0) -> dict:
   }
 
 
+def _pair(cell: dict) -> str:
+  """A quantity's 50% / 90% coverage, in percent."""
+  return f'{100 * cell["interval_50"]:.0f}% / {100 * cell["interval_90"]:.0f}%'
+
+
+def _err(f: str, v: float) -> str:
+  """A mean error as the tables print it: bending a factor, the rest percent."""
+  return f'x{v:.2f}' if f == 'bending_scale' else f'{v:.1f}%'
+
+
 def _cell(s: dict, raw: dict, f: str) -> str:
   if not s:
     return '- | - | - | -'
-  cov = lambda x: f'{100 * x[f]["interval_50"]:.0f}% / {100 * x[f]["interval_90"]:.0f}%'
-  if 'median_error_factor' in s[f]:
-    fmt = lambda v: f'x{v:.2f}'
-    key = 'factor'
-  else:
-    fmt = lambda v: f'{v:.1f}%'
-    key = 'pct'
+  fmt = functools.partial(_err, f)
+  key = 'factor' if f == 'bending_scale' else 'pct'
   err = (f'{fmt(s[f].get("point_error_" + key, float("nan")))} (weight '
          f'{s[f].get("weight", float("nan")):.2f}) | {fmt(s[f]["median_error_" + key])} | '
          f'{fmt(raw[f]["median_error_" + key])} | '
          f'{fmt(s[f].get("prior_point_error_" + key, float("nan")))} | '
          f'{fmt(s[f]["centre_error_" + key])}')  # fmt: skip
-  return f'{cov(s)} | {cov(raw)} | {err} | {raw[f]["rank_chi2"]:.1f}'
+  return f'{_pair(s[f])} | {_pair(raw[f])} | {err} | {raw[f]["rank_chi2"]:.1f}'
 
 
 def table(out: dict) -> str:
@@ -888,10 +893,6 @@ def _pct_ci(cell: dict, lv: int) -> str:
   return f'{100 * cell[f"interval_{lv}"]:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]'
 
 
-def _err(f: str, v: float) -> str:
-  return f'x{v:.2f}' if f == 'bending_scale' else f'{v:.1f}%'
-
-
 def check_table(out: dict) -> str:
   """Markdown: per mode and quantity, how often the 50% and 90% intervals held
   the truth on the new recordings (95% binomial intervals in brackets), what
@@ -910,10 +911,8 @@ def check_table(out: dict) -> str:
     '|---|---|---|---|---|---|---|',
   ]
   promised = lambda m, f: (
-    '{:.0f}% / {:.0f}%'.format(
-      100 * sh['held_out'][m][f]['interval_50'], 100 * sh['held_out'][m][f]['interval_90']
-    ) if f in sh['held_out'].get(m, {}) else '-'
-  )  # fmt: skip
+    _pair(sh['held_out'][m][f]) if f in sh['held_out'].get(m, {}) else '-'
+  )
   for f in FIELDS:
     c = pr[f]
     lines.append(
