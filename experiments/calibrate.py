@@ -4,8 +4,11 @@
   python -m experiments.calibrate --workdir=/tmp/cal --preset=smoke    # CPU, minutes
   python -m experiments.calibrate --workdir=out/calibration --install  # ship its coverage
   python -m experiments.calibrate --workdir=out/calibration --analyse_only  # no simulation
+  python -m experiments.calibrate --workdir=/tmp/cal --simulate_only   # GPU; then copy
+      # /tmp/cal/packed/ to out/calibration/packed/ and --analyse_only there
   python -m experiments.calibrate --workdir=out/check --check --seed=1 \
-      --pairs=30                          # the shipped tables on new recordings
+      --pairs=30 --network_seed=5 --networks=2  # the shipped tables on new
+                                          # recordings and networks it never saw
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -35,8 +38,12 @@ class Args:
     workdir: network, recordings, estimates and results (resumed).
     install: copy the held-out coverage into the package, where estimates
       quote it.
-    analyse_only: analyse the estimates the workdir holds, simulating
-      nothing (e.g. searches run on a GPU machine, analysis elsewhere).
+    analyse_only: analyse the estimates the workdir holds (or those packed
+      in its ``packed/``), simulating nothing (e.g. searches run on a GPU
+      machine, analysis elsewhere).
+    simulate_only: make the networks, recordings and estimates, and pack
+      what the analysis reads into ``<workdir>/packed/`` (a few files):
+      copy that folder to analyse elsewhere with ``--analyse_only``.
     check: check the shipped calibration on new recordings (``--seed``
       other than its own) instead of calibrating; nothing is fitted.
     study: what is simulated and estimated.
@@ -45,6 +52,7 @@ class Args:
   workdir: str = 'out/calibration'
   install: bool = False
   analyse_only: bool = False
+  simulate_only: bool = False
   check: bool = False
   study: calibration.Config = calibration.Config()
 
@@ -55,11 +63,16 @@ PRESETS = {k: Args(study=v) for k, v in calibration.PRESETS.items()}
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
   if args.check:
-    if args.install:
-      raise ValueError('--check fits nothing to --install')
+    if args.install or args.simulate_only:
+      raise ValueError(
+        '--check fits nothing to --install and analyses what it simulates'
+      )
     calibration.check(args.study, args.workdir, analyse_only=args.analyse_only)
     return
-  calibration.run(args.study, args.workdir, analyse_only=args.analyse_only)
+  calibration.run(
+    args.study, args.workdir, analyse_only=args.analyse_only,
+    simulate_only=args.simulate_only,
+  )  # fmt: skip
   if args.install and distributed.is_main():
     shutil.copyfile(
       f'{args.workdir}/{calibration.RESULT_FILE}', report.CALIBRATION_FILE

@@ -164,3 +164,55 @@ def network_retrieval(model_dir: str) -> dict[str, float] | None:
   """
   r = model_lib.selected_eval(model_lib.read_evals(model_dir)).get('test_retrieval')
   return model_lib.retrieval.vs_chance(r) if r else None
+
+
+# What a run's seeds and bookkeeping change: not part of how it was made.
+_NOT_RECIPE = {
+  'training': ('seed', 'log_every', 'max_to_keep', 'eval_batch_size'),
+  'data': ('seed', 'backend', 'batch_size', 'batching'),
+}
+
+
+def network_recipe(model_dir: str) -> dict:
+  """How a trained run was made, apart from its seeds: its training config
+  (``config.json``), what it saw (modality, input mode, fabrics) and the
+  config of the simulations it was trained on (their ``dataset.json``, with
+  the pose ranges; None where that folder is gone). Two networks of one
+  recipe differ only by chance, which a calibration over several of them
+  measures (``experiments.studies.calibration``).
+
+  Raises:
+    ValueError: not a trained run, naming ``model_dir``.
+  """
+  path = os.path.join(model_dir, model_lib.train.CONFIG_FILE)
+  if not os.path.isfile(path):
+    raise ValueError(
+      f'{model_dir}: not a trained run (no {model_lib.train.CONFIG_FILE})'
+    )
+  training = model_lib.config_io.read_json(path)
+  rec = _recorded(model_dir)
+  data = None
+  info_path = os.path.join(rec.get('dataset', ''), 'dataset.json')
+  if rec.get('dataset') and os.path.isfile(info_path):
+    info = dataset.read_json(info_path)
+    data = {**info.get('config', {}), 'pose_ranges': info.get('pose_ranges')}
+    data = {k: v for k, v in data.items() if k not in _NOT_RECIPE['data']}
+  return {
+    'training': {k: v for k, v in training.items() if k not in _NOT_RECIPE['training']},
+    'inputs': {k: rec.get(k) for k in ('modality', 'input_mode', 'materials')},
+    'data': data,
+  }
+
+
+def recipe_differences(mine: dict, theirs: dict) -> list[str]:
+  """Where two ``network_recipe`` s differ, as ``'part.field'`` names (a part
+  that one of them lacks: ``'part'``); [] for one recipe."""
+  out = []
+  for part in sorted(set(mine) | set(theirs)):
+    a, b = mine.get(part), theirs.get(part)
+    if a is None or b is None:
+      if a != b:
+        out.append(part)
+      continue
+    out += [f'{part}.{k}' for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+  return out

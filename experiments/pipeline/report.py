@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import files  # noqa: E402
+from experiments.pipeline import embedding, files  # noqa: E402
 
 LABELS = {
   'bending_scale': 'bending (x measured)',
@@ -131,14 +131,17 @@ def _same(mine, theirs) -> bool:
   return mine == type(mine)(theirs)
 
 
-def calibration_note(config=None, *, joint: bool = False, recordings: int = 1):
+def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
+                     network: dict | None = None):  # fmt: skip
   """What the held-out simulations showed about the intervals, for an
   estimate with ``config`` (``calibration.json``); None when no calibration
   has been run.
 
-  Where every setting that changes the likelihood (``_CALIBRATED_FIELDS``)
-  and the mode (what was measured, a reading's uncertainty within a factor
-  of two of the calibrated one, a joint estimate of two recordings) match,
+  Where every setting that changes the likelihood (``_CALIBRATED_FIELDS``),
+  the mode (what was measured, a reading's uncertainty within a factor of two
+  of the calibrated one, a joint estimate of two recordings) and the
+  network's recipe (``network``: ``embedding.network_recipe`` of the
+  estimate's network; the calibration's networks were all made so) match,
   the note carries the mode's recalibrated CDF levels (``'levels'``, which
   the estimate applies) and the coverage they had on recordings held out
   from them; else it says what differs (``'matches': False``).
@@ -161,6 +164,11 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1):
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
   elif mode is None:
     differs.append('combination of measurements')
+  theirs = cal.get('network', {}).get('recipe')
+  if network is not None and theirs is not None:
+    d = embedding.recipe_differences(network, theirs)
+    if d:
+      differs.append(f'network recipe ({", ".join(d)})')
   rec = cal.get('recalibration')
   if rec and mode in ('known wind', 'known area weight'):
     name = 'wind_speed' if mode == 'known wind' else 'area_weight'

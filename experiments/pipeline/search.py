@@ -473,9 +473,10 @@ def write_result(
   if config.point == 'argmin':
     result.update(_argmin_summary(config, space, res, x_best))
   else:
-    result.update(
-      _posterior_summary(config, space, res, workdir, recording.truth, figures)
-    )
+    result.update(_posterior_summary(
+      config, space, res, workdir, recording.truth, figures,
+      network=embedding.network_recipe(job.model_dir),
+    ))  # fmt: skip
   material = physsim.load_material(physsim.fabric(config.material).material)
   point = result['point_unit']
   bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
@@ -530,9 +531,11 @@ def _argmin_summary(config, space, res: bo.Result, x_best) -> dict:
   }
 
 
-def _posterior_summary(config, space, res, workdir: str, truth, figures=True) -> dict:
+def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
+                       network: dict | None = None) -> dict:  # fmt: skip
   """The posterior median as the point, credible intervals, the prior's width;
-  writes ``posterior.npz`` and ``posterior.png``."""
+  writes ``posterior.npz`` and ``posterior.png``. ``network``: the network's
+  recipe, which the calibration's must match for its tables to apply."""
   key = jax.random.key(config.seed)
   pc = posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
@@ -540,7 +543,7 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True) ->
   prior = posterior_lib.prior_samples(
     jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
   )
-  note = report.calibration_note(config)
+  note = report.calibration_note(config, network=network)
   summary = posterior_lib.summarise(
     res.samples, space, prior, _levels(note), _weights(note), config.measured
   )
@@ -660,7 +663,10 @@ def estimate_joint(
   )  # fmt: skip
   space = physsim.search_space(config.material)
   prior = npz[0]['prior_samples']
-  note = report.calibration_note(config, joint=True, recordings=len(jobs))
+  note = report.calibration_note(
+    config, joint=True, recordings=len(jobs),
+    network=embedding.network_recipe(model_dir),
+  )  # fmt: skip
   levels = _levels(note)
   per = []
   for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):

@@ -12,6 +12,16 @@ when calibrated), and the point estimate's error beside the range centre's.
 
 The recordings come in pairs that share bending and area weight (one fabric,
 two fan settings), so the same simulations also measure the joint estimate.
+
+A network is one draw of its recipe: another seed trains another network,
+whose distances are scaled and bent differently. So the study trains
+``networks`` networks with the demo's recipe (seeds ``network_seed``,
+``network_seed + 1``, ...) and estimates pair ``p`` with network
+``p % networks``; the tables then hold for the recipe, not for one network.
+With ``folds == networks`` each fold is one network's recordings, and the
+cross-fitted coverage is that of a network the tables never saw.
+``calibration.json`` records the recipe (``embedding.network_recipe``), and an
+estimate applies the tables only with a network of that recipe.
 What a measured wind or area weight adds is measured too: a reading with 2%
 error (``measured_sd``) enters as a prior.
 
@@ -36,7 +46,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import os
+import shutil
 import time
 
 import jax
@@ -47,8 +59,9 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
+import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, distributed, files, report, search  # noqa: E402
+from experiments.pipeline import cli, distributed, embedding, files, report, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo as demo_lib  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
@@ -80,8 +93,11 @@ class Config:
     batch_size: recordings simulated per batch when making them.
     backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
     seed: the study's seed (truths, recordings, searches).
-    network_seed: seed of the network's training simulations and training
-      (0: the demo's own network).
+    network_seed: seed of the first network's training simulations and
+      training (0: the demo's own network).
+    networks: networks trained with the recipe (seeds ``network_seed`` + 0,
+      1, ...); pair ``p``'s recordings are estimated with network
+      ``p % networks``.
     estimate: the estimate settings (material, cloth and clock follow the
       demo's).
   """
@@ -96,6 +112,7 @@ class Config:
   backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
   seed: int = 0
   network_seed: int = 0
+  networks: int = 5
   estimate: EstimateConfig = cli.nested(
     EstimateConfig(q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24)),
     skip=('material', 'cloth_resolution', 'frames', 'warmup', 'backend', 'seed',
@@ -108,6 +125,7 @@ PRESETS = {
   # A few pairs on a CPU: checks the whole study end to end.
   'smoke': Config(
     pairs=3,
+    networks=1,
     sequences=8,
     batch_size=6,
     sharpness_grid=(0.25, 0.5, 1.0),
@@ -126,10 +144,62 @@ def truths(config: Config) -> physsim.Params:
   return physsim.from_unit(u.reshape(-1, 3), physsim.search_space(config.material))
 
 
-def _configs(config: Config, point: str = 'median'):
+def network_seeds(config: Config) -> tuple[int, ...]:
+  """The seeds of the study's networks, in order."""
+  return tuple(config.network_seed + k for k in range(config.networks))
+
+
+def fold_of(seq: int, folds: int) -> int:
+  """The cross-fitting fold of recording ``seq``: pairs take the folds in turn
+  (a pair's recordings share bending and area weight, so they stay together)."""
+  return (seq // 2) % folds
+
+
+def network_of(config: Config, seq: int) -> int:
+  """Which network (index into ``network_seeds``) estimates recording ``seq``:
+  pairs take the networks in turn, as they take the folds, so with as many
+  folds as networks each fold is one network's."""
+  return fold_of(seq, config.networks)
+
+
+def network_dirs(config: Config, workdir: str, k: int) -> tuple[str, str]:
+  """(training set, training runs) folders of network ``k`` (one network:
+  ``data`` and ``model``, as the demo lays them out)."""
+  if config.networks == 1:
+    return os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
+  base = os.path.join(workdir, 'networks', str(network_seeds(config)[k]))
+  return os.path.join(base, 'data'), os.path.join(base, 'model')
+
+
+NETWORKS_FILE = 'networks.json'
+
+
+def networks_record(config: Config, workdir: str) -> dict:
+  """The study's networks: their recipe (``embedding.network_recipe``, one
+  for all: only the seeds differ), seeds and held-out triplet accuracies."""
+  dirs = [os.path.join(network_dirs(config, workdir, k)[1], config.material)
+          for k in range(config.networks)]  # fmt: skip
+  recipes = [embedding.network_recipe(d) for d in dirs]
+  for d, r in zip(dirs[1:], recipes[1:], strict=True):
+    if embedding.recipe_differences(r, recipes[0]):
+      raise ValueError(f'{d}: made with another recipe than {dirs[0]}')
+  return {
+    'recipe': recipes[0],
+    'seeds': list(network_seeds(config)),
+    'triplet_accuracy': [
+      model_lib.selected_eval(model_lib.read_evals(d)).get('test_triplet_accuracy')
+      for d in dirs
+    ],
+  }
+
+
+def _configs(config: Config, point: str = 'median', network: int = 0):
+  """(training set, recordings, training, estimate) configs; the first two
+  and the estimate's are every network's, ``network`` picks the seeds of the
+  training set and training."""
   data, rec, training, est = demo_lib.configs(
     config.material, config.sequences, config.seed, config.backend,
-    config.network_seed,
+    network_seeds(config)[network],
   )  # fmt: skip
   n = 2 * config.pairs
   rec = dataclasses.replace(
@@ -146,26 +216,34 @@ def _configs(config: Config, point: str = 'median'):
 def simulate_and_estimate(
   config: Config, workdir: str, point: str = 'median'
 ) -> list[dict]:
-  """Trains the network, makes the recordings and estimates each (resumable),
-  reporting the estimates' ``point`` (the analysis forms its own points).
+  """Trains the networks, makes the recordings and estimates each (resumable),
+  reporting the estimates' ``point`` (the analysis forms its own points);
+  writes ``networks.json`` (``networks_record``).
 
   Under several processes (``distributed``) the processes share the data's
-  and the recordings' simulations, process 0 trains the network, each process
+  and the recordings' simulations, process 0 trains the networks, each process
   estimates its share of the recordings, and process 0 gathers every result
   (the others return []).
 
   Returns:
-    Per recording: ``{'seq', 'truth', 'workdir', 'result'}``.
+    Per recording: ``{'seq', 'truth', 'workdir', 'network', 'result'}``
+    (``network``: its network's seed).
   """
-  data_cfg, rec_cfg, train_cfg, est = _configs(config, point)
-  model_dir = os.path.join(workdir, 'model', config.material)
+  _, rec_cfg, _, est = _configs(config, point)
   rec_root = os.path.join(workdir, 'recordings')
   # Every process simulates its share of the data and of the recordings;
-  # process 0 trains the network in between.
-  gen.run(data_cfg, os.path.join(workdir, 'data'))
+  # process 0 trains the networks in between.
+  model_roots = []
+  for k in range(config.networks):
+    data_cfg, _, train_cfg, _ = _configs(config, point, k)
+    data_dir, model_root = network_dirs(config, workdir, k)
+    gen.run(data_cfg, data_dir)
+    if distributed.is_main():
+      train_lib.run(train_cfg, data_dir, model_root)
+    model_roots.append(model_root)
   if distributed.is_main():
-    train_lib.run(
-      train_cfg, os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
+    files.write_json(
+      os.path.join(workdir, NETWORKS_FILE), networks_record(config, workdir)
     )
   gen.run(rec_cfg, rec_root, params={config.material: truths(config)})
   distributed.barrier('calibration: network and recordings made')
@@ -179,8 +257,11 @@ def simulate_and_estimate(
       index.path(r), fps=est.fps, size=demo_lib.IMAGE_SIZE, frames=est.frames
     )
     wd = os.path.join(workdir, 'estimates', r['seq_id'])
+    k = network_of(config, int(r['seq_id']))
+    model_dir = os.path.join(model_roots[k], config.material)
     jobs.append(search.Job(est, rec, model_dir, wd))
-    meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd})
+    meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd,
+                 'network': network_seeds(config)[k]})  # fmt: skip
   if jax.process_count() > 1:
     mine = distributed.share(jobs)
     print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)
@@ -211,9 +292,13 @@ _LOG_FIELDS = ('bending_scale', 'load_ratio')  # compared on a log scale
 _LOSS = {f: 'factor' if f == 'bending_scale' else 'relative' for f in FIELDS}
 
 
-def _saved(workdir: str) -> dict:
-  with np.load(os.path.join(workdir, search.POSTERIOR_FILE)) as z:
-    return {k: z[k] for k in z.files}
+def _saved(run: dict) -> dict:
+  """A recording's saved GP (what the analysis reads of ``posterior.npz``):
+  packed with the run (``packed_runs``) or read from its estimate's folder."""
+  if 'saved' in run:
+    return run['saved']
+  with np.load(os.path.join(run['workdir'], search.POSTERIOR_FILE)) as z:
+    return {k: z[k] for k in _PACKED}
 
 
 def _draws(rng, grid, log_post, n: int) -> np.ndarray:
@@ -285,7 +370,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
   out = {m: [] for m in MODES}
   by_seq = {r['seq']: r for r in runs}
   for r in runs:
-    z = _saved(r['workdir'])
+    z = _saved(r)
     t = r['truth']
     row = _truth_row(t)
     ll = _log_lik(z, form, sharpness)
@@ -309,7 +394,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
       out[mode].append({'seq': r['seq'], 'truth': row, **score})
     mate = by_seq.get(r['seq'] ^ 1) if pairs else None  # the pair's other recording
     if mate is not None and r['seq'] % 2 == 0:
-      zm = _saved(mate['workdir'])
+      zm = _saved(mate)
       j = posterior_lib.joint(
         [ll, _log_lik(zm, form, sharpness)], grid, base,
         jax.random.key(int(rng.integers(1 << 30))), n=n,
@@ -483,15 +568,15 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   informative posterior. The coverage reported is cross-fitted: the pairs
   fall into ``config.folds`` folds; each fold's recordings are read with the
   sharpness and tables chosen on the other folds alone, so every recording is
-  held out once and none informs its own intervals. The older rule (the
+  held out once and none informs its own intervals (with as many folds as
+  networks, each fold is one network's: ``cross_validated_by_fold`` gives the
+  video's coverage per fold, so per network). The older rule (the
   sharpest value whose uncalibrated intervals never under-cover,
   ``bo.posterior.choose_sharpness``) is reported beside it."""
   space = physsim.search_space(config.material)
-  pair = lambda seq: seq // 2
-  folds = max(2, min(config.folds, len({pair(r['seq']) for r in runs})))
-  fold_of = lambda seq: pair(seq) % folds
+  folds = max(2, min(config.folds, len({r['seq'] // 2 for r in runs})))
   everyone = {r['seq'] for r in runs}
-  sweep, best, fold_choice, cross, never_under = {}, {}, {}, {}, {}
+  sweep, best, fold_choice, cross, never_under, by_fold = {}, {}, {}, {}, {}, {}
   levels = [lv / 100 for lv in LEVELS]
   for form in bo.posterior.LIKELIHOODS:
     by_c = {c: posteriors(config, runs, form, c) for c in config.sharpness_grid}
@@ -516,21 +601,27 @@ def analyse(config: Config, runs: list[dict]) -> dict:
     held = {m: [] for m in MODES}
     fold_choice[form] = []
     for k in range(folds):
-      train = {s for s in everyone if fold_of(s) != k}
+      train = {s for s in everyone if fold_of(s, folds) != k}
       c_k, recal_k = _choose(by_c, space, train)
       fold_choice[form].append(c_k)
       for m in MODES:
         if m not in recal_k:
           continue
-        train_m = [s for s in by_c[c_k][m] if fold_of(s['seq']) != k]
+        train_m = [s for s in by_c[c_k][m] if fold_of(s['seq'], folds) != k]
         w_k = weights(train_m, recal_k[m])
         for s in by_c[c_k][m]:
-          if fold_of(s['seq']) == k:
+          if fold_of(s['seq'], folds) == k:
             held[m].append({**s, 'levels': recal_k[m], 'weights': w_k})
     cross[form] = {m: summarise(v, space) for m, v in held.items()}
+    by_fold[form] = [
+      _coverage_of(summarise([s for s in held['video'] if fold_of(s['seq'], folds) == k],
+                             space, bayes=False))
+      for k in range(folds)
+    ]  # fmt: skip
   return {
     'sweep': sweep, 'best_sharpness': best, 'folds': folds,
     'fold_sharpness': fold_choice, 'cross_validated': cross,
+    'cross_validated_by_fold': by_fold,
     'sharpest_never_under_covering': never_under,
   }  # fmt: skip
 
@@ -541,10 +632,60 @@ def _coverage_of(summary: dict) -> dict:
   } if summary else {}  # fmt: skip
 
 
+# What the analysis reads of each estimate's posterior.npz, and how many
+# recordings one packed file holds.
+_PACKED = ('gp_mean', 'gp_var', 'floor', 'noise_sd')
+PACKED_DIR = 'packed'
+_PER_PACK = 50
+
+
+def pack_runs(runs: list[dict], workdir: str) -> list[str]:
+  """Writes what the analysis reads of ``runs`` (their truths and saved GPs,
+  the GPs in float32) to ``<workdir>/packed/runs-NNN.npz``, a few files of
+  ``_PER_PACK`` recordings, with ``networks.json``: copy that folder to
+  analyse on another machine (``--analyse_only`` reads it when the workdir
+  has no estimates). Returns the files written."""
+  out = []
+  for i in range(0, len(runs), _PER_PACK):
+    chunk = runs[i : i + _PER_PACK]
+    saved = [_saved(r) for r in chunk]
+    arrays = {
+      'seq': np.array([r['seq'] for r in chunk]),
+      'truth': np.array([json.dumps(r['truth']) for r in chunk]),
+      **{k: np.stack([np.asarray(z[k], np.float32) for z in saved]) for k in _PACKED},
+    }  # fmt: skip
+    path = os.path.join(workdir, PACKED_DIR, f'runs-{i // _PER_PACK:03d}.npz')
+    files.write_atomic(path, lambda p, a=arrays: np.savez(p, **a))
+    out.append(path)
+  record = os.path.join(workdir, NETWORKS_FILE)
+  if os.path.isfile(record):
+    shutil.copyfile(record, os.path.join(workdir, PACKED_DIR, NETWORKS_FILE))
+  return out
+
+
+def packed_runs(workdir: str) -> list[dict]:
+  """The runs ``pack_runs`` wrote to ``<workdir>/packed/`` ([] if none), each
+  with its saved GP in memory (``'saved'``)."""
+  root = os.path.join(workdir, PACKED_DIR)
+  names = sorted(os.listdir(root)) if os.path.isdir(root) else []
+  runs = []
+  for name in names:
+    if not (name.startswith('runs-') and name.endswith('.npz')):
+      continue
+    with np.load(os.path.join(root, name)) as z:
+      for j, seq in enumerate(z['seq']):
+        runs.append({
+          'seq': int(seq), 'truth': json.loads(str(z['truth'][j])), 'workdir': None,
+          'saved': {k: np.asarray(z[k][j], np.float64) for k in _PACKED},
+        })  # fmt: skip
+  return runs
+
+
 def saved_runs(workdir: str) -> list[dict]:
   """The finished estimates a study's workdir holds (``estimates/<seq>/``
-  with ``estimate.json`` and ``posterior.npz``), as ``simulate_and_estimate``
-  returns them: the analysis can run on another machine than the searches.
+  with ``estimate.json`` and ``posterior.npz``, else those packed by
+  ``pack_runs``), as ``simulate_and_estimate`` returns them: the analysis can
+  run on another machine than the searches.
 
   Raises:
     ValueError: no finished estimate there.
@@ -562,22 +703,41 @@ def saved_runs(workdir: str) -> list[dict]:
       runs.append(
         {'seq': int(seq), 'truth': recording_lib.read_json(est)['truth'], 'workdir': wd}
       )
+  runs = runs or packed_runs(workdir)
   if not runs:
-    raise ValueError(f'{root}: no finished estimates to analyse')
+    raise ValueError(
+      f'{root}: no finished estimates to analyse (nor packed ones in '
+      f'{os.path.join(workdir, PACKED_DIR)})'
+    )
   return runs
 
 
-def run(config: Config, workdir: str, analyse_only: bool = False) -> dict:
+def run(config: Config, workdir: str, analyse_only: bool = False,
+        simulate_only: bool = False) -> dict:  # fmt: skip
   """The whole study (or, with ``analyse_only``, its analysis of the
-  estimates ``workdir`` already holds); writes ``calibration.json``,
-  ``calibration.md`` and figures."""
+  estimates ``workdir`` already holds; with ``simulate_only``, the networks,
+  recordings and estimates, packed for an analysis elsewhere: ``pack_runs``);
+  writes ``calibration.json``, ``calibration.md`` and figures."""
+  if analyse_only and simulate_only:
+    raise ValueError('analyse_only and simulate_only leave nothing to do')
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
   runs = saved_runs(workdir) if analyse_only else simulate_and_estimate(config, workdir)
   if not distributed.is_main():
     return {}
+  if simulate_only:
+    written = pack_runs(runs, workdir)
+    print(f'{len(runs)} estimates packed in {len(written)} files under '
+          f'{os.path.join(workdir, PACKED_DIR)}', flush=True)  # fmt: skip
+    return {}
   analysis = analyse(config, runs)
-  out = result(config, analysis, seconds=time.time() - t0)
+  record = os.path.join(workdir, NETWORKS_FILE)
+  if not os.path.isfile(record):  # analysed from packed runs
+    record = os.path.join(workdir, PACKED_DIR, NETWORKS_FILE)
+  out = result(
+    config, analysis, seconds=time.time() - t0,
+    network=recording_lib.read_json(record) if os.path.isfile(record) else None,
+  )  # fmt: skip
   files.write_json(os.path.join(workdir, RESULT_FILE), out)
   text = table(out)
   files.write_text(os.path.join(workdir, 'calibration.md'), text + '\n')
@@ -589,18 +749,22 @@ def run(config: Config, workdir: str, analyse_only: bool = False) -> dict:
   return out
 
 
-def result(config: Config, analysis: dict, seconds: float = 0.0) -> dict:
+def result(config: Config, analysis: dict, seconds: float = 0.0,
+           network: dict | None = None) -> dict:  # fmt: skip
   """What ``calibration.json`` holds: the chosen likelihood setting, its
   recalibration tables (what estimates apply), the cross-fitted coverage
-  with them (what estimates quote) and the coverage without them."""
+  with them (what estimates quote), the coverage without them, and the
+  networks (``networks_record``: estimates apply the tables only with a
+  network of their recipe; None: not recorded, not checked)."""
   form, c = 'gibbs', analysis['best_sharpness']['gibbs']
   chosen = analysis['sweep'][form][c]
   held, raw = analysis['cross_validated'][form], chosen['uncalibrated']
   return {
     'material': config.material,
     'n': held['video'].get('n', 0),
-    'setting': f'{form} likelihood, sharpness {c:g}, {config.material} network '
-    f'of {config.sequences} training sequences',
+    'setting': f'{form} likelihood, sharpness {c:g}, {config.material} '
+    f'network{"s" if config.networks > 1 else ""} of {config.sequences} training '
+    f'sequences' + (f' ({config.networks} seeds)' if config.networks > 1 else ''),
     'likelihood': form,
     'sharpness': c,
     'coverage': _coverage_of(held['video']),
@@ -615,6 +779,7 @@ def result(config: Config, analysis: dict, seconds: float = 0.0) -> dict:
     },
     'held_out': held,
     'held_out_uncalibrated': raw,
+    **({'network': network} if network else {}),
     'analysis': analysis,
     # the settings the searches ran with (the demo's cloth and clock), which
     # an estimate must share for these tables to apply
@@ -682,7 +847,30 @@ def table(out: dict) -> str:
             + '; the sharpest never under-covering uncalibrated: '
             + ', '.join(f'{k} {v:g}' for k, v in
                         a['sharpest_never_under_covering'].items())]  # fmt: skip
+  lines += _network_lines(out.get('network'), a)
   return '\n'.join(lines)
+
+
+def _network_lines(network: dict | None, analysis: dict) -> list[str]:
+  """The networks' seeds and triplet accuracies, and (one fold per network)
+  each fold's video coverage, recalibrated on the other networks."""
+  if not network:
+    return []
+  seeds, acc = network['seeds'], network['triplet_accuracy']
+  lines = ['', 'networks (seed: held-out triplet accuracy): ' + ', '.join(
+    f'{s}: {"-" if a is None else f"{100 * a:.0f}%"}'
+    for s, a in zip(seeds, acc, strict=True)
+  )]  # fmt: skip
+  folds = analysis.get('cross_validated_by_fold', {}).get('gibbs')
+  if folds and len(folds) == len(seeds):
+    lines += ['', "each network's recordings, read with the tables of the others "
+              '(video alone; 50% / 90% hold the truth):', '',
+              '| network seed | ' + ' | '.join(FIELDS) + ' |',
+              '|---' * (len(FIELDS) + 1) + '|']  # fmt: skip
+    for seed, cov in zip(seeds, folds, strict=True):
+      cells = ' | '.join(_pair(cov[f]) if f in cov else '-' for f in FIELDS)
+      lines.append(f'| {seed} | {cells} |')
+  return lines
 
 
 def plot_ranks(
@@ -863,10 +1051,16 @@ def check(
   if not distributed.is_main():
     return {}
   held = shipped.get('held_out', {})
+  record = os.path.join(workdir, NETWORKS_FILE)
+  network = recording_lib.read_json(record) if os.path.isfile(record) else None
+  theirs = set(shipped.get('network', {}).get('seeds', [0]))
   out = {
     'material': config.material,
     'seed': config.seed,
     'n': len(runs),
+    'network': network,
+    # the checked networks the calibration never saw (its seeds: 0 if unrecorded)
+    'held_out_networks': sorted(set(network_seeds(config)) - theirs),
     'shipped_file': path,
     'shipped': {
       **{k: shipped.get(k) for k in ('setting', 'n', 'likelihood', 'sharpness')},
@@ -893,6 +1087,13 @@ def _pct_ci(cell: dict, lv: int) -> str:
   return f'{100 * cell[f"interval_{lv}"]:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]'
 
 
+def _seeds(out: dict) -> str:
+  """The checked networks' seeds, those the calibration never saw marked."""
+  seeds = (out.get('network') or {}).get('seeds') or [out['config']['network_seed']]
+  held = set(out.get('held_out_networks', []))
+  return ', '.join(f'{s}{" (held out)" if s in held else ""}' for s in seeds)
+
+
 def check_table(out: dict) -> str:
   """Markdown: per mode and quantity, how often the 50% and 90% intervals held
   the truth on the new recordings (95% binomial intervals in brackets), what
@@ -903,8 +1104,8 @@ def check_table(out: dict) -> str:
   lines = [
     f'Calibration checked: {sh["setting"]} (sharpness {sh["sharpness"]:g}, '
     f'{sh["n"]} calibration recordings) on {out["n"]} recordings it never saw '
-    f'(seed {out["seed"]}); {pr["recalibrated"]} of {pr["n"]} estimates applied '
-    'its tables. Brackets: 95% binomial intervals.',
+    f'(seed {out["seed"]}; networks {_seeds(out)}); {pr["recalibrated"]} of '
+    f'{pr["n"]} estimates applied its tables. Brackets: 95% binomial intervals.',
     '',
     '| mode | quantity | 50% hold the truth | 90% hold the truth | '
     'promised (cross-fitted) | mean error: point | range centre |',

@@ -342,3 +342,126 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
     json.dump(est, f)
   with pytest.raises(ValueError, match='no credible intervals'):
     calibration.printed(calibration.saved_runs(str(tmp_path / 'w')))
+
+
+# ------------------------------------------------- networks and their recipe
+
+
+def _fake_network(root, *, seed=0, epochs=10, backend='c', accuracy=0.8, dataset=True):
+  """A trained run's files as training writes them (no checkpoint: the
+  recipe and the study's record read only these)."""
+  data = root / 'data'
+  data.mkdir(parents=True)
+  if dataset:
+    (data / 'dataset.json').write_text(json.dumps({
+      'seed': seed, 'config': {'sequences': 24, 'frames': 16, 'seed': seed,
+                               'backend': backend, 'batch_size': 8},
+      'pose_ranges': {'distance': [1.8, 2.5]},
+    }))  # fmt: skip
+  run = root / 'model' / 'gray_interlock'
+  run.mkdir(parents=True)
+  (run / 'config.json').write_text(json.dumps(
+    {'epochs': epochs, 'learning_rate': 1e-3, 'seed': seed, 'log_every': 50}
+  ))  # fmt: skip
+  (run / 'inputs.json').write_text(json.dumps({
+    'modality': 'depth', 'input_mode': 'relative', 'materials': ['gray_interlock'],
+    'dataset': str(data),
+  }))  # fmt: skip
+  (run / 'metrics.jsonl').write_text(json.dumps(
+    {'epoch': epochs, 'eval': True, 'test_triplet_accuracy': accuracy}
+  ) + '\n')  # fmt: skip
+  return str(run)
+
+
+def test_a_networks_recipe_is_how_it_was_made_apart_from_its_seeds(tmp_path):
+  from experiments.pipeline import embedding
+
+  a = embedding.network_recipe(_fake_network(tmp_path / 'a'))
+  # Another seed, simulated on another backend: the same recipe.
+  b = embedding.network_recipe(_fake_network(tmp_path / 'b', seed=3, backend='mjx'))
+  assert a == b and embedding.recipe_differences(a, b) == []
+  longer = embedding.network_recipe(_fake_network(tmp_path / 'c', epochs=20))
+  assert embedding.recipe_differences(longer, a) == ['training.epochs']
+  gone = embedding.network_recipe(_fake_network(tmp_path / 'd', dataset=False))
+  assert gone['data'] is None and embedding.recipe_differences(gone, a) == ['data']
+  with pytest.raises(ValueError, match='not a trained run'):
+    embedding.network_recipe(str(tmp_path / 'a' / 'data'))
+
+
+def test_the_tables_apply_only_to_a_network_of_their_recipe(tmp_path, monkeypatch):
+  from experiments.pipeline import embedding
+
+  cal = _recalibrated_file(tmp_path, monkeypatch)
+  mine = embedding.network_recipe(_fake_network(tmp_path / 'a'))
+  config = EstimateConfig(sharpness=0.7)
+  # A calibration that recorded no recipe checks none.
+  assert report.calibration_note(config, network=mine)['recalibrated']
+  cal['network'] = {'recipe': mine, 'seeds': [0, 1]}
+  (tmp_path / 'calibration.json').write_text(json.dumps(cal))
+  other_seed = embedding.network_recipe(_fake_network(tmp_path / 'b', seed=7))
+  assert report.calibration_note(config, network=other_seed)['recalibrated']
+  longer = embedding.network_recipe(_fake_network(tmp_path / 'c', epochs=20))
+  note = report.calibration_note(config, network=longer)
+  assert note['matches'] is False
+  assert note['differs'] == ['network recipe (training.epochs)']
+  assert 'network recipe (training.epochs)' in report.calibration_line(note)
+  assert 'levels' not in note  # nothing for the estimate to apply
+
+
+def test_with_as_many_folds_as_networks_each_fold_is_one_networks(tmp_path):
+  config = calibration.Config(pairs=10, networks=5, folds=5, network_seed=3)
+  assert calibration.network_seeds(config) == (3, 4, 5, 6, 7)
+  for seq in range(2 * config.pairs):
+    assert calibration.network_of(config, seq) == calibration.fold_of(seq, config.folds)
+    # a pair shares bending and area weight: one network reads both
+    assert calibration.network_of(config, seq) == calibration.network_of(
+      config, seq ^ 1
+    )
+  used = [calibration.network_of(config, s) for s in range(2 * config.pairs)]
+  assert sorted(set(used)) == [0, 1, 2, 3, 4] and used.count(0) == 4
+  # One network keeps the demo's layout; several get a folder per seed.
+  one = calibration.Config(networks=1)
+  assert calibration.network_dirs(one, 'w', 0) == ('w/data', 'w/model')
+  assert calibration.network_dirs(config, 'w', 1) == (
+    'w/networks/4/data',
+    'w/networks/4/model',
+  )
+
+
+def test_the_study_records_its_networks_and_refuses_mixed_recipes(tmp_path):
+  config = calibration.Config(networks=2, network_seed=3)
+  for k, acc in enumerate((0.8, 0.7)):
+    _, model = calibration.network_dirs(config, str(tmp_path), k)
+    _fake_network(
+      tmp_path / 'networks' / str(3 + k), seed=3 + k, accuracy=acc
+    )  # fmt: skip
+    assert os.path.isdir(model)
+  rec = calibration.networks_record(config, str(tmp_path))
+  assert rec['seeds'] == [3, 4] and rec['triplet_accuracy'] == [0.8, 0.7]
+  assert rec['recipe']['training']['epochs'] == 10
+  lines = calibration._network_lines(rec, {'cross_validated_by_fold': {'gibbs': [
+    {f: {'interval_50': 0.5, 'interval_90': 0.9} for f in calibration.FIELDS},
+    {f: {'interval_50': 0.4, 'interval_90': 0.8} for f in calibration.FIELDS},
+  ]}})  # fmt: skip
+  text = '\n'.join(lines)
+  assert '3: 80%, 4: 70%' in text and '| 4 | 40% / 80% |' in text
+  cfg = tmp_path / 'networks' / '4' / 'model' / 'gray_interlock' / 'config.json'
+  cfg.write_text(json.dumps({'epochs': 5, 'learning_rate': 1e-3, 'seed': 4}))
+  with pytest.raises(ValueError, match='another recipe'):
+    calibration.networks_record(config, str(tmp_path))
+
+
+def test_packed_runs_carry_what_the_analysis_reads(tmp_path):
+  config = calibration.Config(pairs=30, estimate=EstimateConfig(posterior_grid=GRID))
+  runs = _fake_runs(config, str(tmp_path / 'estimates'))  # 60: two packed files
+  written = calibration.pack_runs(runs, str(tmp_path / 'study'))
+  assert [os.path.basename(p) for p in written] == ['runs-000.npz', 'runs-001.npz']
+  back = calibration.saved_runs(str(tmp_path / 'study'))  # no estimates: the packs
+  assert [r['seq'] for r in back] == [r['seq'] for r in runs]
+  for r, b in zip(runs, back, strict=True):
+    assert b['truth'] == r['truth']
+    want, got = calibration._saved(r), calibration._saved(b)
+    for k in ('gp_mean', 'gp_var', 'floor', 'noise_sd'):
+      np.testing.assert_allclose(got[k], want[k], rtol=1e-6)  # float32
+  with pytest.raises(ValueError, match='nor packed'):
+    calibration.saved_runs(str(tmp_path / 'empty'))
