@@ -151,6 +151,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   with open(CALIBRATION_FILE) as f:
     cal = json.load(f)
   head = {k: cal[k] for k in ('n', 'setting', 'likelihood', 'sharpness') if k in cal}
+  head['networks'] = len(cal.get('network', {}).get('seeds', [0]))
   if config is None:
     return {'matches': True, **head, 'coverage': cal['coverage']}
   calibrated = dict(cal.get('config', {}).get('estimate', {}))
@@ -324,11 +325,15 @@ def calibration_line(cal: dict | None) -> str:
     for k, v in cov.items()
   )
   if cal.get('recalibrated'):
+    held = (
+      'recordings of networks held out from that'
+      if cal.get('networks', 1) > 1
+      else 'recordings held out from that'
+    )
     return (
       f'calibration ({cal["mode"]}): intervals read at levels recalibrated on '
       f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}); '
-      f'read so, recordings held out from that held the truth in their 90%/50% '
-      f'intervals: {parts}.'
+      f'read so, {held} held the truth in their 90%/50% intervals: {parts}.'
     )
   return (
     f'calibration ({cal["n"]} held-out simulated recordings, {cal["setting"]}): 90%/50% '

@@ -399,7 +399,9 @@ def test_the_tables_apply_only_to_a_network_of_their_recipe(tmp_path, monkeypatc
   cal['network'] = {'recipe': mine, 'seeds': [0, 1]}
   (tmp_path / 'calibration.json').write_text(json.dumps(cal))
   other_seed = embedding.network_recipe(_fake_network(tmp_path / 'b', seed=7))
-  assert report.calibration_note(config, network=other_seed)['recalibrated']
+  note = report.calibration_note(config, network=other_seed)
+  assert note['recalibrated'] and note['networks'] == 2
+  assert 'recordings of networks held out' in report.calibration_line(note)
   longer = embedding.network_recipe(_fake_network(tmp_path / 'c', epochs=20))
   note = report.calibration_note(config, network=longer)
   assert note['matches'] is False
