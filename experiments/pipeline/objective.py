@@ -30,6 +30,7 @@ minimiser, at the price of one gust history's bias).
 from __future__ import annotations
 
 import dataclasses
+import os
 from typing import NamedTuple
 
 import jax
@@ -100,6 +101,10 @@ class EstimateConfig:
       a real sensor.
     seed: all randomness (design, gusts, sensor noise, cameras).
     measured: an anemometer's wind or a scale's area weight, as priors.
+    calibration: a calibration file (``experiments/calibrate.py``'s
+      ``calibration.json``) whose tables the estimate applies where its
+      settings and network match; '' for the shipped one. It only changes how
+      the posterior is read, so a resumed run may use another.
   """
 
   point: str = cli.choice('bayes', POINTS)
@@ -128,6 +133,7 @@ class EstimateConfig:
   sensor_noise: bool = True
   seed: int = 0
   measured: Measured = Measured()
+  calibration: str = ''
 
   @property
   def posterior(self) -> bool:
@@ -168,6 +174,11 @@ class EstimateConfig:
     if self.posterior and not 0 <= self.replicates < self.q:
       raise ValueError(f'need 0 <= replicates < q, got {self.replicates}, {self.q}')
     self.measured.check(physsim.search_space(self.material))
+    if self.calibration and not os.path.isfile(self.calibration):
+      raise ValueError(
+        f'calibration {self.calibration!r}: no such file (experiments/calibrate.py '
+        'writes one)'
+      )
     for name in ('frames', 'cameras', 'q', 'n_init', 'cloth_resolution'):
       if getattr(self, name) < 1:
         raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')

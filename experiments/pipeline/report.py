@@ -134,8 +134,8 @@ def _same(mine, theirs) -> bool:
 def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
                      network: dict | None = None):  # fmt: skip
   """What the held-out simulations showed about the intervals, for an
-  estimate with ``config`` (``calibration.json``); None when no calibration
-  has been run.
+  estimate with ``config`` (its ``calibration`` file, else the shipped
+  ``calibration.json``); None when no calibration has been run.
 
   Where every setting that changes the likelihood (``_CALIBRATED_FIELDS``),
   the mode (what was measured, a reading's uncertainty within a factor of two
@@ -146,9 +146,10 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   the estimate applies) and the coverage they had on recordings held out
   from them; else it says what differs (``'matches': False``).
   """
-  if not os.path.isfile(CALIBRATION_FILE):
+  path = getattr(config, 'calibration', '') or CALIBRATION_FILE
+  if not os.path.isfile(path):
     return None
-  with open(CALIBRATION_FILE) as f:
+  with open(path) as f:
     cal = json.load(f)
   head = {k: cal[k] for k in ('n', 'setting', 'likelihood', 'sharpness') if k in cal}
   head['networks'] = len(cal.get('network', {}).get('seeds', [0]))

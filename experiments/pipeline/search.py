@@ -42,7 +42,7 @@ POSTERIOR_FILE = 'posterior.npz'  # draws and the grid posterior/likelihood
 POSTERIOR_STATE = 'posterior_state.npz'
 BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
 # Config fields that do not change what an estimate computes.
-_RESUMABLE_FIELDS = ('workers',)
+_RESUMABLE_FIELDS = ('workers', 'calibration')
 
 
 class Job(NamedTuple):

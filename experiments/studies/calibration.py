@@ -1018,13 +1018,14 @@ def check(
   config: Config, workdir: str, shipped_file: str | None = None,
   analyse_only: bool = False,
 ) -> dict:  # fmt: skip
-  """Checks a calibration (default: the shipped one) on recordings it never saw.
+  """Checks a calibration on recordings it never saw: ``shipped_file``, else
+  ``config.estimate.calibration``, else the shipped one.
 
   Makes and estimates ``2 * config.pairs`` new recordings as the study does,
   with ``config.seed`` other than the calibration's (so the truths, recordings
-  and searches are all new; ``config.network_seed`` other than 0 trains another
-  network too) and the estimate's own defaults (the
-  Bayes point; the shipped tables applied where the settings match), then
+  and searches are all new; network seeds other than the calibration's train
+  networks it never saw) and the estimate's own defaults (the Bayes point;
+  that calibration's tables applied where the settings match), then
   reports how often the intervals hold the truth: those the estimates printed
   (video alone) and every mode's, read from the saved GPs with the
   calibration's sharpness, levels and weights (``check_analysis``). Writes
@@ -1033,9 +1034,13 @@ def check(
   Raises:
     ValueError: no calibration there, or ``config.seed`` is its own.
   """
-  path = shipped_file or report.CALIBRATION_FILE
+  path = shipped_file or config.estimate.calibration or report.CALIBRATION_FILE
   if not os.path.isfile(path):
     raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
+  # the estimates apply the tables being checked
+  config = dataclasses.replace(
+    config, estimate=dataclasses.replace(config.estimate, calibration=path)
+  )
   shipped = recording_lib.read_json(path)
   if shipped.get('config', {}).get('seed') == config.seed:
     raise ValueError(

@@ -467,3 +467,16 @@ def test_packed_runs_carry_what_the_analysis_reads(tmp_path):
       np.testing.assert_allclose(got[k], want[k], rtol=1e-6)  # float32
   with pytest.raises(ValueError, match='nor packed'):
     calibration.saved_runs(str(tmp_path / 'empty'))
+
+
+def test_an_estimate_applies_the_calibration_file_it_is_given(tmp_path, monkeypatch):
+  cal = _recalibrated_file(tmp_path, monkeypatch)
+  mine = tmp_path / 'mine.json'
+  cal['recalibration']['n_calibration_recordings'] = 77
+  mine.write_text(json.dumps(cal))
+  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
+  assert report.calibration_note(EstimateConfig(sharpness=0.7)) is None
+  note = report.calibration_note(EstimateConfig(sharpness=0.7, calibration=str(mine)))
+  assert note['recalibrated'] and note['n_calibration_recordings'] == 77
+  with pytest.raises(ValueError, match='missing.json'):
+    EstimateConfig(calibration=str(tmp_path / 'missing.json')).check()
