@@ -12,6 +12,8 @@ when calibrated), and the point estimate's error beside the range centre's.
 
 The recordings come in pairs that share bending and area weight (one fabric,
 two fan settings), so the same simulations also measure the joint estimate.
+What a measured wind or area weight adds is measured too: a reading with 2%
+error (``measured_sd``) enters as a prior.
 
 A network is one draw of its recipe: another seed trains another network,
 whose distances are scaled and bent differently. So the study trains
@@ -22,8 +24,6 @@ With ``folds == networks`` each fold is one network's recordings, and the
 cross-fitted coverage is that of a network the tables never saw.
 ``calibration.json`` records the recipe (``embedding.network_recipe``), and an
 estimate applies the tables only with a network of that recipe.
-What a measured wind or area weight adds is measured too: a reading with 2%
-error (``measured_sd``) enters as a prior.
 
 The study then calibrates the intervals themselves: per mode and quantity,
 the truths' ranks among the posterior draws give the CDF levels at which the
@@ -48,7 +48,6 @@ import dataclasses
 import functools
 import json
 import os
-import shutil
 import time
 
 import jax
@@ -172,6 +171,16 @@ def network_dirs(config: Config, workdir: str, k: int) -> tuple[str, str]:
 
 
 NETWORKS_FILE = 'networks.json'
+
+
+def _recorded_networks(workdir: str) -> dict | None:
+  """The ``networks_record`` a study's workdir holds (written by its searches,
+  else packed with its runs: ``pack_runs``), or None (older workdirs)."""
+  for path in (os.path.join(workdir, NETWORKS_FILE),
+               os.path.join(workdir, PACKED_DIR, NETWORKS_FILE)):  # fmt: skip
+    if os.path.isfile(path):
+      return recording_lib.read_json(path)
+  return None
 
 
 def networks_record(config: Config, workdir: str) -> dict:
@@ -657,9 +666,9 @@ def pack_runs(runs: list[dict], workdir: str) -> list[str]:
     path = os.path.join(workdir, PACKED_DIR, f'runs-{i // _PER_PACK:03d}.npz')
     files.write_atomic(path, lambda p, a=arrays: np.savez(p, **a))
     out.append(path)
-  record = os.path.join(workdir, NETWORKS_FILE)
-  if os.path.isfile(record):
-    shutil.copyfile(record, os.path.join(workdir, PACKED_DIR, NETWORKS_FILE))
+  record = _recorded_networks(workdir)
+  if record is not None:
+    files.write_json(os.path.join(workdir, PACKED_DIR, NETWORKS_FILE), record)
   return out
 
 
@@ -672,12 +681,16 @@ def packed_runs(workdir: str) -> list[dict]:
   for name in names:
     if not (name.startswith('runs-') and name.endswith('.npz')):
       continue
-    with np.load(os.path.join(root, name)) as z:
-      for j, seq in enumerate(z['seq']):
-        runs.append({
-          'seq': int(seq), 'truth': json.loads(str(z['truth'][j])), 'workdir': None,
-          'saved': {k: np.asarray(z[k][j], np.float64) for k in _PACKED},
-        })  # fmt: skip
+    path = os.path.join(root, name)
+    try:
+      with np.load(path) as z:
+        for j, seq in enumerate(z['seq']):
+          runs.append({
+            'seq': int(seq), 'truth': json.loads(str(z['truth'][j])), 'workdir': None,
+            'saved': {k: np.asarray(z[k][j], np.float64) for k in _PACKED},
+          })  # fmt: skip
+    except (OSError, ValueError, KeyError) as e:
+      raise ValueError(f'{path}: not a file of packed runs ({e})') from e
   return runs
 
 
@@ -731,13 +744,9 @@ def run(config: Config, workdir: str, analyse_only: bool = False,
           f'{os.path.join(workdir, PACKED_DIR)}', flush=True)  # fmt: skip
     return {}
   analysis = analyse(config, runs)
-  record = os.path.join(workdir, NETWORKS_FILE)
-  if not os.path.isfile(record):  # analysed from packed runs
-    record = os.path.join(workdir, PACKED_DIR, NETWORKS_FILE)
   out = result(
-    config, analysis, seconds=time.time() - t0,
-    network=recording_lib.read_json(record) if os.path.isfile(record) else None,
-  )  # fmt: skip
+    config, analysis, seconds=time.time() - t0, network=_recorded_networks(workdir)
+  )
   files.write_json(os.path.join(workdir, RESULT_FILE), out)
   text = table(out)
   files.write_text(os.path.join(workdir, 'calibration.md'), text + '\n')
@@ -1056,8 +1065,7 @@ def check(
   if not distributed.is_main():
     return {}
   held = shipped.get('held_out', {})
-  record = os.path.join(workdir, NETWORKS_FILE)
-  network = recording_lib.read_json(record) if os.path.isfile(record) else None
+  network = _recorded_networks(workdir)
   theirs = set(shipped.get('network', {}).get('seeds', [0]))
   out = {
     'material': config.material,

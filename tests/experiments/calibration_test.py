@@ -480,3 +480,10 @@ def test_an_estimate_applies_the_calibration_file_it_is_given(tmp_path, monkeypa
   assert note['recalibrated'] and note['n_calibration_recordings'] == 77
   with pytest.raises(ValueError, match='missing.json'):
     EstimateConfig(calibration=str(tmp_path / 'missing.json')).check()
+
+
+def test_a_corrupt_packed_file_is_named(tmp_path):
+  (tmp_path / 'packed').mkdir()
+  (tmp_path / 'packed' / 'runs-000.npz').write_bytes(b'not an npz')
+  with pytest.raises(ValueError, match='runs-000.npz: not a file of packed runs'):
+    calibration.saved_runs(str(tmp_path))
