@@ -20,6 +20,11 @@ Modelling choices (measured; see BENCHMARKS.md and experiments/fabric_motion.py)
     MuJoCo's own fluid model stays off (density 0), so nothing double counts.
   * Self-collision off: a sheet in a fan's wind barely touches itself, and the
     collision pipeline would dominate the cost.
+  * MuJoCo's passive forces off (``spring`` and ``damper`` disabled): the cloth
+    has none (no joint springs or dampers, edges are constraints, bending is
+    applied by the rollout), so this changes nothing but skips MuJoCo's
+    passive pass, which was a fifth of a MuJoCo Warp step on a GPU and half
+    of one on a CPU.
 
 Bending mapping (``reference_rigidity``): ArcSim's hinge energy is
 ``ke l^2 theta^2 / (8 (A0 + A1))``. Bent into a cylinder of curvature k, our
@@ -112,7 +117,9 @@ def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
   return f"""<mujoco model="{mesh.name}">
   <option timestep="{config.timestep}" integrator="Euler" solver="{config.solver}"
           iterations="{config.iterations}" ls_iterations="10" tolerance="{config.tolerance:g}"
-          density="0" viscosity="0"/>
+          density="0" viscosity="0">
+    <flag spring="disable" damper="disable"/>
+  </option>
   <worldbody>
     <flexcomp name="cloth" type="direct" dim="2" radius="0.002" mass="{mesh.area * 0.2}"
               point="{points}" element="{elements}">
