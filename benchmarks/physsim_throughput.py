@@ -1,4 +1,5 @@
-"""Cloth simulation throughput: the project's MJX rollout vs MuJoCo Warp called
+"""Cloth simulation throughput: the project's device rollouts ('warp': MuJoCo
+Warp a frame at a time; 'mjx': ``mjx.step`` per substep) vs MuJoCo Warp called
 directly and MuJoCo C, side by side in one process.
 
 Prints a markdown table and writes JSON. World-steps/s counts one MuJoCo step of
@@ -10,13 +11,18 @@ parameter sets x 3 s (plus our 1 s warm-up from rest).
 runs, so its kernels are compiled once): the same worlds, solver and settings,
 ``mjw.step`` in a loop captured as one CUDA graph, a constant force in place of
 the project's per-step wind and bending (which MuJoCo Warp alone does not
-have); the project's rollout at the same batch is compared with it.
-``--ablate_forces`` adds the project's rollout with that same constant force in
-place of its JAX wind and bending (an ablation, patched in this benchmark only):
-what the per-step hand-over between JAX and MuJoCo Warp costs without the forces.
+have); the project's rollouts at the same batch are compared with it.
+``--ablate_forces`` adds the project's rollouts with that same constant force in
+place of their wind and bending (an ablation, patched in this benchmark only):
+for 'mjx', what the per-step hand-over between JAX and MuJoCo Warp costs
+without the forces; for 'warp', also at the direct run's masses (area weight
+0.2), i.e. the direct run's physics through the project's frame calls.
+``--event_trace`` times the parts of MuJoCo Warp's step in the direct run
+(its own event scopes: smooth dynamics, constraints, solver, integration).
 
   python benchmarks/physsim_throughput.py --batch_sizes=1,8,64 --out=out/physsim_cpu.json
   python benchmarks/physsim_throughput.py --batch_sizes=210,1024 --direct --paper_dataset
+  python benchmarks/physsim_throughput.py --backends=warp --c_baseline=false
 """
 
 from __future__ import annotations
@@ -41,7 +47,10 @@ from physsim import rollout as sim
 
 FLAGS = flags.FLAGS
 flags.DEFINE_integer('resolution', 25, 'cloth vertices per side')
-flags.DEFINE_list('batch_sizes', ['1', '16', '256', '1024', '4096'], 'MJX batch sizes')
+flags.DEFINE_list(
+  'batch_sizes', ['1', '16', '256', '1024', '4096'], 'device batch sizes'
+)
+flags.DEFINE_list('backends', ['warp', 'mjx'], "the project's device rollouts to time")
 flags.DEFINE_float('seconds', 0.5, 'simulated seconds per timed MJX call')
 flags.DEFINE_float('c_seconds', 0.5, 'simulated seconds per world for MuJoCo C')
 flags.DEFINE_integer('c_worlds_per_core', 1, 'worlds each C process simulates')
@@ -54,6 +63,13 @@ flags.DEFINE_float(
   'edge_solref', None, "override the edges' constraint time constant, s"
 )
 flags.DEFINE_float('tolerance', None, "override the solver's relative tolerance")
+flags.DEFINE_integer(
+  'ls_iterations', None, "override the solver's line-search iterations (MuJoCo's opt)"
+)
+flags.DEFINE_bool('event_trace', False, "time the parts of MuJoCo Warp's step (direct)")
+flags.DEFINE_string(
+  'save_last', '', "save each device row's last frame (.npz) to compare settings"
+)
 flags.DEFINE_enum(
   'graph_mode', None, ['auto', 'jax', 'warp'], "override MJX's graph mode"
 )
@@ -101,34 +117,62 @@ def _constant_force(c, model, qpos, qvel, t, w):
   return jnp.zeros((c.body.shape[0], 3), lift.dtype).at[:, 1].set(lift)
 
 
-def _ablated_row(model, b):
-  """``_mjx_row`` with ``_constant_force`` traced in (programs rebuilt)."""
+def _ablated_row(model, b, backend):
+  """The device row with the direct run's constant force in place of the wind
+  and bending (programs rebuilt); for 'warp' also at the direct run's masses."""
   model.programs.clear()
-  with mock.patch.object(sim, '_applied_forces', _constant_force):
-    row = _mjx_row(model, b)
+  if backend == 'mjx':
+    with mock.patch.object(sim, '_applied_forces', _constant_force):
+      row = _device_row(model, b, 'mjx')
+  else:
+    import warp as wp
+    from mujoco.mjx.third_party import mujoco_warp as mjw
+
+    from physsim import warp_frames
+
+    def substeps(self):
+      if not hasattr(self, 'push'):  # the eager first frame, before capture
+        x = np.zeros((self.d.qpos.shape[0], model.mj_model.nbody, 6), np.float32)
+        bodies = model.vert_body[model.vert_qadr >= 0]
+        x[:, bodies, 1] = 0.5 * 9.81 * model.mj_model.body_mass[bodies]
+        self.push = wp.array(x, dtype=wp.spatial_vector, device=self.d.qpos.device)
+      for _ in range(self.substeps):
+        wp.copy(self.d.xfrc_applied, self.push)
+        mjw.step(self.m, self.d)
+
+    with mock.patch.object(warp_frames._Worlds, '_substeps', substeps):
+      row = _device_row(model, b, 'warp', area_weight=0.2)
   model.programs.clear()
-  return {**row, 'backend': 'mjx, constant force (ablation)'}
+  return {**row, 'backend': f'{backend}, constant force (ablation)'}
 
 
-def _mjx_row(model, b):
+def _device_row(model, b, backend, area_weight=None):
   frames = max(1, round(FLAGS.seconds * 20))
-  fn = sim.mjx_program(model, frames, 20.0, 0.0)
+  fn = sim.jit_program(model, frames, 20.0, 0.0, backend=backend)
   wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity)
-  w = _inputs(model, _params(b), wind, jax.random.key(0))
+
+  def params(seed):
+    p = _params(b, seed)
+    return p if area_weight is None else p._replace(area_weight=np.full(b, area_weight))
+
+  w = _inputs(model, params(0), wind, jax.random.key(0))
   t0 = time.perf_counter()
   compiled = fn.lower(w).compile()
   compile_s = time.perf_counter() - t0
   times, valid = [], None
   for r in range(FLAGS.repeats + 1):  # first call warms caches/graphs
-    w = _inputs(model, _params(b, r), wind, jax.random.key(r))
+    w = _inputs(model, params(r), wind, jax.random.key(r))
     t0 = time.perf_counter()
     xs, valid = jax.block_until_ready(compiled(w))
     if r:
       times.append(time.perf_counter() - t0)
+  if FLAGS.save_last and area_weight is None:  # the last timed call's worlds
+    base, _ = os.path.splitext(FLAGS.save_last)
+    np.savez(f'{base}_{backend}_{b}.npz', last=np.asarray(xs[:, -1]), valid=valid)
   steps = b * frames * round(0.05 / model.config.timestep)
   run_s = float(np.median(times))
   return {
-    'backend': 'mjx',
+    'backend': backend,
     'batch': b,
     'compile_s': compile_s,
     'run_s': run_s,
@@ -148,7 +192,8 @@ def _direct_row(model, b):
   mjd = mujoco.MjData(mjm)
   mujoco.mj_forward(mjm, mjd)
   m = mjw.put_model(mjm)
-  m.opt.run_collision_detection = False  # as the project's rollout
+  m.opt.run_collision_detection = False  # as the project's rollouts, which also
+  m.opt.warn_overflow = int(m.opt.warn_overflow) & ~int(mjw.OverflowType.ITERATIONS)
   d = mjw.put_data(mjm, mjd, nworld=b, njmax=mjm.nflexedge + 8)
   bodies = model.vert_body[model.vert_qadr >= 0]
   x = np.zeros((b, mjm.nbody, 6), np.float32)  # a steady push of half the weight
@@ -175,7 +220,7 @@ def _direct_row(model, b):
     times.append(time.perf_counter() - t0)
   run_s = float(np.median(times))
   qpos = d.qpos.numpy()
-  return {
+  row = {
     'backend': 'mujoco-warp direct',
     'batch': b,
     'compile_s': compile_s,
@@ -183,6 +228,34 @@ def _direct_row(model, b):
     'world_steps_per_s': b * steps / run_s,
     'valid_fraction': float(np.mean(np.all(np.isfinite(qpos), axis=1))),
   }
+  if FLAGS.event_trace and cuda:
+    row['event_ms_per_step'] = _event_trace(m, d)
+  return row
+
+
+def _event_trace(m, d, steps=10):
+  """Milliseconds per step in each of MuJoCo Warp's event scopes (two levels)."""
+  import warp as wp
+  from mujoco.mjx.third_party import mujoco_warp as mjw
+  from mujoco.mjx.third_party.mujoco_warp._src import warp_util
+
+  with warp_util.EventTracer() as tracer:
+    with wp.ScopedCapture(device=d.qpos.device) as capture:
+      for _ in range(steps):
+        mjw.step(m, d)
+    wp.capture_launch(capture.graph)
+    wp.synchronize()
+    trace = tracer.trace()
+
+  def flat(t, prefix='', depth=0):
+    out = {}
+    for name, (events, sub) in t.items():
+      out[prefix + name] = sum(events) / steps
+      if depth < 2:
+        out.update(flat(sub, f'{prefix}{name}/', depth + 1))
+    return out
+
+  return flat(trace)
 
 
 def _c_job(args):
@@ -234,9 +307,9 @@ def _c_row(model, cores):
   }
 
 
-def _paper_dataset(model):
+def _paper_dataset(model, backend):
   """All 210 paper sequences (60 frames at 20 Hz after 1 s warm-up) in one call."""
-  fn = sim.mjx_program(model, 60, 20.0, _WARMUP)
+  fn = sim.jit_program(model, 60, 20.0, _WARMUP, backend=backend)
   p = _params(_PAPER_SEQUENCES, 123)
   w = _inputs(model, p, physsim.Wind(gust_intensity=0.2), jax.random.key(1))
   t0 = time.perf_counter()
@@ -265,20 +338,23 @@ def main(argv):
   }  # fmt: skip
   config = physsim.SimConfig(**overrides)
   model = physsim.build(physsim.square(FLAGS.resolution), 'gray_interlock', config)
+  if FLAGS.ls_iterations:  # not a SimConfig setting: patched on the compiled model
+    model.mj_model.opt.ls_iterations = FLAGS.ls_iterations
   cores = os.cpu_count() or 1
   device = jax.devices()[0]
   rows = [_c_row(model, 1), _c_row(model, cores)] if FLAGS.c_baseline else []
   for b in map(int, FLAGS.batch_sizes):
-    rows.append(_mjx_row(model, b))
-    print(rows[-1], flush=True)
+    project = []
+    for backend in FLAGS.backends:
+      project.append(_device_row(model, b, backend))
+      print(project[-1], flush=True)
+    for backend in FLAGS.backends if FLAGS.ablate_forces else ():
+      project.append(_ablated_row(model, b, backend))
+      print(project[-1], flush=True)
+    rows += project
     if FLAGS.direct:
-      mjx_rows = [rows[-1]]
-      if FLAGS.ablate_forces:
-        rows.append(_ablated_row(model, b))
-        mjx_rows.append(rows[-1])
-        print(rows[-1], flush=True)
       rows.append(_direct_row(model, b))
-      for r in mjx_rows:
+      for r in project:
         r['x_direct'] = r['world_steps_per_s'] / rows[-1]['world_steps_per_s']
       print(rows[-1], flush=True)
   paper_steps = _PAPER_SEQUENCES * (_PAPER_SECONDS + _WARMUP) / model.config.timestep
@@ -295,12 +371,13 @@ def main(argv):
     'resolution': FLAGS.resolution,
     'timestep': model.config.timestep,
     'solver': f'{model.config.solver} x{model.config.iterations}',
+    'ls_iterations': int(model.mj_model.opt.ls_iterations),
     'sim_config': dataclasses.asdict(model.config),
     'devices': [str(d) for d in jax.local_devices()],
     'rows': rows,
   }
   if FLAGS.paper_dataset:
-    result['paper_dataset_direct'] = _paper_dataset(model)
+    result['paper_dataset'] = {b: _paper_dataset(model, b) for b in FLAGS.backends}
   print(
     f'\n{FLAGS.resolution}x{FLAGS.resolution} cloth, dt {model.config.timestep * 1e3:g} ms, '
     f'{result["solver"]}, device {device}, {cores} CPU cores'
@@ -317,11 +394,13 @@ def main(argv):
       f'{r["compile_s"]:.1f} | {r["paper_dataset_s"]:,.1f} | {r["valid_fraction"]:.3f} | '
       f'{100 * r.get("edge_strain_p99", float("nan")):.2f}% |'
     )
-  if FLAGS.paper_dataset:
-    d = result['paper_dataset_direct']
+  for r in rows:
+    for name, ms in r.get('event_ms_per_step', {}).items():
+      print(f'  {r["batch"]} worlds, {name}: {ms:.3f} ms per step')
+  for backend, d in result.get('paper_dataset', {}).items():
     print(
-      f'\nPaper dataset, 210 x (1+3) s in one MJX call: {d["run_s"]:.2f} s after '
-      f'{d["compile_s"]:.1f} s compile; valid {d["valid_fraction"]:.3f}'
+      f'\nPaper dataset, 210 x (1+3) s in one {backend} call: {d["run_s"]:.2f} s '
+      f'after {d["compile_s"]:.1f} s compile; valid {d["valid_fraction"]:.3f}'
     )
   os.makedirs(os.path.dirname(FLAGS.out) or '.', exist_ok=True)
   with tempfile.NamedTemporaryFile(

@@ -49,6 +49,7 @@ from physsim.render import (
   shade_rgb,
 )
 from physsim.rollout import (
+  BACKENDS,
   Rollout,
   Wind,
   WorldInputs,
@@ -102,6 +103,7 @@ __all__ = [
   'pose_to_dict',
   'reference_rigidity',
   'resolve_backend',
+  'BACKENDS',
   'rollout_fn',
   'render',
   'render_depth',

@@ -1,11 +1,22 @@
-"""Batched cloth rollouts: MJX (``impl='warp'``) and the MuJoCo C oracle.
+"""Batched cloth rollouts on MuJoCo Warp (two ways) and the MuJoCo C oracle.
 
 ``simulate`` takes a batch of parameter sets and returns vertex positions at the
 frame rate, ``(batch, frames, vertices, 3)``, and a per-world validity flag.
-Both backends run the same physics: MuJoCo integrates (Euler) with edge
+Every backend runs the same physics: MuJoCo integrates (Euler) with edge
 equality constraints; each substep the rollout computes ArcSim's face wind
 (with optional gusts) and MuJoCo's bending stencil times the world's bending
 scale, and applies them as ``xfrc_applied`` on the vertex bodies.
+
+Backends (``BACKENDS``; ``'auto'`` picks ``'warp'`` on a GPU, else ``'c'``):
+
+* ``'warp'``: MuJoCo Warp a frame at a time (``physsim.warp_frames``): one
+  JAX FFI call per recorded frame runs its substeps, the forces as Warp
+  kernels, captured once as a CUDA graph. The fastest on a GPU.
+* ``'mjx'``: ``mjx.step`` (``impl='warp'``) per substep inside a
+  ``lax.scan``, the forces in JAX between the steps. The same kernels, one
+  hand-over per substep; kept as a cross-check of ``'warp'``.
+* ``'c'``: MuJoCo C in worker processes, float64 NumPy forces: the oracle,
+  and the fastest on a CPU.
 
 Per-world fields (``WorldInputs``: ``body_mass`` from the area weight, wind
 speed, direction, gusts and bending scale) are all arrays, so new values never
@@ -279,6 +290,21 @@ def _mjx_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: int
   return run
 
 
+def _warp_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: int):
+  """A traceable ``(WorldInputs) -> (positions (B,T,V,3), valid (B,))`` on
+  MuJoCo Warp a frame at a time (``physsim.warp_frames``)."""
+  from physsim import warp_frames  # imported lazily: the C backend works without it
+
+  run = warp_frames.frame_rollout(model, frames, substeps, warm_frames)
+  rest = jnp.asarray(model.mesh.vertices, jnp.float32)
+
+  def fn(w: WorldInputs):
+    xs = run(w)
+    return xs, _valid(xs, rest)
+
+  return fn
+
+
 # ------------------------------------------------------------ MuJoCo C backend
 
 
@@ -452,13 +478,16 @@ def _c_callback_rollout(
 # ------------------------------------------------------------------ public API
 
 
+BACKENDS = ('auto', 'warp', 'mjx', 'c')
+
+
 def resolve_backend(name: str) -> str:
-  """``'auto'`` -> ``'mjx'`` on a GPU, else ``'c'`` (MuJoCo Warp on a CPU is
-  ~10x slower than MuJoCo C); ``'mjx'`` and ``'c'`` pass through."""
+  """``'auto'`` -> ``'warp'`` on a GPU, else ``'c'`` (MuJoCo Warp on a CPU is
+  ~10x slower than MuJoCo C); ``'warp'``, ``'mjx'`` and ``'c'`` pass through."""
   if name == 'auto':
-    return 'mjx' if jax.default_backend() == 'gpu' else 'c'
-  if name not in ('mjx', 'c'):
-    raise ValueError(f"backend must be 'auto', 'mjx' or 'c', got {name!r}")
+    return 'warp' if jax.default_backend() == 'gpu' else 'c'
+  if name not in BACKENDS:
+    raise ValueError(f'backend must be one of {BACKENDS}, got {name!r}')
   return name
 
 
@@ -468,7 +497,7 @@ def rollout_fn(
   frames: int = 60,
   fps: float = 20.0,
   warmup: float = 1.0,
-  backend: str = 'mjx',
+  backend: str = 'auto',
   workers: int | None = None,
 ):
   """The rollout as a traceable ``(WorldInputs) -> (positions, valid)``.
@@ -479,8 +508,10 @@ def rollout_fn(
   Args:
     model: compiled cloth.
     frames, fps, warmup: the frame plan (as ``simulate``).
-    backend: ``'mjx'`` (traced MJX-warp) or ``'c'`` (MuJoCo C through a host
-      callback, ``workers`` processes; default all cores).
+    backend: ``'warp'`` (MuJoCo Warp a frame at a time, ``physsim.warp_frames``),
+      ``'mjx'`` (``mjx.step`` per substep in a ``lax.scan``), ``'c'`` (MuJoCo
+      C through a host callback, ``workers`` processes; default all cores) or
+      ``'auto'`` (``resolve_backend``).
     workers: see ``backend``.
 
   Returns:
@@ -494,24 +525,33 @@ def rollout_fn(
   if key not in model.programs:
     if backend == 'mjx':
       fn = _mjx_rollout(model, frames, substeps, warm_frames)
+    elif backend == 'warp':
+      fn = _warp_rollout(model, frames, substeps, warm_frames)
     else:
       fn = _c_callback_rollout(model, frames, substeps, warm_frames, workers)
     model.programs[key] = fn
   return model.programs[key]
 
 
-def mjx_program(
-  model: ClothModel, frames: int = 60, fps: float = 20.0, warmup=1.0, devices=None
+def jit_program(
+  model: ClothModel,
+  frames: int = 60,
+  fps: float = 20.0,
+  warmup=1.0,
+  devices=None,
+  backend: str = 'warp',
 ):
-  """The jitted MJX rollout ``(WorldInputs) -> (positions, valid)`` that
-  ``simulate`` runs, its worlds split over ``devices`` (default: every local
-  device; ``physsim.devices``). Kept with the model; exposed for benchmarks
-  and tests."""
+  """The jitted rollout ``(WorldInputs) -> (positions, valid)`` that
+  ``simulate`` runs on a device backend (``'warp'`` or ``'mjx'``), its worlds
+  split over ``devices`` (default: every local device; ``physsim.devices``).
+  Kept with the model; exposed for benchmarks and tests."""
+  if backend not in ('warp', 'mjx'):
+    raise ValueError(f"jit_program runs 'warp' or 'mjx', got {backend!r}")
   substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
   mesh = world_mesh(devices)
-  key = ('jit', frames, substeps, warm_frames, mesh_key(mesh))
+  key = ('jit', backend, frames, substeps, warm_frames, mesh_key(mesh))
   if key not in model.programs:
-    fn = rollout_fn(model, frames=frames, fps=fps, warmup=warmup, backend='mjx')
+    fn = rollout_fn(model, frames=frames, fps=fps, warmup=warmup, backend=backend)
     model.programs[key] = jax.jit(shard_worlds(fn, mesh))
   return model.programs[key]
 
@@ -536,7 +576,7 @@ def simulate(
   warmup: float = 1.0,
   wind: Wind | None = None,
   key: jax.Array | None = None,
-  backend: str = 'mjx',
+  backend: str = 'auto',
   space: params_lib.SearchSpace | None = None,
   workers: int | None = None,
   material: str | Sequence[str] | None = None,
@@ -554,8 +594,10 @@ def simulate(
     key: PRNG key for the gusts, split into one sub-key per world; or a
       batch of B keys, one per world (the same key for every world gives
       every world the same gusts: common random numbers).
-    backend: ``'mjx'`` (MuJoCo Warp through MJX, batched) or ``'c'`` (MuJoCo C,
-      one world at a time, float64 forces; the oracle and CPU fallback).
+    backend: ``'warp'`` (MuJoCo Warp, batched, a frame's substeps per call),
+      ``'mjx'`` (MuJoCo Warp through ``mjx.step``, one call per substep), ``'c'``
+      (MuJoCo C, one world at a time, float64 forces; the oracle and CPU
+      fallback) or ``'auto'`` (``'warp'`` on a GPU, else ``'c'``).
     space: allowed parameter ranges (default: the union over the paper's fabrics).
     workers: processes for the C backend (default: all cores).
     material: the fabric (or one per world) whose measured bending a scale of 1
@@ -582,13 +624,12 @@ def simulate(
   wind = wind or Wind()
   check_wind(wind)
   substeps, warm_frames = _frame_plan(model, frames, fps, warmup)
-  if backend not in ('mjx', 'c'):
-    raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
+  backend = resolve_backend(backend)
   keys = _world_keys(key, b, wind)
   times = np.arange(frames) / fps
-  if backend == 'mjx':
+  if backend != 'c':
     w = world_inputs(model, *params, keys, wind, ratio)
-    xs, valid = mjx_program(model, frames, fps, warmup, devices)(w)
+    xs, valid = jit_program(model, frames, fps, warmup, devices, backend)(w)
     return Rollout(np.asarray(xs), np.asarray(valid), times)
   # The oracle keeps float64 parameters and masses (the gusts are float32).
   w = world_inputs(model, *params, keys, wind, ratio)._asdict()

@@ -1,10 +1,13 @@
-"""Tests for physsim.rollout: MJX-warp vs the MuJoCo C oracle, and physics checks.
+"""Tests for physsim.rollout: the device backends ('mjx': ``mjx.step`` per
+substep; 'warp': MuJoCo Warp a frame at a time) vs the MuJoCo C oracle, and
+physics checks.
 
-The MJX rollout compiles once per session (Warp kernels then XLA), on an 8x8
-cloth with a handful of frames.
+Each device rollout compiles once per module (Warp kernels then XLA), on an
+8x8 cloth with a handful of frames.
 """
 
 import jax
+import mujoco
 import numpy as np
 import pytest
 
@@ -37,13 +40,15 @@ def batch():
 def mjx_out(model, batch):
   wind = physsim.Wind(gust_intensity=0.2)
   return sim.simulate(
-    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind, key=jax.random.key(7)
-  )
+    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind,
+    key=jax.random.key(7), backend='mjx',
+  )  # fmt: skip
 
 
-def test_mjx_matches_mujoco_c(model, batch, mjx_out):
+@pytest.fixture(scope='module')
+def c_out(model, batch):
   wind = physsim.Wind(gust_intensity=0.2)
-  ref = sim.simulate(
+  return sim.simulate(
     model,
     batch,
     frames=_FRAMES,
@@ -54,11 +59,25 @@ def test_mjx_matches_mujoco_c(model, batch, mjx_out):
     backend='c',
     workers=1,
   )
-  assert mjx_out.positions.shape == (5, _FRAMES, 64, 3)
-  assert mjx_out.valid.all() and ref.valid.all()
-  moved = np.abs(ref.positions[:, -1] - model.mesh.vertices).max()
+
+
+@pytest.fixture(scope='module')
+def warp_out(model, batch):
+  wind = physsim.Wind(gust_intensity=0.2)
+  return sim.simulate(
+    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind,
+    key=jax.random.key(7), backend='warp',
+  )  # fmt: skip
+
+
+@pytest.mark.parametrize('backend', ['mjx', 'warp'])
+def test_device_backend_matches_mujoco_c(model, c_out, backend, request):
+  out = request.getfixturevalue(f'{backend}_out')
+  assert out.positions.shape == (5, _FRAMES, 64, 3)
+  assert out.valid.all() and c_out.valid.all()
+  moved = np.abs(c_out.positions[:, -1] - model.mesh.vertices).max()
   assert moved > 0.1  # the comparison is not between two resting cloths
-  err = np.abs(mjx_out.positions - ref.positions)
+  err = np.abs(out.positions - c_out.positions)
   assert err.max() < _PARITY_TOL
   assert np.median(err) < _PARITY_MEDIAN_TOL
 
@@ -72,15 +91,17 @@ def test_mjx_matches_mujoco_c(model, batch, mjx_out):
 _SHARDING_TOL = 1e-4  # m
 
 
-def test_worlds_split_over_devices_move_as_on_one(model, batch, mjx_out):
-  assert len(jax.local_devices()) == 2  # mjx_out ran split (5 worlds padded to 6)
+@pytest.mark.parametrize('backend', ['mjx', 'warp'])
+def test_worlds_split_over_devices_move_as_on_one(model, batch, backend, request):
+  split = request.getfixturevalue(f'{backend}_out')
+  assert len(jax.local_devices()) == 2  # it ran split (5 worlds padded to 6)
   one = sim.simulate(
     model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0,
     wind=physsim.Wind(gust_intensity=0.2), key=jax.random.key(7),
-    devices=jax.local_devices()[:1],
+    devices=jax.local_devices()[:1], backend=backend,
   )  # fmt: skip
-  np.testing.assert_array_equal(one.valid, mjx_out.valid)
-  np.testing.assert_allclose(one.positions, mjx_out.positions, atol=_SHARDING_TOL)
+  np.testing.assert_array_equal(one.valid, split.valid)
+  np.testing.assert_allclose(one.positions, split.positions, atol=_SHARDING_TOL)
 
 
 def test_total_mass_is_area_times_area_weight(model):
@@ -181,7 +202,7 @@ def test_one_model_serves_every_material():
 
 
 def test_changing_values_does_not_recompile(model, batch, mjx_out):
-  fn = sim.mjx_program(model, _FRAMES, _FPS, 0.0)
+  fn = sim.jit_program(model, _FRAMES, _FPS, 0.0, backend='mjx')
   before = fn._cache_size()
   other = physsim.params.make(
     batch.bending_scale[::-1], batch.wind_speed, batch.area_weight[::-1]
@@ -194,8 +215,24 @@ def test_changing_values_does_not_recompile(model, batch, mjx_out):
     warmup=0.0,
     wind=physsim.Wind(gust_intensity=0.2),
     key=jax.random.key(8),
+    backend='mjx',
   )
   assert fn._cache_size() == before
+
+
+def test_passive_forces_off_changes_nothing():
+  # The MJCF disables MuJoCo's passive pass (springs, dampers, flex
+  # elasticity) for speed: the cloth has no passive forces of MuJoCo's own, so
+  # the motion is the same to the last bit with the pass back on.
+  model = physsim.build(physsim.square(6), 'gray_interlock')
+  p = physsim.params.make([1.0, 5.0], [3.0, 5.0], [0.15, 0.3])
+  kw = dict(frames=4, fps=_FPS, warmup=0.1, backend='c', workers=1,
+            wind=physsim.Wind(gust_intensity=0.2), key=jax.random.key(3))  # fmt: skip
+  off = sim.simulate(model, p, **kw).positions
+  dsbl = mujoco.mjtDisableBit
+  assert model.mj_model.opt.disableflags & dsbl.mjDSBL_SPRING
+  model.mj_model.opt.disableflags &= ~int(dsbl.mjDSBL_SPRING | dsbl.mjDSBL_DAMPER)
+  np.testing.assert_array_equal(sim.simulate(model, p, **kw).positions, off)
 
 
 def test_blow_up_is_flagged_not_passed_on():
