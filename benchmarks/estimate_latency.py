@@ -21,6 +21,7 @@ import time
 
 from absl import app, flags, logging
 
+import physsim
 from experiments.pipeline import embedding, files, search
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
@@ -40,7 +41,7 @@ flags.DEFINE_string('material', 'gray_interlock', 'its fabric')
 flags.DEFINE_string('model', None, 'its trained network')
 flags.DEFINE_string('out', 'out/estimate_latency.json', 'JSON result')
 flags.DEFINE_list('settings', list(SETTINGS), 'which settings')
-flags.DEFINE_string('backend', 'auto', "'auto', 'mjx' or 'c'")
+flags.DEFINE_enum('backend', 'auto', physsim.BACKENDS, 'simulator (physsim.rollout)')
 flags.DEFINE_integer(
   'repeats',
   1,

@@ -30,6 +30,7 @@ from absl import app, flags, logging
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model as model_lib  # noqa: E402
+import physsim  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo, files  # noqa: E402
 from experiments.pipeline import training as train_lib  # noqa: E402
@@ -40,7 +41,9 @@ FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', 'out/demo', 'data and runs go here')
 flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
 flags.DEFINE_integer('sequences', 24, 'training simulations')
-flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on a GPU")
+flags.DEFINE_enum(
+  'backend', 'auto', physsim.BACKENDS, "'auto': MuJoCo Warp on a GPU, else C"
+)
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs per run')
 _SEEDS = flags.DEFINE_list('seeds', ['0', '1', '2'], 'training seeds per variant')
 _DATASET = flags.DEFINE_string(

@@ -47,7 +47,9 @@ FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', 'out/demo', 'data and runs go here')
 flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
 flags.DEFINE_integer('sequences', 24, 'training simulations')
-flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], "'auto': MJX on a GPU")
+flags.DEFINE_enum(
+  'backend', 'auto', physsim.BACKENDS, "'auto': MuJoCo Warp on a GPU, else C"
+)
 _EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs (every one is kept)')
 _RECORDINGS = flags.DEFINE_integer('recordings', 4, 'real-like recordings')
 _ALL_EPOCHS = flags.DEFINE_bool(

@@ -14,6 +14,7 @@ import dataclasses
 
 from absl import logging
 
+import physsim
 from experiments.pipeline import cli
 from experiments.pipeline import demo as demo_lib
 
@@ -27,14 +28,14 @@ class Args:
     material: the fabric (physsim.FABRICS).
     sequences: training simulations.
     seed: seed of the recording (its ground truth) and of the search.
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
   """
 
   workdir: str = 'out/demo'
   material: str = 'gray_interlock'
   sequences: int = 24
   seed: int = 0
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
 
 
 def main(args: Args) -> None:

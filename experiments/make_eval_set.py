@@ -12,6 +12,7 @@ import dataclasses
 
 from absl import logging
 
+import physsim
 from experiments.pipeline import cli, eval_set
 
 
@@ -24,14 +25,14 @@ class Args:
     smoke: tiny: 2 fabrics, 1 garment, small images (CPU).
     sequences: recordings per fabric and garment (0: 3).
     resolution: image width = height, pixels (0: 256).
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
   """
 
   out: str = 'data/eval'
   smoke: bool = False
   sequences: int = 0
   resolution: int = 0
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
 
 
 PRESETS = {'default': Args(), 'smoke': Args(smoke=True, backend='c')}

@@ -50,7 +50,8 @@ class Config:
     resolution: image width = height, pixels.
     cloth_resolution: cloth vertices per side.
     seed: the only seed.
-    backend: ``'auto'`` (MJX on a GPU, else MuJoCo C), ``'mjx'`` or ``'c'``.
+    backend: ``'auto'`` (MuJoCo Warp a frame at a time on a GPU, else MuJoCo
+      C), ``'warp'``, ``'mjx'`` or ``'c'`` (``physsim.rollout``).
     batch_size: worlds simulated at once, split over every local device
       (``physsim.devices``: with N GPUs give N times the one-GPU batch);
       rendering goes in chunks that fit free device memory. The sequences of
@@ -83,7 +84,7 @@ class Config:
   resolution: int = 256
   cloth_resolution: int = 25
   seed: int = 0
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
   batch_size: int = 30
   workers: int = 0
   gust_intensity: float = 0.2

@@ -43,7 +43,7 @@ from experiments.pipeline import cli, embedding
 from experiments.pipeline.posterior import Measured
 from experiments.pipeline.recording import Recording
 
-BACKENDS = ('auto', 'mjx', 'c')
+BACKENDS = physsim.BACKENDS
 DISTANCES = ('energy', 'centroid')
 POINTS = ('median', 'bayes', 'argmin')
 LIKELIHOODS = ('gibbs', 'threshold')
@@ -93,7 +93,7 @@ class EstimateConfig:
     replicates: candidates per iteration that repeat the most probable cell
       with fresh randomness (they measure the simulator's noise).
     distance: PSD between embedding sets ('energy' or 'centroid').
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
     workers: processes of the C backend (0: one per core); does not change
       results, so a resumed run may use another value.
     sensor_noise: pass candidates' rendered depth through the depth-sensor
@@ -399,10 +399,11 @@ class Objective:
     # device's free memory: the network's activations dominate.
     per_world = cams * problem.n_frames * h * w * _bytes_per_pixel(net.params)
     self._chunk = physsim.devices.chunk_size(per_world)
-    # The worlds of a call split over every local device (MJX); MuJoCo C runs
-    # on the host through a callback, whose process pool is the parallelism.
-    mjx = physsim.resolve_backend(c.backend) == 'mjx'
-    self.world_mesh = physsim.devices.world_mesh() if mjx else None
+    # The worlds of a call split over every local device (MuJoCo Warp); MuJoCo
+    # C runs on the host through a callback, whose process pool is the
+    # parallelism.
+    on_device = physsim.resolve_backend(c.backend) != 'c'
+    self.world_mesh = physsim.devices.world_mesh() if on_device else None
     self._program = jax.jit(
       self._fused, static_argnames=('with_frames', 'with_positions')
     )

@@ -45,7 +45,7 @@ class Config:
     warmup: simulated seconds before the first frame.
     variants: settings variants of part 2 (fabric_motion.VARIANTS).
     variant_winds: wind speeds of part 2, m/s.
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
     seed: gust seed.
   """
 
@@ -59,7 +59,7 @@ class Config:
   warmup: float = 1.0
   variants: tuple[str, ...] = ('chosen', 'edges_10ms', 'edges_20ms', 'dt_1ms', 'steady')
   variant_winds: tuple[float, ...] = (2.5, 3.0)
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
   seed: int = 0
 
 

@@ -33,7 +33,7 @@ class Config:
     gusts: RMS relative gust intensity.
     resolution: cloth vertices per side.
     frames: frames at 20 Hz.
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
     seed: gust seed.
   """
 
@@ -43,7 +43,7 @@ class Config:
   gusts: float = 0.2
   resolution: int = 15
   frames: int = 60
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
   seed: int = 0
 
 

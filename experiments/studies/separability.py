@@ -85,7 +85,7 @@ class Config:
     frames: frames per simulation.
     fps: frame rate, Hz.
     warmup: simulated seconds before the first frame.
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
   """
 
   fabrics: tuple[str, ...] = tuple(physsim.FABRICS)
@@ -100,7 +100,7 @@ class Config:
   frames: int = 60
   fps: float = 20.0
   warmup: float = 1.0
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
 
 
 _SMOKE = Config(
