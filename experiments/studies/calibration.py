@@ -90,7 +90,7 @@ class Config:
     measured_sd: relative standard error of a measured wind or area weight.
     sequences: training simulations of the network (the demo's recipe).
     batch_size: recordings simulated per batch when making them.
-    backend: simulator: 'auto' (MJX on a GPU, else MuJoCo C), 'mjx' or 'c'.
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
     seed: the study's seed (truths, recordings, searches).
     network_seed: seed of the first network's training simulations and
       training (0: the demo's own network).
@@ -108,7 +108,7 @@ class Config:
   measured_sd: float = 0.02
   sequences: int = 24
   batch_size: int = 64
-  backend: str = cli.choice('auto', ('auto', 'mjx', 'c'))
+  backend: str = cli.choice('auto', physsim.BACKENDS)
   seed: int = 0
   network_seed: int = 0
   networks: int = 5
@@ -296,6 +296,7 @@ def simulate_and_estimate(
 # CDF levels, so intervals at any (recalibrated) level come without redrawing.
 _QGRID = np.linspace(0.0, 1.0, 1001)
 _LOG_FIELDS = ('bending_scale', 'load_ratio')  # compared on a log scale
+_LOG_COLUMNS = tuple(f in _LOG_FIELDS for f in FIELDS)
 # The error each point is judged by: bending as a factor, the rest in percent
 # (the load ratio too, as the tables report it).
 _LOSS = {f: 'factor' if f == 'bending_scale' else 'relative' for f in FIELDS}
@@ -354,14 +355,21 @@ def _prior_point(material: str, measured: posterior_lib.Measured) -> np.ndarray:
 
 
 def _score(draws_phys: np.ndarray, prior_phys: np.ndarray, truth_row: np.ndarray,
-           seed: int, prior_point: np.ndarray) -> dict:  # fmt: skip
+           seed: int, prior_point: np.ndarray, box_phys: np.ndarray) -> dict:  # fmt: skip
   """The truth's rank and the quantile function, per field, of the posterior's
   defensive mixture with its prior (``bo.calibration.defensive``, as an
   estimate reads it); intervals at any level are read off it later. With
-  the prior's own least-error point (the reading's, for a measured mode)."""
+  the prior's own least-error point (the reading's, for a measured mode), the
+  truth's rank under the prior alone, and the width of the posterior's
+  intervals over those of the search box's prior ``box_phys`` (the prior the
+  truths are drawn from: about 1 where neither video nor reading told the
+  posterior anything)."""
   mix = bo.calibration.defensive(draws_phys, prior_phys, seed=seed)
   return {
     'rank': bo.calibration.ranks(mix, truth_row),
+    'width_ratio': bo.calibration.width_ratio(mix, box_phys, log=_LOG_COLUMNS),
+    # how an interval that knows nothing (the prior's own) fares on this truth
+    'prior_rank': bo.calibration.ranks(prior_phys, truth_row),
     'qf': np.quantile(mix, _QGRID, axis=0),  # (len(_QGRID), fields)
     'prior_point': prior_point,
   }
@@ -399,7 +407,9 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
       post = bo.posterior.log_normalise(lp + ll)
       draws = _physical_with_ratio(_draws(rng, grid, np.asarray(post), n), space)
       point = _prior_point(config.material, measured[mode])
-      score = _score(draws, prior_draws[mode], row, r['seq'], point)
+      score = _score(
+        draws, prior_draws[mode], row, r['seq'], point, prior_draws['video']
+      )
       out[mode].append({'seq': r['seq'], 'truth': row, **score})
     mate = by_seq.get(r['seq'] ^ 1) if pairs else None  # the pair's other recording
     if mate is not None and r['seq'] % 2 == 0:
@@ -412,7 +422,9 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
         trow = _truth_row(rr['truth'])
         draws = _physical_with_ratio(samples, space)
         point = _prior_point(config.material, measured['video'])
-        score = _score(draws, prior_draws['video'], trow, rr['seq'], point)
+        score = _score(
+          draws, prior_draws['video'], trow, rr['seq'], point, prior_draws['video']
+        )
         out['joint pair'].append({'seq': rr['seq'], 'pair_member': k, 'truth': trow,
                                   **score})  # fmt: skip
   return out
@@ -440,8 +452,13 @@ def _scale(space: physsim.SearchSpace) -> dict:
 
 def recalibration(scores: list[dict]) -> np.ndarray:
   """(len(PROBS), fields) CDF levels from these recordings' ranks
-  (``bo.calibration.levels``)."""
-  return bo.calibration.levels(np.stack([s['rank'] for s in scores]))
+  (``bo.calibration.levels``); a field the video does not inform (its
+  intervals as wide as the prior's) keeps the nominal levels."""
+  widths = [s.get('width_ratio') for s in scores]
+  return bo.calibration.levels(
+    np.stack([s['rank'] for s in scores]),
+    width_ratios=None if any(w is None for w in widths) else np.stack(widths),
+  )
 
 
 def summarise(
@@ -479,6 +496,15 @@ def summarise(
       cell[f'interval_score_{lvl}'] = float(
         np.mean(bo.calibration.interval_score(tr(lo), tr(hi), tr(t), a)) / scale[f]
       )
+    if all('prior_rank' in s for s in scores):
+      pr = np.array([s['prior_rank'][i] for s in scores])
+      for lvl in LEVELS:
+        a = lvl / 100
+        cell[f'prior_interval_{lvl}'] = float(
+          np.mean((pr >= (1 - a) / 2) & (pr <= (1 + a) / 2))
+        )
+    if all('width_ratio' in s for s in scores):  # ~1: the prior's own width
+      cell['width_ratio'] = float(np.median([s['width_ratio'][i] for s in scores]))
     hist = np.histogram(rank[:, i], bins=10, range=(0, 1))[0]
     expected = len(scores) / 10
     cell['rank_histogram'] = hist.tolist()
@@ -812,7 +838,7 @@ def _err(f: str, v: float) -> str:
 
 def _cell(s: dict, raw: dict, f: str) -> str:
   if not s:
-    return '- | - | - | -'
+    return '- | - | - | - | - | - | - | - | -'
   fmt = functools.partial(_err, f)
   key = 'factor' if f == 'bending_scale' else 'pct'
   err = (f'{fmt(s[f].get("point_error_" + key, float("nan")))} (weight '
@@ -820,7 +846,11 @@ def _cell(s: dict, raw: dict, f: str) -> str:
          f'{fmt(raw[f]["median_error_" + key])} | '
          f'{fmt(s[f].get("prior_point_error_" + key, float("nan")))} | '
          f'{fmt(s[f]["centre_error_" + key])}')  # fmt: skip
-  return f'{_pair(s[f])} | {_pair(raw[f])} | {err} | {raw[f]["rank_chi2"]:.1f}'
+  width = raw[f].get('width_ratio')
+  width = '-' if width is None else f'{width:.2f}'
+  return (
+    f'{_pair(s[f])} | {_pair(raw[f])} | {err} | {raw[f]["rank_chi2"]:.1f} | {width}'
+  )
 
 
 def table(out: dict) -> str:
@@ -829,8 +859,10 @@ def table(out: dict) -> str:
   factor exp|log(est / true)|) of the estimate's point (the least-error point
   moved towards the prior's own by the weight, cross-fitted), of the
   recalibrated and the uncalibrated median, of the prior's own point and of
-  the range centre; and the uncalibrated ranks' chi^2 (9 dof; above 21.7
-  rejects uniform ranks at 1%)."""
+  the range centre; the uncalibrated ranks' chi^2 (9 dof; above 21.7
+  rejects uniform ranks at 1%); and the median width of the posterior's 90%
+  intervals over the prior's (at or above ``bo.calibration.UNINFORMED``, the
+  video does not inform the quantity and its nominal levels are kept)."""
   rc = out['recalibration']
   lines = [
     f'Simulated recordings: {out["n"]} ({out["setting"]}); each read with the '
@@ -840,8 +872,9 @@ def table(out: dict) -> str:
     '',
     '| mode | parameter | 50% / 90% hold the truth, recalibrated (held out) | '
     'uncalibrated | mean error: point (weight) | recalibrated median | '
-    "uncalibrated median | prior's point | range centre | rank chi^2 |",
-    '|---|---|---|---|---|---|---|---|---|---|',
+    "uncalibrated median | prior's point | range centre | rank chi^2 | "
+    'width / prior |',
+    '|---|---|---|---|---|---|---|---|---|---|---|',
   ]
   for mode, s in out['held_out'].items():
     for f in FIELDS:
@@ -966,6 +999,17 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
     levels = np.asarray(rc['modes'][mode])
     w = rc.get('weights', {}).get(mode, {})
     s = summarise([{**x, 'levels': levels, 'weights': w} for x in v], space)
+    seeds = network_seeds(config)
+    s['per_network'] = {}
+    for k, seed in enumerate(seeds):
+      mine = [{**x, 'levels': levels, 'weights': w} for x in v
+              if network_of(config, x['seq']) == k]  # fmt: skip
+      if mine:
+        sub = summarise(mine, space, bayes=False)
+        s['per_network'][str(seed)] = {
+          'n': sub['n'],
+          **{f: {c: sub[f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS},
+        }
     ranks = np.stack([x['rank'] for x in v])  # (n, fields)
     for i, f in enumerate(FIELDS):
       r = bo.calibration.unwarp(ranks[:, i], levels[:, i])
@@ -1109,38 +1153,64 @@ def _seeds(out: dict) -> str:
 
 def check_table(out: dict) -> str:
   """Markdown: per mode and quantity, how often the 50% and 90% intervals held
-  the truth on the new recordings (95% binomial intervals in brackets), what
-  the calibration's own cross-fitted coverage promised, and the mean error of
-  the point beside the range centre's; the estimates' printed intervals
-  first."""
+  the truth on the new recordings (95% binomial intervals in brackets), how
+  often the prior's own central intervals held these truths (what an interval
+  that knows nothing scores here: the luck of the draw), what the
+  calibration's own cross-fitted coverage promised, and the mean error of the
+  point beside the range centre's; the estimates' printed intervals first;
+  then the 90% intervals network by network."""
   sh, pr = out['shipped'], out['printed']
   lines = [
     f'Calibration checked: {sh["setting"]} (sharpness {sh["sharpness"]:g}, '
     f'{sh["n"]} calibration recordings) on {out["n"]} recordings it never saw '
     f'(seed {out["seed"]}; networks {_seeds(out)}); {pr["recalibrated"]} of '
-    f'{pr["n"]} estimates applied its tables. Brackets: 95% binomial intervals.',
+    f'{pr["n"]} estimates applied its tables. Brackets: 95% binomial intervals. '
+    "The prior's own: how often the prior's central 50%/90% intervals held "
+    'the same truths.',
     '',
     '| mode | quantity | 50% hold the truth | 90% hold the truth | '
-    'promised (cross-fitted) | mean error: point | range centre |',
-    '|---|---|---|---|---|---|---|',
+    "the prior's own | promised (cross-fitted) | mean error: point | range centre |",
+    '|---|---|---|---|---|---|---|---|',
   ]
   promised = lambda m, f: (
     _pair(sh['held_out'][m][f]) if f in sh['held_out'].get(m, {}) else '-'
   )
+
+  def prior(cell):
+    if 'prior_interval_90' not in cell:
+      return '-'
+    return (
+      f'{100 * cell["prior_interval_50"]:.0f}% / {100 * cell["prior_interval_90"]:.0f}%'
+    )
+
+  video = out['modes'].get('video', {})
   for f in FIELDS:
     c = pr[f]
     lines.append(
       f'| video, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
-      f'{promised("video", f)} | {_err(f, c["estimate_error"])} | '
-      f'{_err(f, c["range_centre_error"])} |'
+      f'{prior(video.get(f, {}))} | {promised("video", f)} | '
+      f'{_err(f, c["estimate_error"])} | {_err(f, c["range_centre_error"])} |'
     )
   for mode, s in out['modes'].items():
     for f in FIELDS:
       c = s[f]
       key = 'factor' if f == 'bending_scale' else 'pct'
       lines.append(
-        f'| {mode} | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
+        f'| {mode} | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | {prior(c)} | '
         f'{promised(mode, f)} | {_err(f, c["point_error_" + key])} | '
         f'{_err(f, c["centre_error_" + key])} |'
+      )
+  nets = video.get('per_network', {})
+  if len(nets) > 1:
+    lines += [
+      '',
+      'Video alone, network by network (50% / 90% intervals that held the truth):',
+      '',
+      '| network seed | recordings | ' + ' | '.join(FIELDS) + ' |',
+      '|---|---:|' + '---|' * len(FIELDS),
+    ]
+    for seed, c in nets.items():
+      lines.append(
+        f'| {seed} | {c["n"]} | ' + ' | '.join(_pair(c[f]) for f in FIELDS) + ' |'
       )
   return '\n'.join(lines)

@@ -113,6 +113,43 @@ def test_recalibrated_intervals_cover_held_out_problems(scale, shift):
     assert lv[2] == pytest.approx(0.212, abs=0.06)
 
 
+def test_an_uninformed_quantity_keeps_its_nominal_levels():
+  # Where the data say nothing the posterior is the prior (here U(0, 1)) and a
+  # truth's rank is the truth itself. A calibration whose truths happened to
+  # avoid the ends (as the shipped area weight's did: 93% of them in the
+  # central 90% of the range) narrows the conformal levels, and new truths
+  # fall outside more often than promised; told that the posterior's
+  # intervals are the prior's own width, the levels stay nominal.
+  rng = np.random.default_rng(0)
+  lucky = np.concatenate([rng.uniform(0.08, 0.96, 93), rng.uniform(0, 1, 7)])
+  ranks = np.stack([lucky, rng.uniform(0, 1, 100)], axis=1)
+  narrowed = calibration.levels(ranks)[:, 0]
+  widths = np.stack([np.full(100, 0.98), np.full(100, 0.3)], axis=1)
+  kept = calibration.levels(ranks, width_ratios=widths)
+  np.testing.assert_array_equal(kept[:, 0], calibration.PROBS)
+  np.testing.assert_array_equal(kept[:, 1], calibration.levels(ranks)[:, 1])
+  new = rng.uniform(0, 1, 20000)  # new truths; the posterior's CDF is the identity
+  held = lambda lv: np.mean((lv[0] <= new) & (new <= lv[4]))
+  assert held(narrowed) < 0.875
+  assert held(kept[:, 0]) == pytest.approx(0.9, abs=0.01)
+  with pytest.raises(ValueError, match='width ratios'):
+    calibration.levels(ranks, width_ratios=widths[:, :1])
+
+
+def test_width_ratio_by_hand():
+  rng = np.random.default_rng(0)
+  prior = np.stack([rng.uniform(0, 1, 20000), np.exp(rng.uniform(-2, 2, 20000))], 1)
+  post = np.stack(
+    [rng.uniform(0.25, 0.75, 20000), np.exp(rng.uniform(-1, 1, 20000))], 1
+  )
+  # Half the width; on a log scale half as well, on a linear one
+  # (e^0.9 - e^-0.9) / (e^1.8 - e^-1.8) = 0.35.
+  np.testing.assert_allclose(
+    calibration.width_ratio(post, prior, log=[False, True]), [0.5, 0.5], atol=0.02
+  )
+  assert calibration.width_ratio(post, prior)[1] == pytest.approx(0.349, abs=0.02)
+
+
 def test_bayes_point_by_hand():
   # Relative error: the median weighted by 1/x. Samples 1 and 3 (equal mass):
   # |c - 1| + |c - 3| / 3 is least at c = 1.

@@ -31,17 +31,20 @@ GRID = (20, 20, 20)
 
 
 def _fake_runs(
-  config: calibration.Config, root: str, noise_seed: int = 1
+  config: calibration.Config, root: str, noise_seed: int = 1, blind=()
 ) -> list[dict]:
+  """Saved GPs of an exact likelihood; the unit-cube dimensions in ``blind``
+  are left out of it (the video says nothing about them)."""
   space = physsim.search_space(config.material)
   truths = calibration.truths(config)
   units = physsim.to_unit(truths, space)
   rng = np.random.default_rng(noise_seed)
   points = bo.posterior.grid_points(GRID)
+  seen = np.array([d not in blind for d in range(3)], np.float64)
   runs = []
   for seq, u in enumerate(units):
     obs = u + S * rng.standard_normal(3)
-    mean = -2.0 + np.log1p(A * np.sum((points - obs) ** 2, -1))
+    mean = -2.0 + np.log1p(A * np.sum(seen * (points - obs) ** 2, -1))
     wd = os.path.join(root, f'{seq:04d}')
     os.makedirs(wd)
     np.savez(os.path.join(wd, search.POSTERIOR_FILE), gp_mean=mean,
@@ -117,6 +120,25 @@ def test_recalibration_repairs_a_too_sharp_likelihood_on_held_out_recordings(
     assert raw[f]['interval_90'] < 0.8, f
     assert abs(fixed[f]['interval_90'] - 0.9) < 0.07, f
     assert abs(fixed[f]['interval_50'] - 0.5) < 0.12, f
+
+
+@pytest.mark.slow
+def test_a_quantity_the_video_does_not_inform_keeps_its_nominal_levels(tmp_path):
+  # Area weight left out of the likelihood: its posterior is the prior, whose
+  # intervals hold truths drawn from the prior exactly as often as they say,
+  # so the recalibration keeps its nominal levels (and fits the others).
+  config = calibration.Config(pairs=40, estimate=EstimateConfig(posterior_grid=GRID))
+  runs = _fake_runs(config, str(tmp_path), blind=(2,))
+  video = calibration.posteriors(config, runs, 'gibbs', C_TRUE)['video']
+  space = physsim.search_space(config.material)
+  raw = calibration.summarise(video, space, bayes=False)
+  assert raw['area_weight']['width_ratio'] > bo.calibration.UNINFORMED
+  assert raw['wind_speed']['width_ratio'] < 0.7
+  lv = calibration.recalibration(video)
+  i = calibration.FIELDS.index('area_weight')
+  np.testing.assert_array_equal(lv[:, i], bo.calibration.PROBS)
+  fitted = calibration.FIELDS.index('wind_speed')
+  assert not np.array_equal(lv[:, fitted], bo.calibration.PROBS)
 
 
 def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
@@ -291,6 +313,21 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
   for f in physsim.Params._fields:
     assert bad['video'][f]['interval_90'] < 0.8, f
     assert bad['video'][f]['interval_90_ci'][1] < 0.9, f  # significantly short
+    # The prior's own intervals on the same truths (drawn from the prior):
+    # about as often as they say; 60 pairs share bending and area weight.
+    assert abs(good['video'][f]['prior_interval_90'] - 0.9) < 0.12, f
+  # Network by network (pairs take the five networks in turn): 24 each.
+  nets = good['video']['per_network']
+  assert len(nets) == config.networks
+  assert sum(c['n'] for c in nets.values()) == 120
+  assert 'network by network' in calibration.check_table({
+    'shipped': {**_tables(C_TRUE), 'held_out': {}}, 'n': 120, 'seed': 1,
+    'printed': {'n': 120, 'recalibrated': 120, **{f: {
+      'interval_50': 0.5, 'interval_50_ci': [0.4, 0.6], 'interval_90': 0.9,
+      'interval_90_ci': [0.8, 0.95], 'estimate_error': 1.0,
+      'range_centre_error': 2.0} for f in calibration.FIELDS}},
+    'modes': good, 'config': {'network_seed': 0},
+  })  # fmt: skip
 
 
 def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
