@@ -233,15 +233,18 @@ def _direct_row(model, b):
   return row
 
 
-def _event_trace(m, d, steps=10):
-  """Milliseconds per step in each of MuJoCo Warp's event scopes (two levels)."""
+def _event_trace(m, d, steps=10, before=None):
+  """Milliseconds per step in each of MuJoCo Warp's event scopes (two levels);
+  ``before(k)`` launches what precedes step ``k`` (the project's forces)."""
   import warp as wp
   from mujoco.mjx.third_party import mujoco_warp as mjw
   from mujoco.mjx.third_party.mujoco_warp._src import warp_util
 
   with warp_util.EventTracer() as tracer:
     with wp.ScopedCapture(device=d.qpos.device) as capture:
-      for _ in range(steps):
+      for k in range(steps):
+        if before is not None:
+          before(k)
         mjw.step(m, d)
     wp.capture_launch(capture.graph)
     wp.synchronize()
@@ -256,6 +259,35 @@ def _event_trace(m, d, steps=10):
     return out
 
   return flat(trace)
+
+
+def _project_trace(model, b, seconds=1.0):
+  """``_event_trace`` of the project's 'warp' frame (its forces, then MuJoCo
+  Warp's step) on ``b`` worlds after ``seconds`` of gusty wind from rest: the
+  same parts as the direct run's trace, on the project's physics."""
+  import warp as wp
+
+  from physsim import warp_frames
+
+  wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity)
+  w = jax.tree.map(np.asarray, _inputs(model, _params(b), wind, jax.random.key(0)))
+  substeps = round(0.05 / model.config.timestep)
+  device = wp.get_device()
+  mjm = model.mj_model
+  st = warp_frames._Worlds(model, b, w.gusts.wavevector.shape[1], substeps, device)
+  with wp.ScopedDevice(device):
+    arr = lambda a, dtype=float: wp.array(np.asarray(a, np.float32), dtype=dtype)
+    zeros = np.zeros((b, mjm.nv))
+    st.load(
+      arr(np.broadcast_to(mjm.qpos0, (b, mjm.nq))), arr(zeros), arr(zeros),
+      arr([0.0]), arr(w.speed), arr(w.direction, wp.vec3), arr(w.bending),
+      arr(w.gusts.wavevector, wp.vec3), arr(w.gusts.direction, wp.vec3),
+      arr(w.gusts.amplitude), arr(w.gusts.phase), arr(w.body_mass),
+    )  # fmt: skip
+    for i in range(round(seconds * 20)):
+      wp.copy(st.inputs.time, arr([i * 0.05]))
+      st._substeps()
+    return _event_trace(st.m, st.d, before=st.forces)
 
 
 def _c_job(args):
@@ -352,6 +384,11 @@ def main(argv):
       project.append(_ablated_row(model, b, backend))
       print(project[-1], flush=True)
     rows += project
+    if (
+      FLAGS.event_trace and 'warp' in FLAGS.backends and jax.default_backend() == 'gpu'
+    ):
+      row = next(r for r in project if r['backend'] == 'warp')
+      row['event_ms_per_step'] = _project_trace(model, b)
     if FLAGS.direct:
       rows.append(_direct_row(model, b))
       for r in project:

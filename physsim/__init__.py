@@ -1,4 +1,4 @@
-"""physsim: MuJoCo flex cloth in ArcSim-style wind, batched under MJX.
+"""physsim: MuJoCo flex cloth in ArcSim-style wind, batched on MuJoCo Warp (MJX's engine).
 
 Public API::
 

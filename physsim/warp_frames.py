@@ -229,55 +229,55 @@ class _Worlds:
         phase=wp.zeros((nworld, modes), dtype=float),
       )
 
-  def _substeps(self):
-    """The frame: ``substeps`` x (forces, MuJoCo Warp step)."""
+  def forces(self, s: int):
+    """Launches substep ``s``'s wind and bending into ``xfrc_applied``."""
     cfg, d, x = self.model.config, self.d, self.inputs
     nworld = d.qpos.shape[0]
-    for s in range(self.substeps):
-      d.xfrc_applied.zero_()
+    d.xfrc_applied.zero_()
+    wp.launch(
+      _wind_kernel,
+      dim=(nworld, self.faces.shape[0]),
+      inputs=[
+        d.qpos, d.qvel, self.rest, self.qadr, self.body, self.faces, self.area,
+        x.speed, x.direction, x.wavevector, x.gust_direction, x.amplitude,
+        x.phase, x.time, float(s * cfg.timestep), float(cfg.air_density),
+        float(cfg.air_drag), d.xfrc_applied,
+      ],
+    )  # fmt: skip
+    if self.hinges.shape[0]:
       wp.launch(
-        _wind_kernel,
-        dim=(nworld, self.faces.shape[0]),
+        _bending_kernel,
+        dim=(nworld, self.hinges.shape[0]),
         inputs=[
-          d.qpos,
-          d.qvel,
-          self.rest,
-          self.qadr,
-          self.body,
-          self.faces,
-          self.area,
-          x.speed,
-          x.direction,
-          x.wavevector,
-          x.gust_direction,
-          x.amplitude,
-          x.phase,
-          x.time,
-          float(s * cfg.timestep),
-          float(cfg.air_density),
-          float(cfg.air_drag),
+          d.qpos, d.qvel, self.rest, self.qadr, self.body, self.hinges,
+          self.coef, self.c16, x.bending, float(cfg.bending_damping),
           d.xfrc_applied,
         ],
-      )
-      if self.hinges.shape[0]:
-        wp.launch(
-          _bending_kernel,
-          dim=(nworld, self.hinges.shape[0]),
-          inputs=[
-            d.qpos,
-            d.qvel,
-            self.rest,
-            self.qadr,
-            self.body,
-            self.hinges,
-            self.coef,
-            self.c16,
-            x.bending,
-            float(cfg.bending_damping),
-            d.xfrc_applied,
-          ],
-        )
-      mjw.step(self.m, d)
+      )  # fmt: skip
+
+  def _substeps(self):
+    """The frame: ``substeps`` x (forces, MuJoCo Warp step)."""
+    for s in range(self.substeps):
+      self.forces(s)
+      mjw.step(self.m, self.d)
+
+  def load(self, qpos, qvel, warmstart, time, speed, direction, bending,
+           wavevector, gust_direction, amplitude, phase, body_mass):  # fmt: skip
+    """Copies a frame's state and the worlds' inputs into the buffers."""
+    x = self.inputs
+    for dst, src in (
+      (self.d.qpos, qpos), (self.d.qvel, qvel), (self.d.qacc_warmstart, warmstart),
+      (self.m.body_mass, body_mass), (x.time, time), (x.speed, speed),
+      (x.direction, direction), (x.bending, bending), (x.wavevector, wavevector),
+      (x.gust_direction, gust_direction), (x.amplitude, amplitude), (x.phase, phase),
+    ):  # fmt: skip
+      wp.copy(dst, src)
+
+  def store(self, qpos, qvel, warmstart):
+    """Copies the state that carries to the next frame out of the buffers."""
+    wp.copy(qpos, self.d.qpos)
+    wp.copy(qvel, self.d.qvel)
+    wp.copy(warmstart, self.d.qacc_warmstart)
 
   def run(self):
     """Advances every world by one frame (a graph replay on a GPU)."""
@@ -287,9 +287,9 @@ class _Worlds:
     if not self.d.qpos.device.is_cuda:
       self._substeps()
       return
-    # First call on this GPU: one eager frame loads every kernel, then the
-    # frame is captured against the persistent buffers and replayed from now
-    # on (the state it ran on is overwritten by the next call's inputs).
+    # First call on this GPU: the frame runs eagerly (loading every kernel),
+    # then is captured against the persistent buffers, to be replayed by
+    # every later call.
     self._substeps()
     with wp.ScopedCapture() as capture:
       self._substeps()
@@ -322,26 +322,10 @@ def _frame_callable(model: ClothModel, substeps: int):
       if key not in worlds:
         worlds[key] = _Worlds(model, nworld, modes, substeps, device)
     st = worlds[key]
-    x = st.inputs
-    for dst, src in (
-      (st.d.qpos, qpos),
-      (st.d.qvel, qvel),
-      (st.d.qacc_warmstart, warmstart),
-      (st.m.body_mass, body_mass),
-      (x.time, time),
-      (x.speed, speed),
-      (x.direction, direction),
-      (x.bending, bending),
-      (x.wavevector, wavevector),
-      (x.gust_direction, gust_direction),
-      (x.amplitude, amplitude),
-      (x.phase, phase),
-    ):
-      wp.copy(dst, src)
+    st.load(qpos, qvel, warmstart, time, speed, direction, bending, wavevector,
+            gust_direction, amplitude, phase, body_mass)  # fmt: skip
     st.run()
-    wp.copy(qpos, st.d.qpos)
-    wp.copy(qvel, st.d.qvel)
-    wp.copy(warmstart, st.d.qacc_warmstart)
+    st.store(qpos, qvel, warmstart)
 
   # The state is updated in place (aliased buffers); the graph is Warp's own,
   # over persistent buffers, so JAX's buffer addresses never matter.
