@@ -173,6 +173,14 @@ _NOT_RECIPE = {
 }
 
 
+def network_accuracy(model_dir: str) -> float | None:
+  """A trained run's held-out triplet accuracy at its selected epoch (None if
+  it was not evaluated on held-out simulations)."""
+  return model_lib.selected_eval(model_lib.read_evals(model_dir)).get(
+    'test_triplet_accuracy'
+  )
+
+
 def network_recipe(model_dir: str) -> dict:
   """How a trained run was made, apart from its seeds: its training config
   (``config.json``), what it saw (modality, input mode, fabrics) and the

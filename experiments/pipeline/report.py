@@ -132,7 +132,7 @@ def _same(mine, theirs) -> bool:
 
 
 def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
-                     network: dict | None = None):  # fmt: skip
+                     network: dict | None = None, accuracy: float | None = None):  # fmt: skip
   """What the held-out simulations showed about the intervals, for an
   estimate with ``config`` (its ``calibration`` file, else the shipped
   ``calibration.json``); None when no calibration has been run.
@@ -144,7 +144,11 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   estimate's network; the calibration's networks were all made so) match,
   the note carries the mode's recalibrated CDF levels (``'levels'``, which
   the estimate applies) and the coverage they had on recordings held out
-  from them; else it says what differs (``'matches': False``).
+  from them; else it says what differs (``'matches': False``). A network of
+  the recipe whose held-out triplet accuracy (``accuracy``) is below every
+  calibration network's is noted (``'weaker_network'``): how often a weaker
+  network's intervals hold the truth was not measured, and the two weakest
+  checked so far held it less often.
   """
   path = getattr(config, 'calibration', '') or CALIBRATION_FILE
   if not os.path.isfile(path):
@@ -187,8 +191,16 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     return {'matches': True, **head, 'coverage': cal['coverage']}
   held = cal['held_out'][mode]
   levels = np.asarray(rec['modes'][mode])  # (len(PROBS), fields)
+  calibrated_acc = [a for a in cal.get('network', {}).get('triplet_accuracy', [])
+                    if a is not None]  # fmt: skip
+  weaker = (
+    {'accuracy': accuracy, 'calibrated': [min(calibrated_acc), max(calibrated_acc)]}
+    if accuracy is not None and calibrated_acc and accuracy < min(calibrated_acc)
+    else None
+  )
   return {
     'matches': True, **head, 'mode': mode, 'recalibrated': True,
+    **({'weaker_network': weaker} if weaker else {}),
     'n_calibration_recordings': rec['n_calibration_recordings'],
     'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
     'weights': rec.get('weights', {}).get(mode, {}),
@@ -331,11 +343,19 @@ def calibration_line(cal: dict | None) -> str:
       if cal.get('networks', 1) > 1
       else 'recordings held out from that'
     )
-    return (
+    line = (
       f'calibration ({cal["mode"]}): intervals read at levels recalibrated on '
       f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}); '
       f'read so, {held} held the truth in their 90%/50% intervals: {parts}.'
     )
+    if w := cal.get('weaker_network'):
+      lo, hi = w['calibrated']
+      line += (
+        f" This network's held-out triplet accuracy ({100 * w['accuracy']:.0f}%) is "
+        f"below the calibration's networks' ({100 * lo:.0f}-{100 * hi:.0f}%): its "
+        'intervals may hold the truth less often than that.'
+      )
+    return line
   return (
     f'calibration ({cal["n"]} held-out simulated recordings, {cal["setting"]}): 90%/50% '
     f'intervals held the truth in {parts} of them.'

@@ -476,6 +476,7 @@ def write_result(
     result.update(_posterior_summary(
       config, space, res, workdir, recording.truth, figures,
       network=embedding.network_recipe(job.model_dir),
+      accuracy=embedding.network_accuracy(job.model_dir),
     ))  # fmt: skip
   material = physsim.load_material(physsim.fabric(config.material).material)
   point = result['point_unit']
@@ -532,10 +533,12 @@ def _argmin_summary(config, space, res: bo.Result, x_best) -> dict:
 
 
 def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
-                       network: dict | None = None) -> dict:  # fmt: skip
+                       network: dict | None = None,
+                       accuracy: float | None = None) -> dict:  # fmt: skip
   """The posterior median as the point, credible intervals, the prior's width;
   writes ``posterior.npz`` and ``posterior.png``. ``network``: the network's
-  recipe, which the calibration's must match for its tables to apply."""
+  recipe, which the calibration's must match for its tables to apply;
+  ``accuracy``: its held-out triplet accuracy (``report.calibration_note``)."""
   key = jax.random.key(config.seed)
   pc = posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
@@ -543,7 +546,7 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
   prior = posterior_lib.prior_samples(
     jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
   )
-  note = report.calibration_note(config, network=network)
+  note = report.calibration_note(config, network=network, accuracy=accuracy)
   summary = posterior_lib.summarise(
     res.samples, space, prior, _levels(note), _weights(note), config.measured
   )
@@ -666,6 +669,7 @@ def estimate_joint(
   note = report.calibration_note(
     config, joint=True, recordings=len(jobs),
     network=embedding.network_recipe(model_dir),
+    accuracy=embedding.network_accuracy(model_dir),
   )  # fmt: skip
   levels = _levels(note)
   per = []

@@ -58,7 +58,6 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
-import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
 from experiments.pipeline import cli, distributed, embedding, files, report, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
@@ -195,10 +194,7 @@ def networks_record(config: Config, workdir: str) -> dict:
   return {
     'recipe': recipes[0],
     'seeds': list(network_seeds(config)),
-    'triplet_accuracy': [
-      model_lib.selected_eval(model_lib.read_evals(d)).get('test_triplet_accuracy')
-      for d in dirs
-    ],
+    'triplet_accuracy': [embedding.network_accuracy(d) for d in dirs],
   }
 
 

@@ -221,6 +221,21 @@ def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkey
                                  recordings=2)['mode'] == 'joint pair'  # fmt: skip
 
 
+def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypatch):
+  cal = _recalibrated_file(tmp_path, monkeypatch)
+  cal['network'] = {'seeds': [0, 1], 'triplet_accuracy': [0.71, 0.88]}
+  (tmp_path / 'calibration.json').write_text(json.dumps(cal))
+  config = EstimateConfig(sharpness=0.7)
+  within = report.calibration_note(config, accuracy=0.75)
+  assert within['recalibrated'] and 'weaker_network' not in within
+  weak = report.calibration_note(config, accuracy=0.66)
+  assert weak['recalibrated']  # the tables still apply: same recipe
+  assert weak['weaker_network'] == {'accuracy': 0.66, 'calibrated': [0.71, 0.88]}
+  line = report.calibration_line(weak)
+  assert '(66%) is below' in line and '(71-88%)' in line
+  assert 'below' not in report.calibration_line(within)
+
+
 def test_recalibrated_summaries_read_the_defensive_mixture_at_the_levels():
   space = physsim.search_space('gray_interlock')
   rng = np.random.default_rng(0)
