@@ -36,38 +36,28 @@ def batch():
   )
 
 
+def _gusty(model, batch, backend, **kw):
+  """The batch's clip in 20% gusts (one key), on ``backend``."""
+  return sim.simulate(
+    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0,
+    wind=physsim.Wind(gust_intensity=0.2), key=jax.random.key(7), backend=backend,
+    **kw,
+  )  # fmt: skip
+
+
 @pytest.fixture(scope='module')
 def mjx_out(model, batch):
-  wind = physsim.Wind(gust_intensity=0.2)
-  return sim.simulate(
-    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind,
-    key=jax.random.key(7), backend='mjx',
-  )  # fmt: skip
+  return _gusty(model, batch, 'mjx')
 
 
 @pytest.fixture(scope='module')
 def c_out(model, batch):
-  wind = physsim.Wind(gust_intensity=0.2)
-  return sim.simulate(
-    model,
-    batch,
-    frames=_FRAMES,
-    fps=_FPS,
-    warmup=0.0,
-    wind=wind,
-    key=jax.random.key(7),
-    backend='c',
-    workers=1,
-  )
+  return _gusty(model, batch, 'c', workers=1)
 
 
 @pytest.fixture(scope='module')
 def warp_out(model, batch):
-  wind = physsim.Wind(gust_intensity=0.2)
-  return sim.simulate(
-    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0, wind=wind,
-    key=jax.random.key(7), backend='warp',
-  )  # fmt: skip
+  return _gusty(model, batch, 'warp')
 
 
 @pytest.mark.parametrize('backend', ['mjx', 'warp'])
@@ -95,11 +85,7 @@ _SHARDING_TOL = 1e-4  # m
 def test_worlds_split_over_devices_move_as_on_one(model, batch, backend, request):
   split = request.getfixturevalue(f'{backend}_out')
   assert len(jax.local_devices()) == 2  # it ran split (5 worlds padded to 6)
-  one = sim.simulate(
-    model, batch, frames=_FRAMES, fps=_FPS, warmup=0.0,
-    wind=physsim.Wind(gust_intensity=0.2), key=jax.random.key(7),
-    devices=jax.local_devices()[:1], backend=backend,
-  )  # fmt: skip
+  one = _gusty(model, batch, backend, devices=jax.local_devices()[:1])
   np.testing.assert_array_equal(one.valid, split.valid)
   np.testing.assert_allclose(one.positions, split.positions, atol=_SHARDING_TOL)
 
