@@ -308,40 +308,50 @@ def _warp_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: in
 # ------------------------------------------------------------ MuJoCo C backend
 
 
+def _cross(a, b):
+  """Row-wise cross product of (N, 3) arrays (``np.cross`` costs more in
+  overhead than arithmetic at a cloth's sizes)."""
+  a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+  b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+  return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+
+
+def _gather_add(index, values, n):
+  """(n, 3) sums of the rows of ``values`` (m, 3) at ``index`` (m,)."""
+  return np.stack([np.bincount(index, values[:, k], minlength=n) for k in range(3)], 1)
+
+
 def _applied_forces_np(c, model, qpos, qvel, t, w):
-  rest = model.mesh.vertices
-  x = rest.copy()
-  v = np.zeros_like(rest)
+  """``_applied_forces`` in float64 NumPy for the MuJoCo C backend."""
+  x = c.rest.copy()
+  v = np.zeros_like(x)
   x[c.moving] += qpos[c.qidx]
   v[c.moving] = qvel[c.qidx]
-  faces = model.mesh.faces
-  p = x[faces]
+  faces = c.faces
+  p0, p1, p2 = x[faces[:, 0]], x[faces[:, 1]], x[faces[:, 2]]
   g = w['gusts']
-  cen = p.mean(axis=1)
+  cen = (p0 + p1 + p2) / 3.0
   arg = (cen - w['speed'] * t * w['direction']) @ g.wavevector.T + g.phase
   u = w['speed'] * (w['direction'] + (np.sin(arg) * g.amplitude) @ g.direction)
-  n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-  n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-  vrel = u - v[faces].mean(axis=1)
-  vn = np.sum(n * vrel, axis=-1, keepdims=True)
+  n = _cross(p1 - p0, p2 - p0)
+  n /= np.maximum(np.sqrt(np.sum(n * n, axis=1, keepdims=True)), 1e-12)
+  vrel = u - (v[faces[:, 0]] + v[faces[:, 1]] + v[faces[:, 2]]) / 3.0
+  vn = np.sum(n * vrel, axis=1, keepdims=True)
   cfg = model.config
-  area = model.mesh.face_areas[:, None]
-  fface = area * (
+  fface = c.face_area * (
     cfg.air_density * np.abs(vn) * vn * n + cfg.air_drag * (vrel - vn * n)
   )
-  out = np.zeros_like(x)
-  np.add.at(out, faces.ravel(), np.repeat(fface / 3.0, 3, axis=0))
+  nv = x.shape[0]
+  out = _gather_add(c.face_index, np.repeat(fface / 3.0, 3, axis=0), nv)
   hv = model.hinge_verts
   ph = x[hv]
   e0, e1, e2 = ph[:, 1] - ph[:, 0], ph[:, 2] - ph[:, 0], ph[:, 3] - ph[:, 0]
-  c1, c2, c3 = np.cross(e1, e2), np.cross(e2, e0), np.cross(e0, e1)
+  c1, c2, c3 = _cross(e1, e2), _cross(e2, e0), _cross(e0, e1)
   curved = np.stack([-(c1 + c2 + c3), c1, c2, c3], axis=1)
-  fb = (
-    np.einsum('hij,hjk->hik', model.hinge_coef, ph)
-    + model.hinge_c16[:, None, None] * curved
-  )
-  fb += cfg.bending_damping * np.einsum('hij,hjk->hik', model.hinge_coef, v[hv])
-  np.add.at(out, hv.ravel(), -w['bending'] * fb.reshape(-1, 3))
+  fb = model.hinge_coef @ ph + model.hinge_c16[:, None, None] * curved
+  if cfg.bending_damping:
+    fb += cfg.bending_damping * (model.hinge_coef @ v[hv])
+  out += _gather_add(c.hinge_index, -w['bending'] * fb.reshape(-1, 3), nv)
   return out[c.moving]
 
 
@@ -363,9 +373,31 @@ def cpu_only_children():
 
 
 class _NpConsts(NamedTuple):
+  """Static arrays of a ``ClothModel`` for the NumPy forces."""
+
   moving: np.ndarray
   qidx: np.ndarray
   body: np.ndarray
+  rest: np.ndarray  # (V, 3)
+  faces: np.ndarray  # (F, 3)
+  face_area: np.ndarray  # (F, 1)
+  face_index: np.ndarray  # (3F,) the faces' vertices, flat
+  hinge_index: np.ndarray  # (4H,) the hinges' vertices, flat
+
+
+def _np_consts(model: ClothModel) -> _NpConsts:
+  moving = np.flatnonzero(model.vert_qadr >= 0)
+  faces = np.asarray(model.mesh.faces)
+  return _NpConsts(
+    moving=moving,
+    qidx=model.vert_qadr[moving][:, None] + np.arange(3),
+    body=model.vert_body[moving],
+    rest=np.asarray(model.mesh.vertices, np.float64),
+    faces=faces,
+    face_area=np.asarray(model.mesh.face_areas, np.float64)[:, None],
+    face_index=faces.ravel(),
+    hinge_index=np.asarray(model.hinge_verts).ravel(),
+  )
 
 
 def _c_world(model: ClothModel, w: dict, frames: int, substeps: int, warm_frames: int):
@@ -373,10 +405,8 @@ def _c_world(model: ClothModel, w: dict, frames: int, substeps: int, warm_frames
   m = model.mj_model
   d = mujoco.MjData(m)
   saved = m.body_mass.copy(), m.dof_M0.copy()
-  moving = np.flatnonzero(model.vert_qadr >= 0)
-  c = _NpConsts(
-    moving, model.vert_qadr[moving][:, None] + np.arange(3), model.vert_body[moving]
-  )
+  c = _np_consts(model)
+  moving = c.moving
   dt = model.config.timestep
   out = np.empty((frames, model.n_vertices, 3))
   try:
