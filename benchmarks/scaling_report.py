@@ -1,0 +1,143 @@
+"""The table of ``benchmarks/gpu_scaling.sh``: the same program on 1 and N GPUs.
+
+  python benchmarks/scaling_report.py --logs=out/gpu_scaling
+
+Reads the script's logs (``sweep_<N>gpu.log`` with the sweep's
+``summary.json`` copied beside it as ``sweep_<N>gpu.json``, and
+``lockstep_<N>gpu.log``) and prints, per stage and device count, the wall time
+of the whole command and of its device work after compile, each as a speed-up
+over the one-device run of the same stage:
+
+* the sweep: its simulate + render seconds (``summary.json``; one batch, so
+  it includes the compile of the batch program, under a second with the warm
+  Warp cache) and the files' writing apart;
+* the lockstep estimate: the seconds of its simulation steps after the first
+  (the step lines ``step k: ... (S simulations X s, search Y s)``: the first
+  step compiles the fused objective) and the searches' own time.
+
+Writes the rows as JSON (``--out``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import sys
+
+from absl import app, flags
+
+flags.DEFINE_string('logs', 'out/gpu_scaling', "gpu_scaling.sh's $OUT")
+flags.DEFINE_string('out', None, 'JSON output (default: LOGS/scaling.json)')
+FLAGS = flags.FLAGS
+
+_WALL = re.compile(r'^wall ([\d.]+) s, exit (-?\d+)$', re.M)
+_STEP = re.compile(
+  r'^step +(\d+): .*\((\d+) simulations ([\d.]+) s, search ([\d.]+) s\)$', re.M
+)
+_LOG = re.compile(r'^(sweep|lockstep)_(\d+)gpu\.log$')
+
+
+def _wall(text: str, path: str) -> tuple[float, int]:
+  m = _WALL.findall(text)
+  if not m:
+    raise ValueError(f'{path}: no "wall S s, exit RC" line (did the run finish?)')
+  return float(m[-1][0]), int(m[-1][1])
+
+
+def sweep_row(log: str, devices: int) -> dict:
+  """One sweep run: wall, simulate + render and write seconds."""
+  with open(log) as f:
+    wall, rc = _wall(f.read(), log)
+  row = {'stage': 'sweep', 'devices': devices, 'wall_s': wall, 'exit': rc}
+  summary = log[: -len('.log')] + '.json'
+  if os.path.exists(summary):
+    with open(summary) as f:
+      s = json.load(f)['seconds']
+    row['device_s'] = sum(
+      s.get(k, 0.0) for k in ('simulate_first_batches', 'simulate', 'render')
+    )
+    row['write_s'] = s.get('write', 0.0)
+  return row
+
+
+def lockstep_row(log: str, devices: int) -> dict:
+  """One lockstep run: wall, and its steps after the first (compiled)."""
+  with open(log) as f:
+    text = f.read()
+  wall, rc = _wall(text, log)
+  steps = [(int(k), int(n), float(x), float(y)) for k, n, x, y in _STEP.findall(text)]
+  later = [s for s in steps if s[0] > 0]
+  return {
+    'stage': 'lockstep',
+    'devices': devices,
+    'wall_s': wall,
+    'exit': rc,
+    'steps': len(steps),
+    'simulations': sum(s[1] for s in steps),
+    'first_step_s': steps[0][2] if steps else None,
+    'device_s': sum(s[2] for s in later) if later else None,
+    'search_s': sum(s[3] for s in steps),
+    'simulations_after_first': sum(s[1] for s in later),
+  }
+
+
+def rows(logs: str) -> list[dict]:
+  """Every run in ``logs``, with speed-ups over the same stage's one-device run."""
+  out = []
+  for name in sorted(os.listdir(logs)):
+    m = _LOG.match(name)
+    if not m:
+      continue
+    make = sweep_row if m[1] == 'sweep' else lockstep_row
+    out.append(make(os.path.join(logs, name), int(m[2])))
+  out.sort(key=lambda r: (r['stage'], r['devices']))
+  for r in out:
+    base = next(
+      (b for b in out if b['stage'] == r['stage'] and b['devices'] == 1), None
+    )
+    for k in ('wall_s', 'device_s'):
+      if base and base.get(k) and r.get(k):
+        r[k.replace('_s', '_speedup')] = base[k] / r[k]
+  return out
+
+
+def table(rs: list[dict]) -> str:
+  def f(x, fmt):
+    return '' if x is None else fmt.format(x)
+
+  lines = [
+    '| stage | GPUs | wall | speed-up | device work after compile | speed-up | other |',
+    '|---|---:|---:|---:|---:|---:|---|',
+  ]
+  for r in rs:
+    if r['stage'] == 'sweep':
+      other = f(r.get('write_s'), 'writing files {:.1f} s')
+    else:
+      other = (
+        f'{r["steps"]} steps, {r["simulations"]} simulations; first step '
+        f'{f(r["first_step_s"], "{:.1f}")} s; searches {r["search_s"]:.1f} s'
+      )
+    lines.append(
+      f'| {r["stage"]} | {r["devices"]} | {r["wall_s"]:.1f} s | '
+      f'{f(r.get("wall_speedup"), "{:.2f}x")} | {f(r.get("device_s"), "{:.1f} s")} | '
+      f'{f(r.get("device_speedup"), "{:.2f}x")} | {other} |'
+    )
+  return '\n'.join(lines)
+
+
+def main(argv):
+  del argv
+  rs = rows(FLAGS.logs)
+  if not rs:
+    sys.exit(f'{FLAGS.logs}: no sweep_<N>gpu.log or lockstep_<N>gpu.log')
+  out = FLAGS.out or os.path.join(FLAGS.logs, 'scaling.json')
+  tmp = out + '.tmp'
+  with open(tmp, 'w') as f:
+    json.dump(rs, f, indent=1)
+  os.replace(tmp, out)
+  print(table(rs))
+
+
+if __name__ == '__main__':
+  app.run(main)
