@@ -8,9 +8,11 @@ Reads the script's logs (``sweep_<N>gpu.log`` with the sweep's
 of the whole command and of its device work after compile, each as a speed-up
 over the one-device run of the same stage:
 
-* the sweep: its simulate + render seconds (``summary.json``; one batch, so
-  it includes the compile of the batch program, under a second with the warm
-  Warp cache) and the files' writing apart;
+* the sweep: its simulation seconds from ``summary.json`` (with the render
+  seconds of batches after the first; the first render call, which compiles,
+  is left out; a one-batch sweep's simulation includes the batch program's
+  compile, under a second with the warm Warp cache) and the files' writing
+  apart;
 * the lockstep estimate: the seconds of its simulation steps after the first
   (the step lines ``step k: ... (S simulations X s, search Y s)``: the first
   step compiles the fused objective) and the searches' own time.
@@ -26,6 +28,8 @@ import re
 import sys
 
 from absl import app, flags
+
+from experiments.pipeline import files
 
 flags.DEFINE_string('logs', 'out/gpu_scaling', "gpu_scaling.sh's $OUT")
 flags.DEFINE_string('out', None, 'JSON output (default: LOGS/scaling.json)')
@@ -132,10 +136,7 @@ def main(argv):
   if not rs:
     sys.exit(f'{FLAGS.logs}: no sweep_<N>gpu.log or lockstep_<N>gpu.log')
   out = FLAGS.out or os.path.join(FLAGS.logs, 'scaling.json')
-  tmp = out + '.tmp'
-  with open(tmp, 'w') as f:
-    json.dump(rs, f, indent=1)
-  os.replace(tmp, out)
+  files.write_json(out, rs)
   print(table(rs))
 
 
