@@ -9,10 +9,17 @@
 #                default posterior, and with PAPER=1 the paper's argmin, after
 #                compile) and Tables 2-style estimates of the NREC recordings in
 #                lockstep with the default posterior (and with PAPER=1 the argmin).
+#   measured     after latency: the NREC recordings again, each with a simulated
+#                anemometer reading (2%) as its prior, then with a simulated
+#                scale-and-ruler reading (2%) (experiments.tables
+#                --wind_reading_sd / --area_weight_reading_sd: the search spends
+#                its simulations on the reading's slice), and
+#                benchmarks/measured_modes.py on the default run's GPs (the same
+#                readings applied after a video-alone search), side by side.
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
-stage=${1:?stage: calibration, paper or latency}
+stage=${1:?stage: calibration, paper, latency or measured}
 R=${2:-/tmp/posterior_run}
 OUT=${OUT:-out/gpu_posterior}
 mkdir -p "$R" "$OUT"
@@ -56,6 +63,17 @@ case "$stage" in
       cp "$R/tables_$p/tables.json" "$OUT/tables_$p.json"
     done
     cp "$R"/tables_default/physnet_depth/fabrics/$GI-0000/posterior.png "$OUT/posterior_${GI}_0000.png"
+    ;;
+  measured)
+    pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
+    for m in wind_reading_sd area_weight_reading_sd; do
+      python -m experiments.tables --eval="$R/eval" --models="$R/t1" --workdir="$R/tables_$m" \
+        --methods=physnet_depth --preset=$pre ${EST:+--backend=c} --$m=0.02 2>&1 | tail -30 \
+        | tee "$OUT/tables_$m.log"
+      cp "$R/tables_$m/tables.json" "$OUT/tables_$m.json"
+    done
+    python benchmarks/measured_modes.py --measured_sd=0.02 --out="$OUT/measured_modes.json" \
+      --estimates="$R/tables_default/physnet_depth/fabrics/$GI-*" 2>&1 | tee "$OUT/measured_modes.log"
     ;;
   *) echo "unknown stage $stage"; exit 2 ;;
 esac

@@ -62,6 +62,23 @@ class Measured:
         )
 
 
+def simulated_reading(
+  name: str, truth: dict, rel_sd: float, seed: int, seq: int
+) -> Measured:
+  """A simulated instrument's reading of ``name`` ('wind_speed': an
+  anemometer; 'area_weight': a scale and a ruler) for a recording with known
+  ``truth``: the truth times ``1 + rel_sd * z``, ``z`` standard normal drawn
+  from ``(seed, seq)`` alone, so recording ``seq`` gets the same reading in
+  every study that uses the same seed (the calibration's post-hoc modes and a
+  search run with the reading as its prior). Its uncertainty is ``rel_sd``
+  times the truth."""
+  if name not in FIELDS[1:]:
+    raise ValueError(f'no instrument reads {name!r}: one of {FIELDS[1:]}')
+  rng = np.random.default_rng([seed, 13, seq, FIELDS.index(name)])
+  v = truth[name] * (1.0 + rel_sd * rng.standard_normal())
+  return Measured(**{name: v, f'{name}_sd': rel_sd * truth[name]})
+
+
 def log_prior(points, space: physsim.SearchSpace, measured: Measured) -> np.ndarray:
   """(G,) log prior at unit-cube ``points (G, 3)``: uniform in the box (so
   bending log-uniform), times a Gaussian for each measured quantity."""

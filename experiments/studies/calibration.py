@@ -68,6 +68,9 @@ from experiments.pipeline import training as train_lib  # noqa: E402
 from experiments.pipeline.objective import EstimateConfig  # noqa: E402
 
 FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
+# The mode an estimate is in, by the reading it was given (Config.check_reading).
+MODE_OF_READING = {'none': 'video', 'wind_speed': 'known wind',
+                   'area_weight': 'known area weight'}  # fmt: skip
 LEVELS = (50, 90)
 MODES = ('video', 'known wind', 'known area weight', 'joint pair')
 RESULT_FILE = 'calibration.json'
@@ -98,6 +101,12 @@ class Config:
       ``p % networks``.
     estimate: the estimate settings (material, cloth and clock follow the
       demo's).
+    check_reading: for ``check``: 'wind_speed' (an anemometer) or
+      'area_weight' (a scale) estimates every new recording with a simulated
+      reading of it (``measured_sd``, drawn around the truth) as the search's
+      prior, so the check measures the intervals an estimate given that
+      reading prints, its search steered by the reading; 'none': the video
+      alone.
   """
 
   material: str = 'gray_interlock'
@@ -116,6 +125,7 @@ class Config:
     skip=('material', 'cloth_resolution', 'frames', 'warmup', 'backend', 'seed',
           'point', 'measured'),
   )  # fmt: skip
+  check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
 
 
 PRESETS = {
@@ -218,12 +228,28 @@ def _configs(config: Config, point: str = 'median', network: int = 0):
   return data, rec, training, est
 
 
+def with_reading(config: Config, est: EstimateConfig, reading: str, truth: dict,
+                 seq: int) -> EstimateConfig:  # fmt: skip
+  """``est`` for recording ``seq``: unchanged for ``reading`` 'none', else with
+  a simulated reading of that quantity as its prior, the one ``posteriors``
+  applies to the same recording in its measured mode."""
+  if reading == 'none':
+    return est
+  measured = posterior_lib.simulated_reading(
+    reading, truth, config.measured_sd, config.seed, seq
+  )
+  return dataclasses.replace(est, measured=measured)
+
+
 def simulate_and_estimate(
-  config: Config, workdir: str, point: str = 'median'
+  config: Config, workdir: str, point: str = 'median', reading: str = 'none'
 ) -> list[dict]:
   """Trains the networks, makes the recordings and estimates each (resumable),
   reporting the estimates' ``point`` (the analysis forms its own points);
-  writes ``networks.json`` (``networks_record``).
+  writes ``networks.json`` (``networks_record``). With a ``reading``
+  ('wind_speed' or 'area_weight'), each recording is estimated with a
+  simulated reading of it as its prior (the one the analysis's measured mode
+  draws for that recording).
 
   Under several processes (``distributed``) the processes share the data's
   and the recordings' simulations, process 0 trains the networks, each process
@@ -264,7 +290,8 @@ def simulate_and_estimate(
     wd = os.path.join(workdir, 'estimates', r['seq_id'])
     k = network_of(config, int(r['seq_id']))
     model_dir = os.path.join(model_roots[k], config.material)
-    jobs.append(search.Job(est, rec, model_dir, wd))
+    job_est = with_reading(config, est, reading, rec.truth, int(r['seq_id']))
+    jobs.append(search.Job(job_est, rec, model_dir, wd))
     meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd,
                  'network': network_seeds(config)[k]})  # fmt: skip
   if jax.process_count() > 1:
@@ -335,14 +362,6 @@ def _truth_row(t: dict) -> np.ndarray:
                   + [physsim.load_ratio(t['wind_speed'], t['area_weight'])])  # fmt: skip
 
 
-def _reading(name: str, truth: dict, sd: float, seed: int, seq: int):
-  """A reading of ``name`` with relative error ``sd`` around the truth, the
-  same for a recording whatever likelihood setting is being analysed."""
-  rng = np.random.default_rng([seed, 13, seq, FIELDS.index(name)])
-  v = truth[name] * (1.0 + sd * rng.standard_normal())
-  return posterior_lib.Measured(**{name: v, f'{name}_sd': sd * truth[name]})
-
-
 @functools.lru_cache(maxsize=4096)
 def _prior_point(material: str, measured: posterior_lib.Measured) -> np.ndarray:
   """The prior's own least-error points in ``FIELDS`` order (quadrature)."""
@@ -390,8 +409,12 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     sd = config.measured_sd
     measured = {
       'video': posterior_lib.Measured(),
-      'known wind': _reading('wind_speed', t, sd, config.seed, r['seq']),
-      'known area weight': _reading('area_weight', t, sd, config.seed, r['seq']),
+      'known wind': posterior_lib.simulated_reading(
+        'wind_speed', t, sd, config.seed, r['seq']
+      ),
+      'known area weight': posterior_lib.simulated_reading(
+        'area_weight', t, sd, config.seed, r['seq']
+      ),
     }
     priors = {m: posterior_lib.log_prior(points, space, v) for m, v in measured.items()}
     base = priors['video']
@@ -1024,7 +1047,8 @@ _ERROR_KEY = {'bending_scale': 'bending_factor', 'wind_speed': 'wind_speed_pct',
 
 
 def printed(runs: list[dict]) -> dict:
-  """What the estimates themselves printed (the video alone): how often their
+  """What the estimates themselves printed (the video alone, or with the
+  reading they were given): how often their
   50% and 90% intervals held the truth (with 95% binomial intervals), their
   points' mean errors beside the range centre's, and how many of them applied
   the shipped tables (an estimate whose settings differ does not).
@@ -1076,9 +1100,11 @@ def check(
   networks it never saw) and the estimate's own defaults (the Bayes point;
   that calibration's tables applied where the settings match), then
   reports how often the intervals hold the truth: those the estimates printed
-  (video alone) and every mode's, read from the saved GPs with the
-  calibration's sharpness, levels and weights (``check_analysis``). Writes
-  ``check.json``, ``check.md`` and ``check_ranks.png`` in ``workdir``.
+  (video alone, or with ``config.check_reading`` the mode of that reading)
+  and every mode's, read from the saved GPs with the calibration's
+  sharpness, levels and weights (``check_analysis``; with a reading only its
+  mode, as the searches were steered by it). Writes ``check.json``,
+  ``check.md`` and ``check_ranks.png`` in ``workdir``.
 
   Raises:
     ValueError: no calibration there, or ``config.seed`` is its own.
@@ -1101,9 +1127,15 @@ def check(
   if analyse_only:
     runs = saved_runs(workdir)
   else:
-    runs = simulate_and_estimate(config, workdir, point='bayes')
+    runs = simulate_and_estimate(
+      config, workdir, point='bayes', reading=config.check_reading
+    )
   if not distributed.is_main():
     return {}
+  mode = MODE_OF_READING[config.check_reading]
+  modes = check_analysis(config, runs, shipped)
+  if config.check_reading != 'none':
+    modes = {m: v for m, v in modes.items() if m == mode}
   held = shipped.get('held_out', {})
   network = _recorded_networks(workdir)
   theirs = set(shipped.get('network', {}).get('seeds', [0]))
@@ -1120,7 +1152,8 @@ def check(
       'held_out': {m: _coverage_of(v) for m, v in held.items()},
     },
     'printed': printed(runs),
-    'modes': check_analysis(config, runs, shipped),
+    'printed_mode': mode,
+    'modes': modes,
     'config': dataclasses.asdict(config),
     'seconds': time.time() - t0,
   }
@@ -1179,12 +1212,13 @@ def check_table(out: dict) -> str:
       f'{100 * cell["prior_interval_50"]:.0f}% / {100 * cell["prior_interval_90"]:.0f}%'
     )
 
-  video = out['modes'].get('video', {})
+  mode = out.get('printed_mode', 'video')
+  video = out['modes'].get(mode, {})
   for f in FIELDS:
     c = pr[f]
     lines.append(
-      f'| video, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
-      f'{prior(video.get(f, {}))} | {promised("video", f)} | '
+      f'| {mode}, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
+      f'{prior(video.get(f, {}))} | {promised(mode, f)} | '
       f'{_err(f, c["estimate_error"])} | {_err(f, c["range_centre_error"])} |'
     )
   for mode, s in out['modes'].items():
@@ -1200,7 +1234,8 @@ def check_table(out: dict) -> str:
   if len(nets) > 1:
     lines += [
       '',
-      'Video alone, network by network (50% / 90% intervals that held the truth):',
+      f'{mode.capitalize()}, network by network (50% / 90% intervals that held '
+      'the truth):',
       '',
       '| network seed | recordings | ' + ' | '.join(FIELDS) + ' |',
       '|---|---:|' + '---|' * len(FIELDS),

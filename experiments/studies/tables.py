@@ -48,6 +48,7 @@ from experiments.pipeline import (  # noqa: E402
   report,
   search,
 )  # fmt: skip
+from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.pipeline.objective import EstimateConfig  # noqa: E402
 from experiments.studies import table1  # noqa: E402
@@ -81,11 +82,50 @@ class Config:
     estimate: settings of every estimate (material and garment come from
       each recording).
     report_only: write the tables of what has finished; run nothing.
+    wind_reading_sd: with > 0, every recording is estimated as if the wind had
+      also been measured (an anemometer): a reading drawn around its truth with
+      this relative standard error (``posterior.simulated_reading``) enters
+      the search as a prior, so the search spends its simulations on that
+      slice. Needs recordings with a truth.
+    area_weight_reading_sd: the same for area weight (a scale and a ruler).
+    reading_seed: seed of the simulated readings (recording ``seq_id`` k
+      gets the reading ``experiments.calibrate`` and
+      ``benchmarks/measured_modes.py`` draw for recording k with this seed).
   """
 
   methods: tuple[str, ...] = METHODS
   estimate: EstimateConfig = cli.nested(EstimateConfig(), skip=('material', 'garment'))
   report_only: bool = False
+  wind_reading_sd: float = 0.0
+  area_weight_reading_sd: float = 0.0
+  reading_seed: int = 0
+
+  def __post_init__(self):
+    for name in ('wind_reading_sd', 'area_weight_reading_sd'):
+      v = getattr(self, name)
+      if not 0.0 <= v < 1.0:
+        raise ValueError(f'--{name}={v}: a relative standard error in [0, 1)')
+    if (self.wind_reading_sd > 0) + (self.area_weight_reading_sd > 0) > 1:
+      raise ValueError(
+        'simulate one reading at a time (--wind_reading_sd or --area_weight_reading_sd)'
+      )
+
+
+def simulated_measurement(config: Config, rec: dict, truth: dict | None):
+  """The ``posterior.Measured`` a recording is estimated with under
+  ``config``'s simulated readings (none: nothing measured)."""
+  readings = {'wind_speed': config.wind_reading_sd,
+              'area_weight': config.area_weight_reading_sd}  # fmt: skip
+  for name, sd in readings.items():
+    if sd > 0:
+      if not truth:
+        raise ValueError(
+          f'{rec["path"]}: a simulated reading needs the truth (meta.json)'
+        )
+      return posterior_lib.simulated_reading(
+        name, truth, sd, config.reading_seed, int(rec['seq_id'])
+      )
+  return posterior_lib.Measured()
 
 
 def recordings(eval_root: str) -> list[dict]:
@@ -143,6 +183,9 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
         rec['path'], fps=ec.fps, size=net.image_size, frames=ec.frames,
         rgb=net.modality == 'rgb',
       )  # fmt: skip
+      measured = simulated_measurement(config, rec, recording.truth)
+      if measured != posterior_lib.Measured():
+        ec = dataclasses.replace(ec, measured=measured)
     except (ValueError, OSError) as e:
       results[key] = {'failed': str(e)}
       continue
@@ -505,6 +548,16 @@ def write_report(results: dict, config: Config, workdir: str) -> str:
   summary = summarise(results, config.methods)
   table = overall(results, config.methods)
   md = format_tables(summary, config.methods) + '\n\n' + format_overall(table)
+  readings = {
+    'wind': config.wind_reading_sd,
+    'area weight': config.area_weight_reading_sd,
+  }
+  for name, sd in readings.items():
+    if sd > 0:
+      md = (
+        f'Every estimate with a simulated {name} reading ({100 * sd:g}% relative '
+        f'error, seed {config.reading_seed}) as its prior.\n\n' + md
+      )
   dataset.write_text_atomic(os.path.join(workdir, 'tables.md'), md + '\n')
   dataset.write_json_atomic(
     os.path.join(workdir, 'tables.json'),

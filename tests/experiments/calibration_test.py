@@ -11,6 +11,7 @@ choice must not be the sharper one.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 
@@ -385,6 +386,26 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   assert saved['printed'] == pr and saved['n'] == 10
   text = (tmp_path / 'w' / 'check.md').read_text()
   assert '| video, as printed | wind_speed | 40% [' in text
+  # Checked with a reading (estimates given an anemometer's): the printed
+  # intervals are that mode's, and only that mode is read from the GPs (the
+  # searches were steered by the reading).
+  knw = dataclasses.replace(config, check_reading='wind_speed')
+  out_w = calibration.check(knw, str(tmp_path / 'w'), str(shipped), analyse_only=True)
+  assert set(out_w['modes']) == {'known wind'} and out_w['printed'] == pr
+  assert out_w['printed_mode'] == 'known wind'
+  assert (
+    '| known wind, as printed | wind_speed | 40% ['
+    in (tmp_path / 'w' / 'check.md').read_text()
+  )
+  # The reading each estimate gets is the one the analysis's mode applies.
+  truth = runs[3]['truth']
+  est = calibration.with_reading(knw, EstimateConfig(), 'wind_speed', truth, 3)
+  assert est.measured == posterior_lib.simulated_reading(
+    'wind_speed', truth, knw.measured_sd, knw.seed, 3
+  )
+  assert calibration.with_reading(knw, EstimateConfig(), 'none', truth, 3) == (
+    EstimateConfig()
+  )
   assert '8 of 10 estimates applied' in text
   assert (tmp_path / 'w' / 'check_ranks.png').stat().st_size > 0
   # An estimate without intervals (the paper's argmin) cannot be checked.

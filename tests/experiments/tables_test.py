@@ -220,6 +220,70 @@ def test_batched_runs_real_estimates(tmp_path):
   assert 'missing' in out[tables._key(bad, 'physnet_depth')]['failed']
 
 
+def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
+  # --wind_reading_sd: the recording is estimated with an anemometer reading
+  # drawn around its truth as its prior, the reading the calibration's post-hoc
+  # 'known wind' mode draws for the same seed and recording number.
+  from experiments.pipeline import objective
+  from experiments.pipeline import posterior as posterior_lib
+  from tests.experiments import estimate_fixtures as fx
+
+  models = str(tmp_path / 'models')
+  fx.write_hand_made_model(
+    table1.run_dir(models, 'physnet', 'depth', 'simulation', fx.MATERIAL)
+  )
+  seq = fx.write_recording(str(tmp_path), fx.TRUTH)
+  rec = {'set': 'fabrics', 'fabric': fx.MATERIAL, 'garment': '', 'seq_id': '0003',
+         'path': seq}  # fmt: skip
+  config = tables.Config(
+    estimate=dataclasses.replace(objective.PRESETS['smoke'], backend='c'),
+    wind_reading_sd=0.02, reading_seed=5,
+  )  # fmt: skip
+  out = tables._batched([(rec, 'physnet_depth')], models, str(tmp_path / 'w'), config)
+  got = out[tables._key(rec, 'physnet_depth')]
+  want = posterior_lib.simulated_reading('wind_speed', fx.TRUTH, 0.02, 5, 3)
+  assert got['config']['measured'] == dataclasses.asdict(want)
+  assert want.wind_speed != fx.TRUTH['wind_speed']
+  assert want.wind_speed_sd == pytest.approx(0.02 * fx.TRUTH['wind_speed'])
+  # The posterior keeps the reading: its 90% interval holds it and is narrower
+  # than one cell of the smoke grid's wind axis plus the reading's +-1.645 sd
+  # (the video alone leaves most of the 1-6 m/s range).
+  lo, hi = got['estimate']['wind_speed']['interval_90']
+  cell = 5.0 / config.estimate.posterior_grid[1]
+  assert lo <= want.wind_speed <= hi
+  assert hi - lo < cell + 2 * 1.645 * want.wind_speed_sd + 1e-9
+  md = tables.write_report({tables._key(rec, 'physnet_depth'): got}, config,
+                           str(tmp_path / 'r'))  # fmt: skip
+  assert md.startswith('Every estimate with a simulated wind reading (2% relative')
+
+
+def test_simulated_readings_are_seeded_and_unbiased():
+  from experiments.pipeline import posterior as posterior_lib
+
+  truth = {'wind_speed': 3.0, 'area_weight': 0.2}
+  a = posterior_lib.simulated_reading('area_weight', truth, 0.05, 1, 7)
+  assert a == posterior_lib.simulated_reading('area_weight', truth, 0.05, 1, 7)
+  assert a != posterior_lib.simulated_reading('area_weight', truth, 0.05, 2, 7)
+  assert a.wind_speed == 0 and a.area_weight_sd == pytest.approx(0.01)
+  z = np.array([
+    posterior_lib.simulated_reading('wind_speed', truth, 0.02, 0, k).wind_speed
+    for k in range(2000)
+  ]) / 3.0 - 1.0  # fmt: skip
+  # 2000 standard normals times 0.02: mean within 4 standard errors of 0,
+  # sd within 5% of 0.02.
+  assert abs(z.mean()) < 4 * 0.02 / np.sqrt(2000)
+  assert z.std() == pytest.approx(0.02, rel=0.05)
+  with pytest.raises(ValueError, match='bending_scale'):
+    posterior_lib.simulated_reading('bending_scale', truth, 0.02, 0, 0)
+  with pytest.raises(ValueError, match='wind_reading_sd=1.5'):
+    tables.Config(wind_reading_sd=1.5)
+  with pytest.raises(ValueError, match='one reading at a time'):
+    tables.Config(wind_reading_sd=0.02, area_weight_reading_sd=0.02)
+  rec = {'path': '/data/x/0001', 'seq_id': '0001'}
+  with pytest.raises(ValueError, match='/data/x/0001: a simulated reading needs'):
+    tables.simulated_measurement(tables.Config(area_weight_reading_sd=0.02), rec, None)
+
+
 def test_candidate_landscapes_place_each_candidate_against_the_truth(tmp_path):
   import cv2
 
