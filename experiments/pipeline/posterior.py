@@ -138,7 +138,7 @@ _U = (np.arange(400) + 0.5) / 400  # shares of the calibrated distribution
 
 
 def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None,
-           weight: float = 1.0, factor: bool = False,
+           weight: float | None = None, factor: bool = False,
            prior_point: float | None = None) -> dict:  # fmt: skip
   """Median, central intervals, sd, how much narrower than the prior (on a
   log scale with ``log``), and the point with the least expected error
@@ -146,6 +146,13 @@ def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None,
   towards the prior's own (``prior_point``, default from the ``prior``
   draws) by ``1 - weight`` (``bo.calibration.shrink``; 1: the posterior's
   alone).
+
+  ``weight`` None (no calibration gave one): 0 for a quantity the data did
+  not inform (its 90% interval at least ``bo.calibration.UNINFORMED`` of the
+  prior's width, the calibration's own rule for such quantities), else 1.
+  What little such a posterior leans one way is as likely the surrogate's
+  noise as the video's information, so the prior's own point is the safer
+  answer (the one calibrations chose for such quantities: weight 0).
 
   ``cdf_levels``: the CDF levels of ``bo.calibration.PROBS`` at which to read
   ``x`` (recalibrated); default the probs themselves."""
@@ -162,6 +169,9 @@ def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None,
   lo, hi = out['interval_90']
   prior_width = float(np.diff(f(np.quantile(prior, [0.05, 0.95])))[0])
   out['narrowing_90'] = prior_width / max(float(f(hi) - f(lo)), 1e-12)  # 1: the prior's
+  if weight is None:
+    uninformed = 1.0 / out['narrowing_90'] >= bo.calibration.UNINFORMED
+    weight = 0.0 if uninformed else 1.0
   calibrated = x if nominal else np.quantile(x, bo.calibration.warp(_U, lv))
   loss = 'factor' if factor else 'relative'
   own = bo.calibration.bayes_point(calibrated, loss)
@@ -186,7 +196,8 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
       read from the posterior's defensive mixture with the prior at those
       levels, as the calibration read it; without, at the nominal levels.
     weights: ``{field: weight}`` of each posterior point against the prior's
-      own (``bo.calibration.choose_weight`` on the calibration), or None (1).
+      own (``bo.calibration.choose_weight`` on the calibration), or None:
+      0 for a quantity the data did not inform, else 1 (see ``_stats``).
     measured: the readings in the prior, for its own points by quadrature
       (``prior_points``); None: from the prior draws.
 
@@ -210,7 +221,7 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
     name: _stats(
       post[:, i], prior[:, i], log=name in ('bending_scale', 'load_ratio'),
       cdf_levels=None if recalibration is None else recalibration[name],
-      weight=(weights or {}).get(name, 1.0), factor=name == 'bending_scale',
+      weight=(weights or {}).get(name), factor=name == 'bending_scale',
       prior_point=None if points is None else points[name],
     )
     for i, name in enumerate(names)

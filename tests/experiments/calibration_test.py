@@ -268,6 +268,43 @@ def test_recalibrated_summaries_read_the_defensive_mixture_at_the_levels():
   np.testing.assert_allclose(plain['wind_speed']['interval_90'], w, rtol=1e-12)
 
 
+def test_without_calibration_an_uninformed_quantity_takes_the_priors_point():
+  # No calibrated weights: a quantity whose posterior is as wide as the prior
+  # (wind here: drawn like the prior, but leaning high) reports the prior's own
+  # least-error point (weight 0); an informed one (area weight, sd 0.05 of the
+  # unit box) its posterior's (weight 1).
+  space = physsim.search_space('gray_interlock')
+  rng = np.random.default_rng(1)
+  prior = rng.uniform(-1, 1, (20000, 3))
+  post = rng.uniform(-1, 1, (20000, 3))
+  post[:, 1] = np.concatenate([rng.uniform(-1, 1, 15000), rng.uniform(0, 1, 5000)])
+  post[:, 2] = np.clip(0.4 + 0.05 * rng.standard_normal(20000), -1, 1)
+  got = posterior_lib.summarise(post, space, prior)
+  prior_phys = calibration._physical_with_ratio(prior, space)
+  post_phys = calibration._physical_with_ratio(post, space)
+  wind = got['wind_speed']
+  assert 1.0 / wind['narrowing_90'] >= bo.calibration.UNINFORMED
+  assert wind['bayes_weight'] == 0.0
+  assert wind['bayes'] == pytest.approx(
+    bo.calibration.bayes_point(prior_phys[:, 1], 'relative'), rel=1e-12
+  )
+  # the posterior's own point leans high: the rule made a difference
+  assert bo.calibration.bayes_point(post_phys[:, 1], 'relative') > wind['bayes'] * 1.05
+  weight = got['area_weight']
+  assert 1.0 / weight['narrowing_90'] < 0.5 and weight['bayes_weight'] == 1.0
+  assert weight['bayes'] == pytest.approx(
+    bo.calibration.bayes_point(post_phys[:, 2], 'relative'), rel=1e-12
+  )
+  # Calibrated weights, when given, are used as they are.
+  ones = dict.fromkeys(calibration.FIELDS, 1.0)
+  assert (
+    posterior_lib.summarise(post, space, prior, weights=ones)['wind_speed'][
+      'bayes_weight'
+    ]
+    == 1.0
+  )
+
+
 def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
   # The analysis can run apart from the searches (--analyse_only).
   with pytest.raises(ValueError, match='no finished estimates'):
