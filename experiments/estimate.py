@@ -50,6 +50,11 @@ class Args:
       than material.
     intake_only: take the recording in (camera, clip, background, alignment),
       write intake.json, overlay.png and the cleaned frames, and stop.
+    wind_speeds: with several recordings: an anemometer's reading at each
+      (m/s), in the recordings' order; each recording's search and the joint
+      posterior take it as that recording's wind prior (--wind_speed is one
+      recording's).
+    wind_speed_sds: their standard uncertainties (m/s), one per reading.
     intake: how the recording is read, cleaned and aligned.
     search: the estimate's settings.
   """
@@ -60,11 +65,33 @@ class Args:
   camera_json: str = ''
   allow_other_material: bool = False
   intake_only: bool = False
+  wind_speeds: tuple[float, ...] = ()
+  wind_speed_sds: tuple[float, ...] = ()
   intake: intake.IntakeConfig = intake.IntakeConfig()
   search: objective_lib.EstimateConfig = objective_lib.EstimateConfig()
 
 
 PRESETS = {k: Args(search=v) for k, v in objective_lib.PRESETS.items()}
+
+
+def joint_winds(args: Args) -> list[tuple[float, float]] | None:
+  """The per-recording wind readings of a joint estimate, or None.
+
+  Raises:
+    ValueError: readings without one per recording, or without uncertainties.
+  """
+  if not args.wind_speeds and not args.wind_speed_sds:
+    return None
+  n = len(args.recording)
+  if n < 2:
+    raise ValueError('--wind_speeds is for several recordings; use --wind_speed')
+  if len(args.wind_speeds) != n or len(args.wind_speed_sds) != n:
+    raise ValueError(
+      f'--wind_speeds={",".join(map(str, args.wind_speeds))} and --wind_speed_sds='
+      f'{",".join(map(str, args.wind_speed_sds))}: need one reading and one '
+      f'uncertainty for each of the {n} recordings'
+    )
+  return list(zip(args.wind_speeds, args.wind_speed_sds, strict=True))
 
 
 def _take_in(args: Args, path: str, workdir: str, size=None, frames: bool = True):
@@ -90,6 +117,7 @@ def main(args: Args) -> None:
   args.intake.check()
   if not args.recording:
     raise ValueError('missing --recording (see --help)')
+  winds = joint_winds(args)  # checked before anything is read
   if args.intake_only:
     for i, path in enumerate(args.recording):
       workdir = (
@@ -133,7 +161,7 @@ def main(args: Args) -> None:
         )  # fmt: skip
       )
   if len(recs) > 1:
-    result = search.estimate_joint(config, recs, args.model, args.workdir)
+    result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
     print(report.joint_table(result))
     return
   result = search.estimate(config, recs[0], args.model, args.workdir)

@@ -246,7 +246,10 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096) -> dict:
     log_liks: per recording, (G,) log likelihood on the grid (C order over
       bending, wind, area weight), all on the same grid and box.
     grid: (nb, nv, nw) cells per dimension.
-    log_prior_grid: (G,) the log prior of one recording's (b, v, w).
+    log_prior_grid: (G,) the log prior of one recording's (b, v, w), shared
+      by all; or one (G,) per recording where their winds were measured
+      apart (an anemometer at each fan setting). Each must be a product of a
+      (b, w) part, the same for all, and a wind part: its own reading.
     key: PRNG key for the draws.
     n: draws per recording.
 
@@ -256,13 +259,19 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096) -> dict:
     joint and draw their own wind given them.
   """
   nb, nv, nw = grid
-  lp = np.asarray(log_prior_grid).reshape(nb, nv, nw)
-  # Prior of (b, w) and of v given (b, w) from the recordings' common prior.
   ll = [np.asarray(x).reshape(nb, nv, nw) for x in log_liks]
-  lp_bw = logsumexp(lp, axis=1)  # (nb, nw)
-  lp_v = lp - lp_bw[:, None, :]  # log p(v | b, w)
+  priors = (
+    [log_prior_grid] * len(ll) if np.ndim(log_prior_grid) == 1 else log_prior_grid
+  )
+  if len(priors) != len(ll):
+    raise ValueError(f'{len(priors)} priors for {len(ll)} recordings')
+  lp = [np.asarray(p).reshape(nb, nv, nw) for p in priors]
+  # The prior of (b, w) (each recording's wind summed out: the same up to a
+  # constant), and each recording's of v given (b, w).
+  lp_bw = logsumexp(lp[0], axis=1)  # (nb, nw)
+  lp_v = [p - logsumexp(p, axis=1)[:, None, :] for p in lp]  # log p(v_k | b, w)
   # Each recording's evidence for (b, w), its wind integrated out.
-  ev = [logsumexp(x + lp_v, axis=1) for x in ll]  # (nb, nw) each
+  ev = [logsumexp(x + v, axis=1) for x, v in zip(ll, lp_v, strict=True)]
   log_bw = np.asarray(lp_bw + sum(ev))
   log_bw = log_bw - logsumexp(log_bw)
   k_bw, k_v, k_jit = jax.random.split(key, 3)
@@ -270,7 +279,7 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096) -> dict:
   ib, iw = np.unravel_index(idx, (nb, nw))
   out = []
   for k, x in enumerate(ll):
-    cond = x[ib, :, iw] + lp_v[ib, :, iw]  # (n, nv): wind given (b, w)
+    cond = x[ib, :, iw] + lp_v[k][ib, :, iw]  # (n, nv): wind given (b, w)
     iv = np.asarray(jax.random.categorical(jax.random.fold_in(k_v, k), cond, axis=1))
     cells = np.stack([ib, iv, iw], axis=1).astype(np.float64)
     jit = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, k), (n, 3)))

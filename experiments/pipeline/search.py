@@ -609,6 +609,7 @@ def estimate_joint(
   recordings: list[Recording],
   model_dir: str,
   workdir: str,
+  winds: list[tuple[float, float]] | None = None,
   **kw,
 ) -> dict:
   """One fabric seen in several recordings (e.g. two fan settings): a joint
@@ -620,11 +621,17 @@ def estimate_joint(
   out (``posterior.joint``). Writes ``joint.json`` and ``joint.png``.
 
   Args:
-    config: settings (``point='median'``; a measured area weight applies to
-      all recordings; a measured wind cannot, as each recording has its own).
+    config: settings (``point='median'`` or ``'bayes'``; a measured area
+      weight applies to all recordings; a measured wind cannot, as each
+      recording has its own: see ``winds``).
     recordings: two or more recordings of the same fabric.
     model_dir: the fabric's trained network.
     workdir: where everything goes.
+    winds: an anemometer's reading at each recording, ``(m/s, its standard
+      uncertainty)`` in the recordings' order, or None. Each enters that
+      recording's search as its prior (its simulations go to that slice) and
+      the joint posterior through it. No calibration covers this
+      combination: the intervals are reported as indicative.
     **kw: ``estimate_many``'s keywords.
 
   Returns:
@@ -634,7 +641,9 @@ def estimate_joint(
 
   Raises:
     ValueError: fewer than two recordings, ``point='argmin'``, a measured
-      wind, or a recording whose estimate failed (named).
+      wind in ``config``, readings for another number of recordings, a
+      reading the search box cannot hold, or a recording whose estimate
+      failed (named).
   """
   if len(recordings) < 2:
     raise ValueError(
@@ -647,11 +656,24 @@ def estimate_joint(
   if config.measured.wind_speed_sd > 0:
     raise ValueError(
       "a measured wind is one recording's: estimate that recording alone, or "
-      'give the joint estimate without --wind_speed'
+      'give one reading per recording (--wind_speeds, --wind_speed_sds)'
     )
+  if winds is not None and len(winds) != len(recordings):
+    raise ValueError(f'{len(winds)} wind readings for {len(recordings)} recordings')
+  configs = [config] * len(recordings)
+  if winds is not None:
+    configs = [
+      dataclasses.replace(
+        config,
+        measured=dataclasses.replace(config.measured, wind_speed=v, wind_speed_sd=sd),
+      )
+      for v, sd in winds
+    ]
+    for c in configs:
+      c.measured.check(physsim.search_space(config.material))
   jobs = [
-    Job(config, r, model_dir, os.path.join(workdir, f'recording_{k}'))
-    for k, r in enumerate(recordings)
+    Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'))
+    for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
   ]
   results = estimate_many(jobs, **kw)
   for job, r in zip(jobs, results, strict=True):
@@ -661,13 +683,12 @@ def estimate_joint(
   grid = tuple(int(g) for g in npz[0]['grid'])
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
   combined = posterior_lib.joint(
-    [z['log_lik'] for z in npz], grid, npz[0]['log_prior'], key,
+    [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
     n=len(npz[0]['samples']),
   )  # fmt: skip
   space = physsim.search_space(config.material)
-  prior = npz[0]['prior_samples']
   note = report.calibration_note(
-    config, joint=True, recordings=len(jobs),
+    configs[0], joint=True, recordings=len(jobs),
     network=embedding.network_recipe(model_dir),
     accuracy=embedding.network_accuracy(model_dir),
   )  # fmt: skip
@@ -675,23 +696,26 @@ def estimate_joint(
   per = []
   for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):
     s = posterior_lib.summarise(
-      samples, space, prior, levels, _weights(note), config.measured
-    )
+      samples, space, npz[k]['prior_samples'], levels, _weights(note),
+      job.config.measured,
+    )  # fmt: skip
     per.append({
       'recording': job.recording.source,
       'alone': results[k]['estimate'],
       'wind_speed': s['wind_speed'],
       'load_ratio': s['load_ratio'],
+      **({'measured_wind': list(winds[k])} if winds is not None else {}),
       **({'truth': job.recording.truth} if job.recording.truth else {}),
     })  # fmt: skip
     posterior_lib.plot(
-      samples, prior, space, job.recording.truth,
+      samples, npz[k]['prior_samples'], space, job.recording.truth,
       os.path.join(workdir, f'joint_recording_{k}.png'),
       title=f'{config.material}: joint posterior, recording {k}',
     )  # fmt: skip
   shared = posterior_lib.summarise(
-    combined['samples'][0], space, prior, levels, _weights(note), config.measured
-  )
+    combined['samples'][0], space, npz[0]['prior_samples'], levels, _weights(note),
+    configs[0].measured,
+  )  # fmt: skip
   out = {
     'material': config.material,
     'recordings': per,

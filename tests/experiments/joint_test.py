@@ -1,0 +1,134 @@
+"""Tests for joint estimates of one fabric in several recordings: the grid
+posterior against brute-force enumeration, and the estimate end to end with a
+wind reading at each recording."""
+
+import dataclasses
+import itertools
+import os
+
+import jax
+import numpy as np
+import pytest
+from jax.scipy.special import logsumexp
+
+from experiments import estimate as estimate_script
+from experiments.pipeline import objective, search
+from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline import recording as recording_lib
+from tests.experiments import estimate_fixtures as fx
+
+GRID = (2, 3, 2)  # bending, wind, area weight cells
+
+
+def _brute_force(log_liks, log_priors):
+  """p(b, w, v_1, ..., v_K | data) by enumerating every cell combination:
+  prior p(b, w) prod_k p_k(v_k | b, w), times prod_k L_k(b, v_k, w)."""
+  nb, nv, nw = GRID
+  ll = [x.reshape(GRID) for x in log_liks]
+  lp = [p.reshape(GRID) for p in log_priors]
+  log_bw = np.asarray(logsumexp(lp[0], axis=1))
+  out = {}
+  for b, w in itertools.product(range(nb), range(nw)):
+    for vs in itertools.product(range(nv), repeat=len(ll)):
+      t = log_bw[b, w]
+      for k, v in enumerate(vs):
+        t += lp[k][b, v, w] - float(logsumexp(lp[k][b, :, w])) + ll[k][b, v, w]
+      out[(b, w, *vs)] = t
+  z = float(logsumexp(np.array(list(out.values()))))
+  return {k: np.exp(v - z) for k, v in out.items()}
+
+
+@pytest.mark.parametrize('own_priors', [False, True])
+def test_joint_posterior_matches_enumeration(own_priors):
+  rng = np.random.default_rng(0)
+  g = int(np.prod(GRID))
+  log_liks = [rng.normal(0, 1.5, g) for _ in range(2)]
+  base = np.log(rng.uniform(0.5, 1.5, GRID[0] * GRID[2]))  # a prior on (b, w)
+  base = np.repeat(base.reshape(GRID[0], 1, GRID[2]), GRID[1], axis=1).ravel()
+  if own_priors:  # each recording's wind measured apart: its own wind factor
+    wind = [np.log(rng.uniform(0.1, 1.0, GRID[1])) for _ in range(2)]
+    priors = [(base.reshape(GRID) + f[None, :, None]).ravel() for f in wind]
+  else:
+    priors = [base, base]
+  exact = _brute_force(log_liks, priors)
+  out = posterior_lib.joint(
+    log_liks, GRID, priors if own_priors else base, jax.random.key(1), n=60_000
+  )
+  bw = np.zeros((GRID[0], GRID[2]))
+  for (b, w, *_), p in exact.items():
+    bw[b, w] += p
+  np.testing.assert_allclose(np.exp(out['log_post_bw']), bw, rtol=1e-5)  # float32
+  # Each recording's draws: its wind cell's marginal, by enumeration, within
+  # 5 standard errors of 60,000 draws.
+  for k, draws in enumerate(out['samples']):
+    cells = np.floor((draws + 1.0) / 2.0 * np.array(GRID)).astype(int)
+    for v in range(GRID[1]):
+      want = sum(p for key, p in exact.items() if key[2 + k] == v)
+      got = np.mean(cells[:, 1] == v)
+      assert abs(got - want) < 5 * np.sqrt(want * (1 - want) / 60_000) + 1e-9, (k, v)
+  with pytest.raises(ValueError, match='3 priors for 2 recordings'):
+    posterior_lib.joint(log_liks, GRID, [base] * 3, jax.random.key(1), n=10)
+
+
+def test_joint_winds_need_one_reading_per_recording():
+  args = estimate_script.Args(recording=('a', 'b'), wind_speeds=(3.0, 4.0),
+                              wind_speed_sds=(0.06,))  # fmt: skip
+  with pytest.raises(
+    ValueError, match='one reading and one uncertainty for each of the 2'
+  ):
+    estimate_script.joint_winds(args)
+  with pytest.raises(ValueError, match='use --wind_speed'):
+    estimate_script.joint_winds(
+      estimate_script.Args(recording=('a',), wind_speeds=(3.0,), wind_speed_sds=(0.1,))
+    )
+  both = dataclasses.replace(args, wind_speed_sds=(0.06, 0.08))
+  assert estimate_script.joint_winds(both) == [(3.0, 0.06), (4.0, 0.08)]
+  assert estimate_script.joint_winds(estimate_script.Args(recording=('a', 'b'))) is None
+
+
+def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
+  # Two fan settings of one fabric (same bending and area weight), each with
+  # an anemometer reading: each search takes its own reading as its prior,
+  # and the joint posterior keeps each recording's wind at its reading.
+  model_dir = fx.write_hand_made_model(str(tmp_path / 'model'))
+  truths = [fx.TRUTH, dict(fx.TRUTH, wind_speed=3.0)]
+  config = dataclasses.replace(objective.PRESETS['smoke'], backend='c')
+  recs = []
+  for k, t in enumerate(truths):
+    path = fx.write_recording(str(tmp_path / f'r{k}'), t)
+    recs.append(
+      recording_lib.load_recording(
+        path, fps=config.fps, size=(fx.SIZE, fx.SIZE), frames=config.frames
+      )
+    )
+  winds = [(4.4, 0.09), (3.05, 0.06)]
+  with pytest.raises(ValueError, match='1 wind readings for 2 recordings'):
+    search.estimate_joint(config, recs, model_dir, str(tmp_path / 'x'), winds[:1])
+  measured = dataclasses.replace(
+    config, measured=posterior_lib.Measured(wind_speed=4.0, wind_speed_sd=0.1)
+  )
+  with pytest.raises(ValueError, match='--wind_speeds'):
+    search.estimate_joint(measured, recs, model_dir, str(tmp_path / 'x'))
+  workdir = str(tmp_path / 'joint')
+  out = search.estimate_joint(config, recs, model_dir, workdir, winds)
+  cell = 5.0 / config.posterior_grid[1]  # the grid's wind cell, m/s
+  for k, (v, sd) in enumerate(winds):
+    r = out['recordings'][k]
+    assert r['measured_wind'] == [v, sd] and r['truth'] == truths[k]
+    # The reading dominates each wind (the video adds a little through the
+    # shared area weight): a narrow interval near it, jointly and alone.
+    for est in (r['wind_speed'], r['alone']['wind_speed']):
+      lo, hi = est['interval_90']
+      assert v - 4 * sd - cell < lo < hi < v + 4 * sd + cell, (k, lo, hi)
+      assert hi - lo < cell + 2 * 1.645 * sd + 1e-9, (k, lo, hi)
+    # the search's prior was its own reading's: highest in the reading's cell
+    z = np.load(os.path.join(workdir, f'recording_{k}', search.POSTERIOR_FILE))
+    lp = z['log_prior'].reshape(config.posterior_grid)
+    centre = 1.0 + (np.argmax(lp[0, :, 0]) + 0.5) * cell
+    assert abs(centre - v) <= cell / 2 + 1e-9, (k, centre)
+  # no calibration covers readings in a joint estimate: said so
+  note = out['calibration']
+  assert note is None or (
+    note['matches'] is False and 'combination of measurements' in note['differs']
+  )
+  assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
