@@ -5,13 +5,18 @@ Reads estimates written by ``experiments.estimate`` or ``experiments.tables``
 with the GP of its log PSD), forms each recording's posterior again from its
 GP at the estimate's likelihood setting: from the video alone, with a wind
 reading of relative error ``--measured_sd`` (an anemometer) and with an area
-weight reading (a scale and a ruler), each reading drawn around the truth.
-Prints, per mode and quantity, the posterior median's mean error, the range
+weight reading (a scale and a ruler), each reading drawn around the truth
+(``posterior.simulated_reading``, seeded by ``--seed`` and the folder's
+sequence id: the readings ``experiments.tables`` and a calibration check of
+that seed gave their searches). With ``--pairs`` (a calibration or its
+check: recordings 2k and 2k+1 share bending and area weight) the joint
+modes too, without and with a wind reading at each recording. Prints, per mode and quantity, the posterior median's mean error, the range
 centre's, and how often the 50% and 90% intervals held the truth; writes JSON.
 No simulation: seconds on a CPU.
 
   python benchmarks/measured_modes.py \\
       --estimates='out/tables/physnet_depth/fabrics/gray_interlock-*' --out=modes.json
+  python benchmarks/measured_modes.py --estimates='out/check/estimates/*' --pairs --seed=3
 """
 
 from __future__ import annotations
@@ -32,7 +37,13 @@ FLAGS = flags.FLAGS
 flags.DEFINE_string('estimates', None, 'glob of estimate folders', required=True)
 flags.DEFINE_float('measured_sd', 0.02, 'relative standard error of a reading')
 flags.DEFINE_string('out', None, 'JSON path')
-MODES = ('video', 'known wind', 'known area weight')
+flags.DEFINE_integer('seed', 0, 'seed of the readings (a check run with --seed=S: S)')
+flags.DEFINE_bool(
+  'pairs',
+  False,
+  'recordings 2k and 2k+1 share bending and area weight (a calibration or its '
+  'check): add the joint modes, without and with a wind reading at each',
+)
 
 
 def main(argv):
@@ -49,22 +60,25 @@ def main(argv):
     configs.add(
       (c['material'], c['likelihood'], c['sharpness'], tuple(c['posterior_grid']))
     )
-    runs.append({'seq': i, 'truth': est['truth'], 'workdir': d})
+    tail = os.path.basename(d).rsplit('-', 1)[-1]  # '0003' or 'gray_interlock-0003'
+    seq = int(tail) if tail.isdigit() else i  # the sequence id seeds its reading
+    runs.append({'seq': seq, 'truth': est['truth'], 'workdir': d})
   if len(configs) != 1:
     raise SystemExit(f'estimates of several settings: {sorted(configs)}')
   material, form, sharpness, grid = configs.pop()
   study = calibration.Config(
-    material=material, measured_sd=FLAGS.measured_sd,
+    material=material, measured_sd=FLAGS.measured_sd, seed=FLAGS.seed,
     estimate=EstimateConfig(posterior_grid=grid),
   )  # fmt: skip
-  scores = calibration.posteriors(study, runs, form, sharpness, pairs=False)
+  scores = calibration.posteriors(study, runs, form, sharpness, pairs=FLAGS.pairs)
+  modes = [m for m in calibration.MODES if FLAGS.pairs or not m.startswith('joint')]
   space = physsim.search_space(material)
-  summary = {m: calibration.summarise(scores[m], space) for m in MODES}
+  summary = {m: calibration.summarise(scores[m], space) for m in modes}
   print(f'{len(runs)} recordings, {material}, {form} likelihood, sharpness {sharpness:g}, '
         f'readings with {100 * FLAGS.measured_sd:g}% error\n')  # fmt: skip
   print('| mode | quantity | median error (range centre) | 50% / 90% hold the truth |')
   print('|---|---|---|---|')
-  for m in MODES:
+  for m in modes:
     for f in calibration.FIELDS:
       s = summary[m][f]
       err = (f'x{s["median_error_factor"]:.2f} (x{s["centre_error_factor"]:.2f})'

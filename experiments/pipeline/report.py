@@ -113,11 +113,12 @@ _CALIBRATED_FIELDS = (
 def calibration_mode(measured, joint: bool = False) -> str | None:
   """The calibration study's mode (``experiments.studies.calibration.MODES``)
   an estimate with these readings falls in: the video alone, with a measured
-  wind, with a measured area weight, or a joint pair; None where none fits
-  (both readings, or a joint estimate with a reading)."""
+  wind, with a measured area weight, a joint pair, or a joint pair with a wind
+  reading at each recording (``measured`` is then one recording's); None
+  where none fits (both readings, or a joint estimate with an area weight)."""
   wind, weight = measured.wind_speed_sd > 0, measured.area_weight_sd > 0
   if joint:
-    return None if wind or weight else 'joint pair'
+    return None if weight else 'joint pair, known winds' if wind else 'joint pair'
   if wind and weight:
     return None
   return 'known wind' if wind else 'known area weight' if weight else 'video'
@@ -176,8 +177,10 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     if d:
       differs.append(f'network recipe ({", ".join(d)})')
   rec = cal.get('recalibration')
-  if rec and mode in ('known wind', 'known area weight'):
-    name = 'wind_speed' if mode == 'known wind' else 'area_weight'
+  if rec and mode is not None and mode not in rec['modes']:
+    differs.append(f'{mode} (not in this calibration)')
+  if rec and mode in ('known wind', 'known area weight', 'joint pair, known winds'):
+    name = 'area_weight' if mode == 'known area weight' else 'wind_speed'
     value, sd = getattr(config.measured, name), getattr(config.measured, f'{name}_sd')
     ratio = (sd / value) / rec['measured_sd']
     if not 0.5 <= ratio <= 2.0:

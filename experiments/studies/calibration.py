@@ -72,7 +72,8 @@ FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
 MODE_OF_READING = {'none': 'video', 'wind_speed': 'known wind',
                    'area_weight': 'known area weight'}  # fmt: skip
 LEVELS = (50, 90)
-MODES = ('video', 'known wind', 'known area weight', 'joint pair')
+MODES = ('video', 'known wind', 'known area weight', 'joint pair',
+         'joint pair, known winds')  # fmt: skip
 RESULT_FILE = 'calibration.json'
 CHECK_FILE = 'check.json'
 
@@ -446,6 +447,31 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
         )
         out['joint pair'].append({'seq': rr['seq'], 'pair_member': k, 'truth': trow,
                                   **score})  # fmt: skip
+      # The same pair with an anemometer reading at each recording.
+      readings = [measured['known wind']] + [
+        posterior_lib.simulated_reading(
+          'wind_speed', mate['truth'], sd, config.seed, mate['seq']
+        )
+      ]  # fmt: skip
+      lps = [priors['known wind'], posterior_lib.log_prior(points, space, readings[1])]
+      jw = posterior_lib.joint(
+        [ll, _log_lik(zm, form, sharpness)], grid, lps,
+        jax.random.key(int(rng.integers(1 << 30))), n=n,
+      )  # fmt: skip
+      for k, (rr, samples) in enumerate(zip((r, mate), jw['samples'], strict=True)):
+        own_prior = _physical_with_ratio(_draws(rng, grid, lps[k], n // 4), space)
+        score = _score(
+          _physical_with_ratio(samples, space), own_prior, _truth_row(rr['truth']),
+          rr['seq'], _prior_point(config.material, readings[k]), prior_draws['video'],
+        )  # fmt: skip
+        out['joint pair, known winds'].append(
+          {
+            'seq': rr['seq'],
+            'pair_member': k,
+            'truth': _truth_row(rr['truth']),
+            **score,
+          }
+        )
   return out
 
 

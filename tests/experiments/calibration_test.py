@@ -182,6 +182,12 @@ def test_calibration_modes_follow_what_was_measured():
     'known area weight'
   )
   assert report.calibration_mode(m(), joint=True) == 'joint pair'
+  wind = m(wind_speed=3.0, wind_speed_sd=0.06)
+  assert report.calibration_mode(wind, joint=True) == 'joint pair, known winds'
+  assert (
+    report.calibration_mode(m(area_weight=0.2, area_weight_sd=0.004), joint=True)
+    is None
+  )
 
 
 def _recalibrated_file(tmp_path, monkeypatch) -> dict:
@@ -220,6 +226,17 @@ def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkey
   assert joint['matches'] is False
   assert report.calibration_note(EstimateConfig(sharpness=0.7), joint=True,
                                  recordings=2)['mode'] == 'joint pair'  # fmt: skip
+  # A joint pair with a wind reading at each: its own tables, when calibrated.
+  assert report.calibration_note(wind, joint=True, recordings=2)['mode'] == (
+    'joint pair, known winds'
+  )
+  cal = json.loads((tmp_path / 'calibration.json').read_text())
+  del cal['recalibration']['modes']['joint pair, known winds']
+  (tmp_path / 'calibration.json').write_text(json.dumps(cal))
+  older = report.calibration_note(wind, joint=True, recordings=2)
+  assert older['matches'] is False
+  assert older['differs'] == ['joint pair, known winds (not in this calibration)']
+  assert report.calibration_note(wind)['mode'] == 'known wind'  # still there
 
 
 def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypatch):

@@ -126,9 +126,8 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
     lp = z['log_prior'].reshape(config.posterior_grid)
     centre = 1.0 + (np.argmax(lp[0, :, 0]) + 0.5) * cell
     assert abs(centre - v) <= cell / 2 + 1e-9, (k, centre)
-  # no calibration covers readings in a joint estimate: said so
+  # the shipped calibration has no tables for readings in a joint estimate
+  # (nor for this test's settings): said so
   note = out['calibration']
-  assert note is None or (
-    note['matches'] is False and 'combination of measurements' in note['differs']
-  )
+  assert note is None or note['matches'] is False
   assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
