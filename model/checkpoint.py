@@ -101,6 +101,14 @@ def save(mngr: ocp.CheckpointManager, step: int, state: Any) -> None:
   mngr.wait_until_finished()
 
 
+def _on_this_device(target: Any) -> Any:
+  """``target``'s shapes and dtypes, on this process's first device."""
+  here = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
+  return jax.tree.map(
+    lambda t: jax.ShapeDtypeStruct(t.shape, t.dtype, sharding=here), target
+  )
+
+
 def restore(
   mngr: ocp.CheckpointManager, target: Any, step: int | None = None
 ) -> Any | None:
@@ -124,13 +132,18 @@ def restore(
     if isinstance(mngr, LocalManager):
       # An orbax checkpoint (written by one process) read in a multi-process
       # run: onto this process's own device.
-      here = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
-      target = jax.tree.map(
-        lambda t: jax.ShapeDtypeStruct(t.shape, t.dtype, sharding=here), target
-      )
+      target = _on_this_device(target)
       with ocp.CheckpointManager(mngr.directory) as orbax_mngr:
         return orbax_mngr.restore(int(step), args=ocp.args.StandardRestore(target))
-    return mngr.restore(int(step), args=ocp.args.StandardRestore(target))
+    try:
+      return mngr.restore(int(step), args=ocp.args.StandardRestore(target))
+    except ValueError as e:
+      if 'topology' not in str(e).lower():
+        raise
+      # Saved from other devices (the scripts make one CPU device per core, a
+      # training may run over several GPUs): onto this process's first device.
+      target = _on_this_device(target)
+      return mngr.restore(int(step), args=ocp.args.StandardRestore(target))
   except Exception as e:  # noqa: BLE001 - orbax raises many kinds for a bad file
     raise ValueError(
       f'{mngr.directory}: checkpoint step {step} cannot be read, corrupt or from '
