@@ -40,6 +40,7 @@ flags.DEFINE_enum('preset', 'default', list(objective.PRESETS), 'estimate settin
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
+FLAG_NAMES = ('model', 'material', 'pairs', 'seed', 'reading_sd', 'preset', 'backend')
 
 
 def _recordings(workdir: str, size: int) -> list[dict]:
@@ -82,8 +83,11 @@ def main(argv):
     config, material=FLAGS.material,
     **({'backend': FLAGS.backend} if FLAGS.backend else {}),
   )  # fmt: skip
-  space = physsim.search_space(FLAGS.material)
-  centre = physsim.params.from_unit(np.zeros(3), space)
+  centre = physsim.search_space(FLAGS.material).center()
+  guess = {
+    'wind_speed': float(centre.wind_speed), 'area_weight': float(centre.area_weight),
+    'load_ratio': float(physsim.load_ratio(centre.wind_speed, centre.area_weight)),
+  }  # fmt: skip
   rows = []
   for pair in _recordings(FLAGS.workdir, net.image_size[0]):
     recs, winds = [], []
@@ -107,10 +111,6 @@ def main(argv):
         'area_weight': out['area_weight'],
         'load_ratio': out['recordings'][k]['load_ratio'],
       }
-      guess = {
-        'wind_speed': centre.wind_speed, 'area_weight': centre.area_weight,
-        'load_ratio': physsim.load_ratio(centre.wind_speed, centre.area_weight),
-      }  # fmt: skip
       one = {n: alone[n]['value'] for n in NAMES[:2]}
       one['load_ratio'] = physsim.load_ratio(one['wind_speed'], one['area_weight'])
       rows.append({
@@ -120,7 +120,7 @@ def main(argv):
         'alone': {n: _error(one[n], t[n]) for n in NAMES},
         'joint': {n: _error(joint[n]['bayes'], t[n]) for n in NAMES},
         'joint_median': {n: _error(joint[n]['median'], t[n]) for n in NAMES},
-        'centre': {n: _error(float(guess[n]), t[n]) for n in NAMES},
+        'centre': {n: _error(guess[n], t[n]) for n in NAMES},
         'joint_covered_90': {
           n: bool(joint[n]['interval_90'][0] <= t[n] <= joint[n]['interval_90'][1])
           for n in NAMES
@@ -152,18 +152,7 @@ def main(argv):
     {
       'rows': rows,
       'summary': summary,
-      'flags': {
-        k: FLAGS[k].value
-        for k in (
-          'model',
-          'material',
-          'pairs',
-          'seed',
-          'reading_sd',
-          'preset',
-          'backend',
-        )
-      },
+      'flags': {k: FLAGS[k].value for k in FLAG_NAMES},
     },
   )
 

@@ -10,8 +10,9 @@ weight reading (a scale and a ruler), each reading drawn around the truth
 sequence id: the readings ``experiments.tables`` and a calibration check of
 that seed gave their searches). With ``--pairs`` (a calibration or its
 check: recordings 2k and 2k+1 share bending and area weight) the joint
-modes too, without and with a wind reading at each recording. Prints, per mode and quantity, the posterior median's mean error, the range
-centre's, and how often the 50% and 90% intervals held the truth; writes JSON.
+modes too, without and with a wind reading at each recording. Prints, per
+mode and quantity, the posterior median's mean error, the range centre's,
+and how often the 50% and 90% intervals held the truth; writes JSON.
 No simulation: seconds on a CPU.
 
   python benchmarks/measured_modes.py \\

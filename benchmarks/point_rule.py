@@ -53,8 +53,7 @@ def points(estimate: dict) -> dict:
   truth['load_ratio'] = float(
     physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
   )
-  centre = physsim.params.from_unit(np.zeros(3), space)
-  guess = dict(zip(posterior_lib.FIELDS, map(float, centre), strict=True))
+  guess = dict(zip(posterior_lib.FIELDS, map(float, space.center()), strict=True))
   guess['load_ratio'] = float(
     physsim.load_ratio(guess['wind_speed'], guess['area_weight'])
   )

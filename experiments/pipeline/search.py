@@ -630,8 +630,9 @@ def estimate_joint(
     winds: an anemometer's reading at each recording, ``(m/s, its standard
       uncertainty)`` in the recordings' order, or None. Each enters that
       recording's search as its prior (its simulations go to that slice) and
-      the joint posterior through it. No calibration covers this
-      combination: the intervals are reported as indicative.
+      the joint posterior through it. Its intervals are recalibrated where
+      the calibration has tables for the mode 'joint pair, known winds' (the
+      shipped one has none: they are reported as indicative).
     **kw: ``estimate_many``'s keywords.
 
   Returns:
@@ -669,8 +670,9 @@ def estimate_joint(
       )
       for v, sd in winds
     ]
+    space = physsim.search_space(config.material)
     for c in configs:
-      c.measured.check(physsim.search_space(config.material))
+      c.measured.check(space)
   jobs = [
     Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'))
     for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
