@@ -39,7 +39,9 @@ class Args:
       fan settings), estimated jointly (one bending and area weight, one wind
       each).
     model: the material's trained network (a train or table1 run folder);
-      not needed with intake_only.
+      several, comma-separated: an ensemble of runs of one architecture (each
+      video embedded by every member; PSD the geometric mean of theirs). Not
+      needed with intake_only.
     workdir: where the search state, estimate.json and the pictures go.
     camera_json: the recording's camera file: OpenCV JSON {"width",
       "height", "fx", "fy", "cx", "cy", "cam_to_world"}, ROS CameraInfo YAML,

@@ -24,7 +24,8 @@ class Args:
 
   Attributes:
     eval: the evaluation set (make_eval_set --out).
-    models: the trained networks (table1 --workdir).
+    models: the trained networks (table1 --workdir); several folders,
+      comma-separated: each network an ensemble of theirs.
     workdir: estimates, tables and figures go here.
     from_json: instead of estimating, re-tabulate these tables.json files
       (runs of different methods on one evaluation set merge).

@@ -74,6 +74,15 @@ def paired_distance(key: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
   return jnp.sum((x - y[perm]) ** 2)
 
 
+def geometric_mean(d: jax.Array, floor: float = 1e-12) -> jax.Array:
+  """Geometric mean of ``(K,)`` distances of one pair of videos under K
+  embeddings (an ensemble): each member's relative change counts alike
+  whatever its scale, and the log of the result (what a GP of the discrepancy
+  models) is the mean of the members' logs. Distances below ``floor`` count as
+  ``floor``; a NaN gives NaN. Returns ``()``."""
+  return jnp.exp(jnp.mean(jnp.log(jnp.maximum(d, floor))))
+
+
 def psd(
   x: jax.Array, y: jax.Array, kind: str = 'energy', key: jax.Array | None = None
 ) -> jax.Array:

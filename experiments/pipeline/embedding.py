@@ -4,6 +4,13 @@ Training (``experiments.pipeline.training``) records in each run folder how
 frames were turned into inputs (``inputs.json``: the modality and the depth
 input mode); the estimate repeats exactly that for the recording and for every
 candidate simulation, so both land in the same embedding space.
+
+An ensemble is several runs of one architecture named together
+(``'run_a,run_b,run_c'``, see ``members``): every video is embedded by each
+member, each member's PSD is taken in its own space, and the ensemble's PSD is
+their geometric mean (``model.psd.geometric_mean``). Networks of one recipe
+differ a lot by the seed alone; the mean of their distances keeps what they
+agree on and averages away what one of them imagines.
 """
 
 from __future__ import annotations
@@ -36,6 +43,8 @@ class EmbeddingNet(NamedTuple):
     materials: the fabrics it was trained on (empty when unrecorded).
     architecture: what its ``apply`` computes apart from the params (the
       network's config as text): runs of one architecture share compiles.
+    members: 0 for one network; K for an ensemble of K runs, whose params
+      are stacked on a leading axis of size K.
   """
 
   network: object
@@ -46,6 +55,7 @@ class EmbeddingNet(NamedTuple):
   image_size: tuple[int, int]
   materials: tuple[str, ...] = ()
   architecture: str = ''
+  members: int = 0
 
 
 def resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -80,16 +90,51 @@ def modality(run_dir: str) -> str:
   return _recorded(run_dir).get('modality', 'depth')
 
 
+def members(model_dir: str) -> list[str]:
+  """The run folders a model names: one, or an ensemble's, comma-separated."""
+  dirs = [d.strip() for d in model_dir.split(',')]
+  if not all(dirs):
+    raise ValueError(f'{model_dir!r}: an empty run folder in the list')
+  return dirs
+
+
 def load_embedding(model_dir: str) -> EmbeddingNet:
-  """Loads any trained run (PhySNet or SDN, depth or RGB), its parameters on
-  one device (``physsim.devices.place``): a data-parallel training's
-  checkpoint restores them replicated over its devices, which would spread
-  every inference program over all of them. Programs that split worlds over
-  a mesh place them there themselves.
+  """Loads any trained run (PhySNet or SDN, depth or RGB), or an ensemble of
+  runs of one architecture (``'a,b,c'``), its parameters on one device
+  (``physsim.devices.place``): a data-parallel training's checkpoint restores
+  them replicated over its devices, which would spread every inference
+  program over all of them. Programs that split worlds over a mesh place them
+  there themselves.
 
   Raises:
-    ValueError: not a trained run, or an unknown modality, naming ``model_dir``.
+    ValueError: not a trained run, an unknown modality, or ensemble members
+      that see or compute differently, naming the run folder.
   """
+  dirs = members(model_dir)
+  nets = [_load_one(d) for d in dirs]
+  if len(nets) == 1:
+    return nets[0]
+  first = nets[0]
+  for d, n in zip(dirs[1:], nets[1:], strict=True):
+    for field in (
+      'modality',
+      'input_mode',
+      'clip_frames',
+      'image_size',
+      'architecture',
+    ):
+      if getattr(n, field) != getattr(first, field):
+        raise ValueError(
+          f'{d}: an ensemble member with {field} {getattr(n, field)!r}, but '
+          f'{dirs[0]} has {getattr(first, field)!r}; members must share it'
+        )
+  params = jax.tree.map(lambda *a: jax.numpy.stack(a), *(n.params for n in nets))
+  # The fabrics every member saw (none recorded by one of them: unchecked).
+  materials = tuple(sorted(set.intersection(*(set(n.materials) for n in nets))))
+  return first._replace(params=params, materials=materials, members=len(nets))
+
+
+def _load_one(model_dir: str) -> EmbeddingNet:
   mod = modality(model_dir)
   if mod not in MODALITIES:
     raise ValueError(
@@ -156,14 +201,43 @@ def embed_video(network, params, inputs, clip_frames: int = 0) -> jax.Array:
   return network.apply(params, clips).reshape(s, n, -1)
 
 
+def embed_videos(net: EmbeddingNet, params, inputs) -> jax.Array:
+  """``embed_video`` with ``net``'s settings: (S, N, D) points of S videos for
+  one network, (K, S, N, D) for an ensemble of K (each in its member's space).
+  ``params`` are ``net.params`` or a copy of them (stacked for an ensemble)."""
+
+  def one(p):
+    return embed_video(net.network, p, inputs, net.clip_frames)
+
+  return jax.vmap(one)(params) if net.members else one(params)
+
+
+def video_distance(net: EmbeddingNet, points, rec_points, kind: str) -> jax.Array:
+  """The PSD (``model.psd.psd`` of ``kind``) of one video's points to the
+  recording's: (N, D) and (M, D) for one network; for an ensemble (K, N, D)
+  and (K, M, D), each member's PSD in its own space, combined by their
+  geometric mean. Returns ()."""
+  if not net.members:
+    return model_lib.psd.psd(points, rec_points, kind)
+  d = jax.vmap(lambda a, b: model_lib.psd.psd(a, b, kind))(points, rec_points)
+  return model_lib.psd.geometric_mean(d)
+
+
 def network_retrieval(model_dir: str) -> dict[str, float] | None:
   """How well the network tells each parameter apart between held-out
   simulations: its logged parameter retrieval (``model.retrieval``) at the
   epoch it ships, over chance (1: the PSD does not constrain that parameter,
-  so neither can the estimate). None for runs that did not log it.
+  so neither can the estimate). None for runs that did not log it. For an
+  ensemble, its members' mean (None unless every member logged it): a guide,
+  not the ensemble's own retrieval, which nobody measured.
   """
-  r = model_lib.selected_eval(model_lib.read_evals(model_dir)).get('test_retrieval')
-  return model_lib.retrieval.vs_chance(r) if r else None
+  out = []
+  for d in members(model_dir):
+    r = model_lib.selected_eval(model_lib.read_evals(d)).get('test_retrieval')
+    if not r:
+      return None
+    out.append(model_lib.retrieval.vs_chance(r))
+  return {k: float(np.mean([o[k] for o in out])) for k in out[0]}
 
 
 # What a run's seeds and bookkeeping change: not part of how it was made.
@@ -175,10 +249,13 @@ _NOT_RECIPE = {
 
 def network_accuracy(model_dir: str) -> float | None:
   """A trained run's held-out triplet accuracy at its selected epoch (None if
-  it was not evaluated on held-out simulations)."""
-  return model_lib.selected_eval(model_lib.read_evals(model_dir)).get(
-    'test_triplet_accuracy'
-  )
+  it was not evaluated on held-out simulations); for an ensemble, its
+  weakest member's (what a calibration of single networks compares)."""
+  accs = [
+    model_lib.selected_eval(model_lib.read_evals(d)).get('test_triplet_accuracy')
+    for d in members(model_dir)
+  ]
+  return None if None in accs else min(accs)
 
 
 def network_recipe(model_dir: str) -> dict:
@@ -187,11 +264,25 @@ def network_recipe(model_dir: str) -> dict:
   config of the simulations it was trained on (their ``dataset.json``, with
   the pose ranges; None where that folder is gone). Two networks of one
   recipe differ only by chance, which a calibration over several of them
-  measures (``experiments.studies.calibration``).
+  measures (``experiments.studies.calibration``). An ensemble's recipe is its
+  first member's with an ``'ensemble'`` part: how many members, and which
+  fields of the others' recipes differ from the first's (a calibration of
+  single networks has no such part, so it does not match an ensemble).
 
   Raises:
     ValueError: not a trained run, naming ``model_dir``.
   """
+  dirs = members(model_dir)
+  recipe = _recipe(dirs[0])
+  if len(dirs) > 1:
+    differ = sorted(
+      {f for d in dirs[1:] for f in recipe_differences(recipe, _recipe(d))}
+    )
+    recipe['ensemble'] = {'members': len(dirs), 'differ': differ}
+  return recipe
+
+
+def _recipe(model_dir: str) -> dict:
   path = os.path.join(model_dir, model_lib.train.CONFIG_FILE)
   if not os.path.isfile(path):
     raise ValueError(

@@ -8,8 +8,9 @@ physics similarity distance (PSD) in one ``jax.jit``::
   u (P, q, 3), keys ──► physical parameters ──► rollout (MJX, or MuJoCo C
   through a host callback) ──► blown-up worlds replaced by the rest mesh ──►
   ray-cast from each recording's camera(s) ──► depth-sensor model ──►
-  network inputs ──► embedding (each recording's own network params) ──►
-  energy distance to the recording's embedding ──► PSD (P, q), NaN where the
+  network inputs ──► embedding (each recording's own network params; every
+  member of an ensemble) ──► energy distance to the recording's embedding
+  (an ensemble's: the members' geometric mean) ──► PSD (P, q), NaN where the
   simulation blew up
 
 Nothing returns to the host in between; only the scores come back (and, when
@@ -37,7 +38,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import model as model_lib
 import physsim
 from experiments.pipeline import cli, embedding
 from experiments.pipeline.posterior import Measured
@@ -245,8 +245,8 @@ class ProblemData(NamedTuple):
     rigidity_ratio: () the fabric's reference bending over the cloth model's.
     poses: ``physsim.Pose`` of its C cameras, rotation (C, 3, 3), position (C, 3).
     color: (3,) the fabric's RGB colour (RGB networks; unused for depth).
-    params: its network's params.
-    rec_points: (N, D) the recording's embedding.
+    params: its network's params (an ensemble's stacked, leading axis K).
+    rec_points: (N, D) the recording's embedding ((K, N, D) for an ensemble).
   """
 
   lo: jax.Array
@@ -289,7 +289,7 @@ class Problem(NamedTuple):
       0 if c.garment else c.cloth_resolution, self.n_frames, c.fps, c.warmup,
       c.gusts, physsim.resolve_backend(c.backend), c.workers, self.intr,
       self.data.poses.position.shape[0], c.sensor_noise, c.distance,
-      n.modality, n.input_mode, n.clip_frames, n.architecture,
+      n.modality, n.input_mode, n.clip_frames, n.architecture, n.members,
       jax.tree.structure(n.params),
     )  # fmt: skip
 
@@ -336,9 +336,10 @@ def make_problem(
   inputs = embedding.network_inputs(
     jnp.asarray(rec_frames)[None], net.modality, net.input_mode
   )
-  rec_points = jax.jit(embedding.embed_video, static_argnums=(0, 3))(
-    net.network, net.params, inputs, net.clip_frames
-  )[0]
+  # (N, D), or (K, N, D) for an ensemble of K: each member's own embedding.
+  rec_points = jax.jit(lambda p, x: embedding.embed_videos(net, p, x)[..., 0, :, :])(
+    net.params, inputs
+  )
   lo, hi, log = physsim.params.unit_map(space)
   model = cloth(config)
   data = ProblemData(
@@ -397,7 +398,14 @@ class Objective:
     )
     # Worlds scored at once per device (render, sensor, network), from the
     # device's free memory: the network's activations dominate.
-    per_world = cams * problem.n_frames * h * w * _bytes_per_pixel(net.params)
+    per_world = (
+      cams
+      * problem.n_frames
+      * h
+      * w
+      * _bytes_per_pixel(net.params)
+      * max(net.members, 1)
+    )
     self._chunk = physsim.devices.chunk_size(per_world)
     # The worlds of a call split over every local device (MuJoCo Warp); MuJoCo
     # C runs on the host through a callback, whose process pool is the
@@ -439,9 +447,9 @@ class Objective:
       frames = self._frames(pos[None], pose, key[None], data.color[i][None])[0]
       x = embedding.network_inputs(frames, net.modality, net.input_mode)
       params = jax.tree.map(lambda a: a[i], data.params)
-      pts = embedding.embed_video(net.network, params, x, net.clip_frames)  # (C, N, D)
-      pts = pts.reshape(-1, pts.shape[-1])  # cameras pooled
-      return model_lib.psd.psd(pts, data.rec_points[i], self._distance)
+      pts = embedding.embed_videos(net, params, x)  # ([K,] C, N, D)
+      pts = pts.reshape(*pts.shape[:-3], -1, pts.shape[-1])  # cameras pooled
+      return embedding.video_distance(net, pts, data.rec_points[i], self._distance)
 
     # Worlds in chunks sized from free memory: the network's activations of
     # every frame at once would not fit (paper size: ~8 MB per frame).
@@ -525,9 +533,10 @@ class Objective:
 def _bytes_per_pixel(params) -> int:
   """Working memory per rendered pixel while a frame is sensed and embedded:
   float32 activations of the widest convolution, in and out, plus the
-  renderer's and sensor's buffers."""
+  renderer's and sensor's buffers (per network: an ensemble's kernels carry
+  a leading member axis)."""
   widest = max(
-    (leaf.shape[-1] for leaf in jax.tree.leaves(params) if np.ndim(leaf) == 4),
+    (leaf.shape[-1] for leaf in jax.tree.leaves(params) if np.ndim(leaf) >= 4),
     default=32,
   )
   return 4 * 2 * (int(widest) + 16)

@@ -136,7 +136,7 @@ def check_run(job: Job, problem) -> None:
       'poses_sha1': _digest(np.asarray(d.poses.rotation, np.float32))
       + _digest(np.asarray(d.poses.position, np.float32)),
     },
-    'model_dir': os.path.abspath(job.model_dir),
+    'model_dir': ','.join(os.path.abspath(d) for d in embedding.members(job.model_dir)),
   }
   if recording.rgb is not None and problem.net.modality == 'rgb':
     run['recording_rgb_sha1'] = _digest(recording.rgb)

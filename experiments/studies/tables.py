@@ -152,8 +152,13 @@ def recordings(eval_root: str) -> list[dict]:
 
 
 def _model_dir(models: str, method: str, fabric: str) -> str:
+  """The fabric's network under ``models``; several roots (``'a,b'``) name
+  an ensemble of their networks (``embedding.load_embedding``)."""
   net, modality = method.split('_')
-  return table1.run_dir(models, net, modality, 'simulation', fabric)
+  return ','.join(
+    table1.run_dir(root, net, modality, 'simulation', fabric)
+    for root in embedding.members(models)
+  )
 
 
 def _out_dir(workdir: str, rec: dict, method: str) -> str:
@@ -207,7 +212,10 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
   for r in recs:  # by set (mesh) first: see the shards below
     for m in config.methods:
       model_dir = _model_dir(models, m, r['fabric'])
-      if os.path.isfile(os.path.join(model_dir, 'config.json')):
+      if all(
+        os.path.isfile(os.path.join(d, 'config.json'))
+        for d in embedding.members(model_dir)
+      ):
         jobs.append((r, m))
       elif model_dir not in missing:
         missing.add(model_dir)
