@@ -16,10 +16,21 @@
 #                its simulations on the reading's slice), and
 #                benchmarks/measured_modes.py on the default run's GPs (the same
 #                readings applied after a video-alone search), side by side.
+#   members      after paper: MEMBERS (default 2) more networks of the same
+#                recipe on the same simulations, seeds 1..MEMBERS ($R/t1_s<seed>).
+#   ensemble     after members: the NREC recordings with the ensemble of the
+#                paper network and its MEMBERS (experiments.tables --models=a,b,c),
+#                video alone and with the 2% anemometer; then every member alone
+#                with the anemometer (side by side, concurrently).
+#   coverage     after paper: NREC real-like recordings for each seed of
+#                EVAL_SEEDS (default 1000-1003; 1000 is the paper stage's set),
+#                truths drawn over the search box, each set estimated by the
+#                paper network in its own process, concurrently (video alone;
+#                READING=wind_reading_sd or area_weight_reading_sd adds a 2% reading).
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
-stage=${1:?stage: calibration, paper, latency or measured}
+stage=${1:?stage: calibration, paper, latency, measured, members, ensemble or coverage}
 R=${2:-/tmp/posterior_run}
 OUT=${OUT:-out/gpu_posterior}
 mkdir -p "$R" "$OUT"
@@ -74,6 +85,64 @@ case "$stage" in
     done
     python benchmarks/measured_modes.py --measured_sd=0.02 --out="$OUT/measured_modes.json" \
       --estimates="$R/tables_default/physnet_depth/fabrics/$GI-*" 2>&1 | tee "$OUT/measured_modes.log"
+    ;;
+  members)
+    for s in $(seq 1 "${MEMBERS:-2}"); do
+      python -m experiments.train --dataset="$R/ds" --workdir="$R/t1_s$s/physnet_depth/simulation" \
+        --materials=$GI $TR --seed="$s" 2>&1 | tail -2 | tee "$OUT/train_s$s.log"
+    done
+    ;;
+  ensemble)
+    pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
+    roots=$R/t1
+    for s in $(seq 1 "${MEMBERS:-2}"); do roots="$roots,$R/t1_s$s"; done
+    for m in ${ENSEMBLE_MODES:-wind_reading_sd none}; do
+      read_flag=""; [ "$m" != none ] && read_flag="--$m=0.02"
+      python -m experiments.tables --eval="$R/eval" --models="$roots" --workdir="$R/ensemble_$m" \
+        --methods=physnet_depth --preset=$pre ${EST:+--backend=c} $read_flag 2>&1 | tail -30 \
+        | tee "$OUT/ensemble_$m.log"
+      cp "$R/ensemble_$m/tables.json" "$OUT/ensemble_$m.json"
+    done
+    if [ -n "${SINGLES-1}" ]; then
+      pids=""
+      for root in ${roots//,/ }; do
+        name=$(basename "$root")
+        XLA_PYTHON_CLIENT_MEM_FRACTION=0.3 \
+        python -m experiments.tables --eval="$R/eval" --models="$root" --workdir="$R/single_${name}_wind" \
+          --methods=physnet_depth --preset=$pre ${EST:+--backend=c} --wind_reading_sd=0.02 \
+          > "$OUT/single_${name}_wind.log" 2>&1 &
+        pids="$pids $!"
+      done
+      for p in $pids; do wait "$p"; done
+      for root in ${roots//,/ }; do
+        name=$(basename "$root")
+        tail -30 "$OUT/single_${name}_wind.log"
+        cp "$R/single_${name}_wind/tables.json" "$OUT/single_${name}_wind.json"
+      done
+    fi
+    ;;
+  coverage)
+    pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
+    seeds=${EVAL_SEEDS:-1000 1001 1002 1003}
+    for seed in $seeds; do
+      python -m experiments.generate_dataset --out="$R/eval_$seed/fabrics" $EV --seed="$seed" 2>&1 \
+        | tail -3 > "$OUT/eval_$seed.log"
+    done
+    read_flag=""; [ -n "${READING:-}" ] && read_flag="--$READING=0.02"
+    name=${READING:-video}
+    pids=""
+    for seed in $seeds; do
+      XLA_PYTHON_CLIENT_MEM_FRACTION=0.2 \
+      python -m experiments.tables --eval="$R/eval_$seed" --models="$R/t1" --workdir="$R/cov_${name}_$seed" \
+        --methods=physnet_depth --preset=$pre ${EST:+--backend=c} $read_flag \
+        > "$OUT/cov_${name}_$seed.log" 2>&1 &
+      pids="$pids $!"
+    done
+    for p in $pids; do wait "$p"; done
+    for seed in $seeds; do
+      tail -6 "$OUT/cov_${name}_$seed.log"
+      cp "$R/cov_${name}_$seed/tables.json" "$OUT/cov_${name}_$seed.json"
+    done
     ;;
   *) echo "unknown stage $stage"; exit 2 ;;
 esac

@@ -1,0 +1,118 @@
+"""Several runs of ``experiments.tables`` on one evaluation set, side by side.
+
+Per run (a label and its ``tables.json``): the mean error of the reported
+point and of the posterior median for wind, area weight, bending (geometric
+mean factor) and the load ratio, and how many 90% and 50% credible intervals
+held the truth. Used to compare networks (one network against an ensemble of
+several, ``--models=a,b,c``) on the same recordings and readings. No
+simulation: seconds on a CPU.
+
+  python benchmarks/tables_compare.py \
+    --tables=single=out/t_single/tables.json,ensemble=out/t_ens/tables.json \
+    --out=compare.json
+  # several evaluation sets estimated by one network, pooled in one row:
+  python benchmarks/tables_compare.py --tables=video=a/tables.json+b/tables.json
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from absl import app, flags
+
+import physsim
+from experiments.pipeline import files, report
+from experiments.pipeline import posterior as posterior_lib
+
+FLAGS = flags.FLAGS
+flags.DEFINE_list(
+  'tables',
+  None,
+  'label=tables.json pairs; label=a.json+b.json pools runs',
+  required=True,
+)
+flags.DEFINE_string('out', None, 'JSON path')
+ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor', 'load_ratio_pct')
+QUANTITIES = ('wind_speed', 'area_weight', 'bending_scale', 'load_ratio')
+
+
+def _mean(values, name: str) -> float:
+  if name == 'bending_factor':  # factors average geometrically
+    return float(np.exp(np.mean(np.log(values))))
+  return float(np.mean(values))
+
+
+def summarise(estimates: list[dict]) -> dict:
+  """Mean errors (point, posterior median) and coverage counts of finished
+  estimates (``tables.json``'s ``estimates`` values) that know their truth."""
+  rows = [e for e in estimates if 'truth' in e and 'covered' in e]
+  point = {k: [] for k in ERRORS}
+  median = {k: [] for k in ERRORS}
+  held = {f'{q}_{lvl}': 0 for q in QUANTITIES for lvl in ('90', '50')}
+  spread = []  # the load ratio's 90% half-width over its median: what the video says
+  for e in rows:
+    space = physsim.search_space(e['material'])
+    mid = physsim.params.make(
+      *(e['estimate'][f]['median'] for f in posterior_lib.FIELDS)
+    )
+    med = report.errors(mid, e['truth'], space)['estimate']
+    for k in ERRORS:
+      point[k].append(e['errors']['estimate'][k])
+      median[k].append(med[k])
+    lo, hi = e['load_ratio']['interval_90']
+    spread.append(50 * (hi - lo) / e['load_ratio']['median'])
+    for q in QUANTITIES:
+      for lvl in ('90', '50'):
+        held[f'{q}_{lvl}'] += bool(e['covered'][q][f'interval_{lvl}'])
+  return {
+    'n': len(rows),
+    'point': {k: _mean(v, k) for k, v in point.items()},
+    'median': {k: _mean(v, k) for k, v in median.items()},
+    'held': held,
+    'load_ratio_half_width_90_pct': float(np.mean(spread)),
+  }
+
+
+def _row(label: str, s: dict) -> str:
+  def cell(k):
+    p, m = s['point'][k], s['median'][k]
+    return f'x{p:.2f} (x{m:.2f})' if k == 'bending_factor' else f'{p:.1f}% ({m:.1f}%)'
+
+  held = ', '.join(str(s['held'][f'{q}_90']) for q in QUANTITIES)
+  held50 = ', '.join(str(s['held'][f'{q}_50']) for q in QUANTITIES)
+  return (
+    f'| {label} | {s["n"]} | '
+    + ' | '.join(cell(k) for k in ERRORS)
+    + f' | {held} / {held50} | {s["load_ratio_half_width_90_pct"]:.0f}% |'
+  )
+
+
+def main(_):
+  out = {}
+  for item in FLAGS.tables:
+    label, _, paths = item.partition('=')
+    if not paths:
+      raise ValueError(f'--tables: {item!r} is not label=path[+path...]')
+    estimates = []
+    for path in paths.split('+'):
+      with open(path) as f:
+        estimates += list(json.load(f)['estimates'].values())
+    out[label] = summarise(estimates)
+  print(
+    '| run | n | wind | area weight | bending | load ratio | 90% / 50% held '
+    '(wind, area weight, bending, load ratio) | load ratio 90% half-width |'
+  )
+  print('|---|---:|---|---|---|---|---|---:|')
+  for label, s in out.items():
+    print(_row(label, s))
+  print(
+    'Mean error of the reported point (of the posterior median in brackets); '
+    "the load ratio's 90% interval, half its width over its median, averaged."
+  )
+  if FLAGS.out:
+    files.write_json(FLAGS.out, out)
+
+
+if __name__ == '__main__':
+  app.run(main)
