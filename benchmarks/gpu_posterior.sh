@@ -26,7 +26,9 @@
 #                EVAL_SEEDS (default 1000-1003; 1000 is the paper stage's set),
 #                truths drawn over the search box, each set estimated by the
 #                paper network in its own process, concurrently (video alone;
-#                READING=wind_reading_sd or area_weight_reading_sd adds a 2% reading).
+#                READING=wind_reading_sd or area_weight_reading_sd adds a 2% reading,
+#                drawn with the set's seed: recording k of every set would
+#                otherwise get the same draw).
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
@@ -135,7 +137,7 @@ case "$stage" in
       XLA_PYTHON_CLIENT_MEM_FRACTION=0.2 \
       python -m experiments.tables --eval="$R/eval_$seed" --models="$R/t1" --workdir="$R/cov_${name}_$seed" \
         --methods=physnet_depth --preset=$pre ${EST:+--backend=c} $read_flag \
-        > "$OUT/cov_${name}_$seed.log" 2>&1 &
+        ${READING:+--reading_seed=$seed} > "$OUT/cov_${name}_$seed.log" 2>&1 &
       pids="$pids $!"
     done
     for p in $pids; do wait "$p"; done

@@ -26,13 +26,6 @@ from experiments.pipeline import files, report
 from experiments.pipeline import posterior as posterior_lib
 
 FLAGS = flags.FLAGS
-flags.DEFINE_list(
-  'tables',
-  None,
-  'label=tables.json pairs; label=a.json+b.json pools runs',
-  required=True,
-)
-flags.DEFINE_string('out', None, 'JSON path')
 ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor', 'load_ratio_pct')
 QUANTITIES = ('wind_speed', 'area_weight', 'bending_scale', 'load_ratio')
 
@@ -114,5 +107,17 @@ def main(_):
     files.write_json(FLAGS.out, out)
 
 
+def define_flags() -> None:
+  """Defined only when run as a script, so tests can import ``summarise``."""
+  flags.DEFINE_list(
+    'tables',
+    None,
+    'label=tables.json pairs; label=a.json+b.json pools runs',
+    required=True,
+  )
+  flags.DEFINE_string('out', None, 'JSON path')
+
+
 if __name__ == '__main__':
+  define_flags()
   app.run(main)
