@@ -91,6 +91,8 @@ class Config:
     reading_seed: seed of the simulated readings (recording ``seq_id`` k
       gets the reading ``experiments.calibrate`` and
       ``benchmarks/measured_modes.py`` draw for recording k with this seed).
+      Recording k of every evaluation set gets the same relative error for
+      one seed: pooling several sets, give each its own.
   """
 
   methods: tuple[str, ...] = METHODS
