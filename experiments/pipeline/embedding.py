@@ -9,8 +9,9 @@ An ensemble is several runs of one architecture named together
 (``'run_a,run_b,run_c'``, see ``members``): every video is embedded by each
 member, each member's PSD is taken in its own space, and the ensemble's PSD is
 their geometric mean (``model.psd.geometric_mean``). Networks of one recipe
-differ a lot by the seed alone; the mean of their distances keeps what they
-agree on and averages away what one of them imagines.
+differ a lot by the seed alone; an ensemble averages out errors that are one
+network's own, not those the video itself leaves (which, at paper size, were
+the larger: docs/calibration.md).
 """
 
 from __future__ import annotations
