@@ -12,10 +12,13 @@ simulation: seconds on a CPU.
     --out=compare.json
   # several evaluation sets estimated by one network, pooled in one row:
   python benchmarks/tables_compare.py --tables=video=a/tables.json+b/tables.json
+  # estimate.json files (quote the pattern), e.g. a calibration check's:
+  python benchmarks/tables_compare.py --tables="check=out/check/estimates/*/estimate.json"
 """
 
 from __future__ import annotations
 
+import glob
 import json
 
 import numpy as np
@@ -88,9 +91,15 @@ def main(_):
     if not paths:
       raise ValueError(f'--tables: {item!r} is not label=path[+path...]')
     estimates = []
-    for path in paths.split('+'):
-      with open(path) as f:
-        estimates += list(json.load(f)['estimates'].values())
+    for pattern in paths.split('+'):
+      found = sorted(glob.glob(pattern))
+      if not found:
+        raise ValueError(f'--tables: nothing matches {pattern!r}')
+      for path in found:
+        with open(path) as f:
+          d = json.load(f)
+        # tables.json holds many estimates; an estimate.json is one.
+        estimates += list(d['estimates'].values()) if 'estimates' in d else [d]
     out[label] = summarise(estimates)
   print(
     '| run | n | wind | area weight | bending | load ratio | 90% / 50% held '
