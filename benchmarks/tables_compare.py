@@ -70,6 +70,25 @@ def summarise(estimates: list[dict]) -> dict:
   }
 
 
+def load(paths: str) -> list[dict]:
+  """The estimates of ``'A+B+...'``: each a ``tables.json`` (many estimates)
+  or an ``estimate.json`` (one), or a glob pattern of them.
+
+  Raises:
+    ValueError: a pattern that matches nothing, naming it.
+  """
+  estimates = []
+  for pattern in paths.split('+'):
+    found = sorted(glob.glob(pattern))
+    if not found:
+      raise ValueError(f'--tables: nothing matches {pattern!r}')
+    for path in found:
+      with open(path) as f:
+        d = json.load(f)
+      estimates += list(d['estimates'].values()) if 'estimates' in d else [d]
+  return estimates
+
+
 def _row(label: str, s: dict) -> str:
   def cell(k):
     p, m = s['point'][k], s['median'][k]
@@ -90,17 +109,7 @@ def main(_):
     label, _, paths = item.partition('=')
     if not paths:
       raise ValueError(f'--tables: {item!r} is not label=path[+path...]')
-    estimates = []
-    for pattern in paths.split('+'):
-      found = sorted(glob.glob(pattern))
-      if not found:
-        raise ValueError(f'--tables: nothing matches {pattern!r}')
-      for path in found:
-        with open(path) as f:
-          d = json.load(f)
-        # tables.json holds many estimates; an estimate.json is one.
-        estimates += list(d['estimates'].values()) if 'estimates' in d else [d]
-    out[label] = summarise(estimates)
+    out[label] = summarise(load(paths))
   print(
     '| run | n | wind | area weight | bending | load ratio | 90% / 50% held '
     '(wind, area weight, bending, load ratio) | load ratio 90% half-width |'

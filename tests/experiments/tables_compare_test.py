@@ -3,7 +3,10 @@ errors and coverage counts worked out by hand."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
+import pytest
 
 from benchmarks import tables_compare as tc
 
@@ -73,3 +76,15 @@ def test_means_and_counts_by_hand():
   assert s['held']['wind_speed_90'] == 1 and s['held']['load_ratio_50'] == 0
   np.testing.assert_allclose(s['load_ratio_half_width_90_pct'], 15.0, atol=_TOL)
   assert '| run | 2 |' in tc._row('run', s)
+
+
+def test_load_reads_tables_and_estimate_files(tmp_path):
+  one = {'truth': {'wind_speed': 1.0}, 'n': 1}
+  (tmp_path / 'tables.json').write_text(json.dumps({'estimates': {'a': one, 'b': one}}))
+  for k in range(3):
+    (tmp_path / f'e{k}').mkdir()
+    (tmp_path / f'e{k}' / 'estimate.json').write_text(json.dumps(one))
+  got = tc.load(f'{tmp_path}/tables.json+{tmp_path}/e*/estimate.json')
+  assert got == [one] * 5
+  with pytest.raises(ValueError, match='nothing matches'):
+    tc.load(f'{tmp_path}/missing/*.json')
