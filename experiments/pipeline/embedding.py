@@ -202,15 +202,18 @@ def embed_video(network, params, inputs, clip_frames: int = 0) -> jax.Array:
   return network.apply(params, clips).reshape(s, n, -1)
 
 
-def embed_videos(net: EmbeddingNet, params, inputs) -> jax.Array:
-  """``embed_video`` with ``net``'s settings: (S, N, D) points of S videos for
-  one network, (K, S, N, D) for an ensemble of K (each in its member's space).
-  ``params`` are ``net.params`` or a copy of them (stacked for an ensemble)."""
+def embed_videos(
+  network, params, inputs, clip_frames: int = 0, members: int = 0
+) -> jax.Array:
+  """``embed_video`` for one network or an ensemble: (S, N, D) points of S
+  videos, or with ``members`` = K (params stacked on a leading axis of K)
+  (K, S, N, D), each in its member's space. Pass an ``EmbeddingNet``'s
+  ``network``, ``params``, ``clip_frames`` and ``members``."""
 
   def one(p):
-    return embed_video(net.network, p, inputs, net.clip_frames)
+    return embed_video(network, p, inputs, clip_frames)
 
-  return jax.vmap(one)(params) if net.members else one(params)
+  return jax.vmap(one)(params) if members else one(params)
 
 
 def video_distance(net: EmbeddingNet, points, rec_points, kind: str) -> jax.Array:

@@ -337,9 +337,9 @@ def make_problem(
     jnp.asarray(rec_frames)[None], net.modality, net.input_mode
   )
   # (N, D), or (K, N, D) for an ensemble of K: each member's own embedding.
-  rec_points = jax.jit(lambda p, x: embedding.embed_videos(net, p, x)[..., 0, :, :])(
-    net.params, inputs
-  )
+  rec_points = jax.jit(embedding.embed_videos, static_argnums=(0, 3, 4))(
+    net.network, net.params, inputs, net.clip_frames, net.members
+  )[..., 0, :, :]
   lo, hi, log = physsim.params.unit_map(space)
   model = cloth(config)
   data = ProblemData(
@@ -447,7 +447,9 @@ class Objective:
       frames = self._frames(pos[None], pose, key[None], data.color[i][None])[0]
       x = embedding.network_inputs(frames, net.modality, net.input_mode)
       params = jax.tree.map(lambda a: a[i], data.params)
-      pts = embedding.embed_videos(net, params, x)  # ([K,] C, N, D)
+      pts = embedding.embed_videos(
+        net.network, params, x, net.clip_frames, net.members
+      )  # ([K,] C, N, D)
       pts = pts.reshape(*pts.shape[:-3], -1, pts.shape[-1])  # cameras pooled
       return embedding.video_distance(net, pts, data.rec_points[i], self._distance)
 
