@@ -27,16 +27,11 @@ from absl import app, flags
 import physsim
 from experiments.pipeline import files, report
 from experiments.pipeline import posterior as posterior_lib
+from experiments.studies import tables as tables_lib
 
 FLAGS = flags.FLAGS
-ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor', 'load_ratio_pct')
+ERRORS = tables_lib.ERRORS
 QUANTITIES = ('wind_speed', 'area_weight', 'bending_scale', 'load_ratio')
-
-
-def _mean(values, name: str) -> float:
-  if name == 'bending_factor':  # factors average geometrically
-    return float(np.exp(np.mean(np.log(values))))
-  return float(np.mean(values))
 
 
 def summarise(estimates: list[dict]) -> dict:
@@ -63,8 +58,8 @@ def summarise(estimates: list[dict]) -> dict:
         held[f'{q}_{lvl}'] += bool(e['covered'][q][f'interval_{lvl}'])
   return {
     'n': len(rows),
-    'point': {k: _mean(v, k) for k, v in point.items()},
-    'median': {k: _mean(v, k) for k, v in median.items()},
+    'point': {k: report.mean_error(v, k) for k, v in point.items()},
+    'median': {k: report.mean_error(v, k) for k, v in median.items()},
     'held': held,
     'load_ratio_half_width_90_pct': float(np.mean(spread)),
   }

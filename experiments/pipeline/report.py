@@ -85,6 +85,14 @@ def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace) -> dic
   return {'estimate': one(best), 'range_centre': one(centre)}
 
 
+def mean_error(values, name: str) -> float:
+  """The mean of one ``errors`` measure over recordings: geometric for the
+  bending factor (a factor), arithmetic for the percent errors."""
+  if name == 'bending_factor':
+    return float(np.exp(np.mean(np.log(values))))
+  return float(np.mean(values))
+
+
 def covered(result: dict, truth: dict) -> dict:
   """Per parameter and the load ratio: does each credible interval hold the truth?"""
   out = {}

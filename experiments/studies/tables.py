@@ -260,11 +260,7 @@ def _values(rows, source, err):
 
 def _mean(rows, source, err):
   vals = _values(rows, source, err)
-  if not vals:
-    return float('nan')
-  if err == 'bending_factor':  # a factor: geometric mean
-    return float(np.exp(np.mean(np.log(vals))))
-  return float(np.mean(vals))
+  return report.mean_error(vals, err) if vals else float('nan')
 
 
 def summarise(results: dict, methods) -> dict:
