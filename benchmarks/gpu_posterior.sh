@@ -28,7 +28,8 @@
 #                paper network in its own process, concurrently (video alone;
 #                READING=wind_reading_sd or area_weight_reading_sd adds a 2% reading,
 #                drawn with the set's seed: recording k of every set would
-#                otherwise get the same draw).
+#                otherwise get the same draw). DISTANCE (e.g. shape, energy+shape)
+#                and SHARPNESS set the estimate's --distance and --sharpness.
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
@@ -131,13 +132,14 @@ case "$stage" in
         | tail -3 > "$OUT/eval_$seed.log"
     done
     read_flag=""; [ -n "${READING:-}" ] && read_flag="--$READING=0.02"
-    name=${READING:-video}
+    name=${READING:-video}${DISTANCE:+_$DISTANCE}${SHARPNESS:+_c$SHARPNESS}
     pids=""
     for seed in $seeds; do
       XLA_PYTHON_CLIENT_MEM_FRACTION=0.2 \
       python -m experiments.tables --eval="$R/eval_$seed" --models="$R/t1" --workdir="$R/cov_${name}_$seed" \
         --methods=physnet_depth --preset=$pre ${EST:+--backend=c} $read_flag \
-        ${READING:+--reading_seed=$seed} > "$OUT/cov_${name}_$seed.log" 2>&1 &
+        ${READING:+--reading_seed=$seed} ${DISTANCE:+--distance=$DISTANCE} \
+        ${SHARPNESS:+--sharpness=$SHARPNESS} > "$OUT/cov_${name}_$seed.log" 2>&1 &
       pids="$pids $!"
     done
     for p in $pids; do wait "$p"; done

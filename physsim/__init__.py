@@ -16,7 +16,17 @@ Public API::
   mesh = physsim.devices.world_mesh()             # worlds split over local devices
 """
 
-from physsim import camera, dataset, devices, motion, params, render, sensor, video
+from physsim import (
+  camera,
+  dataset,
+  devices,
+  motion,
+  params,
+  render,
+  sensor,
+  shape,
+  video,
+)
 from physsim.camera import (
   Intrinsics,
   Pose,
@@ -114,6 +124,7 @@ __all__ = [
   'search_space',
   'sensor',
   'shade_rgb',
+  'shape',
   'simulate',
   'square',
   'to_unit',

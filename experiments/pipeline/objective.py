@@ -13,6 +13,11 @@ physics similarity distance (PSD) in one ``jax.jit``::
   (an ensemble's: the members' geometric mean) ──► PSD (P, q), NaN where the
   simulation blew up
 
+or, with ``distance='shape'``, no network: the squared distance between the
+sheet's mean shape in the world (``physsim.shape``) in each candidate's frames
+and in the recording's (the recording's camera pose is needed), and with
+``'energy+shape'`` the geometric mean of that and the PSD.
+
 Nothing returns to the host in between; only the scores come back (and, when
 asked, the best candidate's frames or every candidate's positions). The
 program depends on the ``Problem.structure`` (mesh, clock, camera model,
@@ -38,13 +43,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import model as model_lib
 import physsim
 from experiments.pipeline import cli, embedding
 from experiments.pipeline.posterior import Measured
 from experiments.pipeline.recording import Recording
 
 BACKENDS = physsim.BACKENDS
-DISTANCES = ('energy', 'centroid')
+DISTANCES = ('energy', 'centroid', 'shape', 'energy+shape')
+# Distances that compare the sheet's mean shape (physsim.shape), and those
+# that embed frames with the network.
+SHAPE_DISTANCES = ('shape', 'energy+shape')
+EMBEDDING_DISTANCES = ('energy', 'centroid', 'energy+shape')
 POINTS = ('median', 'bayes', 'argmin')
 LIKELIHOODS = ('gibbs', 'threshold')
 
@@ -92,7 +102,12 @@ class EstimateConfig:
       value the shipped calibration chose.
     replicates: candidates per iteration that repeat the most probable cell
       with fresh randomness (they measure the simulator's noise).
-    distance: PSD between embedding sets ('energy' or 'centroid').
+    distance: the discrepancy of a candidate's frames to the recording's: the
+      PSD between embedding sets ('energy' or 'centroid'); 'shape', the
+      squared distance between the sheet's mean shape in the world
+      (physsim.shape: how far it is blown back and lifted; no network;
+      needs the recording's camera pose); or 'energy+shape', the geometric
+      mean of the energy PSD and that.
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
     workers: processes of the C backend (0: one per core); does not change
       results, so a resumed run may use another value.
@@ -247,6 +262,8 @@ class ProblemData(NamedTuple):
     color: (3,) the fabric's RGB colour (RGB networks; unused for depth).
     params: its network's params (an ensemble's stacked, leading axis K).
     rec_points: (N, D) the recording's embedding ((K, N, D) for an ensemble).
+    rec_shape: (2,) the recording's ``physsim.shape.summary`` (zeros when the
+      distance does not use it).
   """
 
   lo: jax.Array
@@ -257,6 +274,7 @@ class ProblemData(NamedTuple):
   color: jax.Array
   params: object
   rec_points: jax.Array
+  rec_shape: jax.Array
 
 
 class Problem(NamedTuple):
@@ -324,6 +342,13 @@ def make_problem(
       f'than one SDN clip of {net.clip_frames} frames; use a longer recording '
       '(and EstimateConfig.frames >= the clip)'
     )
+  shaped = config.distance in SHAPE_DISTANCES
+  if shaped and (recording.pose is None or net.modality != 'depth'):
+    raise ValueError(
+      f"{recording.source}: distance {config.distance!r} compares the sheet's "
+      "shape in the world, so it needs the recording's camera pose "
+      '(--camera_json) and a depth network'
+    )
   space = physsim.search_space(config.material)
   h, w = recording.depth.shape[1:]
   key = jax.random.key(config.seed)
@@ -340,13 +365,20 @@ def make_problem(
   rec_points = jax.jit(embedding.embed_videos, static_argnums=(0, 3, 4))(
     net.network, net.params, inputs, net.clip_frames, net.members
   )[..., 0, :, :]
+  rec_shape = jnp.zeros(len(physsim.shape.SUMMARY), jnp.float32)
+  if shaped:
+    rec_shape = physsim.shape.summary(
+      recording.depth, intr, jax.tree.map(lambda a: a[0], poses)
+    )
+    if not np.all(np.isfinite(np.asarray(rec_shape))):
+      raise ValueError(f'{recording.source}: no frame has a valid depth pixel')
   lo, hi, log = physsim.params.unit_map(space)
   model = cloth(config)
   data = ProblemData(
     jnp.asarray(lo, jnp.float32), jnp.asarray(hi, jnp.float32), jnp.asarray(log),
     jnp.float32(physsim.reference_rigidity(config.material) / model.rigidity),
     poses, jnp.asarray(embedding.rgb_color(config.material), jnp.float32),
-    net.params, rec_points,
+    net.params, rec_points, rec_shape,
   )  # fmt: skip
   return Problem(config, recording.source, space, n_frames, intr, net, data)
 
@@ -441,17 +473,27 @@ class Objective:
     positions = jnp.where(valid[:, None, None, None], positions, rest)
     net = self._net
 
-    def score(args):  # one world: render, sense, embed with its problem's net, PSD
+    kind = self._distance
+
+    def score(args):  # one world: render, sense, then its discrepancy
       i, pos, key = args
       pose = jax.tree.map(lambda a: a[i][None], data.poses)  # (1, C)
       frames = self._frames(pos[None], pose, key[None], data.color[i][None])[0]
-      x = embedding.network_inputs(frames, net.modality, net.input_mode)
-      params = jax.tree.map(lambda a: a[i], data.params)
-      pts = embedding.embed_videos(
-        net.network, params, x, net.clip_frames, net.members
-      )  # ([K,] C, N, D)
-      pts = pts.reshape(*pts.shape[:-3], -1, pts.shape[-1])  # cameras pooled
-      return embedding.video_distance(net, pts, data.rec_points[i], self._distance)
+      d = []
+      if kind in EMBEDDING_DISTANCES:  # embed with its problem's net, PSD
+        x = embedding.network_inputs(frames, net.modality, net.input_mode)
+        params = jax.tree.map(lambda a: a[i], data.params)
+        pts = embedding.embed_videos(
+          net.network, params, x, net.clip_frames, net.members
+        )  # ([K,] C, N, D)
+        pts = pts.reshape(*pts.shape[:-3], -1, pts.shape[-1])  # cameras pooled
+        psd_kind = 'energy' if kind == 'energy+shape' else kind
+        d.append(embedding.video_distance(net, pts, data.rec_points[i], psd_kind))
+      if kind in SHAPE_DISTANCES:  # the recording's own camera (C = 1)
+        cam = jax.tree.map(lambda a: a[i, 0], data.poses)
+        s = physsim.shape.summary(frames[0], self._intr, cam)
+        d.append(physsim.shape.summary_distance(s, data.rec_shape[i]))
+      return d[0] if len(d) == 1 else model_lib.psd.geometric_mean(jnp.stack(d))
 
     # Worlds in chunks sized from free memory: the network's activations of
     # every frame at once would not fit (paper size: ~8 MB per frame).

@@ -1,0 +1,88 @@
+"""Tests of the estimate's shape discrepancy (``--distance=shape``,
+``'energy+shape'``): the sheet's mean place in the world, compared inside the
+fused objective.
+
+References: the candidate's own frames (returned by the objective) summarised
+by the float64 NumPy reference of tests/physsim/shape_test.py, and the energy
+PSD from its own program.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments.pipeline import embedding
+from experiments.pipeline import objective as obj_lib
+from tests.experiments.estimate_fixtures import (
+  CONFIG,
+  TRUTH,
+  load,
+  write_hand_made_model,
+  write_recording,
+)
+from tests.physsim.shape_test import reference_summary
+
+# float32 summaries of points ~2 m away, squared: m^2.
+_SHAPE_ATOL = 1e-8
+# The truth's discrepancy: the recording went through 16-bit mm PNGs.
+_TRUTH_SHAPE_MAX = 1e-6  # m^2, a 1 mm centroid difference
+_MEAN_RTOL = 1e-4
+
+
+@pytest.fixture(scope='module')
+def env(tmp_path_factory):
+  root = str(tmp_path_factory.mktemp('shape'))
+  seq = write_recording(root, TRUTH)
+  net = embedding.load_embedding(write_hand_made_model(f'{root}/model'))
+  return dict(rec=load(seq), net=net)
+
+
+def _scores(env, distance: str, u, frames: bool = False):
+  config = dataclasses.replace(CONFIG, distance=distance)
+  problem = obj_lib.make_problem(config, env['net'], env['rec'])
+  gust, noise = obj_lib.candidate_keys(config, 0, len(u))
+  out = obj_lib.Objective(problem)(
+    obj_lib.stack([problem.data]), np.asarray(u)[None], gust[None], noise[None],
+    frames=frames,
+  )  # fmt: skip
+  assert out.valid.all()
+  return out, problem
+
+
+def test_shape_distance_is_the_summaries_squared_distance(env):
+  space = physsim.search_space(CONFIG.material)
+  truth_u = np.asarray(physsim.to_unit(physsim.params.make(**TRUTH), space))
+  truth_u = truth_u.reshape(1, 3)
+  far = np.array([[0.0, -0.8, 0.5]])
+  at_truth, problem = _scores(env, 'shape', truth_u)
+  assert at_truth.psd[0, 0] < _TRUTH_SHAPE_MAX
+  out, _ = _scores(env, 'shape', far, frames=True)
+  pose = env['rec'].pose
+  intr = problem.intr
+  want = np.sum(
+    (reference_summary(out.frames[0], intr, pose)
+     - reference_summary(env['rec'].depth, intr, pose)) ** 2
+  )  # fmt: skip
+  assert want > 100 * _TRUTH_SHAPE_MAX  # a weaker wind sits elsewhere
+  np.testing.assert_allclose(out.psd[0, 0], want, rtol=1e-3, atol=_SHAPE_ATOL)
+
+
+def test_energy_plus_shape_is_the_geometric_mean(env):
+  u = np.array([[0.0, 0.0, 0.0], [0.5, -0.6, 0.7], [-0.8, 0.3, -0.4]])
+  energy = _scores(env, 'energy', u)[0].psd[0]
+  shape = _scores(env, 'shape', u)[0].psd[0]
+  both = _scores(env, 'energy+shape', u)[0].psd[0]
+  assert np.all(energy > 0) and np.all(shape > 0)
+  np.testing.assert_allclose(both, np.sqrt(energy * shape), rtol=_MEAN_RTOL)
+
+
+def test_shape_needs_the_recordings_camera_pose(env):
+  rec = env['rec']._replace(pose=None)
+  config = dataclasses.replace(CONFIG, distance='energy+shape')
+  with pytest.raises(ValueError, match='seq: distance .energy.shape. .*camera pose'):
+    obj_lib.make_problem(config, env['net'], rec)
+  obj_lib.make_problem(CONFIG, env['net'], rec)  # the PSD alone needs none
