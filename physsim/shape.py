@@ -77,3 +77,40 @@ def summary(depth, intrinsics: Intrinsics, pose: Pose) -> jax.Array:
 def summary_distance(a, b) -> jax.Array:
   """Squared distance (m^2) between summaries (..., 2)."""
   return jnp.sum((jnp.asarray(a) - jnp.asarray(b)) ** 2, axis=-1)
+
+
+def _rotation(axis_angle) -> jax.Array:
+  """(3, 3) rotation of an axis-angle vector (Rodrigues), radians."""
+  theta = jnp.sqrt(jnp.sum(axis_angle**2) + 1e-30)
+  k = axis_angle / theta
+  kx = jnp.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+  return jnp.eye(3) + jnp.sin(theta) * kx + (1.0 - jnp.cos(theta)) * kx @ kx
+
+
+def misplaced_pose(key, pose: Pose, sd_m: float, sd_deg: float, centre) -> Pose:
+  """A camera ``pose`` moved by a random rigid error of the world frame.
+
+  A recording's camera is placed in the simulator's world by an alignment
+  (the intake's pins and up) that is off by a few centimetres and degrees.
+  Rendering a simulation from a camera moved by such an error (a rotation of
+  ``sd_deg`` per axis about ``centre``, then a shift of ``sd_m`` per axis,
+  1 sd) and lifting its frames with the given ``pose`` gives its summary the
+  scatter the recording's has, so a posterior built on it carries the
+  alignment's error instead of trusting the camera to the millimetre.
+  """
+  k_rot, k_shift = jax.random.split(key)
+  rot = _rotation(jnp.deg2rad(sd_deg) * jax.random.normal(k_rot, (3,)))
+  centre = jnp.asarray(centre, jnp.float32)
+  position = (
+    rot @ (jnp.asarray(pose.position, jnp.float32) - centre)
+    + centre
+    + sd_m * jax.random.normal(k_shift, (3,))
+  )
+  return Pose(rot @ jnp.asarray(pose.rotation, jnp.float32), position)
+
+
+def misplaced_poses(key, poses: Pose, sd_m: float, sd_deg: float, centre) -> Pose:
+  """``misplaced_pose`` of each of C cameras (rotation (C, 3, 3), position
+  (C, 3)), each with its own error drawn from ``key``."""
+  keys = jax.random.split(key, poses.position.shape[0])
+  return jax.vmap(lambda k, p: misplaced_pose(k, p, sd_m, sd_deg, centre))(keys, poses)

@@ -108,6 +108,14 @@ class EstimateConfig:
       (physsim.shape: how far it is blown back and lifted; no network;
       needs the recording's camera pose); or 'energy+shape', the geometric
       mean of the energy PSD and that.
+    camera_sd_m, camera_sd_deg: how far the recording's camera may be off in
+      the simulator's world (the alignment's rigid error, 1 sd per axis, a
+      shift and a rotation about the pins): every simulation is rendered from
+      a camera moved by such an error and read as from the given one, so the
+      shape discrepancy scatters as the recording's does and the posterior
+      carries the alignment's error. 0, 0: a camera known exactly (simulated
+      recordings). The intake's pins were within about 2 cm and its camera
+      within 3 degrees on its test recording (docs/recordings.md).
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
     workers: processes of the C backend (0: one per core); does not change
       results, so a resumed run may use another value.
@@ -143,6 +151,8 @@ class EstimateConfig:
   sharpness: float = 0.5
   replicates: int = 1
   distance: str = cli.choice('energy', DISTANCES)
+  camera_sd_m: float = 0.0
+  camera_sd_deg: float = 0.0
   backend: str = cli.choice('auto', BACKENDS)
   workers: int = 0
   sensor_noise: bool = True
@@ -202,6 +212,11 @@ class EstimateConfig:
     if self.frames > 1000 or not (0 <= self.warmup <= 10):
       raise ValueError(
         f'need frames <= 1000 and 0 <= warmup <= 10 s, got {self.frames}, {self.warmup}'
+      )
+    if not (0 <= self.camera_sd_m <= 0.2 and 0 <= self.camera_sd_deg <= 20):
+      raise ValueError(
+        'need 0 <= camera_sd_m <= 0.2 (metres) and 0 <= camera_sd_deg <= 20 '
+        f'(degrees), got {self.camera_sd_m}, {self.camera_sd_deg}'
       )
     if not (0 <= self.gusts <= 1) or self.max_iter < 0:
       raise ValueError(
@@ -307,6 +322,7 @@ class Problem(NamedTuple):
       0 if c.garment else c.cloth_resolution, self.n_frames, c.fps, c.warmup,
       c.gusts, physsim.resolve_backend(c.backend), c.workers, self.intr,
       self.data.poses.position.shape[0], c.sensor_noise, c.distance,
+      c.camera_sd_m, c.camera_sd_deg,
       n.modality, n.input_mode, n.clip_frames, n.architecture, n.members,
       jax.tree.structure(n.params),
     )  # fmt: skip
@@ -424,6 +440,8 @@ class Objective:
     self._net = net
     self._sensor = c.sensor_noise and net.modality == 'depth'
     self._distance = c.distance
+    self._camera_sd = (c.camera_sd_m, c.camera_sd_deg)
+    self._pins = self.mesh.vertices[self.mesh.pinned].mean(0)
     cams, (h, w) = (
       problem.data.poses.position.shape[0],
       (problem.intr.height, problem.intr.width),
@@ -477,8 +495,16 @@ class Objective:
 
     def score(args):  # one world: render, sense, then its discrepancy
       i, pos, key = args
-      pose = jax.tree.map(lambda a: a[i][None], data.poses)  # (1, C)
-      frames = self._frames(pos[None], pose, key[None], data.color[i][None])[0]
+      pose = jax.tree.map(lambda a: a[i], data.poses)  # (C,)
+      seen_from = pose
+      if any(self._camera_sd):  # the recording's camera, misplaced as it may be
+        seen_from = physsim.shape.misplaced_poses(
+          camera_key(key), pose, *self._camera_sd, self._pins
+        )
+      frames = self._frames(
+        pos[None], jax.tree.map(lambda a: a[None], seen_from), key[None],
+        data.color[i][None],
+      )[0]  # fmt: skip
       d = []
       if kind in EMBEDDING_DISTANCES:  # embed with its problem's net, PSD
         x = embedding.network_inputs(frames, net.modality, net.input_mode)
@@ -490,7 +516,7 @@ class Objective:
         psd_kind = 'energy' if kind == 'energy+shape' else kind
         d.append(embedding.video_distance(net, pts, data.rec_points[i], psd_kind))
       if kind in SHAPE_DISTANCES:  # the recording's own camera (C = 1)
-        cam = jax.tree.map(lambda a: a[i, 0], data.poses)
+        cam = jax.tree.map(lambda a: a[0], pose)
         s = physsim.shape.summary(frames[0], self._intr, cam)
         d.append(physsim.shape.summary_distance(s, data.rec_shape[i]))
       return d[0] if len(d) == 1 else model_lib.psd.geometric_mean(jnp.stack(d))
@@ -572,6 +598,12 @@ class Objective:
       out.get('frames'),
       out.get('positions'),
     )
+
+
+def camera_key(noise_key: jax.Array) -> jax.Array:
+  """The key of a candidate's camera error (``EstimateConfig.camera_sd_m``),
+  drawn from its sensor-noise key."""
+  return jax.random.fold_in(noise_key, 7)
 
 
 def _bytes_per_pixel(params) -> int:

@@ -113,8 +113,8 @@ def covered(result: dict, truth: dict) -> dict:
 # over.
 _CALIBRATED_FIELDS = (
   'likelihood', 'sharpness', 'material', 'garment', 'cloth_resolution', 'frames',
-  'fps', 'distance', 'warmup', 'gusts', 'sensor_noise', 'q', 'n_init', 'max_iter',
-  'posterior_grid',
+  'fps', 'distance', 'camera_sd_m', 'camera_sd_deg', 'warmup', 'gusts',
+  'sensor_noise', 'q', 'n_init', 'max_iter', 'posterior_grid',
 )  # fmt: skip
 
 
@@ -172,6 +172,9 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   calibrated.update(
     likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
   )
+  if 'distance' in calibrated:  # files from before the camera's error was a setting
+    calibrated.setdefault('camera_sd_m', 0.0)
+    calibrated.setdefault('camera_sd_deg', 0.0)
   differs = [n for n in _CALIBRATED_FIELDS
              if n in calibrated and not _same(getattr(config, n), calibrated[n])]  # fmt: skip
   mode = calibration_mode(config.measured, joint)

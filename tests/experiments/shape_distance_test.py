@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import numpy as np
 import pytest
 
@@ -31,6 +32,7 @@ _SHAPE_ATOL = 1e-8
 # The truth's discrepancy: the recording went through 16-bit mm PNGs.
 _TRUTH_SHAPE_MAX = 1e-6  # m^2, a 1 mm centroid difference
 _MEAN_RTOL = 1e-4
+_CAMERA_SD_M, _CAMERA_SD_DEG = 0.05, 3.0
 
 
 @pytest.fixture(scope='module')
@@ -86,3 +88,44 @@ def test_shape_needs_the_recordings_camera_pose(env):
   with pytest.raises(ValueError, match='seq: distance .energy.shape. .*camera pose'):
     obj_lib.make_problem(config, env['net'], rec)
   obj_lib.make_problem(CONFIG, env['net'], rec)  # the PSD alone needs none
+
+
+def test_a_misplaced_camera_renders_from_its_error(env):
+  # Candidates at the truth with the recording's own gusts, each rendered from
+  # the recording's camera moved by its own error (the candidate's camera
+  # key) and lifted with the given pose: the discrepancy must be that of the
+  # frames rendered here from the same moved cameras, summarised by the
+  # float64 reference. The errors must matter: several cm, not mm.
+  config = dataclasses.replace(
+    CONFIG, distance='shape', camera_sd_m=_CAMERA_SD_M, camera_sd_deg=_CAMERA_SD_DEG
+  )
+  problem = obj_lib.make_problem(config, env['net'], env['rec'])
+  space = physsim.search_space(CONFIG.material)
+  u = np.repeat(np.asarray(physsim.to_unit(physsim.params.make(**TRUTH), space)), 4, 0)
+  gust, _ = obj_lib.candidate_keys(CONFIG, 0, 4)  # common: the recording's gusts
+  noise = jax.random.split(jax.random.key(11), 4)
+  out = obj_lib.Objective(problem)(
+    obj_lib.stack([problem.data]), u.reshape(1, 4, 3), gust[None], noise[None],
+    positions=True,
+  )  # fmt: skip
+  mesh = physsim.square(CONFIG.cloth_resolution)
+  pins = mesh.vertices[mesh.pinned].mean(0)
+  rec_summary = reference_summary(env['rec'].depth, problem.intr, env['rec'].pose)
+  want = []
+  for k, pos in zip(noise, out.positions[0], strict=True):
+    moved = physsim.shape.misplaced_poses(
+      obj_lib.camera_key(k), problem.data.poses, _CAMERA_SD_M, _CAMERA_SD_DEG, pins
+    )
+    frames = physsim.render_depth(
+      pos[None], mesh.faces, problem.intr, jax.tree.map(lambda a: a[None], moved)
+    )[0, 0]
+    got = reference_summary(np.asarray(frames), problem.intr, env['rec'].pose)
+    want.append(np.sum((got - rec_summary) ** 2))
+  assert min(want) > 10 * _TRUTH_SHAPE_MAX
+  np.testing.assert_allclose(out.psd[0], want, rtol=1e-3, atol=_SHAPE_ATOL)
+
+
+def test_camera_error_out_of_range_is_refused():
+  for bad in (dict(camera_sd_m=0.5), dict(camera_sd_deg=-1.0)):
+    with pytest.raises(ValueError, match='camera_sd_m <= 0.2 .metres.'):
+      dataclasses.replace(CONFIG, **bad).check()
