@@ -48,6 +48,7 @@ from experiments.pipeline import (  # noqa: E402
   report,
   search,
 )  # fmt: skip
+from experiments.pipeline import objective as objective_lib  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.pipeline.objective import EstimateConfig  # noqa: E402
@@ -93,6 +94,12 @@ class Config:
       ``benchmarks/measured_modes.py`` draw for recording k with this seed).
       Recording k of every evaluation set gets the same relative error for
       one seed: pooling several sets, give each its own.
+    camera_error_m, camera_error_deg: with > 0, every recording's camera is
+      given misplaced, as an alignment would place it: its pose moved by a
+      random rigid error of this size (1 sd per axis, a shift and a rotation
+      about the pins; ``physsim.shape.misplaced_pose``) drawn from
+      (reading_seed, recording seq_id). The estimate's own ``camera_sd_m`` /
+      ``camera_sd_deg`` say whether it models such an error.
   """
 
   methods: tuple[str, ...] = METHODS
@@ -101,6 +108,8 @@ class Config:
   wind_reading_sd: float = 0.0
   area_weight_reading_sd: float = 0.0
   reading_seed: int = 0
+  camera_error_m: float = 0.0
+  camera_error_deg: float = 0.0
 
   def __post_init__(self):
     for name in ('wind_reading_sd', 'area_weight_reading_sd'):
@@ -128,6 +137,22 @@ def simulated_measurement(config: Config, rec: dict, truth: dict | None):
         name, truth, sd, config.reading_seed, int(rec['seq_id'])
       )
   return posterior_lib.Measured()
+
+
+def misplaced_camera(config: Config, rec: dict, recording, estimate: EstimateConfig):
+  """``recording`` with its camera moved by ``config``'s simulated alignment
+  error (unchanged without one)."""
+  if not (config.camera_error_m or config.camera_error_deg):
+    return recording
+  if recording.pose is None:
+    raise ValueError(f'{rec["path"]}: no camera pose to misplace')
+  mesh = objective_lib.mesh(estimate)
+  key = jax.random.fold_in(jax.random.key(config.reading_seed), int(rec['seq_id']))
+  pose = physsim.shape.misplaced_pose(
+    key, recording.pose, config.camera_error_m, config.camera_error_deg,
+    mesh.vertices[mesh.pinned].mean(0),
+  )  # fmt: skip
+  return recording._replace(pose=jax.tree.map(np.asarray, pose))
 
 
 def recordings(eval_root: str) -> list[dict]:
@@ -190,6 +215,7 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
         rec['path'], fps=ec.fps, size=net.image_size, frames=ec.frames,
         rgb=net.modality == 'rgb',
       )  # fmt: skip
+      recording = misplaced_camera(config, rec, recording, ec)
       measured = simulated_measurement(config, rec, recording.truth)
       if measured != posterior_lib.Measured():
         ec = dataclasses.replace(ec, measured=measured)
@@ -564,6 +590,12 @@ def write_report(results: dict, config: Config, workdir: str) -> str:
         f'Every estimate with a simulated {name} reading ({100 * sd:g}% relative '
         f'error, seed {config.reading_seed}) as its prior.\n\n' + md
       )
+  if config.camera_error_m or config.camera_error_deg:
+    md = (
+      f'Every recording with its camera misplaced by a simulated alignment error '
+      f'({100 * config.camera_error_m:g} cm, {config.camera_error_deg:g} degrees '
+      f'per axis, seed {config.reading_seed}).\n\n' + md
+    )
   dataset.write_text_atomic(os.path.join(workdir, 'tables.md'), md + '\n')
   dataset.write_json_atomic(
     os.path.join(workdir, 'tables.json'),

@@ -6,7 +6,10 @@ import os
 import numpy as np
 import pytest
 
+from experiments.pipeline.objective import EstimateConfig
+from experiments.pipeline.recording import Recording
 from experiments.studies import table1, tables
+from physsim import camera
 
 
 def _res(wind, weight, factor, centre=(50.0, 5.0, 2.0)):
@@ -320,3 +323,22 @@ def test_candidate_landscapes_place_each_candidate_against_the_truth(tmp_path):
   png = str(tmp_path / 'psd_candidates.png')
   tables.plot_candidate_landscapes(out, 'physnet_depth', png)
   assert cv2.imread(png) is not None
+
+
+def test_a_simulated_alignment_error_misplaces_the_camera():
+  pose = camera.look_at((0.5, -1.9, 1.2), (0.0, 0.2, 1.0))
+  rec = Recording(np.zeros((2, 4, 4), np.float32), 20.0, None, pose, 'set/0003')
+  info = {'path': 'set/0003', 'seq_id': '0003'}
+  est = EstimateConfig()
+  same = tables.misplaced_camera(tables.Config(), info, rec, est)
+  assert same is rec
+  config = tables.Config(camera_error_m=0.05, camera_error_deg=3.0)
+  moved = tables.misplaced_camera(config, info, rec, est)
+  again = tables.misplaced_camera(config, info, rec, est)
+  np.testing.assert_array_equal(moved.pose.position, again.pose.position)
+  step = np.linalg.norm(moved.pose.position - pose.position)
+  assert 0.005 < step < 0.5  # metres: a shift and a turn about the pins
+  other = tables.misplaced_camera(config, {**info, 'seq_id': '0004'}, rec, est)
+  assert not np.allclose(other.pose.position, moved.pose.position)
+  with pytest.raises(ValueError, match='set/0003: no camera pose'):
+    tables.misplaced_camera(config, info, rec._replace(pose=None), est)
