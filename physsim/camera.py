@@ -131,6 +131,25 @@ class Intrinsics:
     return cls(**{f: type(getattr(cls, f))(d[f]) for f in fields if f in d})
 
 
+def pixel_rays(intrinsics: Intrinsics, height: int, width: int) -> jax.Array:
+  """(height, width, 3) float32 ray of every pixel centre in the camera frame,
+  scaled to unit z (a pixel of depth d sees the point ``d * ray``), with the
+  focal lengths and principal point of ``intrinsics`` as they are."""
+  v, u = jnp.meshgrid(
+    jnp.arange(height, dtype=jnp.float32),
+    jnp.arange(width, dtype=jnp.float32),
+    indexing='ij',
+  )
+  return jnp.stack(
+    [
+      (u - intrinsics.cx) / intrinsics.fx,
+      (v - intrinsics.cy) / intrinsics.fy,
+      jnp.ones_like(u),
+    ],
+    axis=-1,
+  )
+
+
 class Pose(NamedTuple):
   """Camera pose(s), a pytree; leading axes are batch axes.
 

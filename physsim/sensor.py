@@ -34,7 +34,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from physsim.camera import Intrinsics
+from physsim.camera import Intrinsics, pixel_rays
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,17 +198,7 @@ def incidence_cos(depth, intrinsics: Intrinsics) -> jax.Array:
   1.0 where the normal cannot be estimated (an invalid 4-neighbour).
   """
   h, w = depth.shape
-  v, u = jnp.meshgrid(
-    jnp.arange(h, dtype=jnp.float32), jnp.arange(w, dtype=jnp.float32), indexing='ij'
-  )
-  ray = jnp.stack(
-    [
-      (u - intrinsics.cx) / intrinsics.fx,
-      (v - intrinsics.cy) / intrinsics.fy,
-      jnp.ones_like(u),
-    ],
-    axis=-1,
-  )
+  ray = pixel_rays(intrinsics, h, w)
   p = ray * depth[..., None]  # (H, W, 3) camera-frame points
   du = _shift(p, 0, 1, 0.0) - _shift(p, 0, -1, 0.0)
   dv = _shift(p, 1, 0, 0.0) - _shift(p, -1, 0, 0.0)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from physsim.camera import Intrinsics, Pose
+from physsim.camera import Intrinsics, Pose, pixel_rays
 
 SUMMARY = ('mean_y_m', 'mean_z_m')
 
@@ -38,18 +38,7 @@ def world_points(depth, intrinsics: Intrinsics, pose: Pose) -> jax.Array:
   axis, metres) seen from one camera ``pose`` (rotation (3, 3), position (3,))."""
   depth = jnp.asarray(depth, jnp.float32)
   h, w = depth.shape[-2:]
-  v, u = jnp.meshgrid(
-    jnp.arange(h, dtype=jnp.float32), jnp.arange(w, dtype=jnp.float32), indexing='ij'
-  )
-  ray = jnp.stack(
-    [
-      (u - intrinsics.cx) / intrinsics.fx,
-      (v - intrinsics.cy) / intrinsics.fy,
-      jnp.ones_like(u),
-    ],
-    axis=-1,
-  )  # (H, W, 3) camera frame, z = 1
-  cam = ray * depth[..., None]
+  cam = pixel_rays(intrinsics, h, w) * depth[..., None]
   rot = jnp.asarray(pose.rotation, jnp.float32)
   return cam @ rot.T + jnp.asarray(pose.position, jnp.float32)
 
