@@ -11,16 +11,16 @@ wind-wise and vertical coordinates::
 
   (mean y, mean z), metres
 
-how far the sheet is blown back and lifted. (How much the centroid swings
-depends more on one gust history than on the parameters, so it is left out:
-at the same point, two gust seeds differ in it by as much as a 30% change of
-wind does.) On a hanging sheet the centroid moves on an arc about the pins:
+how far the sheet is blown back and lifted. (How much the centroid swings is
+left out: it follows the one gust history of a clip about as much as the
+parameters.) On a hanging sheet the centroid moves on an arc about the pins:
 mostly back (y) in light wind, mostly up (z) in strong wind, so both count,
 in metres alike. The pixels sample the cloth unevenly (more where it is near
 and faces the camera), which is why a recording is only compared with
-simulations rendered from its own camera, through the same sensor model. ``summary_distance`` is the
-squared distance between two summaries (m^2): a discrepancy that rises
-quadratically away from the truth, as the posterior's likelihood expects.
+simulations rendered from its own camera, through the same sensor model.
+``summary_distance`` is the squared distance between two summaries (m^2): a
+discrepancy that rises quadratically away from the truth, as the posterior's
+likelihood expects.
 """
 
 from __future__ import annotations

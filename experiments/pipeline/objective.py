@@ -258,6 +258,13 @@ def mesh(config: EstimateConfig) -> physsim.Mesh:
   return physsim.square(config.cloth_resolution)
 
 
+def pin_centre(config: EstimateConfig) -> np.ndarray:
+  """(3,) the midpoint of the estimate's pinned vertices: where a camera's
+  placement error turns about (``EstimateConfig.camera_sd_deg``)."""
+  m = mesh(config)
+  return m.vertices[m.pinned].mean(0)
+
+
 def cloth(config: EstimateConfig) -> physsim.ClothModel:
   """The compiled cloth of an estimate's mesh. Worlds name their fabric's
   bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
@@ -441,7 +448,7 @@ class Objective:
     self._sensor = c.sensor_noise and net.modality == 'depth'
     self._distance = c.distance
     self._camera_sd = (c.camera_sd_m, c.camera_sd_deg)
-    self._pins = self.mesh.vertices[self.mesh.pinned].mean(0)
+    self._pins = pin_centre(c)
     cams, (h, w) = (
       problem.data.poses.position.shape[0],
       (problem.intr.height, problem.intr.width),

@@ -146,11 +146,10 @@ def misplaced_camera(config: Config, rec: dict, recording, estimate: EstimateCon
     return recording
   if recording.pose is None:
     raise ValueError(f'{rec["path"]}: no camera pose to misplace')
-  mesh = objective_lib.mesh(estimate)
   key = jax.random.fold_in(jax.random.key(config.reading_seed), int(rec['seq_id']))
   pose = physsim.shape.misplaced_pose(
     key, recording.pose, config.camera_error_m, config.camera_error_deg,
-    mesh.vertices[mesh.pinned].mean(0),
+    objective_lib.pin_centre(estimate),
   )  # fmt: skip
   return recording._replace(pose=jax.tree.map(np.asarray, pose))
 

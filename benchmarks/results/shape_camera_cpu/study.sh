@@ -1,5 +1,7 @@
+# The demo-size misplaced-camera study of BENCHMARKS.md; run from the project root
+# with the project installed (README). Writes under out/.
 set -e
-cd /work/main; . .venv/bin/activate
+mkdir -p out
 export PYTHONUNBUFFERED=1
 W=out/camstudy
 python -m experiments.demo --workdir=out/demo > $W.demo.log 2>&1
@@ -12,5 +14,3 @@ run() { name=$1; shift; python -m experiments.tables --eval=$W/eval --models=$W/
 run shape_exact --distance=shape
 run shape_misplaced --distance=shape --camera_error_m=0.02 --camera_error_deg=3
 run shape_misplaced_modelled --distance=shape --camera_error_m=0.02 --camera_error_deg=3 --camera_sd_m=0.02 --camera_sd_deg=3
-run energy_exact
-run energy_misplaced --camera_error_m=0.02 --camera_error_deg=3
