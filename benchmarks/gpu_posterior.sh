@@ -30,10 +30,14 @@
 #                drawn with the set's seed: recording k of every set would
 #                otherwise get the same draw). DISTANCE (e.g. shape, energy+shape)
 #                and SHARPNESS set the estimate's --distance and --sharpness.
+#   joint        after paper: benchmarks/joint_pairs.py, NGROUPS (default 8) groups of
+#                GROUP (default 3) real-like recordings sharing bending and area
+#                weight, a 2% anemometer reading at each, every search in lockstep,
+#                then each group's joint posterior (DISTANCE as for coverage).
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
-stage=${1:?stage: calibration, paper, latency, measured, members, ensemble or coverage}
+stage=${1:?stage: calibration, paper, latency, measured, members, ensemble, coverage or joint}
 R=${2:-/tmp/posterior_run}
 OUT=${OUT:-out/gpu_posterior}
 mkdir -p "$R" "$OUT"
@@ -147,6 +151,15 @@ case "$stage" in
       tail -6 "$OUT/cov_${name}_$seed.log"
       cp "$R/cov_${name}_$seed/tables.json" "$OUT/cov_${name}_$seed.json"
     done
+    ;;
+  joint)
+    pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
+    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}
+    python benchmarks/joint_pairs.py --model="$R/t1/physnet_depth/simulation/$GI" \
+      --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
+      ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} 2>&1 | tail -12 \
+      | tee "$OUT/$name.log"
+    cp "$R/$name/joint_pairs.json" "$OUT/$name.json"
     ;;
   *) echo "unknown stage $stage"; exit 2 ;;
 esac

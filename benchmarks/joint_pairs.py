@@ -1,18 +1,22 @@
-"""Area weight from two fan settings, each with an anemometer reading.
+"""Area weight from several fan settings, each with an anemometer reading.
 
-Makes ``--pairs`` pairs of real-like recordings of one fabric (the
-``generate_dataset --preset=eval`` recipe at the network's image size; a pair
-shares bending and area weight and draws two winds, as
-``experiments.calibrate`` draws its pairs), gives each recording a simulated
-anemometer reading (``posterior.simulated_reading``, ``--reading_sd``) and
-estimates each pair jointly (``search.estimate_joint``: each recording's own
-search steered by its reading, then the joint posterior). Prints, over the
-recordings, the mean error of area weight, wind and the load ratio estimated
-from one recording with its reading (each joint's ``alone``) and from the pair
-jointly, beside the range centre's; writes JSON. A GPU at paper size:
+Makes ``--pairs`` groups of ``--group`` real-like recordings of one fabric
+(the ``generate_dataset --preset=eval`` recipe at the network's image size; a
+group shares bending and area weight and draws a wind per recording, as
+``experiments.calibrate`` draws its pairs: ``calibration.truths``), gives each
+recording a simulated anemometer reading (``posterior.simulated_reading``,
+``--reading_sd``) and estimates every group jointly: all recordings' searches
+in lockstep (``search.joint_jobs``, one ``estimate_many``), each steered by its
+reading, then each group's joint posterior (``search.combine_joint``).
+Prints, over the recordings, the mean error of area weight, wind and the load
+ratio from one recording with its reading (each joint's ``alone``), from the
+group's first k recordings jointly (posterior median, 2 <= k < group) and from
+the whole group (posterior median and its reported point), beside the range
+centre's; writes JSON. ``--distance`` picks the discrepancy (``shape``:
+where the sheet hangs). A GPU at paper size:
 
   python benchmarks/joint_pairs.py --model=out/table1/physnet_depth/simulation/gray_interlock \\
-      --workdir=/tmp/pairs --pairs=6
+      --workdir=/tmp/pairs --pairs=6 [--group=3 --distance=shape]
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import os
 
+import jax
 import numpy as np
 from absl import app, flags, logging
 
@@ -33,26 +38,30 @@ FLAGS = flags.FLAGS
 flags.DEFINE_string('model', None, "the fabric's trained network", required=True)
 flags.DEFINE_string('workdir', None, 'recordings and estimates go here', required=True)
 flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
-flags.DEFINE_integer('pairs', 6, 'pairs of recordings')
+flags.DEFINE_integer('pairs', 6, 'groups of recordings (fabrics)')
+flags.DEFINE_integer('group', 2, 'recordings per group (fan settings)', lower_bound=2)
 flags.DEFINE_integer('seed', 0, 'truths, readings and searches')
 flags.DEFINE_float('reading_sd', 0.02, "the anemometer's relative standard error")
 flags.DEFINE_enum('preset', 'default', list(objective.PRESETS), 'estimate settings')
+flags.DEFINE_string('distance', '', "the discrepancy (empty: the preset's)")
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
-FLAG_NAMES = ('model', 'material', 'pairs', 'seed', 'reading_sd', 'preset', 'backend')
+FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
+              'distance', 'backend')  # fmt: skip
 
 
-def _recordings(workdir: str, size: int) -> list[dict]:
-  """The pairs' recordings (made or resumed), pair-major, with their truths."""
+def _recordings(workdir: str, size: int) -> list[list[dict]]:
+  """The groups' recordings (made or resumed), group-major."""
   study = calibration.Config(
     material=FLAGS.material, pairs=FLAGS.pairs, seed=FLAGS.seed
   )
-  truths = calibration.truths(study)
+  truths = calibration.truths(study, group=FLAGS.group)
+  n = FLAGS.group * FLAGS.pairs
   cfg = datasets.PRESETS['smoke' if FLAGS.smoke else 'eval']
   cfg = dataclasses.replace(
-    cfg, materials=(FLAGS.material,), sequences=2 * FLAGS.pairs, resolution=size,
-    batch_size=min(2 * FLAGS.pairs, 64), seed=6000 + FLAGS.seed,
+    cfg, materials=(FLAGS.material,), sequences=n, resolution=size,
+    batch_size=min(n, 64), seed=6000 + FLAGS.seed,
     **({'backend': FLAGS.backend} if FLAGS.backend else {}),
   )  # fmt: skip
   root = os.path.join(workdir, 'recordings')
@@ -61,16 +70,38 @@ def _recordings(workdir: str, size: int) -> list[dict]:
   rows = {int(r['seq_id']): r for r in index.filter(material=FLAGS.material).rows}
   out = []
   for p in range(FLAGS.pairs):
-    pair = [rows.get(2 * p), rows.get(2 * p + 1)]
-    if all(r is not None and r['valid'] for r in pair):  # a pair needs both
-      out.append([{'seq': int(r['seq_id']), 'path': index.path(r)} for r in pair])
+    group = [rows.get(FLAGS.group * p + k) for k in range(FLAGS.group)]
+    if all(r is not None and r['valid'] for r in group):  # a group needs all
+      out.append([{'seq': int(r['seq_id']), 'path': index.path(r)} for r in group])
     else:
-      print(f'pair {p}: a recording was not kept (camera coverage); left out')
+      print(f'group {p}: a recording was not kept (camera coverage); left out')
   return out
 
 
 def _error(est: float, truth: float) -> float:
   return float(100 * abs(est / truth - 1))
+
+
+def _first_k_medians(jobs, k: int, space) -> list[dict]:
+  """Posterior medians of each of the first ``k`` recordings' (wind, area
+  weight, load ratio) under their joint posterior (``posterior.joint`` of
+  their saved likelihoods, as ``search.combine_joint`` forms it)."""
+  npz = [np.load(os.path.join(j.workdir, search.POSTERIOR_FILE)) for j in jobs[:k]]
+  grid = tuple(int(g) for g in npz[0]['grid'])
+  key = jax.random.key(jobs[0].config.seed)
+  joint = posterior_lib.joint(
+    [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key
+  )
+  out = []
+  for u in joint['samples']:
+    p = physsim.from_unit(u, space)
+    ratio = physsim.load_ratio(p.wind_speed, p.area_weight)
+    out.append({
+      'wind_speed': float(np.median(p.wind_speed)),
+      'area_weight': float(np.median(p.area_weight)),
+      'load_ratio': float(np.median(ratio)),
+    })  # fmt: skip
+  return out
 
 
 def main(argv):
@@ -82,16 +113,21 @@ def main(argv):
   config = dataclasses.replace(
     config, material=FLAGS.material,
     **({'backend': FLAGS.backend} if FLAGS.backend else {}),
+    **({'distance': FLAGS.distance} if FLAGS.distance else {}),
   )  # fmt: skip
-  centre = physsim.search_space(FLAGS.material).center()
+  space = physsim.search_space(FLAGS.material)
+  centre = space.center()
   guess = {
     'wind_speed': float(centre.wind_speed), 'area_weight': float(centre.area_weight),
     'load_ratio': float(physsim.load_ratio(centre.wind_speed, centre.area_weight)),
   }  # fmt: skip
-  rows = []
-  for pair in _recordings(FLAGS.workdir, net.image_size[0]):
+  groups = _recordings(FLAGS.workdir, net.image_size[0])
+  if not groups:
+    raise SystemExit('no group of recordings was kept')
+  plan = []  # (group, recordings, readings, workdir, jobs)
+  for group in groups:
     recs, winds = [], []
-    for r in pair:
+    for r in group:
       rec = recording_lib.load_recording(
         r['path'], fps=config.fps, size=net.image_size, frames=config.frames
       )
@@ -100,8 +136,19 @@ def main(argv):
       )
       recs.append(rec)
       winds.append((m.wind_speed, m.wind_speed_sd))
-    wd = os.path.join(FLAGS.workdir, f'pair_{pair[0]["seq"] // 2:02d}')
-    out = search.estimate_joint(config, recs, FLAGS.model, wd, winds)
+    wd = os.path.join(FLAGS.workdir, f'pair_{group[0]["seq"] // FLAGS.group:02d}')
+    jobs = search.joint_jobs(config, recs, FLAGS.model, wd, winds)
+    plan.append((group, recs, winds, wd, jobs))
+  # Every group's searches in lockstep: one simulation batch for all.
+  results = search.estimate_many(
+    [j for *_, jobs in plan for j in jobs], nets={FLAGS.model: net}
+  )
+  ks = range(2, FLAGS.group)  # fewer than the whole group
+  rows = []
+  for g, (group, recs, winds, wd, jobs) in enumerate(plan):
+    done = results[g * FLAGS.group : (g + 1) * FLAGS.group]
+    out = search.combine_joint(jobs, done, wd)
+    first = {k: _first_k_medians(jobs, k, space) for k in ks}
     for k, rec in enumerate(recs):
       t = dict(rec.truth)
       t['load_ratio'] = float(physsim.load_ratio(t['wind_speed'], t['area_weight']))
@@ -113,8 +160,8 @@ def main(argv):
       }
       one = {n: alone[n]['value'] for n in NAMES[:2]}
       one['load_ratio'] = physsim.load_ratio(one['wind_speed'], one['area_weight'])
-      rows.append({
-        'seq': pair[k]['seq'],
+      row = {
+        'seq': group[k]['seq'],
         'truth': t,
         'reading': list(winds[k]),
         'alone': {n: _error(one[n], t[n]) for n in NAMES},
@@ -125,25 +172,37 @@ def main(argv):
           n: bool(joint[n]['interval_90'][0] <= t[n] <= joint[n]['interval_90'][1])
           for n in NAMES
         },
-      })  # fmt: skip
-  if not rows:
-    raise SystemExit('no pair of recordings was kept')
-  summary = {
-    who: {n: float(np.mean([r[who][n] for r in rows])) for n in NAMES}
-    for who in ('alone', 'joint', 'joint_median', 'centre')
-  }
+      }  # fmt: skip
+      for j in ks:  # the group's first j recordings, jointly
+        if k < j:
+          row[f'first_{j}'] = {n: _error(first[j][k][n], t[n]) for n in NAMES}
+      rows.append(row)
+  labels = {'alone': 'one recording and its reading'}
+  labels.update(
+    {f'first_{j}': f'the first {j}, jointly (posterior median)' for j in ks}
+  )
+  labels.update({
+    'joint_median': f'all {FLAGS.group}, jointly (posterior median)',
+    'joint': f'all {FLAGS.group}, jointly (reported point)',
+    'centre': 'range centre',
+  })  # fmt: skip
+  summary = {}
+  for who in labels:
+    have = [r[who] for r in rows if who in r]
+    summary[who] = {n: float(np.mean([h[n] for h in have])) for n in NAMES}
+    summary[who]['n'] = len(have)
   summary['joint_covered_90'] = {
     n: float(np.mean([r['joint_covered_90'][n] for r in rows])) for n in NAMES
   }
-  print(f'{len(rows)} recordings in {len(rows) // 2} pairs, {FLAGS.material}, '
-        f'readings with {100 * FLAGS.reading_sd:g}% error; mean errors')  # fmt: skip
-  print('| estimate | wind | area weight | load ratio |')
-  print('|---|---|---|---|')
-  labels = {'alone': 'one recording and its reading', 'joint': 'the pair, jointly',
-            'joint_median': 'the pair, posterior median', 'centre': 'range centre'}  # fmt: skip
+  print(f'{len(rows)} recordings in {len(groups)} groups of {FLAGS.group}, '
+        f'{FLAGS.material}, distance {config.distance}, readings with '
+        f'{100 * FLAGS.reading_sd:g}% error; mean errors')  # fmt: skip
+  print('| estimate | recordings | wind | area weight | load ratio |')
+  print('|---|---:|---|---|---|')
   for who, label in labels.items():
     s = summary[who]
-    print(f'| {label} | ' + ' | '.join(f'{s[n]:.1f}%' for n in NAMES) + ' |')
+    print(f'| {label} | {s["n"]} | '
+          + ' | '.join(f'{s[n]:.1f}%' for n in NAMES) + ' |')  # fmt: skip
   cov = summary['joint_covered_90']
   print('joint 90% intervals held the truth: '
         + ', '.join(f'{n} {100 * cov[n]:.0f}%' for n in NAMES))  # fmt: skip

@@ -618,7 +618,9 @@ def estimate_joint(
   Each recording gets its own posterior search (in lockstep, under
   ``<workdir>/recording_<k>``); their likelihoods on the shared grid are then
   multiplied over bending and area weight, each recording's wind integrated
-  out (``posterior.joint``). Writes ``joint.json`` and ``joint.png``.
+  out (``posterior.joint``). Writes ``joint.json`` and ``joint.png``. Many
+  fabrics at once: ``joint_jobs`` for each, one ``estimate_many`` over all
+  their jobs, then ``combine_joint`` for each.
 
   Args:
     config: settings (``point='median'`` or ``'bayes'``; a measured area
@@ -646,6 +648,19 @@ def estimate_joint(
       reading the search box cannot hold, or a recording whose estimate
       failed (named).
   """
+  jobs = joint_jobs(config, recordings, model_dir, workdir, winds)
+  return combine_joint(jobs, estimate_many(jobs, **kw), workdir)
+
+
+def joint_jobs(
+  config: EstimateConfig,
+  recordings: list[Recording],
+  model_dir: str,
+  workdir: str,
+  winds: list[tuple[float, float]] | None = None,
+) -> list[Job]:
+  """The searches of one fabric's joint estimate (``estimate_joint``'s
+  arguments and checks), one per recording under ``<workdir>/recording_<k>``."""
   if len(recordings) < 2:
     raise ValueError(
       f'a joint estimate needs two or more recordings, got {len(recordings)}'
@@ -673,14 +688,32 @@ def estimate_joint(
     space = physsim.search_space(config.material)
     for c in configs:
       c.measured.check(space)
-  jobs = [
+  return [
     Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'))
     for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
   ]
-  results = estimate_many(jobs, **kw)
+
+
+def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
+  """The joint posterior of one fabric's finished searches (``joint_jobs``,
+  then ``estimate_many``: ``results`` in the jobs' order); writes and returns
+  ``estimate_joint``'s ``joint.json``.
+
+  Raises:
+    ValueError: a recording whose estimate failed (named).
+  """
   for job, r in zip(jobs, results, strict=True):
     if isinstance(r, Exception):
       raise ValueError(f'{job.recording.source}: {r}') from r
+  configs = [job.config for job in jobs]
+  model_dir = jobs[0].model_dir
+  winds = None
+  if configs[0].measured.wind_speed_sd > 0:  # a reading at each recording
+    winds = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
+  m = configs[0].measured
+  config = dataclasses.replace(  # the settings the recordings share
+    configs[0], measured=dataclasses.replace(m, wind_speed=0.0, wind_speed_sd=0.0)
+  )
   npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
   grid = tuple(int(g) for g in npz[0]['grid'])
   key = jax.random.fold_in(jax.random.key(config.seed), 11)

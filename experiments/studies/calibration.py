@@ -143,13 +143,17 @@ PRESETS = {
 }
 
 
-def truths(config: Config) -> physsim.Params:
-  """(2 * pairs,) parameter sets, pair-major: recordings 2k and 2k+1 share
-  bending and area weight and draw their own wind; all uniform in the unit
-  cube of the search box (the prior)."""
+def truths(config: Config, group: int = 2) -> physsim.Params:
+  """(group * pairs,) parameter sets, group-major: the ``group`` recordings
+  of each fabric (a pair by default) share bending and area weight and draw
+  their own wind (one fan setting each); all uniform in the unit cube of the
+  search box (the prior). ``group=2`` gives the calibration study's pairs."""
+  if group < 2:
+    raise ValueError(f'a group is two or more recordings, got {group}')
   rng = np.random.default_rng([config.seed, 7])
-  u = rng.uniform(-1.0, 1.0, size=(config.pairs, 2, 3))
-  u[:, 1, [0, 2]] = u[:, 0, [0, 2]]
+  u = rng.uniform(-1.0, 1.0, size=(config.pairs, group, 3))
+  u[:, 1:, 0] = u[:, :1, 0]
+  u[:, 1:, 2] = u[:, :1, 2]
   return physsim.from_unit(u.reshape(-1, 3), physsim.search_space(config.material))
 
 

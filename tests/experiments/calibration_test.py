@@ -190,6 +190,19 @@ def test_calibration_modes_follow_what_was_measured():
   )
 
 
+def test_a_group_of_recordings_shares_bending_and_area_weight_not_wind():
+  config = calibration.Config(pairs=4, seed=3)
+  space = physsim.search_space(config.material)
+  u = physsim.to_unit(calibration.truths(config, group=3), space).reshape(4, 3, 3)
+  assert np.all(u[:, :, [0, 2]] == u[:, :1, [0, 2]])  # shared within a group
+  assert np.all(np.abs(np.diff(u[:, :, 1], axis=1)) > 1e-6)  # a wind each
+  assert np.all(np.abs(u) <= 1 + 1e-9)
+  pairs = physsim.to_unit(calibration.truths(config), space).reshape(4, 2, 3)
+  assert np.all(pairs[:, 1, [0, 2]] == pairs[:, 0, [0, 2]])
+  with pytest.raises(ValueError, match='two or more'):
+    calibration.truths(config, group=1)
+
+
 def _recalibrated_file(tmp_path, monkeypatch) -> dict:
   levels = {mode: [[0.01] * 4, [0.1] * 4, [0.4] * 4, [0.9] * 4, [0.99] * 4]
             for mode in calibration.MODES}  # fmt: skip

@@ -131,3 +131,11 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   note = out['calibration']
   assert note is None or note['matches'] is False
   assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
+  # the joint's settings are the shared ones (no one recording's reading)
+  assert out['config']['measured']['wind_speed_sd'] == 0.0
+  # the same searches run for many fabrics at once (joint_jobs, one
+  # estimate_many, combine_joint) resume here and combine to the same joint
+  jobs = search.joint_jobs(config, recs, model_dir, workdir, winds)
+  again = search.combine_joint(jobs, search.estimate_many(jobs), workdir)
+  assert again['area_weight'] == out['area_weight']
+  assert again['recordings'][1]['wind_speed'] == out['recordings'][1]['wind_speed']
