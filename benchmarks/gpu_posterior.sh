@@ -33,7 +33,8 @@
 #   joint        after paper: benchmarks/joint_pairs.py, NGROUPS (default 8) groups of
 #                GROUP (default 3) real-like recordings sharing bending and area
 #                weight, a 2% anemometer reading at each, every search in lockstep,
-#                then each group's joint posterior (DISTANCE as for coverage).
+#                then each group's joint posterior (DISTANCE as for coverage;
+#                SECONDS_CLIP: each recording's length, s, the estimate's too).
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
@@ -154,10 +155,11 @@ case "$stage" in
     ;;
   joint)
     pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
-    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}
+    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
     python benchmarks/joint_pairs.py --model="$R/t1/physnet_depth/simulation/$GI" \
       --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
-      ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} 2>&1 | tail -12 \
+      ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} \
+      ${SECONDS_CLIP:+--seconds=$SECONDS_CLIP} 2>&1 | tail -12 \
       | tee "$OUT/$name.log"
     cp "$R/$name/joint_pairs.json" "$OUT/$name.json"
     ;;

@@ -46,9 +46,10 @@ flags.DEFINE_enum('preset', 'default', list(objective.PRESETS), 'estimate settin
 flags.DEFINE_string('distance', '', "the discrepancy (empty: the preset's)")
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
+flags.DEFINE_float('seconds', 0.0, "each recording's length, s (0: the recipe's)")
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
-              'distance', 'backend')  # fmt: skip
+              'distance', 'backend', 'seconds')  # fmt: skip
 
 
 def _recordings(workdir: str, size: int) -> list[list[dict]]:
@@ -64,6 +65,8 @@ def _recordings(workdir: str, size: int) -> list[list[dict]]:
     batch_size=min(n, 64), seed=6000 + FLAGS.seed,
     **({'backend': FLAGS.backend} if FLAGS.backend else {}),
   )  # fmt: skip
+  if FLAGS.seconds:  # a longer (or shorter) clip of the same scenes
+    cfg = dataclasses.replace(cfg, frames=round(FLAGS.seconds * cfg.fps))
   root = os.path.join(workdir, 'recordings')
   datasets.run(cfg, root, params={FLAGS.material: truths})
   index = physsim.dataset.open_dataset(root)
@@ -115,6 +118,8 @@ def main(argv):
     **({'backend': FLAGS.backend} if FLAGS.backend else {}),
     **({'distance': FLAGS.distance} if FLAGS.distance else {}),
   )  # fmt: skip
+  if FLAGS.seconds:  # compare the whole clip
+    config = dataclasses.replace(config, frames=round(FLAGS.seconds * config.fps))
   space = physsim.search_space(FLAGS.material)
   centre = space.center()
   guess = {
