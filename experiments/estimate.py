@@ -162,18 +162,11 @@ def main(args: Args) -> None:
           rgb=net.modality == 'rgb',
         )  # fmt: skip
       )
-  if (
-    config.distance in objective_lib.SHAPE_DISTANCES
-    and not (config.camera_sd_m or config.camera_sd_deg)
-    and any(_needs_intake(args, p) for p in args.recording)
-  ):
-    print(
-      f'warning: --distance={config.distance} reads where the sheet hangs in the '
-      "simulator's world, and the intake placed your camera there by its alignment "
-      '(within about 2 cm and 3 degrees on its test); with --camera_sd_m=0 '
-      '--camera_sd_deg=0 the posterior trusts that placement exactly. Give its '
-      'error, e.g. --camera_sd_m=0.02 --camera_sd_deg=3'
-    )
+  warning = report.shape_camera_warning(
+    config, any(_needs_intake(args, p) for p in args.recording)
+  )
+  if warning:
+    print(warning)
   if len(recs) > 1:
     result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
     print(report.joint_table(result))

@@ -19,6 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import model as model_lib  # noqa: E402
 import physsim  # noqa: E402
 from experiments.pipeline import embedding, files  # noqa: E402
+from experiments.pipeline import objective as obj_lib  # noqa: E402
 
 LABELS = {
   'bending_scale': 'bending (x measured)',
@@ -483,3 +484,23 @@ def plot_montage(
     fig.colorbar(im, ax=axes, shrink=0.8, label='depth (m); white: no return')
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
+
+
+def shape_camera_warning(config, aligned: bool) -> str | None:
+  """The line ``estimate`` prints when a shape discrepancy (which reads
+  centimetres in the simulator's world) trusts a camera that the intake's
+  alignment placed there (``aligned``) as exact (no ``camera_sd``); else None."""
+  if (
+    config.distance not in obj_lib.SHAPE_DISTANCES
+    or config.camera_sd_m
+    or config.camera_sd_deg
+    or not aligned
+  ):
+    return None
+  return (
+    f'warning: --distance={config.distance} reads where the sheet hangs in the '
+    "simulator's world, and the intake placed your camera there by its alignment "
+    '(within about 2 cm and 3 degrees on its test); with --camera_sd_m=0 '
+    '--camera_sd_deg=0 the posterior trusts that placement exactly. Give its '
+    'error, e.g. --camera_sd_m=0.02 --camera_sd_deg=3'
+  )

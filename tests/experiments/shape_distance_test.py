@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import embedding
+from experiments.pipeline import embedding, report
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -129,3 +129,17 @@ def test_camera_error_out_of_range_is_refused():
   for bad in (dict(camera_sd_m=0.5), dict(camera_sd_deg=-1.0)):
     with pytest.raises(ValueError, match='camera_sd_m <= 0.2 .metres.'):
       dataclasses.replace(CONFIG, **bad).check()
+
+
+def test_estimate_warns_when_a_shape_distance_trusts_an_aligned_camera():
+  base = obj_lib.PRESETS['smoke']
+  shape = dataclasses.replace(base, distance='shape')
+  warn = report.shape_camera_warning
+  assert 'camera_sd_m=0.02' in warn(shape, aligned=True)
+  assert 'energy+shape' in warn(
+    dataclasses.replace(shape, distance='energy+shape'), True
+  )
+  assert warn(shape, aligned=False) is None  # a simulated recording's exact camera
+  assert warn(base, aligned=True) is None  # the PSD does not read the world's frame
+  assert warn(dataclasses.replace(shape, camera_sd_m=0.02), aligned=True) is None
+  assert warn(dataclasses.replace(shape, camera_sd_deg=3.0), aligned=True) is None
