@@ -351,7 +351,31 @@ def run(config: Config, root: str, workdir: str, *, progress: bool = True) -> di
     run_dir = os.path.join(workdir, name)
     _, out[name] = fit_run(config, root, run_dir, mats, (x, y, g), progress=progress)
     print(f'{name}: {describe_eval(out[name])}')
+    if warning := weak_network_warning(out[name]):
+      print(f'{name}: {warning}')
   return out
+
+
+# Held-out triplet accuracy below which a network is called barely trained:
+# chance is 50%; the demo's and the paper's recipes gave 71-88% in our studies
+# (BENCHMARKS.md), and one failed run 58%.
+WEAK_ACCURACY = 0.6
+
+
+def weak_network_warning(row: dict) -> str | None:
+  """A warning for a selected eval row whose held-out triplet accuracy is
+  below ``WEAK_ACCURACY``: such a network hardly tells simulations apart, so
+  estimates with it say little beyond the prior (their intervals were not
+  checked for it). None otherwise or when not evaluated."""
+  acc = (row or {}).get('test_triplet_accuracy')
+  if acc is None or acc >= WEAK_ACCURACY:
+    return None
+  return (
+    f'warning: held-out triplet accuracy {100 * acc:.1f}% is close to chance (50%); '
+    'estimates with this network will say little beyond the prior. Train on more '
+    'sequences or for more epochs, or estimate with --distance=shape where the '
+    "camera's place in the simulator's world is known"
+  )
 
 
 def describe_eval(row: dict) -> str:

@@ -249,3 +249,11 @@ def test_embed_dim_reaches_both_networks():
     item = model_lib.train.item_shape(tc)
     out = jax.eval_shape(net.apply, shapes, jax.ShapeDtypeStruct((2, *item), 'float32'))
     assert out.shape == (2, 8)
+
+
+def test_a_network_near_chance_is_warned_about():
+  warn = train.weak_network_warning
+  assert '55.0%' in warn({'epoch': 3, 'test_triplet_accuracy': 0.55})
+  assert warn({'epoch': 3, 'test_triplet_accuracy': train.WEAK_ACCURACY}) is None
+  assert warn({'epoch': 3, 'test_triplet_accuracy': 0.8}) is None
+  assert warn({}) is None and warn({'epoch': 1}) is None  # not evaluated
