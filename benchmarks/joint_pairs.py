@@ -152,7 +152,11 @@ def main(argv):
   rows = []
   for g, (group, recs, winds, wd, jobs) in enumerate(plan):
     done = results[g * FLAGS.group : (g + 1) * FLAGS.group]
-    out = search.combine_joint(jobs, done, wd)
+    try:
+      out = search.combine_joint(jobs, done, wd)
+    except ValueError as e:  # a search failed: the others still count
+      print(f'group {g}: left out ({e})')
+      continue
     first = {k: _first_k_medians(jobs, k, space) for k in ks}
     for k, rec in enumerate(recs):
       t = dict(rec.truth)
@@ -182,6 +186,8 @@ def main(argv):
         if k < j:
           row[f'first_{j}'] = {n: _error(first[j][k][n], t[n]) for n in NAMES}
       rows.append(row)
+  if not rows:
+    raise SystemExit('every group failed')
   labels = {'alone': 'one recording and its reading'}
   labels.update(
     {f'first_{j}': f'the first {j}, jointly (posterior median)' for j in ks}
