@@ -182,6 +182,11 @@ def main(argv):
           for n in NAMES
         },
       }  # fmt: skip
+      # how much each narrows the 90% interval (prior width over posterior's)
+      row['narrowing_90'] = {
+        'alone': {n: alone[n]['narrowing_90'] for n in NAMES[:2]},
+        'joint': {n: joint[n]['narrowing_90'] for n in NAMES[:2]},
+      }
       for j in ks:  # the group's first j recordings, jointly
         if k < j:
           row[f'first_{j}'] = {n: _error(first[j][k][n], t[n]) for n in NAMES}
@@ -214,6 +219,16 @@ def main(argv):
     s = summary[who]
     print(f'| {label} | {s["n"]} | '
           + ' | '.join(f'{s[n]:.1f}%' for n in NAMES) + ' |')  # fmt: skip
+  summary['narrowing_90'] = {
+    who: {
+      n: float(np.mean([r['narrowing_90'][who][n] for r in rows])) for n in NAMES[:2]
+    }
+    for who in ('alone', 'joint')
+  }
+  nar = summary['narrowing_90']
+  print("90% intervals' narrowing (prior width over posterior width), one recording / "
+        'the group: ' + ', '.join(f"{n} x{nar['alone'][n]:.2f} / x{nar['joint'][n]:.2f}"
+                                  for n in NAMES[:2]))  # fmt: skip
   cov = summary['joint_covered_90']
   print('joint 90% intervals held the truth: '
         + ', '.join(f'{n} {100 * cov[n]:.0f}%' for n in NAMES))  # fmt: skip
