@@ -92,7 +92,10 @@ def modality(run_dir: str) -> str:
 
 
 def members(model_dir: str) -> list[str]:
-  """The run folders a model names: one, or an ensemble's, comma-separated."""
+  """The run folders a model names: one, or an ensemble's, comma-separated
+  (a folder whose own name holds a comma is one run)."""
+  if ',' in model_dir and os.path.isdir(model_dir):
+    return [model_dir]
   dirs = [d.strip() for d in model_dir.split(',')]
   if not all(dirs):
     raise ValueError(f'{model_dir!r}: an empty run folder in the list')

@@ -77,6 +77,15 @@ def test_ensemble_loads_stacked_and_refuses_mismatched_members(env):
     embedding.load_embedding(f'{env["a"]},')
 
 
+def test_a_run_folder_whose_name_holds_a_comma_is_one_network(env):
+  odd = os.path.join(env['root'], 'lr=1e-3,seed=4')
+  write_random_model(odd, 'physnet', 'depth', seed=4)
+  assert embedding.members(odd) == [odd]
+  assert embedding.load_embedding(odd).members == 0
+  # a list that names it and another is still an ensemble
+  assert embedding.members(f'{env["a"]},{env["b"]}') == [env['a'], env['b']]
+
+
 def test_ensemble_recipe_differs_from_a_single_network(env):
   pair = embedding.network_recipe(f'{env["a"]},{env["b"]}')
   single = embedding.network_recipe(env['a'])
