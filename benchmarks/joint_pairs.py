@@ -43,7 +43,9 @@ flags.DEFINE_integer('group', 2, 'recordings per group (fan settings)', lower_bo
 flags.DEFINE_integer('seed', 0, 'truths, readings and searches')
 flags.DEFINE_float('reading_sd', 0.02, "the anemometer's relative standard error")
 flags.DEFINE_enum('preset', 'default', list(objective.PRESETS), 'estimate settings')
-flags.DEFINE_string('distance', '', "the discrepancy (empty: the preset's)")
+flags.DEFINE_enum(
+  'distance', '', ['', *objective.DISTANCES], "the discrepancy (empty: the preset's)"
+)
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 flags.DEFINE_float('seconds', 0.0, "each recording's length, s (0: the recipe's)")
