@@ -90,13 +90,8 @@ def _error(est: float, truth: float) -> float:
 def _first_k_medians(jobs, k: int, space) -> list[dict]:
   """Posterior medians of each of the first ``k`` recordings' (wind, area
   weight, load ratio) under their joint posterior (``posterior.joint`` of
-  their saved likelihoods, as ``search.combine_joint`` forms it)."""
-  npz = [np.load(os.path.join(j.workdir, search.POSTERIOR_FILE)) for j in jobs[:k]]
-  grid = tuple(int(g) for g in npz[0]['grid'])
-  key = jax.random.key(jobs[0].config.seed)
-  joint = posterior_lib.joint(
-    [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key
-  )
+  their saved likelihoods, ``search.joint_posterior``)."""
+  joint, _ = search.joint_posterior(jobs[:k], jax.random.key(jobs[0].config.seed))
   out = []
   for u in joint['samples']:
     p = physsim.from_unit(u, space)

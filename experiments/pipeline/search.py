@@ -694,6 +694,19 @@ def joint_jobs(
   ]
 
 
+def joint_posterior(jobs: list[Job], key) -> tuple[dict, list]:
+  """``posterior.joint`` of finished searches (``joint_jobs``'s, or any
+  subset of them) from their saved posteriors, drawing as many samples as
+  each kept; returns it and the loaded ``posterior.npz`` files."""
+  npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
+  grid = tuple(int(g) for g in npz[0]['grid'])
+  combined = posterior_lib.joint(
+    [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
+    n=len(npz[0]['samples']),
+  )  # fmt: skip
+  return combined, npz
+
+
 def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   """The joint posterior of one fabric's finished searches (``joint_jobs``,
   then ``estimate_many``: ``results`` in the jobs' order); writes and returns
@@ -714,13 +727,8 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   config = dataclasses.replace(  # the settings the recordings share
     configs[0], measured=dataclasses.replace(m, wind_speed=0.0, wind_speed_sd=0.0)
   )
-  npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
-  grid = tuple(int(g) for g in npz[0]['grid'])
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
-  combined = posterior_lib.joint(
-    [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
-    n=len(npz[0]['samples']),
-  )  # fmt: skip
+  combined, npz = joint_posterior(jobs, key)
   space = physsim.search_space(config.material)
   note = report.calibration_note(
     configs[0], joint=True, recordings=len(jobs),
