@@ -48,7 +48,9 @@ flags.DEFINE_enum(
 )
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
-flags.DEFINE_float('seconds', 0.0, "each recording's length, s (0: the recipe's)")
+flags.DEFINE_float(
+  'seconds', 0.0, "each recording's length, s (0: the recipe's)", lower_bound=0.0
+)
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
               'distance', 'backend', 'seconds')  # fmt: skip
