@@ -29,11 +29,13 @@
 #                READING=wind_reading_sd or area_weight_reading_sd adds a 2% reading,
 #                drawn with the set's seed: recording k of every set would
 #                otherwise get the same draw). DISTANCE (e.g. shape, energy+shape)
-#                and SHARPNESS set the estimate's --distance and --sharpness.
+#                and SHARPNESS set the estimate's --distance and --sharpness,
+#                LIKELIHOOD (e.g. synthetic) its --likelihood.
 #   joint        after paper: benchmarks/joint_pairs.py, NGROUPS (default 8) groups of
 #                GROUP (default 3) real-like recordings sharing bending and area
 #                weight, a 2% anemometer reading at each, every search in lockstep,
-#                then each group's joint posterior (DISTANCE as for coverage;
+#                then each group's joint posterior (DISTANCE, LIKELIHOOD and
+#                SHARPNESS as for coverage;
 #                SECONDS_CLIP: each recording's length, s, the estimate's too).
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
@@ -137,14 +139,15 @@ case "$stage" in
         | tail -3 > "$OUT/eval_$seed.log"
     done
     read_flag=""; [ -n "${READING:-}" ] && read_flag="--$READING=0.02"
-    name=${READING:-video}${DISTANCE:+_$DISTANCE}${SHARPNESS:+_c$SHARPNESS}
+    name=${READING:-video}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${SHARPNESS:+_c$SHARPNESS}
     pids=""
     for seed in $seeds; do
       XLA_PYTHON_CLIENT_MEM_FRACTION=0.2 \
       python -m experiments.tables --eval="$R/eval_$seed" --models="$R/t1" --workdir="$R/cov_${name}_$seed" \
         --methods=physnet_depth --preset=$pre ${EST:+--backend=c} $read_flag \
         ${READING:+--reading_seed=$seed} ${DISTANCE:+--distance=$DISTANCE} \
-        ${SHARPNESS:+--sharpness=$SHARPNESS} > "$OUT/cov_${name}_$seed.log" 2>&1 &
+        ${SHARPNESS:+--sharpness=$SHARPNESS} ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} \
+        > "$OUT/cov_${name}_$seed.log" 2>&1 &
       pids="$pids $!"
     done
     for p in $pids; do wait "$p"; done
@@ -155,10 +158,11 @@ case "$stage" in
     ;;
   joint)
     pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
-    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
+    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
     python benchmarks/joint_pairs.py --model="$R/t1/physnet_depth/simulation/$GI" \
       --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
       ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} \
+      ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} ${SHARPNESS:+--sharpness=$SHARPNESS} \
       ${SECONDS_CLIP:+--seconds=$SECONDS_CLIP} 2>&1 | tail -12 \
       | tee "$OUT/$name.log"
     cp "$R/$name/joint_pairs.json" "$OUT/$name.json"

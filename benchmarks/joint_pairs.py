@@ -46,6 +46,15 @@ flags.DEFINE_enum('preset', 'default', list(objective.PRESETS), 'estimate settin
 flags.DEFINE_enum(
   'distance', '', ['', *objective.DISTANCES], "the discrepancy (empty: the preset's)"
 )
+flags.DEFINE_enum(
+  'likelihood',
+  '',
+  ['', *objective.LIKELIHOODS],
+  "the posterior's likelihood (empty: the preset's)",
+)
+flags.DEFINE_float(
+  'sharpness', 0.0, "the likelihood's constant (0: the preset's)", lower_bound=0.0
+)
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 flags.DEFINE_float(
@@ -53,7 +62,7 @@ flags.DEFINE_float(
 )
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
-              'distance', 'backend', 'seconds')  # fmt: skip
+              'distance', 'likelihood', 'sharpness', 'backend', 'seconds')  # fmt: skip
 
 
 def _recordings(workdir: str, size: int) -> list[list[dict]]:
@@ -116,7 +125,10 @@ def main(argv):
     config, material=FLAGS.material,
     **({'backend': FLAGS.backend} if FLAGS.backend else {}),
     **({'distance': FLAGS.distance} if FLAGS.distance else {}),
+    **({'likelihood': FLAGS.likelihood} if FLAGS.likelihood else {}),
+    **({'sharpness': FLAGS.sharpness} if FLAGS.sharpness else {}),
   )  # fmt: skip
+  config.check()  # e.g. the synthetic likelihood without the shape distance
   if FLAGS.seconds:  # compare the whole clip
     config = dataclasses.replace(config, frames=round(FLAGS.seconds * config.fps))
   space = physsim.search_space(FLAGS.material)

@@ -324,3 +324,16 @@ def posterior(
   var = jnp.exp(p.log_outputscale) - jnp.sum(v * v, axis=0)
   var = jnp.maximum(var, 1e-12) + jnp.where(noise, jnp.exp(p.log_noise), 0.0)
   return state.y_mean + state.y_scale * mean, var * state.y_scale**2
+
+
+def posterior_cov(state: GPState, xq: jnp.ndarray, xc: jnp.ndarray, *, kernel: str):
+  """Posterior covariance of the latent function between ``xq (m, d)`` and
+  one point ``xc (d,)``, in standardised units: ``(m,)`` (times
+  ``state.y_scale**2`` for the raw targets')."""
+  p = state.params
+  ls, s2 = jnp.exp(p.log_lengthscales), jnp.exp(p.log_outputscale)
+  k = kernels.get(kernel)
+  kq = jnp.where(state.mask[None, :], s2 * k(xq, state.x, ls), 0.0)  # (m, cap)
+  kc = jnp.where(state.mask, s2 * k(xc[None], state.x, ls)[0], 0.0)  # (cap,)
+  vc = jax.scipy.linalg.cho_solve((state.chol, True), kc)
+  return s2 * k(xq, xc[None], ls)[:, 0] - kq @ vc

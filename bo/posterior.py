@@ -55,14 +55,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import log_ndtr, logsumexp
 
-from bo import gp, kernels, qmc
+from bo import gp, qmc, synthetic
 from bo.loop import _capacity, _load, _save
 
 # LogNormal prior on the noise variance of the standardised log discrepancy:
 # median 0.05 (a noise sd of ~22% of the log discrepancy's spread over the
 # box), wide. Replicates in every batch pin it down.
 NOISE_PRIOR = (math.log(0.05), 1.5)
-LIKELIHOODS = ('gibbs', 'threshold')
+LIKELIHOODS = ('gibbs', 'threshold', 'synthetic')
 # Floor on discrepancies before the log (a perfect match is 0).
 _LOG_FLOOR = 1e-12
 # Gauss-Hermite nodes (probabilists') for averages over the GP's uncertainty.
@@ -171,18 +171,6 @@ def log_normalise(log_w):
   return log_w - logsumexp(log_w)
 
 
-def _posterior_cov(state: gp.GPState, xq, xc, kernel: str):
-  """Posterior covariance of the latent function between ``xq (G, d)`` and
-  ``xc (d,)``, standardised units: (G,)."""
-  p = state.params
-  ls, s2 = jnp.exp(p.log_lengthscales), jnp.exp(p.log_outputscale)
-  k = kernels.get(kernel)
-  kq = jnp.where(state.mask[None, :], s2 * k(xq, state.x, ls), 0.0)  # (G, cap)
-  kc = jnp.where(state.mask, s2 * k(xc[None], state.x, ls)[0], 0.0)  # (cap,)
-  vc = jax.scipy.linalg.cho_solve((state.chol, True), kc)
-  return s2 * k(xq, xc[None], ls)[:, 0] - kq @ vc
-
-
 def maxvar_batch(
   state: gp.GPState, xq, log_prior, floor, q: int, *, form: str = 'gibbs',
   sharpness: float = 1.0, kernel: str = 'matern52',
@@ -212,7 +200,9 @@ def maxvar_batch(
 
   def pick(s2, _):
     i = jnp.argmax(log_acq(s2))
-    cov = _posterior_cov(state, xq, xq[i], kernel) * state.y_scale**2  # raw units
+    cov = (
+      gp.posterior_cov(state, xq, xq[i], kernel=kernel) * state.y_scale**2
+    )  # raw units
     s2 = jnp.maximum(s2 - cov**2 / (s2[i] + sn**2), 0.0)
     return s2, i
 
@@ -238,8 +228,13 @@ class PosteriorConfig(NamedTuple):
     grid: cells per dimension of the posterior grid.
     q: candidates per iteration, replicates included.
     replicates: of those, repeats of the highest-posterior cell's centre.
-    likelihood: 'gibbs' or 'threshold' (see module doc).
-    sharpness: the likelihood's constant c (see module doc).
+    likelihood: 'gibbs' or 'threshold' (see module doc), or 'synthetic'
+      (``bo.synthetic``: the search is told summary residuals, not
+      discrepancies).
+    sharpness: the likelihood's constant c (see module doc); for
+      'synthetic' its tempering exponent (1: the likelihood as it is).
+    summaries: values told per evaluation with 'synthetic' (the residual's
+      length); 1 otherwise.
     kernel: GP kernel.
     noise_prior: (loc, scale) of the noise variance's LogNormal prior.
     fit_restarts, fit_maxiter: GP hyperparameter fit (warm-started from the
@@ -253,6 +248,7 @@ class PosteriorConfig(NamedTuple):
   replicates: int = 1
   likelihood: str = 'gibbs'
   sharpness: float = 1.0
+  summaries: int = 1
   kernel: str = 'matern52'
   noise_prior: tuple[float, float] = NOISE_PRIOR
   fit_restarts: int = 2
@@ -268,67 +264,105 @@ class Step(NamedTuple):
     samples: (S, d) posterior draws given the data so far.
     log_post: (G,) normalised log posterior mass per grid cell.
     log_lik: (G,) log likelihood per cell (for combining recordings).
-    params: fitted GP hyperparameters.
-    noise_sd: () the simulator's scatter of log discrepancy the GP found.
-    floor: () the lowest GP mean of log discrepancy.
+    params: flat fitted GP hyperparameters (``gp.params_to_array``); (k, P)
+      for the k GPs of 'synthetic'.
+    noise_sd: () the simulator's scatter of log discrepancy the GP found;
+      (k,) of each summary for 'synthetic'.
+    floor: () the lowest GP mean of log discrepancy (0 for 'synthetic').
     mean, var: (G,) the GP's mean and latent variance of log discrepancy per
-      cell (any likelihood of the module can be formed from them again).
+      cell (any likelihood of the module can be formed from them again);
+      (G, k) of the summary residuals for 'synthetic'.
   """
 
   x: jax.Array
   samples: jax.Array
   log_post: jax.Array
   log_lik: jax.Array
-  params: gp.GPParams
+  params: jax.Array
   noise_sd: jax.Array
   floor: jax.Array
   mean: jax.Array
   var: jax.Array
 
 
+def _batch(config: PosteriorConfig, pts, idx, log_post, key) -> jax.Array:
+  """The next candidates: the picked cells jittered within them, then
+  ``replicates`` repeats of the most probable cell's centre."""
+  width = 2.0 / jnp.asarray(config.grid, pts.dtype)
+  jitter = jax.random.uniform(key, (len(idx), config.d), pts.dtype) - 0.5
+  explore = jnp.clip(pts[idx] + jitter * width, -1.0, 1.0)
+  best = jnp.tile(pts[jnp.argmax(log_post)], (config.replicates, 1))
+  return jnp.concatenate([explore, best])
+
+
 @functools.lru_cache(maxsize=16)
 def make_step(config: PosteriorConfig):
-  """The jitted ``step(x, log_d, mask, key, log_prior, init_params) -> Step``:
-  fit the GP to the log discrepancies, form the posterior on the grid, draw
-  samples and pick the next batch. Buffers have a fixed capacity (padding
-  rows masked), so it compiles once per capacity; memoised per (hashable)
-  config, so searches with equal settings share the compiles."""
+  """The jitted ``step(x, y, mask, key, log_prior, init_params) -> Step``:
+  fit the GP to the log discrepancies ``y (cap,)`` (or, for 'synthetic', the
+  GPs to the summary residuals ``y (cap, k)``), form the posterior on the
+  grid, draw samples and pick the next batch. ``init_params``: flat warm
+  starts, (P,) or (k, P). Buffers have a fixed capacity (padding rows
+  masked), so it compiles once per capacity; memoised per (hashable) config,
+  so searches with equal settings share the compiles."""
   points = jnp.asarray(grid_points(config.grid))
   if config.likelihood not in LIKELIHOODS:
     raise ValueError(
       f'likelihood must be one of {LIKELIHOODS}, got {config.likelihood!r}'
     )
-  lik_kw = dict(
-    form=config.likelihood, sharpness=config.sharpness, kernel=config.kernel
-  )
   n_explore = config.q - config.replicates
   if n_explore < 1:
     raise ValueError(
       f'q={config.q} leaves no room beside {config.replicates} replicates'
     )
+  fit_kw = dict(
+    kernel=config.kernel, n_restarts=config.fit_restarts,
+    maxiter=config.fit_maxiter, noise_prior=config.noise_prior,
+  )  # fmt: skip
+  if config.likelihood == 'synthetic':
+    return jax.jit(
+      functools.partial(_synthetic_step, config, points, n_explore, fit_kw)
+    )
+  lik_kw = dict(
+    form=config.likelihood, sharpness=config.sharpness, kernel=config.kernel
+  )
 
   def step(x, log_d, mask, key, log_prior, init_params) -> Step:
     k_fit, k_sample, k_jit = jax.random.split(key, 3)
     pts = points.astype(x.dtype)
     state = gp.fit(
-      x, log_d, mask, k_fit, kernel=config.kernel, n_restarts=config.fit_restarts,
-      maxiter=config.fit_maxiter, init_params=init_params,
-      noise_prior=config.noise_prior,
-    )  # fmt: skip
+      x, log_d, mask, k_fit, init_params=gp.params_from_array(init_params), **fit_kw
+    )
     lik = likelihood(state, pts, **lik_kw)
     log_post = log_normalise(log_prior + lik.log_lik)
     samples = sample_grid(k_sample, pts, log_post, config.grid, config.samples)
     idx = maxvar_batch(state, pts, log_prior, lik.floor, n_explore, **lik_kw)
-    width = 2.0 / jnp.asarray(config.grid, x.dtype)
-    jitter = jax.random.uniform(k_jit, (n_explore, config.d), x.dtype) - 0.5
-    explore = jnp.clip(pts[idx] + jitter * width, -1.0, 1.0)
-    best = jnp.tile(pts[jnp.argmax(log_post)], (config.replicates, 1))
     return Step(
-      jnp.concatenate([explore, best]), samples, log_post, lik.log_lik,
-      state.params, lik.noise_sd, lik.floor, lik.mean, lik.var,
+      _batch(config, pts, idx, log_post, k_jit), samples, log_post, lik.log_lik,
+      gp.params_to_array(state.params), lik.noise_sd, lik.floor, lik.mean, lik.var,
     )  # fmt: skip
 
   return jax.jit(step)
+
+
+def _synthetic_step(config, points, n_explore, fit_kw, x, r, mask, key, log_prior,
+                    init_params) -> Step:  # fmt: skip
+  """``make_step``'s step for the 'synthetic' likelihood (``bo.synthetic``)."""
+  k_fit, k_sample, k_jit = jax.random.split(key, 3)
+  pts = points.astype(x.dtype)
+  states = synthetic.fit(x, r, mask, k_fit, init_params, **fit_kw)
+  cov = synthetic.noise_cov(states, r, mask, config.kernel)
+  mean, var = synthetic.emulate(states, pts, config.kernel)
+  log_lik = config.sharpness * synthetic.moments(mean, var, cov)[0]
+  log_post = log_normalise(log_prior + log_lik)
+  samples = sample_grid(k_sample, pts, log_post, config.grid, config.samples)
+  idx = synthetic.maxvar_batch(
+    states, pts, log_prior, mean, var, cov, n_explore, kernel=config.kernel
+  )
+  return Step(
+    _batch(config, pts, idx, log_post, k_jit), samples, log_post, log_lik,
+    jnp.stack([gp.params_to_array(s.params) for s in states]),
+    jnp.sqrt(jnp.diag(cov)), jnp.zeros((), x.dtype), mean, var,
+  )  # fmt: skip
 
 
 class State(NamedTuple):
@@ -360,10 +394,12 @@ class Result(NamedTuple):
     log_post: (G,) log posterior mass per grid cell (``grid_points(grid)``).
     log_lik: (G,) log likelihood per cell.
     grid: cells per dimension.
-    noise_sd: the fitted scatter of log discrepancy.
-    floor: the lowest GP mean of log discrepancy.
-    mean, var: (G,) the GP's mean and latent variance per cell.
-    X, Y: every evaluation.
+    noise_sd: the fitted scatter of log discrepancy; (k,) of each summary
+      for 'synthetic'.
+    floor: the lowest GP mean of log discrepancy (0 for 'synthetic').
+    mean, var: (G,) the GP's mean and latent variance per cell; (G, k) for
+      'synthetic'.
+    X, Y: every evaluation (Y (n, k) residuals for 'synthetic').
     n_iter: iterations run.
     stopped_early: the stopping rule ended it.
   """
@@ -372,7 +408,7 @@ class Result(NamedTuple):
   log_post: np.ndarray
   log_lik: np.ndarray
   grid: tuple[int, ...]
-  noise_sd: float
+  noise_sd: float | np.ndarray
   floor: float
   mean: np.ndarray
   var: np.ndarray
@@ -392,7 +428,9 @@ class PosteriorSearch:
 
   ``ask`` returns the initial design (``x0`` rows, then scrambled Halton
   points), then each iteration's ``q`` candidates; ``tell`` records their
-  discrepancies (non-finite: the simulation failed) and saves the state.
+  discrepancies (non-finite: the simulation failed), or with the
+  'synthetic' likelihood their summary residuals ``(q, k)``, and saves the
+  state.
   The search ends after ``n_iter`` iterations, or once the posterior's 5, 50
   and 95% quantiles have moved less than ``stop_tol`` (in unit-cube units) in
   every dimension for ``stop_window`` iterations, but not before
@@ -419,6 +457,8 @@ class PosteriorSearch:
       raise ValueError(f'need n_init >= 1 and n_iter >= 0, got {n_init}, {n_iter}')
     if len(config.grid) != config.d:
       raise ValueError(f'grid {config.grid} is not {config.d}-dimensional')
+    if config.summaries < 1:
+      raise ValueError(f'need summaries >= 1, got {config.summaries}')
     self.config = config
     self.d = config.d
     self.n_init, self.n_iter = n_init, n_iter
@@ -444,14 +484,16 @@ class PosteriorSearch:
 
   def start(self) -> State:
     """A fresh state, or the one saved at ``state_path`` (resume)."""
-    empty = State(np.zeros((0, self.d)), np.zeros(0), 0, np.zeros((0, 3, self.d)))
+    empty = State(
+      np.zeros((0, self.d)), np.zeros((0, *self._y_shape)), 0, np.zeros((0, 3, self.d))
+    )
     if self.state_path is None or not os.path.exists(self.state_path):
       return empty
     s = _load(self.state_path)
     if str(s['signature']) != self.signature:
       raise ValueError(f'{self.state_path} was written by a run with other settings.')
     state = State(
-      s['X'], s['Y'], int(s['iteration']), s['history'].reshape(-1, 3, self.d),
+      s['X'], s['Y'].reshape(-1, *self._y_shape), int(s['iteration']), s['history'].reshape(-1, 3, self.d),
       s['params'] if s['params'].size else None,
     )  # fmt: skip
     return state._replace(stopped=self._rule(state))
@@ -459,25 +501,43 @@ class PosteriorSearch:
   def done(self, state: State) -> bool:
     return state.X.shape[0] > 0 and (state.stopped or state.iteration >= self.n_iter)
 
+  @property
+  def _synthetic(self) -> bool:
+    return self.config.likelihood == 'synthetic'
+
+  @property
+  def _y_shape(self) -> tuple[int, ...]:
+    """The shape of one evaluation's value: () a discrepancy, (k,) residuals."""
+    return (self.config.summaries,) if self._synthetic else ()
+
+  def _ok(self, y) -> np.ndarray:
+    """(n,) rows of told values that count (a failed simulation's do not)."""
+    y = np.asarray(y)
+    return np.isfinite(y).all(axis=1) if self._synthetic else np.isfinite(y)
+
   def _run_step(self, state: State) -> Step:
     n = state.X.shape[0]
     cap = max(self.capacity, _capacity(n))
     mask = np.zeros(cap, bool)
-    mask[:n] = np.isfinite(state.Y)
+    mask[:n] = self._ok(state.Y)
     x = np.zeros((cap, self.d))
     x[:n] = state.X
-    y = np.zeros(cap)
-    y[:n] = np.log(np.maximum(np.where(mask[:n], state.Y, 1.0), _LOG_FLOOR))
+    y = np.zeros((cap, *self._y_shape))
+    if self._synthetic:
+      y[:n] = np.where(mask[:n, None], state.Y, 0.0)
+    else:
+      y[:n] = np.log(np.maximum(np.where(mask[:n], state.Y, 1.0), _LOG_FLOOR))
     with jax.enable_x64(True), jax.default_device(self.device):
-      init = (
-        gp.default_params(self.d, jnp.float64, self.config.noise_prior)
-        if state.params is None
-        else gp.params_from_array(jnp.asarray(state.params))
-      )
+      init = state.params
+      if init is None:  # the GP prior's medians
+        p = gp.default_params(self.d, jnp.float64, self.config.noise_prior)
+        init = np.tile(gp.params_to_array(p), (*self._y_shape, 1)).reshape(
+          *self._y_shape, -1
+        )
       out = self._step(
         jnp.asarray(x), jnp.asarray(y), jnp.asarray(mask),
         jax.random.fold_in(self._key, state.iteration), jnp.asarray(self.log_prior),
-        init,
+        jnp.asarray(init, jnp.float64),
       )  # fmt: skip
       out = jax.device_get(out)
     return out
@@ -491,21 +551,25 @@ class PosteriorSearch:
       starts = np.zeros((0, self.d)) if self.x0 is None else self.x0[: self.n_init]
       rest = 2.0 * qmc.halton(self.n_init - len(starts), self.d, seed=self.seed) - 1.0
       return np.concatenate([starts, rest]), state
-    if not np.isfinite(state.Y).any():  # every simulation failed: explore
+    if not self._ok(state.Y).any():  # every simulation failed: explore
       u = 2.0 * qmc.halton(self.config.q, self.d, seed=self.seed, skip=n) - 1.0
       return u, state
     out = self._run_step(state)
-    params = np.asarray(gp.params_to_array(out.params))
+    params = np.asarray(out.params)
     history = np.concatenate([state.history, _quantiles(out.samples)[None]])
     return np.asarray(out.x, np.float64), state._replace(params=params, history=history)
 
   def tell(self, state: State, x, y) -> State:
-    """Records discrepancies ``y`` of the asked ``x``; saves; applies the rule."""
+    """Records discrepancies ``y (q,)`` (residuals ``(q, k)`` for
+    'synthetic') of the asked ``x``; saves; applies the rule."""
     x = np.asarray(x, np.float64).reshape(-1, self.d)
-    y = np.asarray(y, np.float64).reshape(-1)
+    y = np.asarray(y, np.float64).reshape(-1, *self._y_shape)
     if y.shape[0] != x.shape[0]:
       raise ValueError(f'{y.shape[0]} values for {x.shape[0]} points.')
-    y = np.where(np.isfinite(y) & (y >= 0), y, np.nan)
+    if self._synthetic:  # a failed simulation's whole row
+      y = np.where(self._ok(y)[:, None], y, np.nan)
+    else:
+      y = np.where(np.isfinite(y) & (y >= 0), y, np.nan)
     first = state.X.shape[0] == 0
     state = state._replace(
       X=np.concatenate([state.X, x]), Y=np.concatenate([state.Y, y])
@@ -520,12 +584,14 @@ class PosteriorSearch:
 
   def result(self, state: State) -> Result:
     """The posterior given every evaluation so far (one more GP fit)."""
-    if not np.isfinite(state.Y).any():
+    if not self._ok(state.Y).any():
       raise ValueError('no finite discrepancy: every simulation failed')
     out = self._run_step(state)
     return Result(
       np.asarray(out.samples), np.asarray(out.log_post), np.asarray(out.log_lik),
-      tuple(self.config.grid), float(out.noise_sd), float(out.floor),
+      tuple(self.config.grid),
+      np.asarray(out.noise_sd) if self._synthetic else float(out.noise_sd),
+      float(out.floor),
       np.asarray(out.mean), np.asarray(out.var),
       state.X, state.Y, state.iteration, state.stopped,
     )  # fmt: skip

@@ -56,7 +56,7 @@ DISTANCES = ('energy', 'centroid', 'shape', 'energy+shape')
 SHAPE_DISTANCES = ('shape', 'energy+shape')
 EMBEDDING_DISTANCES = ('energy', 'centroid', 'energy+shape')
 POINTS = ('median', 'bayes', 'argmin')
-LIKELIHOODS = ('gibbs', 'threshold')
+LIKELIHOODS = ('gibbs', 'threshold', 'synthetic')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,11 +95,15 @@ class EstimateConfig:
     min_iter: iterations before the stopping rule is checked.
     posterior_grid: posterior grid cells per dimension (bending, wind, area
       weight).
-    likelihood: the posterior's approximate likelihood, 'gibbs' or
-      'threshold' (BOLFI's; see bo.posterior).
+    likelihood: the posterior's approximate likelihood from the
+      discrepancy, 'gibbs' or 'threshold' (BOLFI's; see bo.posterior); or,
+      with ``distance='shape'``, 'synthetic': GP emulators of the shape
+      summary's two components and the Gaussian likelihood their scatter
+      implies (bo.synthetic).
     sharpness: the likelihood's constant, calibrated on simulations
       (experiments/calibrate.py; docs/calibration.md): the default is the
-      value the shipped calibration chose.
+      value the shipped calibration chose. For 'synthetic', the exponent
+      that tempers its likelihood (1: untempered).
     replicates: candidates per iteration that repeat the most probable cell
       with fresh randomness (they measure the simulator's noise).
     distance: the discrepancy of a candidate's frames to the recording's: the
@@ -195,6 +199,11 @@ class EstimateConfig:
       raise ValueError(
         f'need a posterior_grid of 3 sizes >= 2 and sharpness > 0, got {self.posterior_grid}, '
         f'{self.sharpness}'
+      )
+    if self.likelihood == 'synthetic' and self.distance != 'shape':
+      raise ValueError(
+        "likelihood 'synthetic' models the shape summary: it needs "
+        f"distance 'shape', got {self.distance!r}"
       )
     if self.posterior and not 0 <= self.replicates < self.q:
       raise ValueError(f'need 0 <= replicates < q, got {self.replicates}, {self.q}')
@@ -416,12 +425,16 @@ class Scores(NamedTuple):
       problem's lowest-PSD candidate, camera 0, as its network saw them; or
       None when not asked.
     positions: (P, q, T, V, 3) simulated vertex positions, or None.
+    residual: (P, q, 2) float64 the candidates' ``physsim.shape.summary``
+      minus the recording's (NaN where the PSD is; zeros without a shape
+      distance): what the 'synthetic' likelihood is told.
   """
 
   psd: np.ndarray
   valid: np.ndarray
   frames: np.ndarray | None = None
   positions: np.ndarray | None = None
+  residual: np.ndarray | None = None
 
 
 class Objective:
@@ -488,8 +501,10 @@ class Objective:
 
   def _worlds(self, data: ProblemData, x, ratio, gust_keys, owner, noise_keys):
     """One device's worlds: simulate, render, sense, embed and score each
-    against its problem's recording. Returns PSDs (B,), validity (B,) and
-    positions (B, T, V, 3) (the rest mesh where a world blew up)."""
+    against its problem's recording. Returns PSDs (B,), the shape summaries'
+    residuals to the recording's (B, 2) (zeros without a shape distance),
+    validity (B,) and positions (B, T, V, 3) (the rest mesh where a world
+    blew up)."""
     w = physsim.world_inputs(
       self.cloth, x[:, 0], x[:, 1], x[:, 2], gust_keys, self._wind, ratio
     )
@@ -512,7 +527,7 @@ class Objective:
         pos[None], jax.tree.map(lambda a: a[None], seen_from), key[None],
         data.color[i][None],
       )[0]  # fmt: skip
-      d = []
+      d, resid = [], jnp.zeros(len(physsim.shape.SUMMARY), jnp.float32)
       if kind in EMBEDDING_DISTANCES:  # embed with its problem's net, PSD
         x = embedding.network_inputs(frames, net.modality, net.input_mode)
         params = jax.tree.map(lambda a: a[i], data.params)
@@ -526,12 +541,16 @@ class Objective:
         cam = jax.tree.map(lambda a: a[0], pose)
         s = physsim.shape.summary(frames[0], self._intr, cam)
         d.append(physsim.shape.summary_distance(s, data.rec_shape[i]))
-      return d[0] if len(d) == 1 else model_lib.psd.geometric_mean(jnp.stack(d))
+        resid = s - data.rec_shape[i]
+      d = d[0] if len(d) == 1 else model_lib.psd.geometric_mean(jnp.stack(d))
+      return d, resid
 
     # Worlds in chunks sized from free memory: the network's activations of
     # every frame at once would not fit (paper size: ~8 MB per frame).
-    d = jax.lax.map(score, (owner, positions, noise_keys), batch_size=self._chunk)
-    return d, valid, positions
+    d, resid = jax.lax.map(
+      score, (owner, positions, noise_keys), batch_size=self._chunk
+    )
+    return d, resid, valid, positions
 
   def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
              with_positions):  # fmt: skip
@@ -545,13 +564,14 @@ class Objective:
     worlds = physsim.devices.shard_worlds(
       self._worlds, self.world_mesh, replicated=(0,)
     )
-    d, valid, positions = worlds(
+    d, resid, valid, positions = worlds(
       data, x, ratio, gust_keys.reshape(-1), owner, noise_keys
     )
     d = d.reshape(p, q)
     ok = valid.reshape(p, q) & jnp.isfinite(d)
     d = jnp.where(ok, d, jnp.nan)
-    out = {'psd': d, 'valid': valid.reshape(p, q)}
+    resid = jnp.where(ok[..., None], resid.reshape(p, q, -1), jnp.nan)
+    out = {'psd': d, 'residual': resid, 'valid': valid.reshape(p, q)}
     if with_frames:  # the best candidate of each problem, rendered again (same keys)
       best = jnp.arange(p) * q + jnp.argmin(jnp.where(ok, d, jnp.inf), axis=1)
       frames = self._frames(
@@ -604,6 +624,7 @@ class Objective:
       np.asarray(out['valid']),
       out.get('frames'),
       out.get('positions'),
+      np.asarray(out['residual'], np.float64),
     )
 
 

@@ -94,6 +94,7 @@ def posterior_config(config: EstimateConfig) -> bo.PosteriorConfig:
   return bo.PosteriorConfig(
     d=3, grid=tuple(config.posterior_grid), q=config.q, replicates=config.replicates,
     likelihood=config.likelihood, sharpness=config.sharpness,
+    summaries=len(physsim.shape.SUMMARY) if config.likelihood == 'synthetic' else 1,
   )  # fmt: skip
 
 
@@ -161,6 +162,14 @@ def check_run(job: Job, problem) -> None:
   files.write_json(path, run)
 
 
+def discrepancies(y) -> np.ndarray:
+  """(n,) each evaluation's discrepancy from what its search was told: the
+  discrepancy itself, or for the 'synthetic' likelihood's residuals ``(n, k)``
+  their squared length (the shape distance; NaN: failed)."""
+  y = np.asarray(y, np.float64)
+  return np.sum(y**2, axis=1) if y.ndim == 2 else y
+
+
 @dataclasses.dataclass
 class _Search:
   """One job's search as it advances (``state`` and ``best`` change)."""
@@ -176,7 +185,8 @@ class _Search:
 
   def argmin(self) -> tuple[np.ndarray, float]:
     """The lowest-PSD candidate so far and its PSD (inf: none finite)."""
-    y = np.where(np.isfinite(self.state.Y), self.state.Y, np.inf)
+    y = discrepancies(self.state.Y)
+    y = np.where(np.isfinite(y), y, np.inf)
     if not len(y) or not np.isfinite(y).any():
       return np.full(3, np.nan), float('inf')
     i = int(np.argmin(y))
@@ -248,6 +258,7 @@ class Evaluator:
           s.psd[r, :n], s.valid[r, :n],
           None if s.frames is None else s.frames[r],
           None if s.positions is None else s.positions[r, :n],
+          None if s.residual is None else s.residual[r, :n],
         )  # fmt: skip
     return out
 
@@ -418,7 +429,8 @@ def estimate_many(
     t2 = time.perf_counter()
     for s, x, sc in zip(active, asked, scores, strict=True):
       s.best.update(x, sc.psd, sc.frames)
-      s.state = s.opt.tell(s.state, x, sc.psd)
+      told = sc.residual if jobs[s.index].config.likelihood == 'synthetic' else sc.psd
+      s.state = s.opt.tell(s.state, x, told)
     ended = [s for s in active if s.done()]
     if progress:
       if len(active) == 1:
@@ -489,7 +501,7 @@ def write_result(
     },
     'psd_best': float(y_best),
     'evaluations': int(len(res.Y)),
-    'failed_evaluations': int(np.sum(~np.isfinite(res.Y))),
+    'failed_evaluations': int(np.sum(~np.isfinite(discrepancies(res.Y)))),
     'iterations': int(res.n_iter),
     'stopped_by_rule': bool(res.stopped_early),
     **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
@@ -508,7 +520,12 @@ def write_result(
   n_init = config.n_init
   iteration = report.iterations_of(len(res.Y), n_init, config.q)
   report.plot_trace(
-    res.X, res.Y, iteration, space, recording.truth, os.path.join(workdir, 'trace.png')
+    res.X,
+    discrepancies(res.Y),
+    iteration,
+    space,
+    recording.truth,
+    os.path.join(workdir, 'trace.png'),
   )
   report.plot_montage(
     recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
@@ -578,7 +595,12 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
     'point_unit': np.ravel(median).tolist(),
     'estimate': estimate,
     'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
-    'noise_sd_log_psd': res.noise_sd,
+    'noise_sd_log_psd': None if config.likelihood == 'synthetic' else res.noise_sd,
+    **(
+      {'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()}
+      if config.likelihood == 'synthetic'
+      else {}
+    ),
     'interval_meaning': 'central credible intervals of the posterior given the '
     'video (and any measured wind or area weight)'
     + (

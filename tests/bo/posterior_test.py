@@ -77,7 +77,7 @@ def test_variance_update_equals_refitting_with_the_point():
     _, var = gp.posterior(state, xq)
     c = xq[17]
     sn2 = jnp.exp(state.params.log_noise) * state.y_scale**2
-    cov = posterior._posterior_cov(state, xq, c, 'matern52') * state.y_scale**2
+    cov = gp.posterior_cov(state, xq, c, kernel='matern52') * state.y_scale**2
     updated = var - cov**2 / (var[17] + sn2)
     x2, y2, m2 = x.at[12].set(c), y.at[12].set(123.0), mask.at[12].set(True)
     refit = gp.condition(state.params, x2, y2, m2, kernel='matern52')

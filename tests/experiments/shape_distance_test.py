@@ -10,13 +10,15 @@ PSD from its own program.
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 
 import jax
 import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import embedding, report
+from experiments.pipeline import embedding, report, search
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -32,6 +34,7 @@ _SHAPE_ATOL = 1e-8
 # The truth's discrepancy: the recording went through 16-bit mm PNGs.
 _TRUTH_SHAPE_MAX = 1e-6  # m^2, a 1 mm centroid difference
 _MEAN_RTOL = 1e-4
+_RESIDUAL_ATOL_M = 1e-5  # float32 centroids of points ~2 m away
 _CAMERA_SD_M, _CAMERA_SD_DEG = 0.05, 3.0
 
 
@@ -39,8 +42,9 @@ _CAMERA_SD_M, _CAMERA_SD_DEG = 0.05, 3.0
 def env(tmp_path_factory):
   root = str(tmp_path_factory.mktemp('shape'))
   seq = write_recording(root, TRUTH)
-  net = embedding.load_embedding(write_hand_made_model(f'{root}/model'))
-  return dict(rec=load(seq), net=net)
+  model_dir = write_hand_made_model(f'{root}/model')
+  net = embedding.load_embedding(model_dir)
+  return dict(rec=load(seq), net=net, model_dir=model_dir)
 
 
 def _scores(env, distance: str, u, frames: bool = False):
@@ -71,6 +75,12 @@ def test_shape_distance_is_the_summaries_squared_distance(env):
   )  # fmt: skip
   assert want > 100 * _TRUTH_SHAPE_MAX  # a weaker wind sits elsewhere
   np.testing.assert_allclose(out.psd[0, 0], want, rtol=1e-3, atol=_SHAPE_ATOL)
+  # The residual the 'synthetic' likelihood is told: the same summaries' difference.
+  resid = reference_summary(out.frames[0], intr, pose) - reference_summary(
+    env['rec'].depth, intr, pose
+  )
+  np.testing.assert_allclose(out.residual[0, 0], resid, atol=_RESIDUAL_ATOL_M)
+  assert not np.any(_scores(env, 'energy', far)[0].residual)  # no shape: zeros
 
 
 def test_energy_plus_shape_is_the_geometric_mean(env):
@@ -123,6 +133,38 @@ def test_a_misplaced_camera_renders_from_its_error(env):
     want.append(np.sum((got - rec_summary) ** 2))
   assert min(want) > 10 * _TRUTH_SHAPE_MAX
   np.testing.assert_allclose(out.psd[0], want, rtol=1e-3, atol=_SHAPE_ATOL)
+
+
+def test_the_synthetic_likelihood_needs_the_shape_distance():
+  with pytest.raises(ValueError, match="synthetic.*distance 'shape', got 'energy'"):
+    dataclasses.replace(CONFIG, likelihood='synthetic').check()
+  dataclasses.replace(CONFIG, likelihood='synthetic', distance='shape').check()
+
+
+def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
+  # The whole estimate, told the shape summaries' residuals: the saved search
+  # holds one residual pair per simulation (the objective's), its posterior
+  # narrows the wind around the truth, and the result names the scatter.
+  config = dataclasses.replace(
+    obj_lib.PRESETS['smoke'], backend='c', distance='shape', likelihood='synthetic',
+    sharpness=1.0,
+  )  # fmt: skip
+  config = dataclasses.replace(config, cloth_resolution=CONFIG.cloth_resolution,
+                               frames=CONFIG.frames, warmup=CONFIG.warmup)  # fmt: skip
+  workdir = str(tmp_path / 'est')
+  out = search.estimate(config, env['rec'], env['model_dir'], workdir, progress=False)
+  z = np.load(os.path.join(workdir, search.POSTERIOR_STATE))
+  n = config.n_init + config.q * config.max_iter
+  assert z['Y'].shape == (n, 2) and np.isfinite(z['Y']).all()
+  problem = obj_lib.make_problem(config, env['net'], env['rec'])
+  again = search.score(problem, z['X'][:1])  # the first simulation, rescored
+  np.testing.assert_allclose(again.residual[0], z['Y'][0], atol=_RESIDUAL_ATOL_M)
+  wind = out['estimate']['wind_speed']
+  assert wind['narrowing_90'] > 1.5, wind
+  assert wind['interval_90'][0] <= TRUTH['wind_speed'] <= wind['interval_90'][1]
+  saved = json.load(open(os.path.join(workdir, search.ESTIMATE_FILE)))
+  assert len(saved['noise_sd_shape_m']) == 2 and saved['noise_sd_log_psd'] is None
+  assert 0 < min(saved['noise_sd_shape_m']) < 0.05  # metres of centroid scatter
 
 
 def test_camera_error_out_of_range_is_refused():
