@@ -62,7 +62,10 @@ from bo.loop import _capacity, _load, _save
 # median 0.05 (a noise sd of ~22% of the log discrepancy's spread over the
 # box), wide. Replicates in every batch pin it down.
 NOISE_PRIOR = (math.log(0.05), 1.5)
-LIKELIHOODS = ('gibbs', 'threshold', 'synthetic')
+# Likelihoods of one discrepancy (formed again from a saved GP: log_likelihood),
+# and all a search can use ('synthetic': bo.synthetic, from summaries).
+DISCREPANCY_LIKELIHOODS = ('gibbs', 'threshold')
+LIKELIHOODS = (*DISCREPANCY_LIKELIHOODS, 'synthetic')
 # Floor on discrepancies before the log (a perfect match is 0).
 _LOG_FLOOR = 1e-12
 # Gauss-Hermite nodes (probabilists') for averages over the GP's uncertainty.
@@ -83,7 +86,7 @@ def log_l(f, floor, sn, form: str = 'gibbs', sharpness: float = 1.0):
     return -sharpness * jnp.expm1(f - floor) / sn
   if form == 'threshold':
     return log_ndtr((floor + sharpness * sn - f) / sn)
-  raise ValueError(f'likelihood must be one of {LIKELIHOODS}, got {form!r}')
+  raise ValueError(f'likelihood must be one of {DISCREPANCY_LIKELIHOODS}, got {form!r}')
 
 
 def _moments(mean, var, floor, sn, form, sharpness):

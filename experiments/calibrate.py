@@ -26,6 +26,7 @@ import shutil
 
 from absl import logging
 
+import bo
 from experiments.pipeline import cli, distributed, report
 from experiments.studies import calibration
 
@@ -62,6 +63,11 @@ PRESETS = {k: Args(study=v) for k, v in calibration.PRESETS.items()}
 
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
+  if args.study.estimate.likelihood not in bo.posterior.DISCREPANCY_LIKELIHOODS:
+    raise ValueError(
+      f'--likelihood={args.study.estimate.likelihood}: the calibration re-reads '
+      f'likelihoods of one discrepancy ({", ".join(bo.posterior.DISCREPANCY_LIKELIHOODS)})'
+    )
   if args.check:
     if args.install or args.simulate_only:
       raise ValueError(

@@ -662,7 +662,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   everyone = {r['seq'] for r in runs}
   sweep, best, fold_choice, cross, never_under, by_fold = {}, {}, {}, {}, {}, {}
   levels = [lv / 100 for lv in LEVELS]
-  for form in bo.posterior.LIKELIHOODS:
+  for form in bo.posterior.DISCREPANCY_LIKELIHOODS:
     by_c = {c: posteriors(config, runs, form, c) for c in config.sharpness_grid}
     sweep[form] = {}
     for c, scores in by_c.items():
