@@ -165,8 +165,9 @@ def main(args: Args) -> None:
   warning = report.shape_camera_warning(
     config, any(_needs_intake(args, p) for p in args.recording)
   )
-  if warning:
-    print(warning)
+  for line in (warning, report.synthetic_warning(config)):
+    if line:
+      print(line)
   if len(recs) > 1:
     result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
     print(report.joint_table(result))

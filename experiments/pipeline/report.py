@@ -504,3 +504,18 @@ def shape_camera_warning(config, aligned: bool) -> str | None:
     '--camera_sd_deg=0 the posterior trusts that placement exactly. Give its '
     'error, e.g. --camera_sd_m=0.02 --camera_sd_deg=3'
   )
+
+
+def synthetic_warning(config) -> str | None:
+  """The line ``estimate`` prints for the 'synthetic' likelihood (else None):
+  it takes the recording's scatter to be the simulator's, and on real-like
+  recordings, whose set-up differs, its intervals were too narrow
+  (BENCHMARKS.md)."""
+  if config.likelihood != 'synthetic':
+    return None
+  return (
+    'warning: --likelihood=synthetic trusts the simulator to scatter as your '
+    'recording does; on real-like recordings its 90% intervals held the wind and '
+    "the load ratio only 50-67% of the time (the default 'gibbs' 83%): for "
+    'comparisons, not for intervals you report'
+  )

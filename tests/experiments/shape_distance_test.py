@@ -165,6 +165,8 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   saved = json.load(open(os.path.join(workdir, search.ESTIMATE_FILE)))
   assert len(saved['noise_sd_shape_m']) == 2 and saved['noise_sd_log_psd'] is None
   assert 0 < min(saved['noise_sd_shape_m']) < 0.05  # metres of centroid scatter
+  assert report.synthetic_warning(config).startswith('warning: --likelihood=synthetic')
+  assert report.synthetic_warning(CONFIG) is None
 
 
 def test_camera_error_out_of_range_is_refused():
