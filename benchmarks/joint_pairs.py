@@ -55,6 +55,9 @@ flags.DEFINE_enum(
 flags.DEFINE_float(
   'sharpness', 0.0, "the likelihood's constant (0: the preset's)", lower_bound=0.0
 )
+flags.DEFINE_float(
+  'gusts', 0.0, "the simulations' gust intensity (0: the preset's)", lower_bound=0.0
+)
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 flags.DEFINE_float(
@@ -62,7 +65,7 @@ flags.DEFINE_float(
 )
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
-              'distance', 'likelihood', 'sharpness', 'backend', 'seconds')  # fmt: skip
+              'distance', 'likelihood', 'sharpness', 'gusts', 'backend', 'seconds')  # fmt: skip
 
 
 def _recordings(workdir: str, size: int) -> list[list[dict]]:
@@ -127,6 +130,7 @@ def main(argv):
     **({'distance': FLAGS.distance} if FLAGS.distance else {}),
     **({'likelihood': FLAGS.likelihood} if FLAGS.likelihood else {}),
     **({'sharpness': FLAGS.sharpness} if FLAGS.sharpness else {}),
+    **({'gusts': FLAGS.gusts} if FLAGS.gusts else {}),
   )  # fmt: skip
   config.check()  # e.g. the synthetic likelihood without the shape distance
   if FLAGS.seconds:  # compare the whole clip
