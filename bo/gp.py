@@ -337,3 +337,8 @@ def posterior_cov(state: GPState, xq: jnp.ndarray, xc: jnp.ndarray, *, kernel: s
   kc = jnp.where(state.mask, s2 * k(xc[None], state.x, ls)[0], 0.0)  # (cap,)
   vc = jax.scipy.linalg.cho_solve((state.chol, True), kc)
   return s2 * k(xq, xc[None], ls)[:, 0] - kq @ vc
+
+
+def noise_sd(state: GPState) -> jnp.ndarray:
+  """The fitted noise standard deviation in the units of the raw targets."""
+  return jnp.exp(0.5 * state.params.log_noise) * state.y_scale

@@ -120,10 +120,6 @@ class Likelihood(NamedTuple):
   floor: jax.Array
 
 
-def _noise_sd(state: gp.GPState):
-  return jnp.exp(0.5 * state.params.log_noise) * state.y_scale
-
-
 def log_likelihood(mean, var, floor, noise_sd, *, form='gibbs', sharpness=1.0):
   """(G,) log E_f[L] from the GP's mean and latent variance of log
   discrepancy per point (e.g. a saved ``Result``'s), for any likelihood;
@@ -163,7 +159,7 @@ def likelihood(
   """The likelihood at points ``xq (G, d)``, averaged over the GP; its floor
   is the lowest GP mean over ``xq`` (dense points, e.g. the grid)."""
   mean, var = gp.posterior(state, xq, kernel=kernel)
-  sn = _noise_sd(state)
+  sn = gp.noise_sd(state)
   floor = jnp.min(mean)
   log_lik, _ = _moments(mean, var, floor, sn, form, sharpness)
   return Likelihood(log_lik, mean, var, sn, floor)
@@ -193,7 +189,7 @@ def maxvar_batch(
     (q,) int indices.
   """
   mean, var = gp.posterior(state, xq, kernel=kernel)
-  sn = _noise_sd(state)
+  sn = gp.noise_sd(state)
 
   def log_acq(s2):
     log_m1, log_m2 = _moments(mean, s2, floor, sn, form, sharpness)
@@ -496,7 +492,8 @@ class PosteriorSearch:
     if str(s['signature']) != self.signature:
       raise ValueError(f'{self.state_path} was written by a run with other settings.')
     state = State(
-      s['X'], s['Y'].reshape(-1, *self._y_shape), int(s['iteration']), s['history'].reshape(-1, 3, self.d),
+      s['X'], s['Y'].reshape(-1, *self._y_shape), int(s['iteration']),
+      s['history'].reshape(-1, 3, self.d),
       s['params'] if s['params'].size else None,
     )  # fmt: skip
     return state._replace(stopped=self._rule(state))

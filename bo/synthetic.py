@@ -63,11 +63,6 @@ def moments(mean, var, cov):
   return log_m1, jnp.maximum(log_m2, 2.0 * log_m1)  # Var >= 0 despite rounding
 
 
-def noise_sd(state: gp.GPState):
-  """The GP's noise sd in the units of its raw targets."""
-  return jnp.exp(0.5 * state.params.log_noise) * state.y_scale
-
-
 def fit(x, r, mask, key, init, *, kernel, n_restarts, maxiter, noise_prior):
   """One GP per residual component: ``r (cap, k)``; ``init (k, P)`` flat
   warm-start hyperparameters. Returns a list of k ``gp.GPState``."""
@@ -91,7 +86,7 @@ def fit(x, r, mask, key, init, *, kernel, n_restarts, maxiter, noise_prior):
 def noise_cov(states, r, mask, kernel: str):
   """(k, k) covariance of the simulator's scatter of the summaries: the GPs'
   noise variances, correlated as their residuals about the GP means are."""
-  sd = jnp.stack([noise_sd(s) for s in states])
+  sd = jnp.stack([gp.noise_sd(s) for s in states])
   e = jnp.stack([
     jnp.where(mask, r[:, j] - gp.posterior(s, s.x, kernel=kernel)[0], 0.0)
     for j, s in enumerate(states)
@@ -116,7 +111,7 @@ def maxvar_batch(states, xq, log_prior, mean, var, cov, q: int, *, kernel: str):
   """Indices into ``xq`` of ``q`` greedy MaxVar picks of the synthetic
   likelihood: the point of largest ``prior^2 Var_g[L]``, each pick lowering
   every component's GP variance around it as if it had been observed."""
-  sn2 = jnp.stack([noise_sd(s) ** 2 for s in states])  # (k,)
+  sn2 = jnp.stack([gp.noise_sd(s) ** 2 for s in states])  # (k,)
 
   def pick(v, _):
     log_m1, log_m2 = moments(mean, v, cov)

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import bo
 import model as model_lib
 import physsim
 from experiments.pipeline import cli, embedding
@@ -56,7 +57,7 @@ DISTANCES = ('energy', 'centroid', 'shape', 'energy+shape')
 SHAPE_DISTANCES = ('shape', 'energy+shape')
 EMBEDDING_DISTANCES = ('energy', 'centroid', 'energy+shape')
 POINTS = ('median', 'bayes', 'argmin')
-LIKELIHOODS = ('gibbs', 'threshold', 'synthetic')
+LIKELIHOODS = bo.posterior.LIKELIHOODS
 
 
 @dataclasses.dataclass(frozen=True)
