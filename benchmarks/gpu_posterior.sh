@@ -36,7 +36,8 @@
 #                weight, a 2% anemometer reading at each, every search in lockstep,
 #                then each group's joint posterior (DISTANCE, LIKELIHOOD and
 #                SHARPNESS as for coverage; GUSTS the simulations' gust intensity;
-#                SECONDS_CLIP: each recording's length, s, the estimate's too).
+#                SECONDS_CLIP: each recording's length, s, the estimate's too;
+#                CLOTH: the simulations' cloth vertices per side, 33 as the recordings').
 # Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
@@ -158,12 +159,12 @@ case "$stage" in
     ;;
   joint)
     pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
-    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${GUSTS:+_g$GUSTS}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
+    name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${GUSTS:+_g$GUSTS}${CLOTH:+_c$CLOTH}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
     python benchmarks/joint_pairs.py --model="$R/t1/physnet_depth/simulation/$GI" \
       --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
       ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} \
       ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} ${SHARPNESS:+--sharpness=$SHARPNESS} \
-      ${GUSTS:+--gusts=$GUSTS} \
+      ${GUSTS:+--gusts=$GUSTS} ${CLOTH:+--cloth_resolution=$CLOTH} \
       ${SECONDS_CLIP:+--seconds=$SECONDS_CLIP} 2>&1 | tail -12 \
       | tee "$OUT/$name.log"
     cp "$R/$name/joint_pairs.json" "$OUT/$name.json"

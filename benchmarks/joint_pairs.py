@@ -59,13 +59,20 @@ flags.DEFINE_float(
   'gusts', 0.0, "the simulations' gust intensity (0: the preset's)", lower_bound=0.0
 )
 flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
+flags.DEFINE_integer(
+  'cloth_resolution',
+  0,
+  "the simulations' cloth vertices per side (0: the preset's; the recordings have 33)",
+  lower_bound=0,
+)
 flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 flags.DEFINE_float(
   'seconds', 0.0, "each recording's length, s (0: the recipe's)", lower_bound=0.0
 )
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
-              'distance', 'likelihood', 'sharpness', 'gusts', 'backend', 'seconds')  # fmt: skip
+              'distance', 'likelihood', 'sharpness', 'gusts', 'cloth_resolution', 'backend',
+              'seconds')  # fmt: skip
 
 
 def _recordings(workdir: str, size: int) -> list[list[dict]]:
@@ -131,6 +138,7 @@ def main(argv):
     **({'likelihood': FLAGS.likelihood} if FLAGS.likelihood else {}),
     **({'sharpness': FLAGS.sharpness} if FLAGS.sharpness else {}),
     **({'gusts': FLAGS.gusts} if FLAGS.gusts else {}),
+    **({'cloth_resolution': FLAGS.cloth_resolution} if FLAGS.cloth_resolution else {}),
   )  # fmt: skip
   config.check()  # e.g. the synthetic likelihood without the shape distance
   if FLAGS.seconds:  # compare the whole clip
@@ -189,6 +197,9 @@ def main(argv):
         'truth': t,
         'reading': list(winds[k]),
         'alone': {n: _error(one[n], t[n]) for n in NAMES},
+        # the points themselves, for their bias (signed error)
+        'alone_point': {n: float(one[n]) for n in NAMES},
+        'joint_point': {n: float(joint[n]['bayes']) for n in NAMES},
         'joint': {n: _error(joint[n]['bayes'], t[n]) for n in NAMES},
         'joint_median': {n: _error(joint[n]['median'], t[n]) for n in NAMES},
         'centre': {n: _error(guess[n], t[n]) for n in NAMES},
@@ -244,6 +255,13 @@ def main(argv):
   print("90% intervals' narrowing (prior width over posterior width), one recording / "
         'the group: ' + ', '.join(f"{n} x{nar['alone'][n]:.2f} / x{nar['joint'][n]:.2f}"
                                   for n in NAMES[:2]))  # fmt: skip
+  # bias: the mean signed log error of the group's point, percent
+  summary['joint_bias'] = {
+    n: float(100 * np.mean([np.log(r['joint_point'][n] / r['truth'][n]) for r in rows]))
+    for n in NAMES
+  }
+  print('joint points, mean signed log error (bias): '
+        + ', '.join(f"{n} {summary['joint_bias'][n]:+.1f}%" for n in NAMES))  # fmt: skip
   cov = summary['joint_covered_90']
   print('joint 90% intervals held the truth: '
         + ', '.join(f'{n} {100 * cov[n]:.0f}%' for n in NAMES))  # fmt: skip
