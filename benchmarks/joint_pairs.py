@@ -12,8 +12,10 @@ Prints, over the recordings, the mean error of area weight, wind and the load
 ratio from one recording with its reading (each joint's ``alone``), from the
 group's first k recordings jointly (posterior median, 2 <= k < group) and from
 the whole group (posterior median and its reported point), beside the range
-centre's; writes JSON. ``--distance`` picks the discrepancy (``shape``:
-where the sheet hangs). A GPU at paper size:
+centre's, and the joint points' bias; writes JSON. ``--distance`` picks the
+discrepancy (``shape``: where the sheet hangs); ``--gusts`` and
+``--cloth_resolution`` set the simulations' gust intensity and mesh (the
+recordings' own: 0.3 and 33). A GPU at paper size:
 
   python benchmarks/joint_pairs.py --model=out/table1/physnet_depth/simulation/gray_interlock \\
       --workdir=/tmp/pairs --pairs=6 [--group=3 --distance=shape]

@@ -1,0 +1,90 @@
+"""Tests for benchmarks/joint_pairs.py on a CPU: one group of two smoke
+recordings with the hand-made embedding, the simulator's mesh and gusts set by
+flag; each error is its point's, checked by hand, and a rerun resumes."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import physsim
+from tests.experiments import estimate_fixtures as fx
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+_EXACT = 1e-9  # errors and bias are recomputed from the same float64 values
+NAMES = ('wind_speed', 'area_weight', 'load_ratio')
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+  env = dict(os.environ, PYTHONPATH=_ROOT)
+  return subprocess.run(
+    [sys.executable, 'benchmarks/joint_pairs.py', *args],
+    cwd=_ROOT, env=env, capture_output=True, text=True, timeout=1800,
+  )  # fmt: skip
+
+
+@pytest.fixture(scope='module')
+def joint_run(tmp_path_factory):
+  root = tmp_path_factory.mktemp('joint_pairs')
+  model = fx.write_hand_made_model(str(root / 'model'))
+  args = (
+    f'--model={model}', f'--workdir={root / "work"}', '--smoke', '--backend=c',
+    '--preset=smoke', '--pairs=1', '--group=2', '--distance=shape',
+    '--gusts=0.3', '--cloth_resolution=8',
+  )  # fmt: skip
+  proc = _run(*args)
+  assert proc.returncode == 0, proc.stderr[-3000:]
+  path = root / 'work' / 'joint_pairs.json'
+  return args, path, json.loads(path.read_text()), proc.stdout
+
+
+@pytest.mark.slow
+def test_errors_are_their_points_and_the_flags_are_recorded(joint_run):
+  _, _, out, stdout = joint_run
+  assert out['flags']['cloth_resolution'] == 8
+  assert out['flags']['gusts'] == pytest.approx(0.3)
+  assert out['flags']['distance'] == 'shape'
+  rows = out['rows']
+  assert len(rows) == 2
+  for r in rows:
+    t = r['truth']
+    assert t['load_ratio'] == pytest.approx(
+      float(physsim.load_ratio(t['wind_speed'], t['area_weight'])), rel=_EXACT
+    )
+    # a 2% anemometer reading: within 5 sd of the truth
+    assert abs(r['reading'][0] / t['wind_speed'] - 1) < 0.1
+    for who in ('alone', 'joint'):
+      for n in NAMES:
+        by_hand = 100 * abs(r[f'{who}_point'][n] / t[n] - 1)
+        assert r[who][n] == pytest.approx(by_hand, rel=_EXACT, abs=_EXACT)
+  # the group shares its area weight: one truth, one joint point
+  assert rows[0]['truth']['area_weight'] == rows[1]['truth']['area_weight']
+  assert rows[0]['joint_point']['area_weight'] == rows[1]['joint_point']['area_weight']
+  s = out['summary']
+  for n in NAMES:
+    bias = 100 * np.mean([np.log(r['joint_point'][n] / r['truth'][n]) for r in rows])
+    assert s['joint_bias'][n] == pytest.approx(bias, rel=_EXACT, abs=_EXACT)
+    assert s['joint'][n] == pytest.approx(np.mean([r['joint'][n] for r in rows]))
+  assert s['joint']['n'] == 2
+  assert 'bias' in stdout and 'range centre' in stdout
+  assert 'step' in stdout  # the searches ran (the resume test relies on it)
+
+
+@pytest.mark.slow
+def test_a_rerun_resumes_to_the_same_result(joint_run):
+  args, path, out, _ = joint_run
+  proc = _run(*args)
+  assert proc.returncode == 0, proc.stderr[-3000:]
+  assert 'step' not in proc.stdout  # every search had ended: nothing simulated
+  assert json.loads(path.read_text())['rows'] == out['rows']
+
+
+def test_a_negative_mesh_is_refused_by_name(tmp_path):
+  proc = _run(f'--model={tmp_path}', f'--workdir={tmp_path}', '--cloth_resolution=-1')
+  assert proc.returncode != 0
+  assert 'cloth_resolution' in proc.stderr
