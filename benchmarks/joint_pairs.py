@@ -194,15 +194,17 @@ def main(argv):
       }
       one = {n: alone[n]['value'] for n in NAMES[:2]}
       one['load_ratio'] = physsim.load_ratio(one['wind_speed'], one['area_weight'])
+      # the points themselves beside their errors, for their bias (signed error)
+      points = {
+        'alone': {n: float(one[n]) for n in NAMES},
+        'joint': {n: float(joint[n]['bayes']) for n in NAMES},
+      }
       row = {
         'seq': group[k]['seq'],
         'truth': t,
         'reading': list(winds[k]),
-        'alone': {n: _error(one[n], t[n]) for n in NAMES},
-        # the points themselves, for their bias (signed error)
-        'alone_point': {n: float(one[n]) for n in NAMES},
-        'joint_point': {n: float(joint[n]['bayes']) for n in NAMES},
-        'joint': {n: _error(joint[n]['bayes'], t[n]) for n in NAMES},
+        **{f'{who}_point': p for who, p in points.items()},
+        **{who: {n: _error(p[n], t[n]) for n in NAMES} for who, p in points.items()},
         'joint_median': {n: _error(joint[n]['median'], t[n]) for n in NAMES},
         'centre': {n: _error(guess[n], t[n]) for n in NAMES},
         'joint_covered_90': {
