@@ -31,7 +31,7 @@
 #                otherwise get the same draw). DISTANCE (e.g. shape, energy+shape)
 #                and SHARPNESS set the estimate's --distance and --sharpness,
 #                LIKELIHOOD (e.g. synthetic) its --likelihood.
-#   joint        after paper: benchmarks/joint_pairs.py, NGROUPS (default 8) groups of
+#   joint        after paper (DISTANCE=shape: needs no network, so no paper stage): benchmarks/joint_pairs.py, NGROUPS (default 8) groups of
 #                GROUP (default 3) real-like recordings sharing bending and area
 #                weight, a 2% anemometer reading at each, every search in lockstep,
 #                then each group's joint posterior (DISTANCE, LIKELIHOOD and
@@ -160,7 +160,9 @@ case "$stage" in
   joint)
     pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
     name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${GUSTS:+_g$GUSTS}${CLOTH:+_c$CLOTH}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
-    python benchmarks/joint_pairs.py --model="$R/t1/physnet_depth/simulation/$GI" \
+    model="--model=$R/t1/physnet_depth/simulation/$GI"
+    [ "${DISTANCE:-}" = shape ] && model="--image_size=$([ -n "${SMOKE:-}" ] && echo 32 || echo 256)"
+    python benchmarks/joint_pairs.py "$model" \
       --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
       ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} \
       ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} ${SHARPNESS:+--sharpness=$SHARPNESS} \

@@ -15,10 +15,12 @@ the whole group (posterior median and its reported point), beside the range
 centre's, and the joint points' bias; writes JSON. ``--distance`` picks the
 discrepancy (``shape``: where the sheet hangs); ``--gusts`` and
 ``--cloth_resolution`` set the simulations' gust intensity and mesh (the
-recordings' own: 0.3 and 33). A GPU at paper size:
+recordings' own: 0.3 and 33). The shape distance needs no network (no
+``--model``: frames at ``--image_size``). A GPU at paper size:
 
   python benchmarks/joint_pairs.py --model=out/table1/physnet_depth/simulation/gray_interlock \\
-      --workdir=/tmp/pairs --pairs=6 [--group=3 --distance=shape]
+      --workdir=/tmp/pairs --pairs=6 [--group=3]
+  python benchmarks/joint_pairs.py --distance=shape --workdir=/tmp/pairs_shape --pairs=6
 """
 
 from __future__ import annotations
@@ -37,7 +39,12 @@ from experiments.pipeline import recording as recording_lib
 from experiments.studies import calibration
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('model', None, "the fabric's trained network", required=True)
+flags.DEFINE_string(
+  'model', '', "the fabric's trained network (none with --distance=shape)"
+)
+flags.DEFINE_integer(
+  'image_size', 256, 'pixels a side of the frames without a network', lower_bound=16
+)
 flags.DEFINE_string('workdir', None, 'recordings and estimates go here', required=True)
 flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
 flags.DEFINE_integer('pairs', 6, 'groups of recordings (fabrics)')
@@ -72,7 +79,7 @@ flags.DEFINE_float(
   'seconds', 0.0, "each recording's length, s (0: the recipe's)", lower_bound=0.0
 )
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
-FLAG_NAMES = ('model', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
+FLAG_NAMES = ('model', 'image_size', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
               'distance', 'likelihood', 'sharpness', 'gusts', 'cloth_resolution', 'backend',
               'seconds')  # fmt: skip
 
@@ -131,7 +138,11 @@ def main(argv):
   del argv
   logging.set_verbosity(logging.WARNING)  # orbax logs every restore at INFO
   cli.host_devices()  # as the scripts: one CPU device per core (GP searches)
-  net = embedding.load_embedding(FLAGS.model)
+  net = (
+    embedding.load_embedding(FLAGS.model)
+    if FLAGS.model
+    else embedding.no_network((FLAGS.image_size, FLAGS.image_size))
+  )
   config = objective.PRESETS[FLAGS.preset]
   config = dataclasses.replace(
     config, material=FLAGS.material,
@@ -143,6 +154,8 @@ def main(argv):
     **({'cloth_resolution': FLAGS.cloth_resolution} if FLAGS.cloth_resolution else {}),
   )  # fmt: skip
   config.check()  # e.g. the synthetic likelihood without the shape distance
+  if not FLAGS.model and config.distance != 'shape':
+    raise app.UsageError(f'--distance={config.distance} needs --model (a network)')
   if FLAGS.seconds:  # compare the whole clip
     config = dataclasses.replace(config, frames=round(FLAGS.seconds * config.fps))
   space = physsim.search_space(FLAGS.material)

@@ -3,6 +3,10 @@ r"""Estimate a fabric's bending, area weight and the wind from one depth video.
   python -m experiments.estimate --recording=PATH --material=gray_interlock \
       --model=out/table1/physnet_depth/simulation/gray_interlock --workdir=out/estimate
 
+  # where the sheet hangs, no network: --distance=shape and the camera's pose
+  python -m experiments.estimate --recording=PATH --material=gray_interlock \
+      --distance=shape --workdir=out/estimate_shape
+
   # a camera's own recording: its camera file, only the intake (no network)
   python -m experiments.estimate --recording=rec/depth --camera_json=rec/camera.json \
       --intake_only --workdir=out/intake
@@ -41,7 +45,10 @@ class Args:
     model: the material's trained network (a train or table1 run folder);
       several, comma-separated: an ensemble of runs of one architecture (each
       video embedded by every member; PSD the geometric mean of theirs). Not
-      needed with intake_only.
+      needed with intake_only, nor with --distance=shape (which reads the
+      sheet's place from the depth frames themselves).
+    image_size: without a network (--distance=shape, no model), the size
+      (pixels a side) the frames are compared at; a network fixes its own.
     workdir: where the search state, estimate.json and the pictures go.
     camera_json: the recording's camera file: OpenCV JSON {"width",
       "height", "fx", "fy", "cx", "cy", "cam_to_world"}, ROS CameraInfo YAML,
@@ -63,6 +70,7 @@ class Args:
 
   recording: tuple[str, ...] = ()
   model: str = ''
+  image_size: int = 256
   workdir: str = 'out/estimate'
   camera_json: str = ''
   allow_other_material: bool = False
@@ -112,6 +120,36 @@ def _needs_intake(args: Args, path: str) -> bool:
   return bool(args.camera_json) or not intake.is_sequence(path)
 
 
+def network(args: Args) -> embedding.EmbeddingNet:
+  """The estimate's network (``--model``), or none for ``--distance=shape``.
+
+  Raises:
+    ValueError: no model for a distance that embeds, a bad ``image_size``, or
+      a network of another fabric (unless ``allow_other_material``).
+  """
+  if not args.model:
+    if args.search.distance != 'shape':
+      raise ValueError(
+        f'missing --model (see --help): --distance={args.search.distance} embeds '
+        'frames with a trained network; --distance=shape needs none, '
+        '--intake_only neither'
+      )
+    if not 16 <= args.image_size <= 1024:
+      raise ValueError(f'--image_size={args.image_size}: need 16-1024 pixels a side')
+    return embedding.no_network((args.image_size, args.image_size))
+  net = embedding.load_embedding(args.model)
+  if (
+    net.materials
+    and args.search.material not in net.materials
+    and not args.allow_other_material
+  ):
+    raise ValueError(
+      f'{args.model} was trained on {list(net.materials)}, not '
+      f'{args.search.material}; pass --allow_other_material to search with it anyway'
+    )
+  return net
+
+
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   config = args.search
@@ -128,18 +166,7 @@ def main(args: Args) -> None:
       _take_in(args, path, workdir)
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return
-  if not args.model:
-    raise ValueError('missing --model (see --help), or pass --intake_only')
-  net = embedding.load_embedding(args.model)
-  if (
-    net.materials
-    and config.material not in net.materials
-    and not args.allow_other_material
-  ):
-    raise ValueError(
-      f'{args.model} was trained on {list(net.materials)}, not {config.material}; '
-      'pass --allow_other_material to search with it anyway'
-    )
+  net = network(args)
   recs = []
   for i, path in enumerate(args.recording):
     if _needs_intake(args, path):

@@ -59,6 +59,21 @@ class EmbeddingNet(NamedTuple):
   members: int = 0
 
 
+def no_network(image_size: tuple[int, int]) -> EmbeddingNet:
+  """What the estimate holds in place of a network when none is needed.
+
+  The shape distance (``--distance=shape``) reads the sheet's place in the
+  world from the depth frames themselves, so an estimate with it needs no
+  trained run: frames are compared at ``image_size`` (H, W), the size the
+  recording was loaded at. ``network`` is None and there are no params; the
+  objective refuses any distance that would embed with it.
+  """
+  h, w = (int(s) for s in image_size)
+  if h < 1 or w < 1:
+    raise ValueError(f'image size {image_size}: need positive height and width')
+  return EmbeddingNet(None, {}, 'depth', 'metric', 0, (h, w), (), 'none', 0)
+
+
 def resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
   """Nearest-neighbour resize of (..., H, W, 3), as ``dataset.resize_depth`` does depth."""
   chw = np.moveaxis(rgb, -1, -3)  # (..., 3, H, W)
@@ -238,6 +253,8 @@ def network_retrieval(model_dir: str) -> dict[str, float] | None:
   ensemble, its members' mean (None unless every member logged it): a guide,
   not the ensemble's own retrieval, which nobody measured.
   """
+  if not model_dir:  # no network (the shape distance)
+    return None
   out = []
   for d in members(model_dir):
     r = model_lib.selected_eval(model_lib.read_evals(d)).get('test_retrieval')
@@ -257,7 +274,10 @@ _NOT_RECIPE = {
 def network_accuracy(model_dir: str) -> float | None:
   """A trained run's held-out triplet accuracy at its selected epoch (None if
   it was not evaluated on held-out simulations); for an ensemble, its
-  weakest member's (what a calibration of single networks compares)."""
+  weakest member's (what a calibration of single networks compares); None
+  without a network (``model_dir`` empty)."""
+  if not model_dir:
+    return None
   accs = [
     model_lib.selected_eval(model_lib.read_evals(d)).get('test_triplet_accuracy')
     for d in members(model_dir)
@@ -265,7 +285,7 @@ def network_accuracy(model_dir: str) -> float | None:
   return None if None in accs else min(accs)
 
 
-def network_recipe(model_dir: str) -> dict:
+def network_recipe(model_dir: str) -> dict | None:
   """How a trained run was made, apart from its seeds: its training config
   (``config.json``), what it saw (modality, input mode, fabrics) and the
   config of the simulations it was trained on (their ``dataset.json``, with
@@ -275,10 +295,13 @@ def network_recipe(model_dir: str) -> dict:
   first member's with an ``'ensemble'`` part: how many members, and which
   fields of the others' recipes differ from the first's (a calibration of
   single networks has no such part, so it does not match an ensemble).
+  None without a network (``model_dir`` empty).
 
   Raises:
     ValueError: not a trained run, naming ``model_dir``.
   """
+  if not model_dir:
+    return None
   dirs = members(model_dir)
   recipe = _recipe(dirs[0])
   if len(dirs) > 1:

@@ -356,6 +356,11 @@ def make_problem(
       (size, modality, shorter than an SDN clip), naming the recording.
   """
   config.check()
+  if net.network is None and config.distance != 'shape':
+    raise ValueError(
+      f'{recording.source}: distance {config.distance!r} embeds frames with a '
+      "trained network, and none was given; only 'shape' needs none (--model)"
+    )
   size = tuple(net.image_size)
   if tuple(recording.depth.shape[1:]) != size:
     raise ValueError(
@@ -391,13 +396,15 @@ def make_problem(
     poses = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32)[None], recording.pose)
   else:
     poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
-  inputs = embedding.network_inputs(
-    jnp.asarray(rec_frames)[None], net.modality, net.input_mode
-  )
-  # (N, D), or (K, N, D) for an ensemble of K: each member's own embedding.
-  rec_points = jax.jit(embedding.embed_videos, static_argnums=(0, 3, 4))(
-    net.network, net.params, inputs, net.clip_frames, net.members
-  )[..., 0, :, :]
+  rec_points = jnp.zeros((1, 1), jnp.float32)  # no network: nothing embedded
+  if net.network is not None:
+    inputs = embedding.network_inputs(
+      jnp.asarray(rec_frames)[None], net.modality, net.input_mode
+    )
+    # (N, D), or (K, N, D) for an ensemble of K: each member's own embedding.
+    rec_points = jax.jit(embedding.embed_videos, static_argnums=(0, 3, 4))(
+      net.network, net.params, inputs, net.clip_frames, net.members
+    )[..., 0, :, :]
   rec_shape = jnp.zeros(len(physsim.shape.SUMMARY), jnp.float32)
   if shaped:
     rec_shape = physsim.shape.summary(
@@ -639,7 +646,9 @@ def _bytes_per_pixel(params) -> int:
   """Working memory per rendered pixel while a frame is sensed and embedded:
   float32 activations of the widest convolution, in and out, plus the
   renderer's and sensor's buffers (per network: an ensemble's kernels carry
-  a leading member axis)."""
+  a leading member axis); without a network, the latter alone."""
+  if not jax.tree.leaves(params):
+    return 4 * 2 * 16
   widest = max(
     (leaf.shape[-1] for leaf in jax.tree.leaves(params) if np.ndim(leaf) >= 4),
     default=32,

@@ -508,14 +508,16 @@ def shape_camera_warning(config, aligned: bool) -> str | None:
 
 def synthetic_warning(config) -> str | None:
   """The line ``estimate`` prints for the 'synthetic' likelihood (else None):
-  it takes the recording's scatter to be the simulator's, and on real-like
-  recordings, whose set-up differs, its intervals were too narrow
+  it takes the recording's scatter to be the simulator's. On real-like
+  recordings simulated with another mesh and gust level its intervals were
+  too narrow; with their own (``cloth_resolution``, ``gusts``) they held
   (BENCHMARKS.md)."""
   if config.likelihood != 'synthetic':
     return None
   return (
     'warning: --likelihood=synthetic trusts the simulator to scatter as your '
-    'recording does; on real-like recordings its 90% intervals held the wind and '
-    "the load ratio only 50-67% of the time (the default 'gibbs' 83%): for "
-    'comparisons, not for intervals you report'
+    'recording does; on real-like recordings simulated with another mesh and gust '
+    'level its 90% intervals held the wind and the load ratio only 50-67% of the '
+    "time (the default 'gibbs' 83%), with their own (--cloth_resolution, --gusts) "
+    '83-100%: report its intervals only when the simulator matches your set-up'
   )

@@ -51,7 +51,8 @@ class Job(NamedTuple):
   Attributes:
     config: its settings.
     recording: the video (``recording.load_recording``).
-    model_dir: its material's trained network.
+    model_dir: its material's trained network; '' for none (the shape
+      distance alone: frames compared at the recording's loaded size).
     workdir: where its state, JSON and pictures go.
   """
 
@@ -127,6 +128,7 @@ def check_run(job: Job, problem) -> None:
   """
   workdir, config, recording = job.workdir, job.config, job.recording
   d = problem.data
+  runs = embedding.members(job.model_dir) if job.model_dir else []  # none: shape
   run = {
     'config': {
       k: v for k, v in dataclasses.asdict(config).items() if k not in _RESUMABLE_FIELDS
@@ -137,7 +139,7 @@ def check_run(job: Job, problem) -> None:
       'poses_sha1': _digest(np.asarray(d.poses.rotation, np.float32))
       + _digest(np.asarray(d.poses.position, np.float32)),
     },
-    'model_dir': ','.join(os.path.abspath(d) for d in embedding.members(job.model_dir)),
+    'model_dir': ','.join(os.path.abspath(d) for d in runs),
   }
   if recording.rgb is not None and problem.net.modality == 'rgb':
     run['recording_rgb_sha1'] = _digest(recording.rgb)
@@ -290,7 +292,7 @@ def estimate(
     recording: the video (``load_recording``; with ``rgb=True`` for an RGB
       network).
     model_dir: a trained run of this material's network (PhySNet or SDN,
-      depth or RGB).
+      depth or RGB); '' with ``distance='shape'``, which needs none.
     workdir: where state, JSON and pictures go.
     progress: print one line per iteration.
     gp_on_cpu: fit the GP and propose on the CPU (``gp_device``).
@@ -347,9 +349,13 @@ def estimate_many(
   live: list[_Search] = []
   for i, job in enumerate(jobs):
     try:
-      if job.model_dir not in nets:
-        nets[job.model_dir] = embedding.load_embedding(job.model_dir)
-      problem = obj_lib.make_problem(job.config, nets[job.model_dir], job.recording)
+      if not job.model_dir:  # the shape distance: frames at the recording's size
+        net = embedding.no_network(job.recording.depth.shape[1:])
+      else:
+        if job.model_dir not in nets:
+          nets[job.model_dir] = embedding.load_embedding(job.model_dir)
+        net = nets[job.model_dir]
+      problem = obj_lib.make_problem(job.config, net, job.recording)
       opt = make_searcher(
         job.config, problem.space, job.workdir, gp_on_cpu=gp_on_cpu, index=i
       )
@@ -649,7 +655,7 @@ def estimate_joint(
       weight applies to all recordings; a measured wind cannot, as each
       recording has its own: see ``winds``).
     recordings: two or more recordings of the same fabric.
-    model_dir: the fabric's trained network.
+    model_dir: the fabric's trained network ('' for none: ``estimate``).
     workdir: where everything goes.
     winds: an anemometer's reading at each recording, ``(m/s, its standard
       uncertainty)`` in the recordings' order, or None. Each enters that

@@ -1,6 +1,7 @@
 """Tests for benchmarks/joint_pairs.py on a CPU: one group of two smoke
-recordings with the hand-made embedding, the simulator's mesh and gusts set by
-flag; each error is its point's, checked by hand, and a rerun resumes."""
+recordings estimated with the shape distance and no network, the simulator's
+mesh and gusts set by flag; each error is its point's, checked by hand, and a
+rerun resumes."""
 
 from __future__ import annotations
 
@@ -31,9 +32,8 @@ def _run(*args: str) -> subprocess.CompletedProcess:
 @pytest.fixture(scope='module')
 def joint_run(tmp_path_factory):
   root = tmp_path_factory.mktemp('joint_pairs')
-  model = fx.write_hand_made_model(str(root / 'model'))
-  args = (
-    f'--model={model}', f'--workdir={root / "work"}', '--smoke', '--backend=c',
+  args = (  # no --model: the shape distance needs no network
+    f'--image_size={fx.SIZE}', f'--workdir={root / "work"}', '--smoke', '--backend=c',
     '--preset=smoke', '--pairs=1', '--group=2', '--distance=shape',
     '--gusts=0.3', '--cloth_resolution=8',
   )  # fmt: skip
@@ -49,6 +49,7 @@ def test_errors_are_their_points_and_the_flags_are_recorded(joint_run):
   assert out['flags']['cloth_resolution'] == 8
   assert out['flags']['gusts'] == pytest.approx(0.3)
   assert out['flags']['distance'] == 'shape'
+  assert out['flags']['model'] == '' and out['flags']['image_size'] == fx.SIZE
   rows = out['rows']
   assert len(rows) == 2
   for r in rows:
@@ -88,3 +89,10 @@ def test_a_negative_mesh_is_refused_by_name(tmp_path):
   proc = _run(f'--model={tmp_path}', f'--workdir={tmp_path}', '--cloth_resolution=-1')
   assert proc.returncode != 0
   assert 'cloth_resolution' in proc.stderr
+
+
+def test_a_distance_that_embeds_needs_a_network(tmp_path):
+  proc = _run(f'--workdir={tmp_path}', '--distance=energy')
+  assert proc.returncode != 0
+  assert '--distance=energy needs --model' in proc.stderr
+  assert not os.listdir(tmp_path)  # refused before anything was made

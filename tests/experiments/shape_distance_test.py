@@ -12,12 +12,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 
 import jax
 import numpy as np
 import pytest
 
 import physsim
+from experiments import estimate as estimate_cli
 from experiments.pipeline import embedding, report, search
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
@@ -135,6 +137,53 @@ def test_a_misplaced_camera_renders_from_its_error(env):
   np.testing.assert_allclose(out.psd[0], want, rtol=1e-3, atol=_SHAPE_ATOL)
 
 
+def test_the_shape_needs_no_network(env):
+  # The same candidates and keys scored with the hand-made network and with
+  # none: the shape never embeds, so discrepancies and residuals are equal.
+  u = np.array([[0.0, 0.0, 0.0], [0.5, -0.6, 0.7]])
+  config = dataclasses.replace(CONFIG, distance='shape')
+  gust, noise = obj_lib.candidate_keys(config, 0, len(u))
+  none = embedding.no_network(env['rec'].depth.shape[1:])
+  assert none.network is None and none.image_size == env['net'].image_size
+  got = []
+  for net in (env['net'], none):
+    problem = obj_lib.make_problem(config, net, env['rec'])
+    got.append(
+      obj_lib.Objective(problem)(
+        obj_lib.stack([problem.data]), u[None], gust[None], noise[None]
+      )
+    )
+  assert np.all(got[0].psd > 0)
+  np.testing.assert_array_equal(got[1].psd, got[0].psd)
+  np.testing.assert_array_equal(got[1].residual, got[0].residual)
+  for distance in ('energy', 'energy+shape', 'centroid'):
+    with pytest.raises(
+      ValueError, match=f"seq: distance '{re.escape(distance)}' embeds"
+    ):
+      obj_lib.make_problem(
+        dataclasses.replace(CONFIG, distance=distance), none, env['rec']
+      )
+  with pytest.raises(ValueError, match=r'image size \(0, 32\)'):
+    embedding.no_network((0, 32))
+  # Nothing about a network is claimed: no recipe, accuracy or retrieval.
+  assert embedding.network_recipe('') is None
+  assert embedding.network_accuracy('') is None
+  assert embedding.network_retrieval('') is None
+
+
+def test_the_command_line_asks_for_a_network_only_where_one_is_used(env):
+  shape = estimate_cli.Args(
+    search=dataclasses.replace(CONFIG, distance='shape'), image_size=48
+  )
+  assert estimate_cli.network(shape).image_size == (48, 48)
+  with pytest.raises(ValueError, match='--distance=energy embeds frames'):
+    estimate_cli.network(estimate_cli.Args(search=CONFIG))
+  with pytest.raises(ValueError, match='--image_size=8: need 16-1024'):
+    estimate_cli.network(dataclasses.replace(shape, image_size=8))
+  given = dataclasses.replace(shape, model=env['model_dir'])  # a network still loads
+  assert estimate_cli.network(given).network is not None
+
+
 def test_the_synthetic_likelihood_needs_the_shape_distance():
   with pytest.raises(ValueError, match="synthetic.*distance 'shape', got 'energy'"):
     dataclasses.replace(CONFIG, likelihood='synthetic').check()
@@ -152,7 +201,9 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   config = dataclasses.replace(config, cloth_resolution=CONFIG.cloth_resolution,
                                frames=CONFIG.frames, warmup=CONFIG.warmup)  # fmt: skip
   workdir = str(tmp_path / 'est')
-  out = search.estimate(config, env['rec'], env['model_dir'], workdir, progress=False)
+  # No network ('': the shape needs none); rescored below with the hand-made one.
+  out = search.estimate(config, env['rec'], '', workdir, progress=False)
+  assert json.load(open(os.path.join(workdir, search.RUN_FILE)))['model_dir'] == ''
   z = np.load(os.path.join(workdir, search.POSTERIOR_STATE))
   n = config.n_init + config.q * config.max_iter
   assert z['Y'].shape == (n, 2) and np.isfinite(z['Y']).all()
