@@ -138,11 +138,6 @@ def main(argv):
   del argv
   logging.set_verbosity(logging.WARNING)  # orbax logs every restore at INFO
   cli.host_devices()  # as the scripts: one CPU device per core (GP searches)
-  net = (
-    embedding.load_embedding(FLAGS.model)
-    if FLAGS.model
-    else embedding.no_network((FLAGS.image_size, FLAGS.image_size))
-  )
   config = objective.PRESETS[FLAGS.preset]
   config = dataclasses.replace(
     config, material=FLAGS.material,
@@ -154,8 +149,10 @@ def main(argv):
     **({'cloth_resolution': FLAGS.cloth_resolution} if FLAGS.cloth_resolution else {}),
   )  # fmt: skip
   config.check()  # e.g. the synthetic likelihood without the shape distance
-  if not FLAGS.model and config.distance != 'shape':
-    raise app.UsageError(f'--distance={config.distance} needs --model (a network)')
+  try:
+    net = embedding.for_distance(FLAGS.model, config.distance, FLAGS.image_size)
+  except ValueError as e:
+    raise app.UsageError(str(e)) from e
   if FLAGS.seconds:  # compare the whole clip
     config = dataclasses.replace(config, frames=round(FLAGS.seconds * config.fps))
   space = physsim.search_space(FLAGS.material)

@@ -124,20 +124,11 @@ def network(args: Args) -> embedding.EmbeddingNet:
   """The estimate's network (``--model``), or none for ``--distance=shape``.
 
   Raises:
-    ValueError: no model for a distance that embeds, a bad ``image_size``, or
-      a network of another fabric (unless ``allow_other_material``).
+    ValueError: no model for a distance that embeds, a bad ``image_size``
+      (``embedding.for_distance``), or a network of another fabric (unless
+      ``allow_other_material``).
   """
-  if not args.model:
-    if args.search.distance != 'shape':
-      raise ValueError(
-        f'missing --model (see --help): --distance={args.search.distance} embeds '
-        'frames with a trained network; --distance=shape needs none, '
-        '--intake_only neither'
-      )
-    if not 16 <= args.image_size <= 1024:
-      raise ValueError(f'--image_size={args.image_size}: need 16-1024 pixels a side')
-    return embedding.no_network((args.image_size, args.image_size))
-  net = embedding.load_embedding(args.model)
+  net = embedding.for_distance(args.model, args.search.distance, args.image_size)
   if (
     net.materials
     and args.search.material not in net.materials

@@ -74,6 +74,34 @@ def no_network(image_size: tuple[int, int]) -> EmbeddingNet:
   return EmbeddingNet(None, {}, 'depth', 'metric', 0, (h, w), (), 'none', 0)
 
 
+IMAGE_SIZES = (16, 1024)  # pixels a side the frames may have without a network
+
+
+def for_distance(model_dir: str, distance: str, image_size: int) -> EmbeddingNet:
+  """The network an estimate with ``distance`` compares frames through.
+
+  One rule for every command line: a trained run (``model_dir``) when one is
+  named; otherwise the shape distance, which reads depth frames directly, gets
+  ``no_network`` at ``image_size`` pixels a side, and any other distance is
+  refused: it would embed frames with a network there is none of.
+
+  Raises:
+    ValueError: no ``model_dir`` for a distance that embeds, or an
+      ``image_size`` outside ``IMAGE_SIZES``.
+  """
+  if model_dir:
+    return load_embedding(model_dir)
+  if distance != 'shape':
+    raise ValueError(
+      f'missing --model: --distance={distance} embeds frames with a trained '
+      'network (--distance=shape needs none)'
+    )
+  lo, hi = IMAGE_SIZES
+  if not lo <= image_size <= hi:
+    raise ValueError(f'--image_size={image_size}: need {lo}-{hi} pixels a side')
+  return no_network((image_size, image_size))
+
+
 def resize_rgb(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
   """Nearest-neighbour resize of (..., H, W, 3), as ``dataset.resize_depth`` does depth."""
   chw = np.moveaxis(rgb, -1, -3)  # (..., 3, H, W)

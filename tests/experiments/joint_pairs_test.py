@@ -94,5 +94,5 @@ def test_a_negative_mesh_is_refused_by_name(tmp_path):
 def test_a_distance_that_embeds_needs_a_network(tmp_path):
   proc = _run(f'--workdir={tmp_path}', '--distance=energy')
   assert proc.returncode != 0
-  assert '--distance=energy needs --model' in proc.stderr
+  assert 'missing --model: --distance=energy embeds frames' in proc.stderr
   assert not os.listdir(tmp_path)  # refused before anything was made

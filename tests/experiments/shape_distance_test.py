@@ -176,7 +176,9 @@ def test_the_command_line_asks_for_a_network_only_where_one_is_used(env):
     search=dataclasses.replace(CONFIG, distance='shape'), image_size=48
   )
   assert estimate_cli.network(shape).image_size == (48, 48)
-  with pytest.raises(ValueError, match='--distance=energy embeds frames'):
+  with pytest.raises(
+    ValueError, match='missing --model: --distance=energy embeds frames'
+  ):
     estimate_cli.network(estimate_cli.Args(search=CONFIG))
   with pytest.raises(ValueError, match='--image_size=8: need 16-1024'):
     estimate_cli.network(dataclasses.replace(shape, image_size=8))
