@@ -80,10 +80,9 @@ def main(args: Args) -> None:
     simulate_only=args.simulate_only,
   )  # fmt: skip
   if args.install and distributed.is_main():
-    shutil.copyfile(
-      f'{args.workdir}/{calibration.RESULT_FILE}', report.CALIBRATION_FILE
-    )
-    print(f'installed as {report.CALIBRATION_FILE}')
+    dest = report.shipped_calibration(args.study.estimate.distance)
+    shutil.copyfile(f'{args.workdir}/{calibration.RESULT_FILE}', dest)
+    print(f'installed as {dest}')
 
 
 if __name__ == '__main__':

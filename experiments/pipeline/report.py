@@ -29,7 +29,32 @@ LABELS = {
 SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weight'}
 # Coverage of the posterior's intervals measured on held-out simulated
 # recordings (written by experiments/calibrate.py, shipped with the package).
+# The shipped calibrations: the default distance's (its networks' recipe), and
+# the shape distance's (no network), each made by ``experiments/calibrate.py
+# --install`` with that distance.
 CALIBRATION_FILE = os.path.join(os.path.dirname(__file__), 'calibration.json')
+SHAPE_CALIBRATION_FILE = os.path.join(
+  os.path.dirname(__file__), 'calibration_shape.json'
+)
+
+
+def shipped_calibration(distance: str) -> str:
+  """Where the calibration of estimates with ``distance`` is shipped (and
+  ``--install`` puts it): the shape distance's own file, every other
+  distance's the default one (whose networks it records)."""
+  return SHAPE_CALIBRATION_FILE if distance == 'shape' else CALIBRATION_FILE
+
+
+def calibration_file(config=None) -> str:
+  """The calibration an estimate with ``config`` quotes: its own
+  (``config.calibration``), else the one shipped for its distance, else (none
+  shipped for it) the default one, whose note then names what differs."""
+  if given := getattr(config, 'calibration', ''):
+    return given
+  own = shipped_calibration(getattr(config, 'distance', ''))
+  return own if os.path.isfile(own) else CALIBRATION_FILE
+
+
 _RETRIEVAL_MEANING = (
   'near 1: the video barely constrains that parameter; trust its interval, '
   'not its value'
@@ -144,8 +169,8 @@ def _same(mine, theirs) -> bool:
 def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
                      network: dict | None = None, accuracy: float | None = None):  # fmt: skip
   """What the held-out simulations showed about the intervals, for an
-  estimate with ``config`` (its ``calibration`` file, else the shipped
-  ``calibration.json``); None when no calibration has been run.
+  estimate with ``config`` (``calibration_file``); None when no calibration
+  has been run.
 
   Where every setting that changes the likelihood (``_CALIBRATED_FIELDS``),
   the mode (what was measured, a reading's uncertainty within a factor of two
@@ -160,7 +185,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   network's intervals hold the truth was not measured, and the two weakest
   checked so far held it less often.
   """
-  path = getattr(config, 'calibration', '') or CALIBRATION_FILE
+  path = calibration_file(config)
   if not os.path.isfile(path):
     return None
   with open(path) as f:

@@ -23,7 +23,10 @@ whose distances are scaled and bent differently. So the study trains
 With ``folds == networks`` each fold is one network's recordings, and the
 cross-fitted coverage is that of a network the tables never saw.
 ``calibration.json`` records the recipe (``embedding.network_recipe``), and an
-estimate applies the tables only with a network of that recipe.
+estimate applies the tables only with a network of that recipe. A distance
+that embeds nothing (``estimate.distance='shape'``) needs no network: the
+study then trains none, estimates every recording from its depth frames
+alone, and its tables hold for that distance (``report.calibration_file``).
 
 The study then calibrates the intervals themselves: per mode and quantity,
 the truths' ranks among the posterior draws give the CDF levels at which the
@@ -62,6 +65,7 @@ import physsim  # noqa: E402
 from experiments.pipeline import cli, distributed, embedding, files, report, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo as demo_lib  # noqa: E402
+from experiments.pipeline import objective as objective_lib  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.pipeline import training as train_lib  # noqa: E402
@@ -157,8 +161,17 @@ def truths(config: Config, group: int = 2) -> physsim.Params:
   return physsim.from_unit(u.reshape(-1, 3), physsim.search_space(config.material))
 
 
+def uses_networks(config: Config) -> bool:
+  """Whether the study's estimates embed frames with trained networks (every
+  distance but the shape's)."""
+  return config.estimate.distance in objective_lib.EMBEDDING_DISTANCES
+
+
 def network_seeds(config: Config) -> tuple[int, ...]:
-  """The seeds of the study's networks, in order."""
+  """The seeds of the study's networks, in order (none for a distance that
+  embeds nothing)."""
+  if not uses_networks(config):
+    return ()
   return tuple(config.network_seed + k for k in range(config.networks))
 
 
@@ -219,7 +232,7 @@ def _configs(config: Config, point: str = 'median', network: int = 0):
   training set and training."""
   data, rec, training, est = demo_lib.configs(
     config.material, config.sequences, config.seed, config.backend,
-    network_seeds(config)[network],
+    config.network_seed + network,
   )  # fmt: skip
   n = 2 * config.pairs
   rec = dataclasses.replace(
@@ -270,14 +283,14 @@ def simulate_and_estimate(
   # Every process simulates its share of the data and of the recordings;
   # process 0 trains the networks in between.
   model_roots = []
-  for k in range(config.networks):
+  for k in range(len(network_seeds(config))):
     data_cfg, _, train_cfg, _ = _configs(config, point, k)
     data_dir, model_root = network_dirs(config, workdir, k)
     gen.run(data_cfg, data_dir)
     if distributed.is_main():
       train_lib.run(train_cfg, data_dir, model_root)
     model_roots.append(model_root)
-  if distributed.is_main():
+  if distributed.is_main() and model_roots:
     files.write_json(
       os.path.join(workdir, NETWORKS_FILE), networks_record(config, workdir)
     )
@@ -294,11 +307,12 @@ def simulate_and_estimate(
     )
     wd = os.path.join(workdir, 'estimates', r['seq_id'])
     k = network_of(config, int(r['seq_id']))
-    model_dir = os.path.join(model_roots[k], config.material)
+    # '' : no network (search.estimate_many compares depth frames directly)
+    model_dir = os.path.join(model_roots[k], config.material) if model_roots else ''
     job_est = with_reading(config, est, reading, rec.truth, int(r['seq_id']))
     jobs.append(search.Job(job_est, rec, model_dir, wd))
     meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd,
-                 'network': network_seeds(config)[k]})  # fmt: skip
+                 'network': network_seeds(config)[k] if model_roots else None})  # fmt: skip
   if jax.process_count() > 1:
     mine = distributed.share(jobs)
     print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)
@@ -847,8 +861,7 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'material': config.material,
     'n': held['video'].get('n', 0),
     'setting': f'{form} likelihood, sharpness {c:g}, {config.material} '
-    f'network{"s" if config.networks > 1 else ""} of {config.sequences} training '
-    f'sequences' + (f' ({config.networks} seeds)' if config.networks > 1 else ''),
+    + _networks_text(config),
     'likelihood': form,
     'sharpness': c,
     'coverage': _coverage_of(held['video']),
@@ -873,6 +886,16 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     },  # fmt: skip
     'seconds': seconds,
   }
+
+
+def _networks_text(config: Config) -> str:
+  """The study's networks in words, for ``calibration.json``'s setting."""
+  if not uses_networks(config):
+    return f'{config.estimate.distance} distance, no network'
+  n = config.networks
+  return f'network{"s" if n > 1 else ""} of {config.sequences} training sequences' + (
+    f' ({n} seeds)' if n > 1 else ''
+  )
 
 
 def _pair(cell: dict) -> str:
@@ -1122,7 +1145,7 @@ def check(
   analyse_only: bool = False,
 ) -> dict:  # fmt: skip
   """Checks a calibration on recordings it never saw: ``shipped_file``, else
-  ``config.estimate.calibration``, else the shipped one.
+  ``config.estimate.calibration``, else the one shipped for its distance.
 
   Makes and estimates ``2 * config.pairs`` new recordings as the study does,
   with ``config.seed`` other than the calibration's (so the truths, recordings
@@ -1139,7 +1162,7 @@ def check(
   Raises:
     ValueError: no calibration there, or ``config.seed`` is its own.
   """
-  path = shipped_file or config.estimate.calibration or report.CALIBRATION_FILE
+  path = shipped_file or report.calibration_file(config.estimate)
   if not os.path.isfile(path):
     raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
   # the estimates apply the tables being checked
@@ -1205,6 +1228,9 @@ def _pct_ci(cell: dict, lv: int) -> str:
 
 def _seeds(out: dict) -> str:
   """The checked networks' seeds, those the calibration never saw marked."""
+  distance = out['config'].get('estimate', {}).get('distance', 'energy')
+  if distance not in objective_lib.EMBEDDING_DISTANCES:
+    return 'none'
   seeds = (out.get('network') or {}).get('seeds') or [out['config']['network_seed']]
   held = set(out.get('held_out_networks', []))
   return ', '.join(f'{s}{" (held out)" if s in held else ""}' for s in seeds)
