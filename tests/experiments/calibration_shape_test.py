@@ -98,3 +98,18 @@ def test_shape_estimates_quote_the_shape_calibration(study, tmp_path, monkeypatc
     dataclasses.replace(searched, sharpness=3 * out['sharpness'])
   )
   assert not other['matches'] and 'sharpness' in ' '.join(other['differs'])
+
+
+def test_the_shipped_shape_calibration_holds_for_demo_size_shape_estimates():
+  config = dataclasses.replace(
+    calibration.Config(),
+    estimate=dataclasses.replace(calibration.Config().estimate, distance='shape'),
+  )
+  searched = dataclasses.replace(calibration._configs(config)[3], point='bayes')
+  assert report.calibration_file(searched) == report.SHAPE_CALIBRATION_FILE
+  note = report.calibration_note(searched)
+  assert note['matches'] and note['recalibrated'], note
+  assert note['n_calibration_recordings'] >= 100  # the minimum
+  for field, cov in note['coverage'].items():  # held out from the tables
+    assert 0.85 <= cov['interval_90'] <= 0.95, (field, cov)
+    assert 0.40 <= cov['interval_50'] <= 0.60, (field, cov)
