@@ -27,7 +27,7 @@ import shutil
 from absl import logging
 
 import bo
-from experiments.pipeline import cli, distributed, report
+from experiments.pipeline import cli, distributed, files, report
 from experiments.studies import calibration
 
 
@@ -81,7 +81,8 @@ def main(args: Args) -> None:
   )  # fmt: skip
   if args.install and distributed.is_main():
     dest = report.shipped_calibration(args.study.estimate.distance)
-    shutil.copyfile(f'{args.workdir}/{calibration.RESULT_FILE}', dest)
+    src = f'{args.workdir}/{calibration.RESULT_FILE}'
+    files.write_atomic(dest, lambda tmp: shutil.copyfile(src, tmp))  # never half-copied
     print(f'installed as {dest}')
 
 

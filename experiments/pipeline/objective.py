@@ -356,7 +356,7 @@ def make_problem(
       (size, modality, shorter than an SDN clip), naming the recording.
   """
   config.check()
-  if net.network is None and config.distance != 'shape':
+  if net.network is None and config.distance in EMBEDDING_DISTANCES:
     raise ValueError(
       f'{recording.source}: distance {config.distance!r} embeds frames with a '
       "trained network, and none was given; only 'shape' needs none (--model)"

@@ -28,10 +28,9 @@ LABELS = {
 }
 SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weight'}
 # Coverage of the posterior's intervals measured on held-out simulated
-# recordings (written by experiments/calibrate.py, shipped with the package).
-# The shipped calibrations: the default distance's (its networks' recipe), and
-# the shape distance's (no network), each made by ``experiments/calibrate.py
-# --install`` with that distance.
+# recordings, shipped with the package (``experiments/calibrate.py --install``):
+# the default distance's (its networks' recipe) and the shape distance's (no
+# network).
 CALIBRATION_FILE = os.path.join(os.path.dirname(__file__), 'calibration.json')
 SHAPE_CALIBRATION_FILE = os.path.join(
   os.path.dirname(__file__), 'calibration_shape.json'

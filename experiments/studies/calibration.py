@@ -282,8 +282,8 @@ def simulate_and_estimate(
   rec_root = os.path.join(workdir, 'recordings')
   # Every process simulates its share of the data and of the recordings;
   # process 0 trains the networks in between.
-  model_roots = []
-  for k in range(len(network_seeds(config))):
+  seeds, model_roots = network_seeds(config), []
+  for k in range(len(seeds)):
     data_cfg, _, train_cfg, _ = _configs(config, point, k)
     data_dir, model_root = network_dirs(config, workdir, k)
     gen.run(data_cfg, data_dir)
@@ -312,7 +312,7 @@ def simulate_and_estimate(
     job_est = with_reading(config, est, reading, rec.truth, int(r['seq_id']))
     jobs.append(search.Job(job_est, rec, model_dir, wd))
     meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd,
-                 'network': network_seeds(config)[k] if model_roots else None})  # fmt: skip
+                 'network': seeds[k] if seeds else None})  # fmt: skip
   if jax.process_count() > 1:
     mine = distributed.share(jobs)
     print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)
