@@ -15,7 +15,9 @@ the whole group (posterior median and its reported point), beside the range
 centre's, and the joint points' bias; writes JSON. ``--distance`` picks the
 discrepancy (``shape``: where the sheet hangs); ``--gusts`` and
 ``--cloth_resolution`` set the simulations' gust intensity and mesh (the
-recordings' own: 0.3 and 33). The shape distance needs no network (no
+recordings' own: 0.3 and 33); ``--seconds`` the clips' length and
+``--fan_winds`` the range the recordings' winds are drawn from (a user's
+gentle fan settings; by default the whole search box). The shape distance needs no network (no
 ``--model``: frames at ``--image_size``). A GPU at paper size:
 
   python benchmarks/joint_pairs.py --model=out/table1/physnet_depth/simulation/gray_interlock \\
@@ -78,10 +80,13 @@ flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
 flags.DEFINE_float(
   'seconds', 0.0, "each recording's length, s (0: the recipe's)", lower_bound=0.0
 )
+flags.DEFINE_list(
+  'fan_winds', [], "lo,hi m/s: draw each recording's wind here (empty: the search box)"
+)
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'image_size', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
               'distance', 'likelihood', 'sharpness', 'gusts', 'cloth_resolution', 'backend',
-              'seconds')  # fmt: skip
+              'seconds', 'fan_winds')  # fmt: skip
 
 
 def _recordings(workdir: str, size: int) -> list[list[dict]]:
@@ -90,6 +95,10 @@ def _recordings(workdir: str, size: int) -> list[list[dict]]:
     material=FLAGS.material, pairs=FLAGS.pairs, seed=FLAGS.seed
   )
   truths = calibration.truths(study, group=FLAGS.group)
+  if FLAGS.fan_winds:  # the user's fan settings: winds drawn in a narrower range
+    lo, hi = _fan_winds()
+    rng = np.random.default_rng([FLAGS.seed, 11])
+    truths = truths._replace(wind_speed=rng.uniform(lo, hi, truths.wind_speed.shape))
   n = FLAGS.group * FLAGS.pairs
   cfg = datasets.PRESETS['smoke' if FLAGS.smoke else 'eval']
   cfg = dataclasses.replace(
@@ -111,6 +120,21 @@ def _recordings(workdir: str, size: int) -> list[list[dict]]:
     else:
       print(f'group {p}: a recording was not kept (camera coverage); left out')
   return out
+
+
+def _fan_winds() -> tuple[float, float]:
+  """``--fan_winds`` as (lo, hi) m/s, inside the fabric's search box."""
+  box = physsim.search_space(FLAGS.material).wind_speed
+  try:
+    lo, hi = (float(v) for v in FLAGS.fan_winds)
+  except ValueError:
+    lo = hi = float('nan')
+  if not (box[0] <= lo < hi <= box[1]):
+    raise app.UsageError(
+      f'--fan_winds={",".join(FLAGS.fan_winds)}: need lo,hi m/s with '
+      f'{box[0]:g} <= lo < hi <= {box[1]:g} (the search box)'
+    )
+  return lo, hi
 
 
 def _error(est: float, truth: float) -> float:
@@ -149,6 +173,8 @@ def main(argv):
     **({'cloth_resolution': FLAGS.cloth_resolution} if FLAGS.cloth_resolution else {}),
   )  # fmt: skip
   config.check()  # e.g. the synthetic likelihood without the shape distance
+  if FLAGS.fan_winds:
+    _fan_winds()  # a bad range refused before any work
   try:
     net = embedding.for_distance(FLAGS.model, config.distance, FLAGS.image_size)
   except ValueError as e:

@@ -1,7 +1,7 @@
 """Tests for benchmarks/joint_pairs.py on a CPU: one group of two smoke
-recordings estimated with the shape distance and no network, the simulator's
-mesh and gusts set by flag; each error is its point's, checked by hand, and a
-rerun resumes."""
+recordings (fan settings drawn in a narrower range) estimated with the shape
+distance and no network, the simulator's mesh and gusts set by flag; each
+error is its point's, checked by hand, and a rerun resumes."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def joint_run(tmp_path_factory):
   args = (  # no --model: the shape distance needs no network
     f'--image_size={fx.SIZE}', f'--workdir={root / "work"}', '--smoke', '--backend=c',
     '--preset=smoke', '--pairs=1', '--group=2', '--distance=shape',
-    '--gusts=0.3', '--cloth_resolution=8',
+    '--gusts=0.3', '--cloth_resolution=8', '--fan_winds=2,3',
   )  # fmt: skip
   proc = _run(*args)
   assert proc.returncode == 0, proc.stderr[-3000:]
@@ -50,6 +50,7 @@ def test_errors_are_their_points_and_the_flags_are_recorded(joint_run):
   assert out['flags']['gusts'] == pytest.approx(0.3)
   assert out['flags']['distance'] == 'shape'
   assert out['flags']['model'] == '' and out['flags']['image_size'] == fx.SIZE
+  assert out['flags']['fan_winds'] == ['2', '3']
   rows = out['rows']
   assert len(rows) == 2
   for r in rows:
@@ -57,6 +58,7 @@ def test_errors_are_their_points_and_the_flags_are_recorded(joint_run):
     assert t['load_ratio'] == pytest.approx(
       float(physsim.load_ratio(t['wind_speed'], t['area_weight'])), rel=_EXACT
     )
+    assert 2.0 <= t['wind_speed'] <= 3.0  # the fan settings asked for
     # a 2% anemometer reading: within 5 sd of the truth
     assert abs(r['reading'][0] / t['wind_speed'] - 1) < 0.1
     for who in ('alone', 'joint'):
@@ -96,3 +98,11 @@ def test_a_distance_that_embeds_needs_a_network(tmp_path):
   assert proc.returncode != 0
   assert 'missing --model: --distance=energy embeds frames' in proc.stderr
   assert not os.listdir(tmp_path)  # refused before anything was made
+
+
+@pytest.mark.parametrize('winds', ['3,9', '4,2', 'a'])
+def test_fan_winds_outside_the_box_are_refused_before_any_work(tmp_path, winds):
+  proc = _run(f'--workdir={tmp_path / "w"}', '--distance=shape', f'--fan_winds={winds}')
+  assert proc.returncode != 0
+  assert f'--fan_winds={winds}: need lo,hi m/s with 1 <= lo < hi <= 6' in proc.stderr
+  assert not (tmp_path / 'w').exists()
