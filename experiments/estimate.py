@@ -189,10 +189,16 @@ def main(args: Args) -> None:
   if len(recs) > 1:
     result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
     print(report.joint_table(result))
-    return
-  result = search.estimate(config, recs[0], args.model, args.workdir)
-  print(report.report_table(result))
-  print(f'estimate.json and pictures in {os.path.abspath(args.workdir)}')
+    ratios = [r['load_ratio']['median'] for r in result['recordings']]
+  else:
+    result = search.estimate(config, recs[0], args.model, args.workdir)
+    print(report.report_table(result))
+    ratios = [result['load_ratio']['median']]
+  note = report.fan_setting_note(ratios, config.material)
+  if note:
+    print(note)
+  if len(recs) == 1:
+    print(f'estimate.json and pictures in {os.path.abspath(args.workdir)}')
 
 
 if __name__ == '__main__':

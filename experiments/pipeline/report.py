@@ -545,3 +545,33 @@ def synthetic_warning(config) -> str | None:
     "time (the default 'gibbs' 83%), with their own (--cloth_resolution, --gusts) "
     '83-100%: report its intervals only when the simulator matches your set-up'
   )
+
+
+# One clip reads the load ratio about twice as poorly above STRONG_LOAD_RATIO as
+# below GENTLE_LOAD_RATIO, and a longer clip helps only below (the sheet blown
+# nearly flat; benchmarks/gust_floor.py, BENCHMARKS.md).
+STRONG_LOAD_RATIO = 10.0
+GENTLE_LOAD_RATIO = 8.0
+
+
+def fan_setting_note(load_ratios, material: str) -> str | None:
+  """The line ``estimate`` prints when every recording's load ratio (posterior
+  medians) is above ``STRONG_LOAD_RATIO``: such fan settings read area weight
+  hardly better than its range, and a gentler one (the wind that gives
+  ``GENTLE_LOAD_RATIO`` at the fabric's middle area weight) reads it about twice
+  as well; else None."""
+  ratios = np.atleast_1d(np.asarray(load_ratios, np.float64))
+  if not np.all(ratios > STRONG_LOAD_RATIO):
+    return None
+  w = float(physsim.search_space(material).center().area_weight)
+  gentle = float(
+    np.sqrt(GENTLE_LOAD_RATIO * w * physsim.params.GRAVITY / physsim.params.AIR_DENSITY)
+  )
+  seen = ', '.join(f'{r:.0f}' for r in ratios)
+  return (
+    f'note: load ratio rho v^2/(w g) about {seen}: at fan settings this strong the '
+    'sheet is blown nearly flat and a clip reads the area weight hardly better than '
+    f'its range; to measure it, record a gentler setting too (load ratio under '
+    f'{GENTLE_LOAD_RATIO:g}: about {gentle:.1f} m/s or less for {material}), with '
+    'an anemometer, and a longer clip (docs/identifiability.md)'
+  )

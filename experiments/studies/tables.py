@@ -9,7 +9,9 @@ bending-scale error as a factor (which the paper could not measure), beside the
 error of the trivial estimate (the centre of the search range) and the paper's
 PhySNet-depth numbers. Failed estimates are marked F; a method without a trained
 network for a fabric (no ``config.json`` in its run folder) is skipped there and
-shown as '-'. RGB methods need an evaluation set with colour frames (what
+shown as '-'. The method ``shape`` needs no network: it estimates with
+``--distance=shape`` (where the sheet hangs, ``physsim.shape``) from depth
+frames at ``shape_image_size``. RGB methods need an evaluation set with colour frames (what
 ``make_eval_set`` writes).
 
 ``experiments/tables.py`` is its command line. Writes ``tables.md``, ``tables.json``, ``bending_surfaces_<method>.png`` (the
@@ -70,6 +72,8 @@ PAPER = {
 }
 # The paper's four methods, as <network>_<modality> run folders of table1.
 METHODS = ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
+# No network: the shape distance on the depth frames.
+SHAPE_METHOD = 'shape'
 ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor', 'load_ratio_pct')
 ERROR_NAMES = ('wind %', 'area weight %', 'bending factor', 'load ratio %')
 
@@ -79,7 +83,10 @@ class Config:
   """Tables 2 and 3.
 
   Attributes:
-    methods: networks to evaluate, '<network>_<modality>' run folders of table1.
+    methods: networks to evaluate, '<network>_<modality>' run folders of table1,
+      or 'shape' (no network: ``--distance=shape``).
+    shape_image_size: pixels a side of the depth frames the 'shape' method
+      reads (no network sets it).
     estimate: settings of every estimate (material and garment come from
       each recording).
     report_only: write the tables of what has finished; run nothing.
@@ -103,6 +110,7 @@ class Config:
   """
 
   methods: tuple[str, ...] = METHODS
+  shape_image_size: int = 256
   estimate: EstimateConfig = cli.nested(EstimateConfig(), skip=('material', 'garment'))
   report_only: bool = False
   wind_reading_sd: float = 0.0
@@ -116,6 +124,11 @@ class Config:
       v = getattr(self, name)
       if not 0.0 <= v < 1.0:
         raise ValueError(f'--{name}={v}: a relative standard error in [0, 1)')
+    lo, hi = embedding.IMAGE_SIZES
+    if not lo <= self.shape_image_size <= hi:
+      raise ValueError(
+        f'--shape_image_size={self.shape_image_size}: need {lo}-{hi} pixels a side'
+      )
     if (self.wind_reading_sd > 0) + (self.area_weight_reading_sd > 0) > 1:
       raise ValueError(
         'simulate one reading at a time (--wind_reading_sd or --area_weight_reading_sd)'
@@ -180,6 +193,8 @@ def recordings(eval_root: str) -> list[dict]:
 def _model_dir(models: str, method: str, fabric: str) -> str:
   """The fabric's network under ``models``; several roots (``'a,b'``) name
   an ensemble of their networks (``embedding.load_embedding``)."""
+  if method == SHAPE_METHOD:
+    return ''  # no network
   net, modality = method.split('_')
   return ','.join(
     table1.run_dir(root, net, modality, 'simulation', fabric)
@@ -204,11 +219,14 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
   for rec, method in jobs:
     key, model_dir = _key(rec, method), _model_dir(models, method, rec['fabric'])
     ec = dataclasses.replace(
-      config.estimate, material=rec['fabric'], garment=rec['garment']
-    )
+      config.estimate, material=rec['fabric'], garment=rec['garment'],
+      **({'distance': 'shape'} if method == SHAPE_METHOD else {}),
+    )  # fmt: skip
     try:
       if model_dir not in nets:
-        nets[model_dir] = embedding.load_embedding(model_dir)
+        nets[model_dir] = embedding.for_distance(
+          model_dir, ec.distance, config.shape_image_size
+        )
       net = nets[model_dir]
       recording = recording_lib.load_recording(
         rec['path'], fps=ec.fps, size=net.image_size, frames=ec.frames,
@@ -232,14 +250,16 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
   """Runs (or reuses) every estimate of this shard; returns {key: result} of
   every finished or failed one (other shards' unfinished ones are left out)."""
   for m in config.methods:
-    if m not in METHODS:
-      raise ValueError(f'method {m!r}: the estimate supports {METHODS}')
+    if m not in (*METHODS, SHAPE_METHOD):
+      raise ValueError(
+        f'method {m!r}: the estimate supports {(*METHODS, SHAPE_METHOD)}'
+      )
   recs = recordings(eval_root)
   jobs, missing = [], set()
   for r in recs:  # by set (mesh) first: see the shards below
     for m in config.methods:
       model_dir = _model_dir(models, m, r['fabric'])
-      if all(
+      if m == SHAPE_METHOD or all(
         os.path.isfile(os.path.join(d, 'config.json'))
         for d in embedding.members(model_dir)
       ):

@@ -73,3 +73,17 @@ def test_a_file_that_is_not_a_result_is_named(tmp_path):
   )  # fmt: skip
   assert proc.returncode != 0
   assert f'{bad}: not a joint_pairs.json' in proc.stderr
+
+
+def test_estimate_notes_strong_fan_settings_and_the_gentler_wind():
+  from experiments.pipeline import report
+
+  note = report.fan_setting_note([12.0, 15.0], 'gray_interlock')
+  # load ratio 8 at the middle area weight (0.185 kg/m^2): v = sqrt(8 w g / rho)
+  v = np.sqrt(8.0 * 0.185 * 9.81 / 1.0)
+  assert f'about {v:.1f} m/s or less for gray_interlock' in note
+  assert 'about 12, 15' in note
+  assert report.fan_setting_note(12.0, 'gray_interlock') is not None  # a scalar
+  # one gentle recording among strong ones: nothing to advise
+  assert report.fan_setting_note([12.0, 5.0], 'gray_interlock') is None
+  assert report.fan_setting_note([report.STRONG_LOAD_RATIO], 'gray_interlock') is None

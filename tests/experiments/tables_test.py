@@ -223,6 +223,31 @@ def test_batched_runs_real_estimates(tmp_path):
   assert 'missing' in out[tables._key(bad, 'physnet_depth')]['failed']
 
 
+def test_the_shape_method_estimates_without_a_network(tmp_path):
+  # --methods=shape: no models folder at all; every recording is estimated with
+  # the shape distance from its depth frames at shape_image_size.
+  from experiments.pipeline import objective
+  from tests.experiments import estimate_fixtures as fx
+
+  seq = fx.write_recording(str(tmp_path), fx.TRUTH)
+  rec = {'set': 'fabrics', 'fabric': fx.MATERIAL, 'garment': '', 'seq_id': '0000',
+         'path': seq}  # fmt: skip
+  config = tables.Config(
+    methods=('shape',), shape_image_size=fx.SIZE,
+    estimate=dataclasses.replace(objective.PRESETS['smoke'], backend='c'),
+  )  # fmt: skip
+  missing = str(tmp_path / 'no_models')
+  got = tables._batched([(rec, 'shape')], missing, str(tmp_path / 'w'), config)
+  res = got[tables._key(rec, 'shape')]
+  assert 'failed' not in res, res
+  assert res['config']['distance'] == 'shape' and res['truth'] == fx.TRUTH
+  assert not os.path.exists(missing)
+  md = tables.write_report(got, config, str(tmp_path / 'r'))
+  assert '| shape |' in md
+  with pytest.raises(ValueError, match='shape_image_size=8: need 16-1024'):
+    tables.Config(shape_image_size=8)
+
+
 def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
   # --wind_reading_sd: the recording is estimated with an anemometer reading
   # drawn around its truth as its prior, the reading the calibration's post-hoc
