@@ -23,13 +23,15 @@ class Args:
 
   Attributes:
     recording: a dataset sequence folder with ground truth (meta.json).
-    model: a trained PhySNet run.
+    model: a trained PhySNet run (none with --distance=shape).
+    image_size: pixels a side of the frames without a network.
     workdir: PNGs, JSON and the resumable state go here.
     study: what is evaluated.
   """
 
   recording: str = cli.required()
-  model: str = cli.required()
+  model: str = ''
+  image_size: int = 256
   workdir: str = 'out/landscape'
   study: landscape_lib.Config = landscape_lib.Config()
 
@@ -39,7 +41,9 @@ PRESETS = {k: Args(study=v) for k, v in landscape_lib.PRESETS.items()}
 
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
-  result = landscape_lib.run(args.study, args.recording, args.model, args.workdir)
+  result = landscape_lib.run(
+    args.study, args.recording, args.model, args.workdir, args.image_size
+  )
   print(json.dumps({k: result[k] for k in ('truth', 'truth_ratio', 'psd_truth')}))
   print(json.dumps({'grid_argmin': result['grid']['argmin']}))
   print('psd_vs_ratio', json.dumps(result['grid']['psd_vs_ratio']))

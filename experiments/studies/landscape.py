@@ -1,7 +1,9 @@
 """The estimate's objective landscape around a known truth, and what physics can tell apart.
 
 For a recording with ground truth (a dataset sequence folder) and a trained
-PhySNet run, this evaluates the estimate's objective (``experiments.pipeline.objective``):
+PhySNet run, this evaluates the estimate's objective (``experiments.pipeline.objective``;
+with ``--distance=shape`` no network is needed, and "PSD" below reads as the
+shape's discrepancy, m^2):
 
   (a) along each parameter through the truth, the other two held at the truth;
   (b) over a grid of the (wind speed, area weight) plane at the true bending;
@@ -139,7 +141,7 @@ def _signature(
     {
       'config': dataclasses.asdict(config),
       'recording': os.path.abspath(recording.source),
-      'model': os.path.abspath(model_dir),
+      'model': os.path.abspath(model_dir) if model_dir else '',
     },
     sort_keys=True,
   )
@@ -181,10 +183,17 @@ def evaluate_points(problem: est.Problem, U, batch, state_path, signature):
   return psd, stats
 
 
-def run(config: Config, recording_dir: str, model_dir: str, workdir: str) -> dict:
-  """Runs (or resumes) the study; returns and writes ``landscape.json``."""
+def run(
+  config: Config,
+  recording_dir: str,
+  model_dir: str,
+  workdir: str,
+  image_size: int = 256,
+) -> dict:
+  """Runs (or resumes) the study; returns and writes ``landscape.json``.
+  ``model_dir`` may be '' with the shape distance (frames at ``image_size``)."""
   t0 = time.time()
-  net = embedding.load_embedding(model_dir)
+  net = embedding.for_distance(model_dir, config.objective.distance, image_size)
   meta = recording_lib.read_json(os.path.join(recording_dir, 'meta.json'))
   obj_config = dataclasses.replace(
     config.objective, material=meta.get('material', config.objective.material)

@@ -83,3 +83,21 @@ def test_tiny_study_then_resume(tmp_path, monkeypatch):
   other = dataclasses.replace(config, grid=2)
   with pytest.raises(ValueError, match='another study'):
     ls.run(other, seq, model_dir, workdir)
+
+
+def test_the_shape_distance_maps_without_a_network(tmp_path):
+  # --distance=shape and no --model: the discrepancy mapped is where the sheet
+  # hangs (m^2), zero at the truth but for the recording's mm quantisation.
+  from tests.experiments.estimate_fixtures import SIZE
+
+  seq = write_recording(str(tmp_path), TRUTH)
+  shape = dataclasses.replace(CONFIG, distance='shape')
+  config = ls.Config(objective=shape, points_1d=2, grid=2, batch=8)
+  result = ls.run(config, seq, '', str(tmp_path / 'land'), image_size=SIZE)
+  assert result['model'] == ''
+  assert result['psd_truth'] < _TRUTH_PSD_TOLERANCE
+  line = result['line']['wind_speed']
+  assert line['argmin'] == pytest.approx(TRUTH['wind_speed'])
+  assert max(line['psd']) > 10 * result['psd_truth']  # the ends of the range are far
+  with pytest.raises(ValueError, match='missing --model'):
+    ls.run(ls.Config(objective=CONFIG), seq, '', str(tmp_path / 'no'))
