@@ -121,10 +121,13 @@ def main(argv):
     slope = (y[1] - y[0]) / d_log_ratio
     ratio = float(physsim.load_ratio(v, w))
     for c in clips:
-      s = ratio_sd(
-        summaries(gusty.positions[i * n : (i + 1) * n], round(c * FLAGS.fps)), slope
-      )
-      row = {'wind_speed': v, 'load_ratio': ratio, 'clip_s': c, 'ratio_sd': s}
+      samples = summaries(gusty.positions[i * n : (i + 1) * n], round(c * FLAGS.fps))
+      s = ratio_sd(samples, slope)
+      row = {
+        'wind_speed': v, 'load_ratio': ratio, 'clip_s': c, 'ratio_sd': s,
+        # its two factors: how far the summary moves with the ratio, and wanders
+        'slope_m': slope.tolist(), 'gust_sd_m': samples.std(axis=0, ddof=1).tolist(),
+      }  # fmt: skip
       for r in readings:
         row[f'area_weight_floor_{r:g}'] = {k: floor(s, r, k) for k in (1, 3)}
       rows.append(row)

@@ -69,6 +69,7 @@ def test_script_writes_a_floor_per_wind_and_clip(tmp_path):
   assert [r['clip_s'] for r in rows] == [0.5, 1.0]
   for r in rows:
     assert np.isfinite(r['ratio_sd']) and r['ratio_sd'] > 0
+    assert len(r['slope_m']) == 2 and min(r['gust_sd_m']) > 0
     f = r['area_weight_floor_0.02']
     assert f['1'] == pytest.approx(gf.floor(r['ratio_sd'], 0.02, 1), rel=_EXACT)
     assert f['3'] < f['1']
