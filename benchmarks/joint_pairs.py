@@ -17,8 +17,9 @@ discrepancy (``shape``: where the sheet hangs); ``--gusts`` and
 ``--cloth_resolution`` set the simulations' gust intensity and mesh (the
 recordings' own: 0.3 and 33); ``--seconds`` the clips' length and
 ``--fan_winds`` the range the recordings' winds are drawn from (a user's
-gentle fan settings; by default the whole search box). The shape distance needs no network (no
-``--model``: frames at ``--image_size``). A GPU at paper size:
+gentle fan settings; by default the whole search box). The shape distance
+needs no network (no ``--model``: frames at ``--image_size``). A GPU at paper
+size:
 
   python benchmarks/joint_pairs.py --model=out/table1/physnet_depth/simulation/gray_interlock \\
       --workdir=/tmp/pairs --pairs=6 [--group=3]
