@@ -24,10 +24,6 @@ from absl import app, flags
 from experiments.pipeline import files
 
 FLAGS = flags.FLAGS
-flags.DEFINE_list('results', None, 'joint_pairs.json files', required=True)
-flags.DEFINE_float('split', 3.5, 'gentle fan settings: readings up to this, m/s')
-flags.DEFINE_float('ratio_split', 8.0, 'low load ratios: truths up to this')
-flags.DEFINE_string('out', None, 'JSON path')
 
 
 def strata(rows: list[dict], split: float, ratio_split: float) -> dict:
@@ -78,5 +74,14 @@ def main(argv):
     files.write_json(FLAGS.out, {'strata': out, 'results': FLAGS.results})
 
 
+def define_flags() -> None:
+  """Defined only when run as a script, so tests can import the helpers."""
+  flags.DEFINE_list('results', None, 'joint_pairs.json files', required=True)
+  flags.DEFINE_float('split', 3.5, 'gentle fan settings: readings up to this, m/s')
+  flags.DEFINE_float('ratio_split', 8.0, 'low load ratios: truths up to this')
+  flags.DEFINE_string('out', None, 'JSON path')
+
+
 if __name__ == '__main__':
+  define_flags()
   app.run(main)

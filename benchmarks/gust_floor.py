@@ -40,22 +40,6 @@ import physsim
 from experiments.pipeline import files
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
-flags.DEFINE_list('winds', ['3', '5'], 'mean wind speeds, m/s')
-flags.DEFINE_float('area_weight', 0.0, 'kg/m^2 (0: the middle of the fabric range)')
-flags.DEFINE_float('bending', 1.0, "bending scale (1: the fabric's measured)")
-flags.DEFINE_float('gusts', 0.3, 'RMS relative gust intensity', lower_bound=0.0)
-flags.DEFINE_integer('draws', 24, 'gust histories per wind speed', lower_bound=4)
-flags.DEFINE_float('seconds', 10.0, 'seconds recorded per history', lower_bound=0.5)
-flags.DEFINE_list('clips', ['2.5', '5', '10'], 'clip lengths, s (<= --seconds)')
-flags.DEFINE_float('fps', 20.0, 'frames per second summarised')
-flags.DEFINE_float('warmup', 1.0, 'seconds simulated before the first frame')
-flags.DEFINE_integer('cloth_resolution', 33, 'vertices a side')
-flags.DEFINE_float('step', 0.05, 'relative area-weight step of the slope')
-flags.DEFINE_list('readings', ['0.02'], "the anemometer's relative standard errors")
-flags.DEFINE_string('backend', 'auto', 'simulator (physsim.simulate)')
-flags.DEFINE_integer('seed', 0, 'gust histories')
-flags.DEFINE_string('out', None, 'JSON path')
 
 
 def summaries(positions: np.ndarray, frames: int) -> np.ndarray:
@@ -152,5 +136,26 @@ def main(argv):
     )
 
 
+def define_flags() -> None:
+  """Defined only when run as a script, so tests can import the helpers."""
+  flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
+  flags.DEFINE_list('winds', ['3', '5'], 'mean wind speeds, m/s')
+  flags.DEFINE_float('area_weight', 0.0, 'kg/m^2 (0: the middle of the fabric range)')
+  flags.DEFINE_float('bending', 1.0, "bending scale (1: the fabric's measured)")
+  flags.DEFINE_float('gusts', 0.3, 'RMS relative gust intensity', lower_bound=0.0)
+  flags.DEFINE_integer('draws', 24, 'gust histories per wind speed', lower_bound=4)
+  flags.DEFINE_float('seconds', 10.0, 'seconds recorded per history', lower_bound=0.5)
+  flags.DEFINE_list('clips', ['2.5', '5', '10'], 'clip lengths, s (<= --seconds)')
+  flags.DEFINE_float('fps', 20.0, 'frames per second summarised')
+  flags.DEFINE_float('warmup', 1.0, 'seconds simulated before the first frame')
+  flags.DEFINE_integer('cloth_resolution', 33, 'vertices a side')
+  flags.DEFINE_float('step', 0.05, 'relative area-weight step of the slope')
+  flags.DEFINE_list('readings', ['0.02'], "the anemometer's relative standard errors")
+  flags.DEFINE_string('backend', 'auto', 'simulator (physsim.simulate)')
+  flags.DEFINE_integer('seed', 0, 'gust histories')
+  flags.DEFINE_string('out', None, 'JSON path')
+
+
 if __name__ == '__main__':
+  define_flags()
   app.run(main)
