@@ -189,11 +189,11 @@ def main(args: Args) -> None:
   if len(recs) > 1:
     result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
     print(report.joint_table(result))
-    ratios = [r['load_ratio']['median'] for r in result['recordings']]
+    ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
     result = search.estimate(config, recs[0], args.model, args.workdir)
     print(report.report_table(result))
-    ratios = [result['load_ratio']['median']]
+    ratios = [report.point_of(result['load_ratio'])]
   note = report.fan_setting_note(ratios, config.material)
   if note:
     print(note)

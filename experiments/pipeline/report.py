@@ -554,6 +554,12 @@ STRONG_LOAD_RATIO = 10.0
 GENTLE_LOAD_RATIO = 8.0
 
 
+def point_of(stats: dict) -> float:
+  """A quantity's summary as one number: the posterior median where there is a
+  posterior, else the reported value (the paper's argmin protocol)."""
+  return float(stats['median'] if 'median' in stats else stats['value'])
+
+
 def fan_setting_note(load_ratios, material: str) -> str | None:
   """The line ``estimate`` prints when every recording's load ratio (posterior
   medians) is above ``STRONG_LOAD_RATIO``: such fan settings read area weight

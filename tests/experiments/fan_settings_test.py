@@ -87,3 +87,10 @@ def test_estimate_notes_strong_fan_settings_and_the_gentler_wind():
   # one gentle recording among strong ones: nothing to advise
   assert report.fan_setting_note([12.0, 5.0], 'gray_interlock') is None
   assert report.fan_setting_note([report.STRONG_LOAD_RATIO], 'gray_interlock') is None
+
+
+def test_the_note_reads_a_posterior_median_or_the_argmin_protocols_value():
+  from experiments.pipeline import report
+
+  assert report.point_of({'median': 12.0, 'value': 11.0}) == 12.0
+  assert report.point_of({'value': 9.5, 'posterior_median': 9.0}) == 9.5  # argmin
