@@ -8,7 +8,10 @@ centre's area-weight error on the same recordings; the same split by the
 true load ratio (``--ratio_split``). The reading is what a user sees when
 choosing a setting; the load ratio is what the physics cares about (the sheet
 blows flat at high ratios and its mean shape stops following the ratio:
-``benchmarks/gust_floor.py``). No simulation: seconds on a CPU.
+``benchmarks/gust_floor.py``). Then, pooled over the files, each estimate's
+mean error with its standard error over groups (``by_group``): a group's
+recordings share one joint area weight, so the group, not the recording, is
+the independent unit. No simulation: seconds on a CPU.
 
   python benchmarks/fan_settings.py \\
       --results=benchmarks/results/matched_synthetic_h100/joint_3_shape_synthetic_g0.3_c33.json
@@ -16,6 +19,7 @@ blows flat at high ratios and its mean shape stops following the ratio:
 
 from __future__ import annotations
 
+import collections
 import json
 
 import numpy as np
@@ -53,15 +57,66 @@ def strata(rows: list[dict], split: float, ratio_split: float) -> dict:
   return out
 
 
+NAMES = ('wind_speed', 'area_weight', 'load_ratio')
+# a row's estimates (benchmarks/joint_pairs.py): one recording, the group's first
+# two jointly, the whole group jointly (reported point), the range centre
+ESTIMATES = ('alone', 'first_2', 'joint', 'centre')
+
+
+def by_group(runs: list[tuple[list[dict], int]]) -> dict:
+  """Per estimate: mean error over recordings and its standard error over groups.
+
+  ``runs`` holds each file's rows and its group size; a row's group is its
+  ``seq // size`` within its file. Every group counts once in the standard
+  error (the standard deviation of group means over the square root of their
+  number), so a joint estimate shared by a group's recordings is not counted
+  as several independent ones.
+  """
+  out = {}
+  for who in ESTIMATES:
+    groups = []  # one dict of error lists per group
+    for rows, size in runs:
+      by = collections.defaultdict(list)
+      for r in rows:
+        if who in r:
+          by[r['seq'] // size].append(r[who])
+      groups += list(by.values())
+    if not groups:
+      continue
+    s = {'groups': len(groups), 'n': sum(len(g) for g in groups)}
+    for n in NAMES:
+      means = np.array([np.mean([e[n] for e in g]) for g in groups])
+      weights = np.array([len(g) for g in groups])
+      s[n] = float(np.sum(means * weights) / weights.sum())
+      s[f'{n}_se'] = (
+        float(means.std(ddof=1) / np.sqrt(len(means)))
+        if len(means) > 1
+        else float('nan')
+      )
+    out[who] = s
+  return out
+
+
+def _load(path: str) -> tuple[list[dict], int | None]:
+  """A joint_pairs.json's rows and group size (None where it records none)."""
+  try:
+    with open(path) as f:
+      data = json.load(f)
+    rows = data['rows']
+    for i, r in enumerate(rows):
+      for key in ('reading', 'truth', 'alone', 'centre'):
+        if key not in r:
+          raise ValueError(f'row {i} has no {key!r}')
+  except (OSError, ValueError, KeyError, TypeError) as e:
+    raise app.UsageError(f'{path}: not a joint_pairs.json ({e})') from e
+  size = data.get('flags', {}).get('group')
+  return rows, (int(size) if size and all('seq' in r for r in rows) else None)
+
+
 def main(argv):
   del argv
-  rows = []
-  for path in FLAGS.results:
-    try:
-      with open(path) as f:
-        rows += json.load(f)['rows']
-    except (OSError, ValueError, KeyError) as e:
-      raise app.UsageError(f'{path}: not a joint_pairs.json ({e})') from e
+  runs = [_load(path) for path in FLAGS.results]
+  rows = [r for rs, _ in runs for r in rs]
   out = strata(rows, FLAGS.split, FLAGS.ratio_split)
   print(f'{len(rows)} recordings; one recording and its reading, mean error (SE)')
   print('| recordings | n | area weight | load ratio | range centre: area weight |')
@@ -70,8 +125,19 @@ def main(argv):
     print(f"| {name} | {s['n']} | {s['area_weight']:.1f}% ({s['area_weight_se']:.1f}) | "
           f"{s['load_ratio']:.1f}% ({s['load_ratio_se']:.1f}) | "
           f"{s['centre_area_weight']:.1f}% |")  # fmt: skip
+  pooled = None
+  if all(size for _, size in runs):  # every file says how its groups were made
+    pooled = by_group(runs)
+    print('every recording, mean error (SE over groups)')
+    print('| estimate | groups | recordings | wind | area weight | load ratio |')
+    print('|---|---:|---:|---|---|---|')
+    for who, s in pooled.items():
+      print(f"| {who} | {s['groups']} | {s['n']} | "
+            + ' | '.join(f"{s[n]:.1f}% ({s[n + '_se']:.1f})" for n in NAMES) + ' |')  # fmt: skip
   if FLAGS.out:
-    files.write_json(FLAGS.out, {'strata': out, 'results': FLAGS.results})
+    files.write_json(
+      FLAGS.out, {'strata': out, 'by_group': pooled, 'results': FLAGS.results}
+    )
 
 
 def define_flags() -> None:

@@ -63,11 +63,22 @@ def floor(s: float, reading: float, k: int) -> float:
   return float(100 * np.sqrt(2 / np.pi) * np.sqrt((s**2 + (2 * reading) ** 2) / k))
 
 
+def _positive_floats(name: str) -> list[float]:
+  """A list flag's values as positive floats; a usage error naming the flag."""
+  try:
+    values = [float(v) for v in FLAGS[name].value]
+  except ValueError:
+    values = []
+  if not values or not all(v > 0 for v in values):  # also refuses NaN
+    raise app.UsageError(
+      f'--{name}={",".join(FLAGS[name].value)}: need positive numbers, comma-separated'
+    )
+  return values
+
+
 def main(argv):
   del argv
-  winds = [float(v) for v in FLAGS.winds]
-  clips = [float(c) for c in FLAGS.clips]
-  readings = [float(r) for r in FLAGS.readings]
+  winds, clips, readings = (_positive_floats(n) for n in ('winds', 'clips', 'readings'))
   if max(clips) > FLAGS.seconds:
     raise app.UsageError(f'--clips up to {max(clips)} s but --seconds={FLAGS.seconds}')
   space = physsim.search_space(FLAGS.material)

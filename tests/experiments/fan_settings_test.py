@@ -63,16 +63,85 @@ def test_script_prints_and_writes_the_strata(tmp_path):
   assert json.loads(out.read_text())['strata']['reading > 3.5 m/s']['n'] == 2
 
 
-def test_a_file_that_is_not_a_result_is_named(tmp_path):
+def _errors(wind, area, ratio):
+  return {'wind_speed': wind, 'area_weight': area, 'load_ratio': ratio}
+
+
+def _grouped(seq, alone, joint, first_2=None):
+  row = _row(2.0, 3.0, alone, 1.0, 10.0)
+  row['seq'] = seq
+  row['alone'] = _errors(1.0, alone, 2.0)
+  row['joint'] = _errors(1.0, joint, 2.0)
+  row['centre'] = _errors(50.0, 10.0, 100.0)
+  if first_2 is not None:
+    row['first_2'] = _errors(1.0, first_2, 2.0)
+  return row
+
+
+# two files, groups of 3 (seq // 3); the joint error is shared within a group
+RUN_A = [
+  _grouped(0, 4.0, 3.0, 5.0), _grouped(1, 6.0, 3.0, 7.0), _grouped(2, 8.0, 3.0),
+  _grouped(3, 2.0, 1.0, 2.0), _grouped(4, 2.0, 1.0, 4.0), _grouped(5, 5.0, 1.0),
+]  # fmt: skip
+RUN_B = [_grouped(0, 9.0, 8.0, 9.0), _grouped(1, 3.0, 8.0, 1.0), _grouped(2, 3.0, 8.0)]
+
+
+def test_by_group_counts_each_group_once_in_the_standard_error():
+  out = fs.by_group([(RUN_A, 3), (RUN_B, 3)])
+  joint = out['joint']
+  assert joint['groups'] == 3 and joint['n'] == 9
+  assert joint['area_weight'] == pytest.approx(4.0, rel=_EXACT)  # (9 + 3 + 24) / 9
+  # group means 3, 1, 8: SE = sd / sqrt(3), not the recordings' sd / sqrt(9)
+  assert joint['area_weight_se'] == pytest.approx(
+    np.std([3.0, 1.0, 8.0], ddof=1) / np.sqrt(3), rel=_EXACT
+  )
+  alone = out['alone']  # group means 6, 3, 5
+  assert alone['area_weight'] == pytest.approx(42 / 9, rel=_EXACT)
+  assert alone['area_weight_se'] == pytest.approx(
+    np.std([6.0, 3.0, 5.0], ddof=1) / np.sqrt(3), rel=_EXACT
+  )
+  first = out['first_2']  # two rows a group: means 6, 3, 5 again
+  assert first['n'] == 6 and first['area_weight'] == pytest.approx(28 / 6, rel=_EXACT)
+  assert out['centre']['wind_speed'] == pytest.approx(50.0, rel=_EXACT)
+
+
+def test_script_pools_files_by_group_when_they_record_their_groups(tmp_path):
+  paths = []
+  for name, rows in (('a', RUN_A), ('b', RUN_B)):
+    p = tmp_path / f'{name}.json'
+    p.write_text(json.dumps({'rows': rows, 'flags': {'group': 3}}))
+    paths.append(str(p))
+  out = tmp_path / 'pooled.json'
+  proc = subprocess.run(
+    [sys.executable, 'benchmarks/fan_settings.py', f'--results={",".join(paths)}',
+     f'--out={out}'],
+    cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
+    text=True, timeout=300,
+  )  # fmt: skip
+  assert proc.returncode == 0, proc.stderr[-2000:]
+  assert '| joint | 3 | 9 | 1.0% (0.0) | 4.0% (2.1) |' in proc.stdout
+  assert json.loads(out.read_text())['by_group']['joint']['groups'] == 3
+
+
+@pytest.mark.parametrize(
+  'text, why',
+  [
+    ('{"summary": {}}', "'rows'"),
+    ('{"rows": [{"reading": [2, 0.04], "truth": {}, "alone": {}}]}', "no 'centre'"),
+    ('[1, 2]', 'indices'),
+  ],
+)
+def test_a_file_that_is_not_a_result_is_named(tmp_path, text, why):
   bad = tmp_path / 'bad.json'
-  bad.write_text('{"summary": {}}')
+  bad.write_text(text)
   proc = subprocess.run(
     [sys.executable, 'benchmarks/fan_settings.py', f'--results={bad}'],
     cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
     text=True, timeout=300,
   )  # fmt: skip
   assert proc.returncode != 0
-  assert f'{bad}: not a joint_pairs.json' in proc.stderr
+  assert f'{bad}: not a joint_pairs.json' in proc.stderr and why in proc.stderr
+  assert 'Traceback' not in proc.stderr
 
 
 def test_estimate_notes_strong_fan_settings_and_the_gentler_wind():

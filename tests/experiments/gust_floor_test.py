@@ -77,11 +77,21 @@ def test_script_writes_a_floor_per_wind_and_clip(tmp_path):
   assert not list(tmp_path.glob('*.tmp*'))  # written whole
 
 
-def test_clips_longer_than_the_histories_are_refused(tmp_path):
+@pytest.mark.parametrize(
+  'args, named',
+  [
+    (['--seconds=1', '--clips=2'], '--clips up to 2'),
+    (['--winds=a'], '--winds=a: need positive numbers'),
+    (['--winds=3,-1'], '--winds=3,-1: need positive numbers'),
+    (['--clips=2,nan'], '--clips=2,nan: need positive numbers'),
+  ],
+)
+def test_bad_flags_are_refused_by_name_before_any_simulation(args, named):
   proc = subprocess.run(
-    [sys.executable, 'benchmarks/gust_floor.py', '--seconds=1', '--clips=2'],
+    [sys.executable, 'benchmarks/gust_floor.py', *args],
     cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
     text=True, timeout=300,
   )  # fmt: skip
   assert proc.returncode != 0
-  assert '--clips up to 2' in proc.stderr
+  assert named in proc.stderr
+  assert 'Traceback' not in proc.stderr
