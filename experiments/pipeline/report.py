@@ -563,9 +563,10 @@ def point_of(stats: dict) -> float:
 def fan_setting_note(load_ratios, material: str) -> str | None:
   """The line ``estimate`` prints when every recording's load ratio (posterior
   medians) is above ``STRONG_LOAD_RATIO``: such fan settings read area weight
-  hardly better than its range, and a gentler one (the wind that gives
-  ``GENTLE_LOAD_RATIO`` at the fabric's middle area weight) reads it about twice
-  as well; else None."""
+  hardly better than its range, while three gentler ones (the wind that gives
+  ``GENTLE_LOAD_RATIO`` at the fabric's middle area weight), each with an
+  anemometer reading, estimated jointly, read it about twice as well as the
+  range (BENCHMARKS.md); else None."""
   ratios = np.atleast_1d(np.asarray(load_ratios, np.float64))
   if not np.all(ratios > STRONG_LOAD_RATIO):
     return None
@@ -577,7 +578,8 @@ def fan_setting_note(load_ratios, material: str) -> str | None:
   return (
     f'note: load ratio rho v^2/(w g) about {seen}: at fan settings this strong the '
     'sheet is blown nearly flat and a clip reads the area weight hardly better than '
-    f'its range; to measure it, record a gentler setting too (load ratio under '
-    f'{GENTLE_LOAD_RATIO:g}: about {gentle:.1f} m/s or less for {material}), with '
-    'an anemometer, and a longer clip (docs/identifiability.md)'
+    f'its range; to measure it, record three gentler settings (load ratio under '
+    f'{GENTLE_LOAD_RATIO:g}: about {gentle:.1f} m/s or less for {material}), each '
+    'with an anemometer reading, and estimate them jointly (--recording=a,b,c '
+    '--wind_speeds=...; docs/identifiability.md)'
   )

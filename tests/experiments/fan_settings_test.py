@@ -152,6 +152,7 @@ def test_estimate_notes_strong_fan_settings_and_the_gentler_wind():
   v = np.sqrt(8.0 * 0.185 * 9.81 / 1.0)
   assert f'about {v:.1f} m/s or less for gray_interlock' in note
   assert 'about 12, 15' in note
+  assert 'three gentler settings' in note and '--recording=a,b,c' in note
   assert report.fan_setting_note(12.0, 'gray_interlock') is not None  # a scalar
   # one gentle recording among strong ones: nothing to advise
   assert report.fan_setting_note([12.0, 5.0], 'gray_interlock') is None
