@@ -17,6 +17,15 @@ _ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__
 _EXACT = 1e-12
 
 
+def _script(*args):
+  """benchmarks/fan_settings.py run as a user runs it."""
+  return subprocess.run(
+    [sys.executable, 'benchmarks/fan_settings.py', *args],
+    cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
+    text=True, timeout=300,
+  )  # fmt: skip
+
+
 def _row(reading, ratio, area, ratio_err, centre):
   return {
     'reading': [reading, 0.02 * reading],
@@ -53,11 +62,7 @@ def test_script_prints_and_writes_the_strata(tmp_path):
   src = tmp_path / 'joint_pairs.json'
   src.write_text(json.dumps({'rows': ROWS}))
   out = tmp_path / 'strata.json'
-  proc = subprocess.run(
-    [sys.executable, 'benchmarks/fan_settings.py', f'--results={src}', f'--out={out}'],
-    cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
-    text=True, timeout=300,
-  )  # fmt: skip
+  proc = _script(f'--results={src}', f'--out={out}')
   assert proc.returncode == 0, proc.stderr[-2000:]
   assert '| reading <= 3.5 m/s | 3 | 4.0% (1.2)' in proc.stdout
   assert json.loads(out.read_text())['strata']['reading > 3.5 m/s']['n'] == 2
@@ -112,12 +117,7 @@ def test_script_pools_files_by_group_when_they_record_their_groups(tmp_path):
     p.write_text(json.dumps({'rows': rows, 'flags': {'group': 3}}))
     paths.append(str(p))
   out = tmp_path / 'pooled.json'
-  proc = subprocess.run(
-    [sys.executable, 'benchmarks/fan_settings.py', f'--results={",".join(paths)}',
-     f'--out={out}'],
-    cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
-    text=True, timeout=300,
-  )  # fmt: skip
+  proc = _script(f'--results={",".join(paths)}', f'--out={out}')
   assert proc.returncode == 0, proc.stderr[-2000:]
   assert '| joint | 3 | 9 | 1.0% (0.0) | 4.0% (2.1) |' in proc.stdout
   assert json.loads(out.read_text())['by_group']['joint']['groups'] == 3
@@ -134,11 +134,7 @@ def test_script_pools_files_by_group_when_they_record_their_groups(tmp_path):
 def test_a_file_that_is_not_a_result_is_named(tmp_path, text, why):
   bad = tmp_path / 'bad.json'
   bad.write_text(text)
-  proc = subprocess.run(
-    [sys.executable, 'benchmarks/fan_settings.py', f'--results={bad}'],
-    cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
-    text=True, timeout=300,
-  )  # fmt: skip
+  proc = _script(f'--results={bad}')
   assert proc.returncode != 0
   assert f'{bad}: not a joint_pairs.json' in proc.stderr and why in proc.stderr
   assert 'Traceback' not in proc.stderr
