@@ -86,8 +86,7 @@ def by_group(runs: list[tuple[list[dict], int]]) -> dict:
     s = {'groups': len(groups), 'n': sum(len(g) for g in groups)}
     for n in NAMES:
       means = np.array([np.mean([e[n] for e in g]) for g in groups])
-      weights = np.array([len(g) for g in groups])
-      s[n] = float(np.sum(means * weights) / weights.sum())
+      s[n] = float(np.mean([e[n] for g in groups for e in g]))  # over recordings
       s[f'{n}_se'] = (
         float(means.std(ddof=1) / np.sqrt(len(means)))
         if len(means) > 1
