@@ -106,10 +106,18 @@ def _load(path: str) -> tuple[list[dict], int | None]:
       for key in ('reading', 'truth', 'alone', 'centre'):
         if key not in r:
           raise ValueError(f'row {i} has no {key!r}')
-  except (OSError, ValueError, KeyError, TypeError) as e:
+    size = data.get('flags', {}).get('group')
+    size = int(size) if size and all('seq' in r for r in rows) else None
+    # the summaries themselves on this file alone: a missing inner key is named
+    # here, with the file, not later as a bare KeyError
+    strata(rows, 0.0, 0.0)
+    if size:
+      by_group([(rows, size)])
+  except KeyError as e:
+    raise app.UsageError(f'{path}: not a joint_pairs.json (a row lacks {e})') from e
+  except (OSError, ValueError, TypeError, AttributeError) as e:
     raise app.UsageError(f'{path}: not a joint_pairs.json ({e})') from e
-  size = data.get('flags', {}).get('group')
-  return rows, (int(size) if size and all('seq' in r for r in rows) else None)
+  return rows, size
 
 
 def main(argv):

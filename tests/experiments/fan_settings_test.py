@@ -129,6 +129,11 @@ def test_script_pools_files_by_group_when_they_record_their_groups(tmp_path):
     ('{"summary": {}}', "'rows'"),
     ('{"rows": [{"reading": [2, 0.04], "truth": {}, "alone": {}}]}', "no 'centre'"),
     ('[1, 2]', 'indices'),
+    (json.dumps({'rows': [{**ROWS[0], 'truth': {}}]}), "a row lacks 'load_ratio'"),
+    (
+      json.dumps({'rows': [{**RUN_B[0], 'joint': {}}], 'flags': {'group': 3}}),
+      "a row lacks 'wind_speed'",
+    ),
   ],
 )
 def test_a_file_that_is_not_a_result_is_named(tmp_path, text, why):
