@@ -9,10 +9,11 @@
 #      (MuJoCo's 1e-8 never stops early in float32);
 #   3. rendering 210 worlds x 6 cameras x 60 frames at 256 px (chunks sized from
 #      free memory).
-# Usage: OUT=/path bash benchmarks/gpu_engine.sh; logs and JSON go to $OUT.
+# Usage: OUT=/path bash benchmarks/gpu_engine.sh; logs and JSON go to $OUT
+# (default out/benchmarks/engine, outside git; not benchmarks/results).
 # SMOKE=1 checks the script on a CPU with tiny sizes.
 set -uo pipefail
-OUT=${OUT:-out/gpu_engine}
+OUT=${OUT:-out/benchmarks/engine}
 mkdir -p "$OUT"
 export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 step() {  # name seconds command...
@@ -33,7 +34,7 @@ for tol in 1e-6 1e-5; do
   step "tolerance_$tol" 90 python $P --batch_sizes=$B2 --backends=warp \
     --tolerance=$tol --out="$OUT/physsim_tolerance_$tol.json"
 done
-step render 120 python benchmarks/render_throughput.py --batch_sizes=$RB \
+step render 120 python -m benchmarks.render_throughput --batch_sizes=$RB \
   --methods=raster --mujoco_frames=0 --repeats=1 --resolution=$R \
   ${SMOKE:+--frames=4 --cameras=2} --out="$OUT/render_210.json"
 grep -h "^|" "$OUT"/*.log

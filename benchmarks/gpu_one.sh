@@ -37,9 +37,9 @@ step dataset 400 python -m experiments.generate_dataset --out="$R/ds" --material
 step train 600 python -m experiments.table1 --dataset="$R/ds" --workdir="$R/t1" \
   --columns=physnet_depth --splits=simulation --materials=$GI --epochs=30 \
   --val_fraction=0.2 --patience=4 --train_only || exit 1
-step train_fp32 300 python benchmarks/train_throughput.py --precision=float32 \
+step train_fp32 300 python -m benchmarks.train_throughput --precision=float32 \
   --out="$R/train_fp32.json"
-step latency 1200 python benchmarks/estimate_latency.py --recording="$REC" \
+step latency 1200 python -m benchmarks.estimate_latency --recording="$REC" \
   --material=$GI --model="$R/t1/physnet_depth/simulation/$GI" \
   --settings="$SETTINGS" --repeats="${REPEATS:-2}" --out="$R/latency.json"
 note done

@@ -43,7 +43,7 @@ step table1 3000 "${LAUNCH[@]}" --command="python -m experiments.table1 \
   --dataset=$R/ds --workdir=$R/t1 $T1_ARGS --columns=$COLUMNS --splits=simulation"
 if [ "$LATENCY" = 1 ]; then  # one estimate after compile
   gi=${FABRICS[1]}
-  step latency 900 python benchmarks/estimate_latency.py \
+  step latency 900 python -m benchmarks.estimate_latency \
     --recording="$R/eval/fabrics/$gi/0000" --material="$gi" $EST_ARGS \
     --model="$R/t1/physnet_depth/simulation/$gi" --out="$R/latency.json" \
     --settings=default,q8_warmup0.5

@@ -38,12 +38,13 @@
 #                SHARPNESS as for coverage; GUSTS the simulations' gust intensity;
 #                SECONDS_CLIP: each recording's length, s, the estimate's too;
 #                CLOTH: the simulations' cloth vertices per side, 33 as the recordings').
-# Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT.
+# Usage: benchmarks/gpu_posterior.sh STAGE [RUN_DIR]; logs and results go to $OUT
+# (default out/benchmarks/posterior, outside git; not benchmarks/results).
 # SMOKE=1 shrinks everything to check the script on a CPU.
 set -euo pipefail
 stage=${1:?stage: calibration, paper, latency, measured, members, ensemble, coverage or joint}
 R=${2:-/tmp/posterior_run}
-OUT=${OUT:-out/gpu_posterior}
+OUT=${OUT:-out/benchmarks/posterior}
 mkdir -p "$R" "$OUT"
 export PYTHONUNBUFFERED=1
 GI=gray_interlock
@@ -75,7 +76,7 @@ case "$stage" in
     python -m experiments.generate_dataset --out="$R/eval/fabrics" $EV 2>&1 | tail -8 | tee "$OUT/eval.log"
     ;;
   latency)
-    [ -z "${SMOKE:-}" ] && python benchmarks/estimate_latency.py --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
+    [ -z "${SMOKE:-}" ] && python -m benchmarks.estimate_latency --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
       --model="$R/t1/physnet_depth/simulation/$GI" --out="$OUT/latency.json" $LAT 2>&1 \
       | tee "$OUT/latency.log"
     for p in ${PAPER:+paper} default; do
@@ -94,7 +95,7 @@ case "$stage" in
         | tee "$OUT/tables_$m.log"
       cp "$R/tables_$m/tables.json" "$OUT/tables_$m.json"
     done
-    python benchmarks/measured_modes.py --measured_sd=0.02 --out="$OUT/measured_modes.json" \
+    python -m benchmarks.measured_modes --measured_sd=0.02 --out="$OUT/measured_modes.json" \
       --estimates="$R/tables_default/physnet_depth/fabrics/$GI-*" 2>&1 | tee "$OUT/measured_modes.log"
     ;;
   members)
@@ -162,7 +163,7 @@ case "$stage" in
     name=joint_${GROUP:-3}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${GUSTS:+_g$GUSTS}${CLOTH:+_c$CLOTH}${SECONDS_CLIP:+_${SECONDS_CLIP}s}
     model="--model=$R/t1/physnet_depth/simulation/$GI"
     [ "${DISTANCE:-}" = shape ] && model="--image_size=$([ -n "${SMOKE:-}" ] && echo 32 || echo 256)"
-    python benchmarks/joint_pairs.py "$model" \
+    python -m benchmarks.joint_pairs "$model" \
       --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
       ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} \
       ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} ${SHARPNESS:+--sharpness=$SHARPNESS} \

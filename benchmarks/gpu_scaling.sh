@@ -10,8 +10,9 @@
 #             (experiments.tables), a fixed ITERS iterations after the initial
 #             design so every run does the same work; G (default: every count
 #             in GPUS) picks the runs.
-# Usage: OUT=/path bash benchmarks/gpu_scaling.sh STAGE [RUN_DIR]; then
-#   python benchmarks/scaling_report.py --logs=$OUT   (the table and JSON).
+# Usage: OUT=/path bash benchmarks/gpu_scaling.sh STAGE [RUN_DIR] (OUT default
+# out/gpu_scaling, scaling_report's default, outside git; not benchmarks/results); then
+#   python -m benchmarks.scaling_report --logs=$OUT   (the table and JSON).
 # GPUS lists the device counts (default "1 N", N = every GPU). SMOKE=1 checks the
 # script on a CPU with tiny sizes (XLA's host devices stand in for GPUs).
 set -uo pipefail

@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # The GPU measurements behind BENCHMARKS.md, in the order they are run on the
 # device machine (after the wheels of ../shared/tools/device-wheels.sh are in
-# /tmp/site). Each step has its own time limit and log under $OUT; a failing
+# /tmp/site). Each step has its own time limit and log under $OUT (default
+# out/benchmarks/suite, outside git; not benchmarks/results); a failing
 # step does not stop the rest.
 #   bash benchmarks/gpu_suite.sh render|motion|estimate|tables
 # The device image had no working EGL: MuJoCo's own renderer is timed on the CPU
 # only (render_throughput.py there), and MUJOCO_GL=glfw lets mujoco import.
 set -uo pipefail
 export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
-OUT=${OUT:-out/gpu}
+OUT=${OUT:-out/benchmarks/suite}
 mkdir -p "$OUT"
 step() {  # name seconds command...
   local name=$1 secs=$2
@@ -20,15 +21,15 @@ step() {  # name seconds command...
 case ${1:-render} in
   render)
     nvidia-smi -L >"$OUT/gpu.txt" 2>&1
-    step render_raster 200 python benchmarks/render_throughput.py \
+    step render_raster 200 python -m benchmarks.render_throughput \
       --batch_sizes=1,16,64,210 --methods=raster --mjwarp --mujoco_frames=0 \
       --out="$OUT/render_gpu.json"
-    step render_brute 60 python benchmarks/render_throughput.py \
+    step render_brute 60 python -m benchmarks.render_throughput \
       --batch_sizes=1 --methods=brute --mujoco_frames=0 \
       --out="$OUT/render_brute_gpu.json"
-    step train_fp32 150 python benchmarks/train_throughput.py --precision=float32 \
+    step train_fp32 150 python -m benchmarks.train_throughput --precision=float32 \
       --out="$OUT/train_gpu.json"
-    step train_bf16 100 python benchmarks/train_throughput.py --precision=bfloat16 \
+    step train_bf16 100 python -m benchmarks.train_throughput --precision=bfloat16 \
       --out="$OUT/train_gpu_bf16.json"
     ;;
   motion)
