@@ -1,0 +1,119 @@
+"""Tests for the documentation as a map: BENCHMARKS.md short, every cited result
+and every relative link present, docs/README.md listing every page, and
+benchmarks/results holding only small summaries. Reads files only (no JAX)."""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import subprocess
+
+import pytest
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_RESULTS = 'benchmarks/results'
+_MAX_LINES = 200  # BENCHMARKS.md: the current numbers, not a history
+_MAX_FILE = 100 * 1024  # one committed summary
+_MAX_TOTAL = 2 * 1024 * 1024  # every committed summary together
+_LINK = re.compile(r'\[[^\]]*\]\(([^)\s]+)\)')
+_CITED = re.compile(r'benchmarks/results/[A-Za-z0-9_.*/-]*')
+
+
+def _pages() -> list[str]:
+  """README.md, BENCHMARKS.md and every docs/*.md, relative to the root."""
+  docs = sorted(glob.glob(os.path.join(_ROOT, 'docs', '*.md')))
+  return ['README.md', 'BENCHMARKS.md', *(os.path.relpath(p, _ROOT) for p in docs)]
+
+
+def _read(page: str) -> str:
+  with open(os.path.join(_ROOT, page), encoding='utf-8') as f:
+    return f.read()
+
+
+def _cited() -> dict[str, list[str]]:
+  """Each path under benchmarks/results a page names -> the pages naming it."""
+  out: dict[str, list[str]] = {}
+  for page in _pages():
+    for m in _CITED.finditer(_read(page)):
+      path = m.group(0).rstrip('./')
+      if path != _RESULTS:
+        out.setdefault(path, []).append(page)
+  return out
+
+
+def _exists(path: str) -> bool:
+  full = os.path.join(_ROOT, path)
+  return bool(glob.glob(full)) if '*' in path else os.path.exists(full)
+
+
+def _git(*args: str) -> subprocess.CompletedProcess:
+  return subprocess.run(
+    ['git', *args], cwd=_ROOT, capture_output=True, text=True, timeout=60
+  )
+
+
+def _git_checkout() -> bool:
+  try:
+    proc = _git('rev-parse', '--is-inside-work-tree')
+  except (OSError, subprocess.SubprocessError):
+    return False
+  return proc.returncode == 0 and proc.stdout.strip() == 'true'
+
+
+def test_benchmarks_is_short():
+  lines = _read('BENCHMARKS.md').splitlines()
+  assert len(lines) <= _MAX_LINES, f'BENCHMARKS.md has {len(lines)} lines'
+
+
+def test_every_cited_result_exists():
+  cited = _cited()
+  assert cited, 'no page cites benchmarks/results: the pattern is wrong'
+  missing = {p: pages for p, pages in cited.items() if not _exists(p)}
+  assert not missing, f'cited but absent: {missing}'
+
+
+def test_cited_results_are_not_ignored():
+  if not _git_checkout():
+    pytest.skip('not a git checkout')
+  paths = [p for p in _cited() if '*' not in p]
+  proc = _git('check-ignore', *paths)
+  assert proc.returncode == 1, f'cited but ignored by git: {proc.stdout.split()}'
+
+
+def test_committed_results_are_small():
+  if not _git_checkout():
+    pytest.skip('not a git checkout')
+  proc = _git('ls-files', '-z', '--', _RESULTS)
+  assert proc.returncode == 0, proc.stderr
+  sizes = {}
+  for path in filter(None, proc.stdout.split('\0')):
+    full = os.path.join(_ROOT, path)
+    if os.path.isfile(full):  # a file deleted but not yet committed is gone
+      sizes[path] = os.path.getsize(full)
+  big = {p: s for p, s in sizes.items() if s > _MAX_FILE}
+  assert not big, f'over {_MAX_FILE} bytes: {big}'
+  total = sum(sizes.values())
+  assert total <= _MAX_TOTAL, f'{total} bytes in {_RESULTS}, over {_MAX_TOTAL}'
+
+
+def test_docs_readme_lists_every_page():
+  listed = {
+    os.path.normpath(t.split('#')[0]) for t in _LINK.findall(_read('docs/README.md'))
+  }
+  pages = [os.path.basename(p) for p in _pages() if p.startswith('docs' + os.sep)]
+  missing = [p for p in pages if p != 'README.md' and p not in listed]
+  assert not missing, f'docs/README.md does not list {missing}'
+
+
+def test_relative_links_resolve():
+  broken = []
+  for page in _pages():
+    base = os.path.dirname(os.path.join(_ROOT, page))
+    for target in _LINK.findall(_read(page)):
+      if re.match(r'[a-z][a-z0-9+.-]*:', target) or target.startswith('#'):
+        continue  # a URL, or an anchor on the same page
+      path = target.split('#')[0].split('?')[0]
+      if not os.path.exists(os.path.normpath(os.path.join(base, path))):
+        broken.append(f'{page}: {target}')
+  assert not broken, 'links to missing files:\n' + '\n'.join(broken)
