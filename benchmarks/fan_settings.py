@@ -13,21 +13,40 @@ mean error with its standard error over groups (``by_group``): a group's
 recordings share one joint area weight, so the group, not the recording, is
 the independent unit. No simulation: seconds on a CPU.
 
-  python benchmarks/fan_settings.py \\
+  python -m benchmarks.fan_settings \\
       --results=benchmarks/results/matched_synthetic_h100/joint_3_shape_synthetic_g0.3_c33.json
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import json
 
 import numpy as np
-from absl import app, flags
 
-from experiments.pipeline import files
+from benchmarks import out_path
+from experiments.pipeline import cli, files
 
-FLAGS = flags.FLAGS
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The fan-settings summary.
+
+  Attributes:
+    results: joint_pairs.json files (comma-separated; required).
+    split: gentle fan settings: readings up to this, m/s.
+    ratio_split: low load ratios: truths up to this.
+    out: JSON path.
+  """
+
+  results: tuple[str, ...] = cli.required(())
+  split: float = 3.5
+  ratio_split: float = 8.0
+  out: str = out_path('fan_settings')
+
+
+PRESETS = {'default': Args()}
 
 
 def strata(rows: list[dict], split: float, ratio_split: float) -> dict:
@@ -114,17 +133,16 @@ def _load(path: str) -> tuple[list[dict], int | None]:
     if size:
       by_group([(rows, size)])
   except KeyError as e:
-    raise app.UsageError(f'{path}: not a joint_pairs.json (a row lacks {e})') from e
+    raise ValueError(f'{path}: not a joint_pairs.json (a row lacks {e})') from e
   except (OSError, ValueError, TypeError, AttributeError) as e:
-    raise app.UsageError(f'{path}: not a joint_pairs.json ({e})') from e
+    raise ValueError(f'{path}: not a joint_pairs.json ({e})') from e
   return rows, size
 
 
-def main(argv):
-  del argv
-  runs = [_load(path) for path in FLAGS.results]
+def main(args: Args) -> None:
+  runs = [_load(path) for path in args.results]
   rows = [r for rs, _ in runs for r in rs]
-  out = strata(rows, FLAGS.split, FLAGS.ratio_split)
+  out = strata(rows, args.split, args.ratio_split)
   print(f'{len(rows)} recordings; one recording and its reading, mean error (SE)')
   print('| recordings | n | area weight | load ratio | range centre: area weight |')
   print('|---|---:|---|---|---|')
@@ -141,20 +159,11 @@ def main(argv):
     for who, s in pooled.items():
       print(f"| {who} | {s['groups']} | {s['n']} | "
             + ' | '.join(f"{s[n]:.1f}% ({s[n + '_se']:.1f})" for n in NAMES) + ' |')  # fmt: skip
-  if FLAGS.out:
-    files.write_json(
-      FLAGS.out, {'strata': out, 'by_group': pooled, 'results': FLAGS.results}
-    )
-
-
-def define_flags() -> None:
-  """Defined only when run as a script, so tests can import the helpers."""
-  flags.DEFINE_list('results', None, 'joint_pairs.json files', required=True)
-  flags.DEFINE_float('split', 3.5, 'gentle fan settings: readings up to this, m/s')
-  flags.DEFINE_float('ratio_split', 8.0, 'low load ratios: truths up to this')
-  flags.DEFINE_string('out', None, 'JSON path')
+  files.write_json(
+    args.out, {'strata': out, 'by_group': pooled, 'results': list(args.results)}
+  )
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  define_flags()
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -26,20 +26,70 @@ its time step); the spread is estimated from ``--draws`` histories (24: about
 +-15% on each standard error). About 30 minutes on two CPU cores at the
 defaults (MuJoCo C), minutes on a GPU:
 
-  python benchmarks/gust_floor.py --out=/tmp/gust_floor.json
-  python benchmarks/gust_floor.py --winds=2,4,6 --seconds=5 --clips=2.5,5 --seed=1
+  python -m benchmarks.gust_floor --out=/tmp/gust_floor.json
+  python -m benchmarks.gust_floor --winds=2,4,6 --seconds=5 --clips=2.5,5 --seed=1
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import numpy as np
-from absl import app, flags
 
 import physsim
-from experiments.pipeline import files
+from benchmarks import floats, out_path
+from experiments.pipeline import cli, files
 
-FLAGS = flags.FLAGS
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The gust floor.
+
+  Attributes:
+    material: the fabric.
+    winds: mean wind speeds, m/s (comma-separated).
+    area_weight: kg/m^2 (0: the middle of the fabric range).
+    bending: bending scale (1: the fabric's measured).
+    gusts: RMS relative gust intensity (>= 0).
+    draws: gust histories per wind speed (>= 4).
+    seconds: seconds recorded per history (>= 0.5).
+    clips: clip lengths, s (<= --seconds; comma-separated).
+    fps: frames per second summarised.
+    warmup: seconds simulated before the first frame.
+    cloth_resolution: vertices a side.
+    step: relative area-weight step of the slope.
+    readings: the anemometer's relative standard errors (comma-separated).
+    backend: simulator (physsim.simulate).
+    seed: gust histories.
+    out: JSON path.
+  """
+
+  material: str = 'gray_interlock'
+  winds: tuple[str, ...] = ('3', '5')
+  area_weight: float = 0.0
+  bending: float = 1.0
+  gusts: float = 0.3
+  draws: int = 24
+  seconds: float = 10.0
+  clips: tuple[str, ...] = ('2.5', '5', '10')
+  fps: float = 20.0
+  warmup: float = 1.0
+  cloth_resolution: int = 33
+  step: float = 0.05
+  readings: tuple[str, ...] = ('0.02',)
+  backend: str = 'auto'
+  seed: int = 0
+  out: str = out_path('gust_floor')
+
+
+PRESETS = {
+  'default': Args(),
+  # checks the script on a CPU in about a minute
+  'smoke': Args(
+    winds=('3',), draws=4, seconds=1.0, clips=('0.5', '1'), cloth_resolution=8
+  ),
+}
 
 
 def summaries(positions: np.ndarray, frames: int) -> np.ndarray:
@@ -63,48 +113,39 @@ def floor(s: float, reading: float, k: int) -> float:
   return float(100 * np.sqrt(2 / np.pi) * np.sqrt((s**2 + (2 * reading) ** 2) / k))
 
 
-def _positive_floats(name: str) -> list[float]:
-  """A list flag's values as positive floats; a usage error naming the flag."""
-  try:
-    values = [float(v) for v in FLAGS[name].value]
-  except ValueError:
-    values = []
-  if not values or not all(v > 0 for v in values):  # also refuses NaN
-    raise app.UsageError(
-      f'--{name}={",".join(FLAGS[name].value)}: need positive numbers, comma-separated'
-    )
-  return values
-
-
-def main(argv):
-  del argv
-  winds, clips, readings = (_positive_floats(n) for n in ('winds', 'clips', 'readings'))
-  if max(clips) > FLAGS.seconds:
-    raise app.UsageError(f'--clips up to {max(clips)} s but --seconds={FLAGS.seconds}')
-  space = physsim.search_space(FLAGS.material)
-  w = FLAGS.area_weight or float(space.center().area_weight)
-  model = physsim.build(physsim.square(FLAGS.cloth_resolution), FLAGS.material)
-  n = FLAGS.draws
-  frames = round(FLAGS.seconds * FLAGS.fps)
-  common = dict(fps=FLAGS.fps, warmup=FLAGS.warmup, backend=FLAGS.backend,
-                material=FLAGS.material)  # fmt: skip
-  print(f'{n * len(winds)} gusty worlds, {FLAGS.seconds:g} s each ...', flush=True)
+def main(args: Args) -> None:
+  winds, clips, readings = (
+    floats(n, getattr(args, n), positive=True) for n in ('winds', 'clips', 'readings')
+  )
+  for name, low in (('gusts', 0.0), ('draws', 4), ('seconds', 0.5)):
+    if not getattr(args, name) >= low:
+      raise ValueError(f'--{name}={getattr(args, name)}: need at least {low}')
+  if max(clips) > args.seconds:
+    raise ValueError(f'--clips up to {max(clips)} s but --seconds={args.seconds}')
+  space = physsim.search_space(args.material)
+  w = args.area_weight or float(space.center().area_weight)
+  model = physsim.build(physsim.square(args.cloth_resolution), args.material)
+  n = args.draws
+  frames = round(args.seconds * args.fps)
+  common = dict(fps=args.fps, warmup=args.warmup, backend=args.backend,
+                material=args.material)  # fmt: skip
+  print(f'{n * len(winds)} gusty worlds, {args.seconds:g} s each ...', flush=True)
   gusty = physsim.simulate(
     model,
-    physsim.params.make(FLAGS.bending, np.repeat(winds, n), w),
+    physsim.params.make(args.bending, np.repeat(winds, n), w),
     frames=frames,
-    wind=physsim.Wind(gust_intensity=FLAGS.gusts),
-    key=jax.random.key(FLAGS.seed),
+    wind=physsim.Wind(gust_intensity=args.gusts),
+    key=jax.random.key(args.seed),
     **common,
   )
   # steady wind: the slope, from area weights a step either side
-  lo, hi = w / (1 + FLAGS.step), w * (1 + FLAGS.step)
+  lo, hi = w / (1 + args.step), w * (1 + args.step)
   steady = physsim.simulate(
     model,
     physsim.params.make(
-      FLAGS.bending, np.repeat(winds, 2), np.tile([lo, hi], len(winds))
+      args.bending, np.repeat(winds, 2), np.tile([lo, hi], len(winds))
     ),
-    frames=round(FLAGS.fps),
+    frames=round(args.fps),
     **common,
   )
   if not (np.all(gusty.valid) and np.all(steady.valid)):
@@ -112,11 +153,11 @@ def main(argv):
   d_log_ratio = -np.log(hi / lo)  # the ratio goes as 1 / w
   rows = []
   for i, v in enumerate(winds):
-    y = summaries(steady.positions[2 * i : 2 * i + 2], round(FLAGS.fps))
+    y = summaries(steady.positions[2 * i : 2 * i + 2], round(args.fps))
     slope = (y[1] - y[0]) / d_log_ratio
     ratio = float(physsim.load_ratio(v, w))
     for c in clips:
-      samples = summaries(gusty.positions[i * n : (i + 1) * n], round(c * FLAGS.fps))
+      samples = summaries(gusty.positions[i * n : (i + 1) * n], round(c * args.fps))
       s = ratio_sd(samples, slope)
       row = {
         'wind_speed': v, 'load_ratio': ratio, 'clip_s': c, 'ratio_sd': s,
@@ -126,7 +167,7 @@ def main(argv):
       for r in readings:
         row[f'area_weight_floor_{r:g}'] = {k: floor(s, r, k) for k in (1, 3)}
       rows.append(row)
-  print(f'{FLAGS.material}, area weight {w:g} kg/m^2, gusts {FLAGS.gusts:g}, '
+  print(f'{args.material}, area weight {w:g} kg/m^2, gusts {args.gusts:g}, '
         f'{n} histories per wind; mean-error floors of area weight from k recordings, no prior')  # fmt: skip
   head = ''.join(f' | floor k=1, k=3 ({100 * r:g}% reading)' for r in readings)
   print('| wind m/s | load ratio | clip s | ratio sd' + head + ' |')
@@ -138,35 +179,10 @@ def main(argv):
     )
     print(f"| {row['wind_speed']:g} | {row['load_ratio']:.2f} | {row['clip_s']:g} | "
           f"{100 * row['ratio_sd']:.1f}%{cells} |")  # fmt: skip
-  if FLAGS.out:
-    flags_used = ('material', 'winds', 'area_weight', 'bending', 'gusts', 'draws', 'seconds',
-                  'clips', 'fps', 'warmup', 'cloth_resolution', 'step', 'readings',
-                  'backend', 'seed')  # fmt: skip
-    files.write_json(
-      FLAGS.out, {'rows': rows, 'flags': {k: FLAGS[k].value for k in flags_used}}
-    )
-
-
-def define_flags() -> None:
-  """Defined only when run as a script, so tests can import the helpers."""
-  flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
-  flags.DEFINE_list('winds', ['3', '5'], 'mean wind speeds, m/s')
-  flags.DEFINE_float('area_weight', 0.0, 'kg/m^2 (0: the middle of the fabric range)')
-  flags.DEFINE_float('bending', 1.0, "bending scale (1: the fabric's measured)")
-  flags.DEFINE_float('gusts', 0.3, 'RMS relative gust intensity', lower_bound=0.0)
-  flags.DEFINE_integer('draws', 24, 'gust histories per wind speed', lower_bound=4)
-  flags.DEFINE_float('seconds', 10.0, 'seconds recorded per history', lower_bound=0.5)
-  flags.DEFINE_list('clips', ['2.5', '5', '10'], 'clip lengths, s (<= --seconds)')
-  flags.DEFINE_float('fps', 20.0, 'frames per second summarised')
-  flags.DEFINE_float('warmup', 1.0, 'seconds simulated before the first frame')
-  flags.DEFINE_integer('cloth_resolution', 33, 'vertices a side')
-  flags.DEFINE_float('step', 0.05, 'relative area-weight step of the slope')
-  flags.DEFINE_list('readings', ['0.02'], "the anemometer's relative standard errors")
-  flags.DEFINE_string('backend', 'auto', 'simulator (physsim.simulate)')
-  flags.DEFINE_integer('seed', 0, 'gust histories')
-  flags.DEFINE_string('out', None, 'JSON path')
+  settings = {k: v for k, v in dataclasses.asdict(args).items() if k != 'out'}
+  files.write_json(args.out, {'rows': rows, 'flags': settings})
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  define_flags()
-  app.run(main)
+  cli.run(Args, PRESETS, main)

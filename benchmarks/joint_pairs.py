@@ -21,9 +21,9 @@ gentle fan settings; by default the whole search box). The shape distance
 needs no network (no ``--model``: frames at ``--image_size``). A GPU at paper
 size:
 
-  python benchmarks/joint_pairs.py --model=out/table1/physnet_depth/simulation/gray_interlock \\
+  python -m benchmarks.joint_pairs --model=out/table1/physnet_depth/simulation/gray_interlock \\
       --workdir=/tmp/pairs --pairs=6 [--group=3]
-  python benchmarks/joint_pairs.py --distance=shape --workdir=/tmp/pairs_shape --pairs=6
+  python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_shape --pairs=6
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import os
 
 import jax
 import numpy as np
-from absl import app, flags, logging
+from absl import logging
 
 import physsim
 from experiments.pipeline import cli, datasets, embedding, files, objective, search
@@ -41,81 +41,98 @@ from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from experiments.studies import calibration
 
-FLAGS = flags.FLAGS
-flags.DEFINE_string(
-  'model', '', "the fabric's trained network (none with --distance=shape)"
-)
-flags.DEFINE_integer(
-  'image_size', 256, 'pixels a side of the frames without a network', lower_bound=16
-)
-flags.DEFINE_string('workdir', None, 'recordings and estimates go here', required=True)
-flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
-flags.DEFINE_integer('pairs', 6, 'groups of recordings (fabrics)')
-flags.DEFINE_integer('group', 2, 'recordings per group (fan settings)', lower_bound=2)
-flags.DEFINE_integer('seed', 0, 'truths, readings and searches')
-flags.DEFINE_float('reading_sd', 0.02, "the anemometer's relative standard error")
-flags.DEFINE_enum('preset', 'default', list(objective.PRESETS), 'estimate settings')
-flags.DEFINE_enum(
-  'distance', '', ['', *objective.DISTANCES], "the discrepancy (empty: the preset's)"
-)
-flags.DEFINE_enum(
-  'likelihood',
-  '',
-  ['', *objective.LIKELIHOODS],
-  "the posterior's likelihood (empty: the preset's)",
-)
-flags.DEFINE_float(
-  'sharpness', 0.0, "the likelihood's constant (0: the preset's)", lower_bound=0.0
-)
-flags.DEFINE_float(
-  'gusts', 0.0, "the simulations' gust intensity (0: the preset's)", lower_bound=0.0
-)
-flags.DEFINE_string('backend', '', "simulator (empty: the preset's)")
-flags.DEFINE_integer(
-  'cloth_resolution',
-  0,
-  "the simulations' cloth vertices per side (0: the preset's; the recordings have 33)",
-  lower_bound=0,
-)
-flags.DEFINE_bool('smoke', False, 'CPU-sized recordings (checks the script)')
-flags.DEFINE_float(
-  'seconds', 0.0, "each recording's length, s (0: the recipe's)", lower_bound=0.0
-)
-flags.DEFINE_list(
-  'fan_winds', [], "lo,hi m/s: draw each recording's wind here (empty: the search box)"
-)
+_ESTIMATE_FIELDS = tuple(f.name for f in dataclasses.fields(objective.EstimateConfig))
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The joint-pairs benchmark. ``--preset`` picks the estimate settings
+  (``objective.PRESETS``: default, paper, smoke); the flags below that say
+  "the preset's" override one of them.
+
+  Attributes:
+    model: the fabric's trained network (none with --distance=shape).
+    image_size: pixels a side of the frames without a network (>= 16).
+    workdir: recordings and estimates go here (required).
+    material: the fabric.
+    pairs: groups of recordings (fabrics).
+    group: recordings per group (fan settings, >= 2).
+    seed: truths, readings and searches.
+    reading_sd: the anemometer's relative standard error.
+    distance: the discrepancy (empty: the preset's).
+    likelihood: the posterior's likelihood (empty: the preset's).
+    sharpness: the likelihood's constant (0: the preset's; >= 0).
+    gusts: the simulations' gust intensity (0: the preset's; >= 0).
+    backend: simulator (empty: the preset's).
+    cloth_resolution: the simulations' cloth vertices per side (0: the
+      preset's; the recordings have 33).
+    smoke: CPU-sized recordings (checks the script).
+    seconds: each recording's length, s (0: the recipe's; >= 0).
+    fan_winds: lo,hi m/s: draw each recording's wind here (empty: the search
+      box).
+    estimate: the preset's estimate settings (no flags of their own).
+  """
+
+  model: str = ''
+  image_size: int = 256
+  workdir: str = cli.required()
+  material: str = 'gray_interlock'
+  pairs: int = 6
+  group: int = 2
+  seed: int = 0
+  reading_sd: float = 0.02
+  distance: str = cli.choice('', ['', *objective.DISTANCES])
+  likelihood: str = cli.choice('', ['', *objective.LIKELIHOODS])
+  sharpness: float = 0.0
+  gusts: float = 0.0
+  backend: str = ''
+  cloth_resolution: int = 0
+  smoke: bool = False
+  seconds: float = 0.0
+  fan_winds: tuple[str, ...] = ()
+  estimate: objective.EstimateConfig = cli.nested(
+    objective.EstimateConfig(), skip=_ESTIMATE_FIELDS
+  )
+
+
+PRESETS = {k: Args(estimate=v) for k, v in objective.PRESETS.items()}
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'image_size', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
               'distance', 'likelihood', 'sharpness', 'gusts', 'cloth_resolution', 'backend',
               'seconds', 'fan_winds')  # fmt: skip
+_LOWER = {'image_size': 16, 'group': 2, 'sharpness': 0.0, 'gusts': 0.0,
+          'cloth_resolution': 0, 'seconds': 0.0}  # fmt: skip
 
 
-def _recordings(workdir: str, size: int) -> list[list[dict]]:
+def _preset(args: Args) -> str:
+  """The name of the preset whose estimate settings ``args`` carry."""
+  return next(k for k, v in objective.PRESETS.items() if v == args.estimate)
+
+
+def _recordings(args: Args, workdir: str, size: int) -> list[list[dict]]:
   """The groups' recordings (made or resumed), group-major."""
-  study = calibration.Config(
-    material=FLAGS.material, pairs=FLAGS.pairs, seed=FLAGS.seed
-  )
-  truths = calibration.truths(study, group=FLAGS.group)
-  if FLAGS.fan_winds:  # the user's fan settings: winds drawn in a narrower range
-    lo, hi = _fan_winds()
-    rng = np.random.default_rng([FLAGS.seed, 11])
+  study = calibration.Config(material=args.material, pairs=args.pairs, seed=args.seed)
+  truths = calibration.truths(study, group=args.group)
+  if args.fan_winds:  # the user's fan settings: winds drawn in a narrower range
+    lo, hi = _fan_winds(args)
+    rng = np.random.default_rng([args.seed, 11])
     truths = truths._replace(wind_speed=rng.uniform(lo, hi, truths.wind_speed.shape))
-  n = FLAGS.group * FLAGS.pairs
-  cfg = datasets.PRESETS['smoke' if FLAGS.smoke else 'eval']
+  n = args.group * args.pairs
+  cfg = datasets.PRESETS['smoke' if args.smoke else 'eval']
   cfg = dataclasses.replace(
-    cfg, materials=(FLAGS.material,), sequences=n, resolution=size,
-    batch_size=min(n, 64), seed=6000 + FLAGS.seed,
-    **({'backend': FLAGS.backend} if FLAGS.backend else {}),
+    cfg, materials=(args.material,), sequences=n, resolution=size,
+    batch_size=min(n, 64), seed=6000 + args.seed,
+    **({'backend': args.backend} if args.backend else {}),
   )  # fmt: skip
-  if FLAGS.seconds:  # a longer (or shorter) clip of the same scenes
-    cfg = dataclasses.replace(cfg, frames=round(FLAGS.seconds * cfg.fps))
+  if args.seconds:  # a longer (or shorter) clip of the same scenes
+    cfg = dataclasses.replace(cfg, frames=round(args.seconds * cfg.fps))
   root = os.path.join(workdir, 'recordings')
-  datasets.run(cfg, root, params={FLAGS.material: truths})
+  datasets.run(cfg, root, params={args.material: truths})
   index = physsim.dataset.open_dataset(root)
-  rows = {int(r['seq_id']): r for r in index.filter(material=FLAGS.material).rows}
+  rows = {int(r['seq_id']): r for r in index.filter(material=args.material).rows}
   out = []
-  for p in range(FLAGS.pairs):
-    group = [rows.get(FLAGS.group * p + k) for k in range(FLAGS.group)]
+  for p in range(args.pairs):
+    group = [rows.get(args.group * p + k) for k in range(args.group)]
     if all(r is not None and r['valid'] for r in group):  # a group needs all
       out.append([{'seq': int(r['seq_id']), 'path': index.path(r)} for r in group])
     else:
@@ -123,16 +140,16 @@ def _recordings(workdir: str, size: int) -> list[list[dict]]:
   return out
 
 
-def _fan_winds() -> tuple[float, float]:
+def _fan_winds(args: Args) -> tuple[float, float]:
   """``--fan_winds`` as (lo, hi) m/s, inside the fabric's search box."""
-  box = physsim.search_space(FLAGS.material).wind_speed
+  box = physsim.search_space(args.material).wind_speed
   try:
-    lo, hi = (float(v) for v in FLAGS.fan_winds)
+    lo, hi = (float(v) for v in args.fan_winds)
   except ValueError:
     lo = hi = float('nan')
   if not (box[0] <= lo < hi <= box[1]):
-    raise app.UsageError(
-      f'--fan_winds={",".join(FLAGS.fan_winds)}: need lo,hi m/s with '
+    raise ValueError(
+      f'--fan_winds={",".join(args.fan_winds)}: need lo,hi m/s with '
       f'{box[0]:g} <= lo < hi <= {box[1]:g} (the search box)'
     )
   return lo, hi
@@ -159,38 +176,36 @@ def _first_k_medians(jobs, k: int, space) -> list[dict]:
   return out
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)  # orbax logs every restore at INFO
-  cli.host_devices()  # as the scripts: one CPU device per core (GP searches)
-  config = objective.PRESETS[FLAGS.preset]
+  for name, low in _LOWER.items():
+    if not getattr(args, name) >= low:
+      raise ValueError(f'--{name}={getattr(args, name)}: need at least {low}')
+  config = args.estimate
   config = dataclasses.replace(
-    config, material=FLAGS.material,
-    **({'backend': FLAGS.backend} if FLAGS.backend else {}),
-    **({'distance': FLAGS.distance} if FLAGS.distance else {}),
-    **({'likelihood': FLAGS.likelihood} if FLAGS.likelihood else {}),
-    **({'sharpness': FLAGS.sharpness} if FLAGS.sharpness else {}),
-    **({'gusts': FLAGS.gusts} if FLAGS.gusts else {}),
-    **({'cloth_resolution': FLAGS.cloth_resolution} if FLAGS.cloth_resolution else {}),
+    config, material=args.material,
+    **({'backend': args.backend} if args.backend else {}),
+    **({'distance': args.distance} if args.distance else {}),
+    **({'likelihood': args.likelihood} if args.likelihood else {}),
+    **({'sharpness': args.sharpness} if args.sharpness else {}),
+    **({'gusts': args.gusts} if args.gusts else {}),
+    **({'cloth_resolution': args.cloth_resolution} if args.cloth_resolution else {}),
   )  # fmt: skip
   config.check()  # e.g. the synthetic likelihood without the shape distance
-  if FLAGS.fan_winds:
-    _fan_winds()  # a bad range refused before any work
-  try:
-    net = embedding.for_distance(FLAGS.model, config.distance, FLAGS.image_size)
-  except ValueError as e:
-    raise app.UsageError(str(e)) from e
-  if FLAGS.seconds:  # compare the whole clip
-    config = dataclasses.replace(config, frames=round(FLAGS.seconds * config.fps))
-  space = physsim.search_space(FLAGS.material)
+  if args.fan_winds:
+    _fan_winds(args)  # a bad range refused before any work
+  net = embedding.for_distance(args.model, config.distance, args.image_size)
+  if args.seconds:  # compare the whole clip
+    config = dataclasses.replace(config, frames=round(args.seconds * config.fps))
+  space = physsim.search_space(args.material)
   centre = space.center()
   guess = {
     'wind_speed': float(centre.wind_speed), 'area_weight': float(centre.area_weight),
     'load_ratio': float(physsim.load_ratio(centre.wind_speed, centre.area_weight)),
   }  # fmt: skip
-  groups = _recordings(FLAGS.workdir, net.image_size[0])
+  groups = _recordings(args, args.workdir, net.image_size[0])
   if not groups:
-    raise SystemExit('no group of recordings was kept')
+    raise ValueError('no group of recordings was kept')
   plan = []  # (group, recordings, readings, workdir, jobs)
   for group in groups:
     recs, winds = [], []
@@ -199,21 +214,21 @@ def main(argv):
         r['path'], fps=config.fps, size=net.image_size, frames=config.frames
       )
       m = posterior_lib.simulated_reading(
-        'wind_speed', rec.truth, FLAGS.reading_sd, FLAGS.seed, r['seq']
+        'wind_speed', rec.truth, args.reading_sd, args.seed, r['seq']
       )
       recs.append(rec)
       winds.append((m.wind_speed, m.wind_speed_sd))
-    wd = os.path.join(FLAGS.workdir, f'pair_{group[0]["seq"] // FLAGS.group:02d}')
-    jobs = search.joint_jobs(config, recs, FLAGS.model, wd, winds)
+    wd = os.path.join(args.workdir, f'pair_{group[0]["seq"] // args.group:02d}')
+    jobs = search.joint_jobs(config, recs, args.model, wd, winds)
     plan.append((group, recs, winds, wd, jobs))
   # Every group's searches in lockstep: one simulation batch for all.
   results = search.estimate_many(
-    [j for *_, jobs in plan for j in jobs], nets={FLAGS.model: net}
+    [j for *_, jobs in plan for j in jobs], nets={args.model: net}
   )
-  ks = range(2, FLAGS.group)  # fewer than the whole group
+  ks = range(2, args.group)  # fewer than the whole group
   rows = []
   for g, (group, recs, winds, wd, jobs) in enumerate(plan):
-    done = results[g * FLAGS.group : (g + 1) * FLAGS.group]
+    done = results[g * args.group : (g + 1) * args.group]
     try:
       out = search.combine_joint(jobs, done, wd)
     except ValueError as e:  # a search failed: the others still count
@@ -259,14 +274,14 @@ def main(argv):
           row[f'first_{j}'] = {n: _error(first[j][k][n], t[n]) for n in NAMES}
       rows.append(row)
   if not rows:
-    raise SystemExit('every group failed')
+    raise ValueError('every group failed')
   labels = {'alone': 'one recording and its reading'}
   labels.update(
     {f'first_{j}': f'the first {j}, jointly (posterior median)' for j in ks}
   )
   labels.update({
-    'joint_median': f'all {FLAGS.group}, jointly (posterior median)',
-    'joint': f'all {FLAGS.group}, jointly (reported point)',
+    'joint_median': f'all {args.group}, jointly (posterior median)',
+    'joint': f'all {args.group}, jointly (reported point)',
     'centre': 'range centre',
   })  # fmt: skip
   summary = {}
@@ -277,9 +292,9 @@ def main(argv):
   summary['joint_covered_90'] = {
     n: float(np.mean([r['joint_covered_90'][n] for r in rows])) for n in NAMES
   }
-  print(f'{len(rows)} recordings in {len(groups)} groups of {FLAGS.group}, '
-        f'{FLAGS.material}, distance {config.distance}, readings with '
-        f'{100 * FLAGS.reading_sd:g}% error; mean errors')  # fmt: skip
+  print(f'{len(rows)} recordings in {len(groups)} groups of {args.group}, '
+        f'{args.material}, distance {config.distance}, readings with '
+        f'{100 * args.reading_sd:g}% error; mean errors')  # fmt: skip
   print('| estimate | recordings | wind | area weight | load ratio |')
   print('|---|---:|---|---|---|')
   for who, label in labels.items():
@@ -307,14 +322,22 @@ def main(argv):
   print('joint 90% intervals held the truth: '
         + ', '.join(f'{n} {100 * cov[n]:.0f}%' for n in NAMES))  # fmt: skip
   files.write_json(
-    os.path.join(FLAGS.workdir, 'joint_pairs.json'),
+    os.path.join(args.workdir, 'joint_pairs.json'),
     {
       'rows': rows,
       'summary': summary,
-      'flags': {k: FLAGS[k].value for k in FLAG_NAMES},
+      'flags': {
+        k: _preset(args) if k == 'preset' else _json(getattr(args, k))
+        for k in FLAG_NAMES
+      },
     },
   )
 
 
+def _json(value):
+  """A setting as the JSON records it (a list flag as a list)."""
+  return list(value) if isinstance(value, tuple) else value
+
+
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -15,9 +15,9 @@ mode and quantity, the posterior median's mean error, the range centre's,
 and how often the 50% and 90% intervals held the truth; writes JSON.
 No simulation: seconds on a CPU.
 
-  python benchmarks/measured_modes.py \\
+  python -m benchmarks.measured_modes \\
       --estimates='out/tables/physnet_depth/fabrics/gray_interlock-*' --out=modes.json
-  python benchmarks/measured_modes.py --estimates='out/check/estimates/*' --pairs --seed=3
+  python -m benchmarks.measured_modes --estimates='out/check/estimates/*' --pairs --seed=3
 """
 
 from __future__ import annotations
@@ -26,37 +26,47 @@ import dataclasses
 import glob
 import os
 
-from absl import app, flags
-
 import physsim
-from experiments.pipeline import files
+from benchmarks import out_path
+from experiments.pipeline import cli, files
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import read_json
 from experiments.studies import calibration
 
-FLAGS = flags.FLAGS
-flags.DEFINE_string('estimates', None, 'glob of estimate folders', required=True)
-flags.DEFINE_float('measured_sd', 0.02, 'relative standard error of a reading')
-flags.DEFINE_string('out', None, 'JSON path')
-flags.DEFINE_integer('seed', 0, 'seed of the readings (a check run with --seed=S: S)')
-flags.DEFINE_bool(
-  'pairs',
-  False,
-  'recordings 2k and 2k+1 share bending and area weight (a calibration or its '
-  'check): add the joint modes, without and with a wind reading at each',
-)
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """What readings add to finished estimates.
+
+  Attributes:
+    estimates: glob of estimate folders (required).
+    measured_sd: relative standard error of a reading.
+    out: JSON path.
+    seed: seed of the readings (a check run with --seed=S: S).
+    pairs: recordings 2k and 2k+1 share bending and area weight (a
+      calibration or its check): add the joint modes, without and with a wind
+      reading at each.
+  """
+
+  estimates: str = cli.required()
+  measured_sd: float = 0.02
+  out: str = out_path('measured_modes')
+  seed: int = 0
+  pairs: bool = False
 
 
-def main(argv):
-  del argv
-  dirs = sorted(d for d in glob.glob(FLAGS.estimates) if os.path.isdir(d))
+PRESETS = {'default': Args()}
+
+
+def main(args: Args) -> None:
+  dirs = sorted(d for d in glob.glob(args.estimates) if os.path.isdir(d))
   if not dirs:
-    raise SystemExit(f'no estimate folders match {FLAGS.estimates!r}')
+    raise ValueError(f'no estimate folders match {args.estimates!r}')
   runs, configs = [], set()
   for i, d in enumerate(dirs):
     est = read_json(os.path.join(d, 'estimate.json'))
     if 'truth' not in est:
-      raise SystemExit(f'{d}/estimate.json: no truth (a simulated recording is needed)')
+      raise ValueError(f'{d}/estimate.json: no truth (a simulated recording is needed)')
     c = est['config']
     configs.add(
       (c['material'], c['likelihood'], c['sharpness'], tuple(c['posterior_grid']))
@@ -65,18 +75,18 @@ def main(argv):
     seq = int(tail) if tail.isdigit() else i  # the sequence id seeds its reading
     runs.append({'seq': seq, 'truth': est['truth'], 'workdir': d})
   if len(configs) != 1:
-    raise SystemExit(f'estimates of several settings: {sorted(configs)}')
+    raise ValueError(f'estimates of several settings: {sorted(configs)}')
   material, form, sharpness, grid = configs.pop()
   study = calibration.Config(
-    material=material, measured_sd=FLAGS.measured_sd, seed=FLAGS.seed,
+    material=material, measured_sd=args.measured_sd, seed=args.seed,
     estimate=EstimateConfig(posterior_grid=grid),
   )  # fmt: skip
-  scores = calibration.posteriors(study, runs, form, sharpness, pairs=FLAGS.pairs)
-  modes = [m for m in calibration.MODES if FLAGS.pairs or not m.startswith('joint')]
+  scores = calibration.posteriors(study, runs, form, sharpness, pairs=args.pairs)
+  modes = [m for m in calibration.MODES if args.pairs or not m.startswith('joint')]
   space = physsim.search_space(material)
   summary = {m: calibration.summarise(scores[m], space) for m in modes}
   print(f'{len(runs)} recordings, {material}, {form} likelihood, sharpness {sharpness:g}, '
-        f'readings with {100 * FLAGS.measured_sd:g}% error\n')  # fmt: skip
+        f'readings with {100 * args.measured_sd:g}% error\n')  # fmt: skip
   print('| mode | quantity | median error (range centre) | 50% / 90% hold the truth |')
   print('|---|---|---|---|')
   for m in modes:
@@ -87,13 +97,13 @@ def main(argv):
              f'{s["median_error_pct"]:.1f}% ({s["centre_error_pct"]:.1f}%)')  # fmt: skip
       print(f'| {m} | {f} | {err} | {100 * s["interval_50"]:.0f}% / '
             f'{100 * s["interval_90"]:.0f}% |')  # fmt: skip
-  if FLAGS.out:
-    files.write_json(FLAGS.out, {
-      'estimates': dirs, 'material': material, 'likelihood': form,
-      'sharpness': sharpness, 'measured_sd': FLAGS.measured_sd, 'summary': summary,
-      'config': dataclasses.asdict(study),
-    })  # fmt: skip
+  files.write_json(args.out, {
+    'estimates': dirs, 'material': material, 'likelihood': form,
+    'sharpness': sharpness, 'measured_sd': args.measured_sd, 'summary': summary,
+    'config': dataclasses.asdict(study),
+  })  # fmt: skip
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -14,13 +14,12 @@ Prints a table and writes ``mesh_convergence.json`` and
 ``mesh_convergence.png``; each finished resolution is saved as it completes, so
 a rerun resumes.
 
-  PYTHONPATH=. python benchmarks/mesh_convergence.py --workdir=out/mesh
-  PYTHONPATH=. python benchmarks/mesh_convergence.py --preset=smoke --workdir=/tmp/m
+  python -m benchmarks.mesh_convergence --workdir=out/mesh
+  python -m benchmarks.mesh_convergence --preset=smoke --workdir=/tmp/m
 """
 
 import dataclasses
 import os
-import sys
 import time
 
 import jax
@@ -30,8 +29,6 @@ import numpy as np
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import physsim  # noqa: E402
 from experiments.pipeline import cli, files  # noqa: E402

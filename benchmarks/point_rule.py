@@ -10,24 +10,37 @@ prints, per file and quantity, the mean error of the posterior's own point,
 of the point under the rule, and of the range centre, with how many estimates
 the rule touched. No simulation: seconds on a CPU.
 
-  python benchmarks/point_rule.py --tables=out/tables/tables.json --out=rule.json
+  python -m benchmarks.point_rule --tables=out/tables/tables.json --out=rule.json
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
-from absl import app, flags
 
 import bo
 import physsim
-from experiments.pipeline import files
+from benchmarks import out_path
+from experiments.pipeline import cli, files
 from experiments.pipeline import posterior as posterior_lib
 
-FLAGS = flags.FLAGS
-flags.DEFINE_list('tables', None, 'tables.json files', required=True)
-flags.DEFINE_string('out', None, 'JSON path')
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The point-rule comparison.
+
+  Attributes:
+    tables: tables.json files (comma-separated; required).
+    out: JSON path.
+  """
+
+  tables: tuple[str, ...] = cli.required(())
+  out: str = out_path('point_rule')
+
+
+PRESETS = {'default': Args()}
 NAMES = (*posterior_lib.FIELDS, 'load_ratio')
 
 
@@ -70,18 +83,17 @@ def points(estimate: dict) -> dict:
   return out
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   report = {}
-  for path in FLAGS.tables:
+  for path in args.tables:
     with open(path) as f:
       estimates = json.load(f)['estimates']
     try:
       rows = [points(e) for e in estimates.values() if 'truth' in e and 'estimate' in e]
     except ValueError as e:
-      raise SystemExit(f'{path}: {e}') from e
+      raise ValueError(f'{path}: {e}') from e
     if not rows:
-      raise SystemExit(f'{path}: no finished estimates with a truth')
+      raise ValueError(f'{path}: no finished estimates with a truth')
     report[path] = {}
     print(f'{path}: {len(rows)} estimates')
     print('| quantity | posterior point | with the rule | range centre | uninformed |')
@@ -102,9 +114,9 @@ def main(argv):
       print(f'| {name} | {fmt(e["posterior"])} | {fmt(e["rule"])} | '
             f'{fmt(e["centre"])} | {e["uninformed"]} of {len(rows)} |')  # fmt: skip
     print()
-  if FLAGS.out:
-    files.write_json(FLAGS.out, report)
+  files.write_json(args.out, report)
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

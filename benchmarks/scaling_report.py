@@ -1,6 +1,6 @@
 """The table of ``benchmarks/gpu_scaling.sh``: the same program on 1 and N GPUs.
 
-  python benchmarks/scaling_report.py --logs=out/gpu_scaling
+  python -m benchmarks.scaling_report --logs=out/gpu_scaling
 
 Reads the script's logs (``sweep_<N>gpu.log`` with the sweep's
 ``summary.json`` copied beside it as ``sweep_<N>gpu.json``, and
@@ -22,18 +22,28 @@ Writes the rows as JSON (``--out``).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
-import sys
 
-from absl import app, flags
+from experiments.pipeline import cli, files
 
-from experiments.pipeline import files
 
-flags.DEFINE_string('logs', 'out/gpu_scaling', "gpu_scaling.sh's $OUT")
-flags.DEFINE_string('out', None, 'JSON output (default: LOGS/scaling.json)')
-FLAGS = flags.FLAGS
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The scaling report.
+
+  Attributes:
+    logs: gpu_scaling.sh's $OUT.
+    out: JSON output (empty: LOGS/scaling.json).
+  """
+
+  logs: str = 'out/gpu_scaling'
+  out: str = ''
+
+
+PRESETS = {'default': Args()}
 
 _WALL = re.compile(r'^wall ([\d.]+) s, exit (-?\d+)$', re.M)
 _STEP = re.compile(
@@ -130,15 +140,15 @@ def table(rs: list[dict]) -> str:
   return '\n'.join(lines)
 
 
-def main(argv):
-  del argv
-  rs = rows(FLAGS.logs)
+def main(args: Args) -> None:
+  rs = rows(args.logs)
   if not rs:
-    sys.exit(f'{FLAGS.logs}: no sweep_<N>gpu.log or lockstep_<N>gpu.log')
-  out = FLAGS.out or os.path.join(FLAGS.logs, 'scaling.json')
+    raise ValueError(f'{args.logs}: no sweep_<N>gpu.log or lockstep_<N>gpu.log')
+  out = args.out or os.path.join(args.logs, 'scaling.json')
   files.write_json(out, rs)
   print(table(rs))
+  print(f'wrote {out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

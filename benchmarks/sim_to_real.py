@@ -12,31 +12,50 @@ is least. Prints a table and writes ``<workdir>/sim_to_real.json`` (and the PSD
 lines as ``sim_to_real.png``).
 
   python -m experiments.demo --workdir=out/demo   # the network
-  PYTHONPATH=. python benchmarks/sim_to_real.py --model=out/demo/model/gray_interlock
+  python -m benchmarks.sim_to_real --model=out/demo/model/gray_interlock
 """
 
 import dataclasses
 import os
-import sys
 import time
 
 import matplotlib
 import numpy as np
-from absl import app, flags, logging
+from absl import logging
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
 import physsim  # noqa: E402
+from experiments.pipeline import cli, demo, embedding, files, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
-from experiments.pipeline import demo, embedding, files, search  # noqa: E402
 from experiments.pipeline import objective as objective_lib  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.studies import landscape  # noqa: E402
 
-FLAGS = flags.FLAGS
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The sim-to-real study.
+
+  Attributes:
+    model: the demo's network.
+    workdir: recordings, JSON, PNG.
+    material: the network's fabric.
+    seed: the demo's --seed (recording and search).
+    points: wind speeds across the range (+ truth).
+    backend: simulator.
+  """
+
+  model: str = 'out/demo/model/gray_interlock'
+  workdir: str = 'out/sim_to_real'
+  material: str = 'gray_interlock'
+  seed: int = 0
+  points: int = 11
+  backend: str = cli.choice('auto', ['auto', 'mjx', 'c'])
+
+
+PRESETS = {'default': Args()}
 
 
 def variants(train_cfg: gen.Config, rec_cfg: gen.Config) -> dict[str, gen.Config]:
@@ -72,18 +91,17 @@ def wind_line(u_truth: np.ndarray, points: int) -> np.ndarray:
   return u[parts['line_1']]
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
   t0 = time.time()
-  model_dir, wd = FLAGS.model, FLAGS.workdir
+  model_dir, wd = args.model, args.workdir
   if not os.path.isdir(model_dir):
     raise ValueError(
       f'--model={model_dir}: no such run (python -m experiments.demo first)'
     )
   net = embedding.load_embedding(model_dir)
-  material = FLAGS.material
-  train_cfg, rec_cfg, _, est_cfg = demo.configs(material, 24, FLAGS.seed, FLAGS.backend)
+  material = args.material
+  train_cfg, rec_cfg, _, est_cfg = demo.configs(material, 24, args.seed, args.backend)
   size = net.image_size
   results, truth0 = {}, None
   evaluator = search.Evaluator()
@@ -107,7 +125,7 @@ def main(argv):
       u_truth = np.asarray(
         physsim.to_unit(physsim.params.make(**rec.truth), problem.space), np.float64
       ).ravel()
-      line = wind_line(u_truth, FLAGS.points)
+      line = wind_line(u_truth, args.points)
       psd = search.score(problem, line, evaluator=evaluator).psd
       wind = np.ravel(physsim.from_unit(line, problem.space)[1])
       k = int(np.nanargmin(psd))
@@ -166,16 +184,5 @@ def plot(results: dict, truth: float, path: str) -> None:
   plt.close(fig)
 
 
-def define_flags() -> None:
-  """Defined only when run as a script, so tests can import ``variants``."""
-  flags.DEFINE_string('model', 'out/demo/model/gray_interlock', 'demo network')
-  flags.DEFINE_string('workdir', 'out/sim_to_real', 'recordings, JSON, PNG')
-  flags.DEFINE_string('material', 'gray_interlock', "the network's fabric")
-  flags.DEFINE_integer('seed', 0, "the demo's --seed (recording and search)")
-  flags.DEFINE_integer('points', 11, 'wind speeds across the range (+ truth)')
-  flags.DEFINE_enum('backend', 'auto', ['auto', 'mjx', 'c'], 'simulator')
-
-
 if __name__ == '__main__':
-  define_flags()
-  app.run(main)
+  cli.run(Args, PRESETS, main)

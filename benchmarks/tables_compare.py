@@ -7,29 +7,45 @@ held the truth. Used to compare networks (one network against an ensemble of
 several, ``--models=a,b,c``) on the same recordings and readings. No
 simulation: seconds on a CPU.
 
-  python benchmarks/tables_compare.py \
+  python -m benchmarks.tables_compare \
     --tables=single=out/t_single/tables.json,ensemble=out/t_ens/tables.json \
     --out=compare.json
   # several evaluation sets estimated by one network, pooled in one row:
-  python benchmarks/tables_compare.py --tables=video=a/tables.json+b/tables.json
+  python -m benchmarks.tables_compare --tables=video=a/tables.json+b/tables.json
   # estimate.json files (quote the pattern), e.g. a calibration check's:
-  python benchmarks/tables_compare.py --tables="check=out/check/estimates/*/estimate.json"
+  python -m benchmarks.tables_compare --tables="check=out/check/estimates/*/estimate.json"
 """
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import json
 
 import numpy as np
-from absl import app, flags
 
 import physsim
-from experiments.pipeline import files, report
+from benchmarks import out_path
+from experiments.pipeline import cli, files, report
 from experiments.pipeline import posterior as posterior_lib
 from experiments.studies import tables as tables_lib
 
-FLAGS = flags.FLAGS
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The comparison of ``experiments.tables`` runs.
+
+  Attributes:
+    tables: label=tables.json pairs (comma-separated; required);
+      label=a.json+b.json pools runs.
+    out: JSON path.
+  """
+
+  tables: tuple[str, ...] = cli.required(())
+  out: str = out_path('tables_compare')
+
+
+PRESETS = {'default': Args()}
 ERRORS = tables_lib.ERRORS
 QUANTITIES = ('wind_speed', 'area_weight', 'bending_scale', 'load_ratio')
 
@@ -98,9 +114,9 @@ def _row(label: str, s: dict) -> str:
   )
 
 
-def main(_):
+def main(args: Args) -> None:
   out = {}
-  for item in FLAGS.tables:
+  for item in args.tables:
     label, _, paths = item.partition('=')
     if not paths:
       raise ValueError(f'--tables: {item!r} is not label=path[+path...]')
@@ -116,21 +132,9 @@ def main(_):
     'Mean error of the reported point (of the posterior median in brackets); '
     "the load ratio's 90% interval, half its width over its median, averaged."
   )
-  if FLAGS.out:
-    files.write_json(FLAGS.out, out)
-
-
-def define_flags() -> None:
-  """Defined only when run as a script, so tests can import ``summarise``."""
-  flags.DEFINE_list(
-    'tables',
-    None,
-    'label=tables.json pairs; label=a.json+b.json pools runs',
-    required=True,
-  )
-  flags.DEFINE_string('out', None, 'JSON path')
+  files.write_json(args.out, out)
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  define_flags()
-  app.run(main)
+  cli.run(Args, PRESETS, main)

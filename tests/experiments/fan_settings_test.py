@@ -18,9 +18,9 @@ _EXACT = 1e-12
 
 
 def _script(*args):
-  """benchmarks/fan_settings.py run as a user runs it."""
+  """python -m benchmarks.fan_settings, as a user runs it."""
   return subprocess.run(
-    [sys.executable, 'benchmarks/fan_settings.py', *args],
+    [sys.executable, '-m', 'benchmarks.fan_settings', *args],
     cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
     text=True, timeout=300,
   )  # fmt: skip

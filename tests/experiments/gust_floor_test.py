@@ -58,7 +58,7 @@ def test_summaries_are_the_mean_centroid_over_the_first_frames():
 def test_script_writes_a_floor_per_wind_and_clip(tmp_path):
   out = tmp_path / 'floor.json'
   proc = subprocess.run(
-    [sys.executable, 'benchmarks/gust_floor.py', '--winds=3', '--draws=4',
+    [sys.executable, '-m', 'benchmarks.gust_floor', '--winds=3', '--draws=4',
      '--seconds=1', '--clips=0.5,1', '--cloth_resolution=8', '--backend=c',
      f'--out={out}'],
     cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
@@ -88,7 +88,7 @@ def test_script_writes_a_floor_per_wind_and_clip(tmp_path):
 )
 def test_bad_flags_are_refused_by_name_before_any_simulation(args, named):
   proc = subprocess.run(
-    [sys.executable, 'benchmarks/gust_floor.py', *args],
+    [sys.executable, '-m', 'benchmarks.gust_floor', *args],
     cwd=_ROOT, env=dict(os.environ, PYTHONPATH=_ROOT), capture_output=True,
     text=True, timeout=300,
   )  # fmt: skip

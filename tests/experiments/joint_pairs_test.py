@@ -24,7 +24,7 @@ NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 def _run(*args: str) -> subprocess.CompletedProcess:
   env = dict(os.environ, PYTHONPATH=_ROOT)
   return subprocess.run(
-    [sys.executable, 'benchmarks/joint_pairs.py', *args],
+    [sys.executable, '-m', 'benchmarks.joint_pairs', *args],
     cwd=_ROOT, env=env, capture_output=True, text=True, timeout=1800,
   )  # fmt: skip
 

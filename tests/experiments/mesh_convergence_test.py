@@ -89,7 +89,7 @@ def test_resume_reads_only_the_same_config(tmp_path):
 @pytest.mark.parametrize(
   'script, output',
   [
-    (['benchmarks/mesh_convergence.py'], 'mesh_convergence.json'),
+    (['-m', 'benchmarks.mesh_convergence'], 'mesh_convergence.json'),
     (['-m', 'experiments.fabric_motion'], 'motion_sweep.json'),
   ],
 )
