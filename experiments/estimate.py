@@ -27,7 +27,7 @@ import os
 
 from absl import logging
 
-from experiments.pipeline import cli, embedding, intake, report, search
+from experiments.pipeline import cli, embedding, files, intake, report, search
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 
@@ -101,6 +101,12 @@ def joint_winds(args: Args) -> list[tuple[float, float]] | None:
       f'{",".join(map(str, args.wind_speed_sds))}: need one reading and one '
       f'uncertainty for each of the {n} recordings'
     )
+  if any(v < 0 for v in args.wind_speeds) or any(sd <= 0 for sd in args.wind_speed_sds):
+    raise ValueError(
+      f'--wind_speeds={",".join(map(str, args.wind_speeds))} and --wind_speed_sds='
+      f'{",".join(map(str, args.wind_speed_sds))}: readings must be >= 0 m/s and '
+      'their uncertainties > 0'
+    )
   return list(zip(args.wind_speeds, args.wind_speed_sds, strict=True))
 
 
@@ -141,20 +147,36 @@ def network(args: Args) -> embedding.EmbeddingNet:
   return net
 
 
+def _intake_dir(args: Args, i: int) -> str:
+  """Where recording ``i``'s intake goes."""
+  return args.workdir if len(args.recording) == 1 else f'{args.workdir}/intake_{i}'
+
+
 def main(args: Args) -> None:
+  """Checks every setting, then holds the workdir (one process at a time;
+  ``files.locked``) for the intake and the search."""
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
+  cli.check_numbers(args)
   config = args.search
   config.check()
   args.intake.check()
   if not args.recording:
     raise ValueError('missing --recording (see --help)')
   winds = joint_winds(args)  # checked before anything is read
+  with files.locked(args.workdir):
+    _main(args, config, winds)
+
+
+def _main(args: Args, config, winds) -> None:
+  # Before any intake writes: no workdir may hold another recording's run.
+  for i, path in enumerate(args.recording):
+    if args.intake_only or _needs_intake(args, path):
+      intake.check_workdir(
+        _intake_dir(args, i), path, args.camera_json, search.RUN_FILE
+      )
   if args.intake_only:
     for i, path in enumerate(args.recording):
-      workdir = (
-        args.workdir if len(args.recording) == 1 else f'{args.workdir}/intake_{i}'
-      )
-      _take_in(args, path, workdir)
+      _take_in(args, path, _intake_dir(args, i))
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return
   net = network(args)
@@ -166,10 +188,7 @@ def main(args: Args) -> None:
           f'{path}: an RGB network needs a dataset sequence with colour frames; '
           'the intake reads depth only'
         )
-      workdir = (
-        args.workdir if len(args.recording) == 1 else f'{args.workdir}/intake_{i}'
-      )
-      recs.append(_take_in(args, path, workdir, size=net.image_size))
+      recs.append(_take_in(args, path, _intake_dir(args, i), size=net.image_size))
     else:
       recs.append(
         recording_lib.load_recording(

@@ -50,6 +50,14 @@ FORMS = (
 # OpenGL camera axes (x right, y up, looking along -z) in OpenCV's.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 ORTHONORMAL_TOL = 1e-3
+# The largest camera file read (a camera's takes a few kB).
+MAX_FILE_BYTES = 1 << 20
+# The largest image side a camera file may give, pixels.
+MAX_SIDE = 8192
+
+
+def one_line(e: BaseException) -> str:
+  return ' '.join(str(e).split())
 
 
 class CameraFile(NamedTuple):
@@ -87,20 +95,35 @@ def _error(path: str, why: str) -> ValueError:
 def _load(path: str) -> dict:
   if not os.path.isfile(path):
     raise ValueError(f'{path}: no such camera file')
-  with open(path) as f:
-    text = f.read()
+  size = os.path.getsize(path)
+  if size > MAX_FILE_BYTES:
+    raise ValueError(
+      f'{path}: {size / 2**20:.0f} MiB is no camera file (at most '
+      f'{MAX_FILE_BYTES >> 20} MiB)'
+    )
+  try:
+    with open(path, encoding='utf-8') as f:
+      text = f.read()
+  except UnicodeDecodeError as e:
+    raise ValueError(
+      f'{path}: not a text file ({e.reason} at byte {e.start})'
+    ) from None
   if path.lower().endswith(('.yaml', '.yml')):
     import yaml  # noqa: PLC0415 - only YAML camera files need it
 
     try:
       data = yaml.safe_load(text)
     except yaml.YAMLError as e:
-      raise ValueError(f'{path}: not readable YAML ({e})') from None
+      raise ValueError(f'{path}: not readable YAML ({one_line(e)})') from None
+    except RecursionError:
+      raise ValueError(f'{path}: not readable YAML (nested too deeply)') from None
   else:
     try:
       data = json.loads(text)
     except ValueError as e:
       raise ValueError(f'{path}: not readable JSON ({e})') from None
+    except RecursionError:
+      raise ValueError(f'{path}: not readable JSON (nested too deeply)') from None
   if not isinstance(data, dict):
     raise _error(path, f'holds a {type(data).__name__}, not a mapping')
   return data
@@ -111,7 +134,7 @@ def _numbers(path: str, key: str, value, shape) -> np.ndarray:
     value = value['data']
   try:
     a = np.asarray(value, np.float64)
-  except (TypeError, ValueError):
+  except (TypeError, ValueError, OverflowError, RecursionError):
     raise _error(path, f'"{key}" is not numbers: {value!r}') from None
   if shape is not None:
     if a.size != math.prod(shape):
@@ -170,10 +193,10 @@ def _fps(path: str, d: dict) -> float | None:
 def _size(path: str, d: dict, w_key: str, h_key: str) -> tuple[int, int]:
   try:
     w, h = int(d[w_key]), int(d[h_key])
-  except (KeyError, TypeError, ValueError):
+  except (KeyError, TypeError, ValueError, OverflowError):
     raise _error(path, f'needs integer "{w_key}" and "{h_key}"') from None
-  if w < 1 or h < 1:
-    raise _error(path, f'image size must be positive, got {w} x {h}')
+  if not (1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE):
+    raise _error(path, f'image size must be 1 to {MAX_SIDE} px a side, got {w} x {h}')
   return w, h
 
 
@@ -194,8 +217,13 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
   if 'intrinsics' in d:
     try:
       intr = Intrinsics.from_dict(d['intrinsics'])
-    except (ValueError, TypeError, AttributeError) as e:
-      raise _error(path, f'bad "intrinsics" ({e})') from None
+    except (ValueError, TypeError, AttributeError, KeyError, OverflowError) as e:
+      raise _error(path, f'bad "intrinsics" ({e!r})') from None
+    if not (1 <= intr.width <= MAX_SIDE and 1 <= intr.height <= MAX_SIDE):
+      raise _error(
+        path, f'image size must be 1 to {MAX_SIDE} px a side, got {intr.width} x '
+        f'{intr.height}',
+      )  # fmt: skip
     pose = None
     ext = d.get('extrinsics')
     if ext is not None:
@@ -237,7 +265,7 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
     else:
       try:
         vals = [float(d[key]) for key in ('fx', 'fy', 'cx', 'cy')]
-      except (KeyError, TypeError, ValueError):
+      except (KeyError, TypeError, ValueError, OverflowError):
         raise _error(path, 'needs numbers "fx", "fy", "cx" and "cy"') from None
       k = np.array([[vals[0], 0, vals[2]], [0, vals[1], vals[3]], [0, 0, 1]])
     dist = d.get('distortion', d.get('dist_coeffs', ()))
@@ -259,7 +287,14 @@ def read_camera(path: str) -> CameraFile:
       (the message lists them), or a camera that cannot be (non-positive
       focal length, non-orthonormal rotation, non-finite values).
   """
-  return parse_camera(_load(path), path)
+  data = _load(path)
+  try:
+    return parse_camera(data, path)
+  except (TypeError, KeyError, IndexError, AttributeError, OverflowError) as e:
+    # A value of an unexpected type deep in an otherwise accepted form.
+    raise _error(path, f'cannot be read ({type(e).__name__}: {e})') from None
+  except RecursionError:
+    raise _error(path, 'a value is nested too deeply') from None
 
 
 def scaled_to(camera: CameraFile, width: int, height: int) -> CameraFile:

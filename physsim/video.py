@@ -26,6 +26,8 @@ import json
 import math
 import os
 import re
+import struct
+import zipfile
 from typing import NamedTuple
 
 import cv2
@@ -41,7 +43,12 @@ PLAUSIBLE_METRES = (0.1, 5.0)
 FPS_RANGE = (1.0, 1000.0)
 # The most decoded frames (float32 bytes) one video may expand to.
 MAX_BYTES = 8 << 30
+# The largest frame side, pixels: no depth camera writes more (checked from
+# the file's header, before its pixels are decoded).
+MAX_SIDE = 8192
 _NOT_FRAMES = ('rgb_', 'color', 'colour', 'mask', 'preview')
+# The largest meta.json read for its fps.
+MAX_TEXT_BYTES = 16 << 20
 VIDEO_EXTENSIONS = ('.mp4', '.avi', '.mov', '.mkv', '.m4v', '.webm', '.mpg', '.mpeg')
 
 
@@ -95,6 +102,131 @@ def frame_files(path: str, pattern: str = '*.png') -> list[str]:
   return sorted(files, key=natural_key)
 
 
+class Header(NamedTuple):
+  """What a recording's headers say before any pixel is decoded.
+
+  Attributes:
+    frames: how many frames (after ``start``).
+    height, width: a frame's size, pixels.
+  """
+
+  frames: int
+  height: int
+  width: int
+
+  @property
+  def decoded_bytes(self) -> int:
+    """Bytes of the frames decoded as float32."""
+    return 4 * self.frames * self.height * self.width
+
+
+_PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
+
+
+def png_size(file: str) -> tuple[int, int] | None:
+  """(width, height) from a PNG's IHDR chunk (its first 24 bytes), or None
+  for a file that is not a PNG (another format OpenCV may still read).
+
+  Raises:
+    ValueError: naming the file: a PNG signature with a broken header.
+  """
+  with open(file, 'rb') as f:
+    head = f.read(24)
+  if not head.startswith(_PNG_SIGNATURE):
+    return None
+  if len(head) < 24 or head[12:16] != b'IHDR':
+    raise ValueError(f'{file}: not a readable image (a PNG without its IHDR header)')
+  w, h = struct.unpack('>II', head[16:24])
+  return w, h
+
+
+def _npy_shape(f) -> tuple[tuple[int, ...], np.dtype] | None:
+  """(shape, dtype) from an open .npy stream's header, or None for a header
+  version this reader does not parse (the full load then checks it)."""
+  version = np.lib.format.read_magic(f)
+  if version == (1, 0):
+    shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+  elif version == (2, 0):
+    shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+  else:
+    return None
+  return tuple(int(n) for n in shape), dtype
+
+
+def _array_header(path: str) -> Header | None:
+  """The depth array's header of a .npy or .npz, or None when unknown."""
+  try:
+    if path.lower().endswith('.npz'):
+      with zipfile.ZipFile(path) as z:
+        names = [n for n in z.namelist() if n.endswith('.npy')]
+        arrays = [n for n in names if n != 'fps.npy']
+        name = 'depth.npy' if 'depth.npy' in names else None
+        if name is None and len(arrays) == 1:
+          name = arrays[0]
+        if name is None:
+          return None
+        with z.open(name) as f:
+          found = _npy_shape(f)
+    else:
+      with open(path, 'rb') as f:
+        found = _npy_shape(f)
+  except (OSError, ValueError, EOFError, zipfile.BadZipFile, struct.error) as e:
+    raise ValueError(f'{path}: not a readable NumPy file ({e})') from None
+  if found is None:
+    return None
+  shape, _ = found
+  if len(shape) != 3:
+    raise ValueError(f'{path}: depth array must be (T, H, W), got shape {shape}')
+  return Header(*shape)
+
+
+def read_header(path: str, pattern: str = '*.png', start: int = 0) -> Header | None:
+  """A recording's frame count and size from its headers alone (PNG IHDR,
+  .npy/.npz array headers), or None where only decoding tells (videos,
+  non-PNG images).
+
+  Raises:
+    ValueError: naming the file: frames of different sizes, a side above
+      ``MAX_SIDE``, or more than ``MAX_BYTES`` once decoded.
+  """
+  if os.path.isdir(path):
+    files = frame_files(path, pattern)[start:]
+    if not files:
+      return None
+    first = None
+    for name in files:
+      size = png_size(os.path.join(path, name))
+      if size is None:
+        return None
+      if first is None:
+        first = (name, size)
+      elif size != first[1]:
+        raise ValueError(
+          f'{os.path.join(path, name)}: shape/dtype {size[0]} x {size[1]} px '
+          f'differs from the first frame {first[0]} ({first[1][0]} x {first[1][1]})'
+        )
+    header = Header(len(files), first[1][1], first[1][0])
+  elif os.path.isfile(path) and path.lower().endswith(('.npy', '.npz')):
+    header = _array_header(path)
+    if header is None:
+      return None
+    header = header._replace(frames=max(header.frames - start, 0))
+  else:
+    return None
+  if max(header.height, header.width) > MAX_SIDE:
+    raise ValueError(
+      f'{path}: frames of {header.width} x {header.height} px; no depth camera '
+      f'writes more than {MAX_SIDE} a side'
+    )
+  if header.decoded_bytes > MAX_BYTES:
+    raise ValueError(
+      f'{path}: {header.frames} frames of {header.width} x {header.height} px would '
+      f'take {header.decoded_bytes / 2**30:.1f} GiB decoded (at most '
+      f'{MAX_BYTES / 2**30:g}); cut the recording (start, fewer files)'
+    )
+  return header
+
+
 def _read_png_folder(path: str, pattern: str, depth_scale: float, start: int) -> _Raw:
   files = frame_files(path, pattern)
   if not files:
@@ -103,6 +235,7 @@ def _read_png_folder(path: str, pattern: str, depth_scale: float, start: int) ->
     )
   if start >= len(files):
     raise ValueError(f'{path}: start {start} but only {len(files)} frames')
+  read_header(path, pattern, start)  # sizes and memory, before decoding
   files = files[start:]
   frames, first = [], None
   for name in files:
@@ -173,7 +306,17 @@ def _check_metres(path: str, depth: np.ndarray) -> np.ndarray:
   return depth.astype(np.float32)
 
 
+def _scalar_fps(path: str, value) -> float:
+  a = np.asarray(value)
+  if a.size != 1 or a.dtype.kind not in 'iuf':
+    raise ValueError(
+      f'{path}: "fps" must be one number, got a {a.dtype} array of shape {a.shape}'
+    )
+  return float(a.reshape(()))
+
+
 def _read_array(path: str) -> _Raw:
+  read_header(path)  # shape and memory, before decoding
   try:
     data = np.load(path, allow_pickle=False)
   except (OSError, ValueError, EOFError) as e:
@@ -189,7 +332,7 @@ def _read_array(path: str) -> _Raw:
       else:
         raise ValueError(f'{path}: .npz needs a "depth" array, has {keys}')
       if 'fps' in keys:
-        fps = float(data['fps'])
+        fps = _scalar_fps(path, data['fps'])
     kind = 'npz'
   else:
     depth, kind = data, 'npy'
@@ -227,16 +370,23 @@ def _fps_beside(folder: str) -> float | None:
     meta = os.path.join(d, 'meta.json')
     if os.path.isfile(meta):
       try:
-        with open(meta) as f:
+        if os.path.getsize(meta) > MAX_TEXT_BYTES:
+          raise ValueError(f'larger than {MAX_TEXT_BYTES >> 20} MiB')
+        with open(meta, encoding='utf-8') as f:
           value = json.load(f).get('fps')
-      except (json.JSONDecodeError, AttributeError) as e:
-        raise ValueError(f'{meta}: not a JSON object with "fps" ({e})') from None
+      except (ValueError, AttributeError, RecursionError) as e:
+        why = 'nested too deeply' if isinstance(e, RecursionError) else e
+        raise ValueError(f'{meta}: not a JSON object with "fps" ({why})') from None
       if value is not None:
         return _positive_fps(meta, value)
     txt = os.path.join(d, 'fps.txt')
     if os.path.isfile(txt):
-      with open(txt) as f:
-        return _positive_fps(txt, f.read().strip())
+      try:
+        with open(txt, encoding='utf-8') as f:
+          text = f.read(64).strip()
+      except ValueError:
+        text = '(not text)'
+      return _positive_fps(txt, text)
   return None
 
 

@@ -20,16 +20,20 @@ script's dataclass; flags given on the command line override it.
   if __name__ == '__main__':
     cli.run(Args, {'default': Args(), 'smoke': Args(search=SMOKE)}, main)
 
-User errors (``ValueError``, ``OSError``) end the run with one line on stderr
-and exit status 2; ``--verbose`` shows the traceback instead.
+User errors (``ValueError``, ``OSError``, a flag that does not parse, a
+numeric setting that is NaN or infinite) end the run with one line on stderr
+and exit status 2; ``--verbose`` shows the traceback instead. Ctrl-C ends it
+with one line that gives the command that resumes it (exit status 130).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 import os
 import re
+import shlex
 import sys
 import types
 import typing
@@ -240,7 +244,40 @@ def from_flags(
       missing.append(f'--{name}')
   if missing:
     raise ValueError(f'missing {", ".join(missing)} (see --help)')
+  check_numbers(config)
   return config
+
+
+def _flag_name(f: dataclasses.Field) -> str:
+  return f.metadata.get(_FLAG, f.name)
+
+
+def check_numbers(config) -> None:
+  """One check for every numeric field of a config and the configs nested in
+  it: each float (or element of a tuple of them) must be finite.
+
+  Raises:
+    ValueError: ``--flag=value: ...`` naming the first field that is NaN or
+      infinite (or not a number at all).
+  """
+  for f in dataclasses.fields(config):
+    value = getattr(config, f.name)
+    if dataclasses.is_dataclass(value):
+      check_numbers(value)
+      continue
+    items = value if isinstance(value, tuple) else (value,)
+    for v in items:
+      if isinstance(v, bool | str) or v is None:
+        continue
+      try:
+        finite = math.isfinite(v)
+      except TypeError:
+        finite = False
+      if not finite:
+        shown = ','.join(map(str, items)) if isinstance(value, tuple) else str(v)
+        raise ValueError(
+          f'--{_flag_name(f)}={shown}: every number must be finite (not NaN or inf)'
+        )
 
 
 def parse(cls, presets: Mapping[str, object], argv: list[str]):
@@ -266,9 +303,33 @@ def host_devices(n: int | None = None) -> None:
   )
 
 
+def one_line(e: BaseException) -> str:
+  """A user error's message on one line (the lines of a longer one joined)."""
+  return '; '.join(line.strip() for line in str(e).splitlines() if line.strip())
+
+
+def resume_command(argv: list[str] | None = None) -> str:
+  """The command line that ran this script (``python -m module ...``), quoted
+  for a shell: what resumes it after an interruption."""
+  argv = list(sys.argv if argv is None else argv)
+  spec = getattr(sys.modules.get('__main__'), '__spec__', None)
+  head = ['python', '-m', spec.name] if spec and spec.name else ['python', argv[0]]
+  return shlex.join(head + argv[1:])
+
+
+def _parse_flags(argv):
+  """absl's flag parsing, its errors as one line and exit status 2."""
+  try:
+    return flags.FLAGS(argv)
+  except flags.Error as e:
+    print(f'error: {one_line(e)} (see --help)', file=sys.stderr)
+    sys.exit(2)
+
+
 def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) -> None:
   """A script's whole ``__main__``: flags from ``cls``, ``main(config)``, and
-  user errors as one line (exit status 2) unless ``--verbose``. Under a
+  user errors as one line (exit status 2) unless ``--verbose``; Ctrl-C as one
+  line naming the command that resumes (exit status 130). Under a
   multi-process launch (``distributed``) the processes are joined first."""
   from experiments.pipeline import distributed  # noqa: PLC0415 - imports jax
 
@@ -277,15 +338,23 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
   define_flags(cls, presets, module_name=sys.argv[0])
 
   def _main(argv):
-    if len(argv) > 1:
-      raise app.UsageError(f'unexpected arguments {argv[1:]}')
     try:
+      if len(argv) > 1:
+        raise ValueError(f'unexpected arguments {argv[1:]} (flags are --name=value)')
       main(from_flags(cls, presets))
     except (ValueError, OSError) as e:
       if flags.FLAGS.verbose:
         raise
-      print(f'error: {e}', file=sys.stderr)
-      print('(run with --verbose for the traceback)', file=sys.stderr)
+      print(f'error: {one_line(e)} (--verbose shows the traceback)', file=sys.stderr)
       sys.exit(2)
+    except KeyboardInterrupt:
+      if flags.FLAGS.verbose:
+        raise
+      print(f'interrupted; resume with: {resume_command()}', file=sys.stderr)
+      sys.exit(130)
 
-  app.run(_main)
+  try:
+    app.run(_main, flags_parser=_parse_flags)
+  except KeyboardInterrupt:  # before main started (imports, flag parsing)
+    print(f'interrupted; resume with: {resume_command()}', file=sys.stderr)
+    sys.exit(130)

@@ -6,6 +6,9 @@ final name.
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
 import os
 
 from model import config_io
@@ -13,7 +16,12 @@ from physsim.dataset import write_atomic
 from physsim.dataset import write_json_atomic as write_json
 from physsim.dataset import write_text_atomic as write_text
 
-__all__ = ['resume', 'savefig', 'write_atomic', 'write_json', 'write_text']
+__all__ = [
+  'LOCK_FILE', 'locked', 'resume', 'savefig', 'write_atomic', 'write_json',
+  'write_text',
+]  # fmt: skip
+
+LOCK_FILE = '.lock'
 
 
 def savefig(fig, path: str, dpi: int = 100) -> None:
@@ -33,3 +41,61 @@ def resume(path: str, config) -> dict:
   except (ValueError, TypeError):
     same = False
   return data if same else {}
+
+
+def _holder(path: str) -> str:
+  try:
+    with open(path) as f:
+      pid = f.read(32).strip()
+  except OSError:
+    pid = ''
+  return f'process {pid}' if pid.isdigit() else 'another process'
+
+
+@contextlib.contextmanager
+def locked(workdir: str):
+  """Holds ``workdir`` for this process: a second process (or a second call
+  here) is refused while the first runs, naming its pid. The lock is the
+  kernel's (``flock`` on ``<workdir>/.lock``), so a process that died, even
+  by SIGKILL, leaves none behind that blocks the next. The lock file goes on
+  exit, and the workdir too when this call made it and left it empty.
+
+  Raises:
+    ValueError: the workdir is held, naming the holder's pid.
+    OSError: the workdir cannot be made.
+  """
+  made = not os.path.isdir(workdir)
+  os.makedirs(workdir, exist_ok=True)
+  path = os.path.join(workdir, LOCK_FILE)
+  while True:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+      fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as e:
+      os.close(fd)
+      if e.errno not in (errno.EAGAIN, errno.EACCES):
+        raise
+      raise ValueError(
+        f'{workdir}: in use by {_holder(path)} (lock {path}); wait for it to end '
+        'or use another --workdir'
+      ) from None
+    # The file may have been removed by its last holder between our open and
+    # our lock: then the lock is on a dead inode, so take the new file.
+    try:
+      same = os.stat(path).st_ino == os.fstat(fd).st_ino
+    except FileNotFoundError:
+      same = False
+    if same:
+      break
+    os.close(fd)
+  try:
+    os.ftruncate(fd, 0)
+    os.write(fd, f'{os.getpid()}\n'.encode())
+    yield
+  finally:
+    with contextlib.suppress(OSError):
+      os.remove(path)
+    os.close(fd)
+    if made:
+      with contextlib.suppress(OSError):
+        os.rmdir(workdir)  # only if empty

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from experiments.pipeline import files, objective
+from experiments.pipeline import cli, files, objective
 from experiments.pipeline import recording as recording_lib
 from physsim import alignment, camera_files, dataset, scene, video
 
@@ -56,6 +56,9 @@ PIN_SPACING_TOL = 0.2
 MIN_VISIBLE = 0.5
 # ... and the fewest pixels it may cover (a camera 100 m away sees a speck).
 MIN_PIXELS = 100
+# The smallest frames taken in, pixels (width, height): below it no camera
+# resolves a cloth (and a few pixels a frame are a broken export).
+MIN_SIZE = (32, 24)
 INTAKE_FILE = 'intake.json'
 OVERLAY_FILE = 'overlay.png'
 FRAMES_DIR = 'intake'
@@ -87,6 +90,10 @@ class IntakeConfig:
       the simulated cloth seen from the fitted pose, at rest or swung about
       its top edge (the best of 0-90 degrees); below it the search is
       refused.
+    allow_no_camera: take in a recording without a camera file (no
+      --camera_json): nothing can then be removed as background but by
+      depth_range or mask, nor the camera placed, so training-like cameras
+      are simulated; refused unless this is set.
   """
 
   fps: float = 0.0
@@ -101,9 +108,16 @@ class IntakeConfig:
   up: tuple[float, ...] = ()
   wind_toward_camera: bool = False
   min_overlap: float = 0.5
+  allow_no_camera: bool = False
 
   def check(self) -> None:
-    """Raises ValueError naming the first bad field."""
+    """Raises ValueError naming the first bad field (every number finite
+    first: ``cli.check_numbers``)."""
+    cli.check_numbers(self)
+    if not 1e-6 <= self.depth_scale <= 1.0:
+      raise ValueError(
+        f'--depth_scale={self.depth_scale}: must be metres per unit in [1e-6, 1]'
+      )
     if self.fps and not 1 <= self.fps <= 1000:
       raise ValueError(
         f'fps must be 0 (from the files) or in [1, 1000] Hz, got {self.fps}'
@@ -148,6 +162,7 @@ class Intake(NamedTuple):
     passthrough: a dataset sequence, taken as it is.
     swing_deg: the swing angle of that best overlap.
     silhouette: (H, W) bool, the simulated cloth at that angle, or None.
+    camera_file: the camera file's path, or ''.
   """
 
   depth: np.ndarray
@@ -167,6 +182,7 @@ class Intake(NamedTuple):
   passthrough: bool = False
   swing_deg: float | None = None
   silhouette: np.ndarray | None = None
+  camera_file: str = ''
 
 
 def is_sequence(path: str) -> bool:
@@ -282,7 +298,18 @@ def take_in(
   config.check()
   if is_sequence(path) and not camera_json:
     return _passthrough(path, est)
+  if not camera_json and not config.allow_no_camera:
+    raise ValueError(
+      f'{path}: no camera file (--camera_json): without it no background can be '
+      'removed but by depth_range or mask (a blank wall would pass as cloth) and '
+      'the camera cannot be placed; give it, or pass --allow_no_camera to '
+      'simulate training-like cameras anyway'
+    )
   cam = camera_files.read_camera(camera_json) if camera_json else None
+  frames_path = os.path.join(path, 'cam0') if is_sequence(path) else path
+  header = video.read_header(frames_path, config.frame_glob, config.start)
+  if header is not None:
+    _check_size(path, header.width, header.height, cam)
   src_fps = config.fps or (cam.fps if cam else None) or None
   frames_path, truth = path, None
   if is_sequence(path):  # a dataset sequence with another camera file: camera 0
@@ -309,6 +336,7 @@ def take_in(
   index = np.arange(int(math.floor(pos[-1] + 0.5 + 1e-9)) + 1)
   depth = vid.depth[index]
   h, w = depth.shape[1:]
+  _check_size(path, w, h, cam)
   intr = None
   if cam is not None:
     cam = camera_files.scaled_to(cam, w, h)
@@ -335,10 +363,22 @@ def take_in(
   intake = Intake(
     bg.depth, vid.fps, index + config.start, intr, None, None, '', valid,
     bg.fraction, None, planes, path, truth, cam.form if cam else '',
+    camera_file=camera_json,
   )  # fmt: skip
   if cam is None:
     return intake
   return _align(intake, cam, config, est, bg.planes, workdir)
+
+
+def _check_size(path: str, w: int, h: int, cam) -> None:
+  """Frames big enough to hold a cloth, and of the camera file's shape."""
+  if w < MIN_SIZE[0] or h < MIN_SIZE[1]:
+    raise ValueError(
+      f'{path}: frames of {w} x {h} px; the intake needs at least '
+      f'{MIN_SIZE[0]} x {MIN_SIZE[1]} (a broken export?)'
+    )
+  if cam is not None:
+    camera_files.scaled_to(cam, w, h)
 
 
 def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> Intake:
@@ -446,6 +486,7 @@ def to_json(intake: Intake) -> dict:
     'pins_camera': pins,
     'up_from': intake.up_from,
     'camera_form': intake.camera_form,
+    'camera_file': os.path.abspath(intake.camera_file) if intake.camera_file else '',
     'intrinsics': intake.intrinsics.to_dict() if intake.intrinsics else None,
     'pose_in_simulator': pose,
     'valid_fraction': intake.valid_fraction.tolist(),
@@ -487,6 +528,39 @@ def overlay(intake: Intake, mesh) -> np.ndarray:
         centre = (int(round((u / z + 0.5) * scale)), int(round((v / z + 0.5) * scale)))
         cv2.circle(img, centre, max(3, scale), (0, 255, 0), 2)
   return img
+
+
+def check_workdir(workdir: str, path: str, camera_json: str, run_file: str) -> None:
+  """Refuses, before anything is written, an intake of ``path`` into a
+  workdir that holds another recording's intake (``intake.json`` of another
+  source), or a search (``run_file``) of another recording or camera file.
+
+  Raises:
+    ValueError: naming the workdir's file and what differs.
+  """
+  old_path = os.path.join(workdir, INTAKE_FILE)
+  run = os.path.join(workdir, run_file)
+  if not os.path.exists(old_path):
+    if os.path.exists(run):
+      raise ValueError(
+        f'{run}: the workdir holds an estimate of a recording that was not taken '
+        f'in here, not of {path}; use another --workdir'
+      )
+    return
+  old = recording_lib.read_json(old_path)
+  source = old.get('source') if isinstance(old, dict) else None
+  if source != os.path.abspath(path):
+    raise ValueError(
+      f'{old_path}: the workdir holds the intake of {source}, not of {path}; use '
+      'another --workdir'
+    )
+  camera = os.path.abspath(camera_json) if camera_json else ''
+  if os.path.exists(run) and old.get('camera_file', camera) != camera:
+    raise ValueError(
+      f'{old_path}: the workdir holds an estimate with a different camera file '
+      f'({old.get("camera_file") or "none"}, not {camera or "none"}); use another '
+      '--workdir'
+    )
 
 
 def write(intake: Intake, workdir: str, est, *, frames: bool = True) -> None:

@@ -177,7 +177,9 @@ class EstimateConfig:
     return self.point == 'argmin'
 
   def check(self) -> None:
-    """Raises ValueError naming the first field outside its allowed values."""
+    """Raises ValueError naming the first field outside its allowed values
+    (every number finite first: ``cli.check_numbers``)."""
+    cli.check_numbers(self)
     if self.material not in physsim.FABRICS:
       raise ValueError(
         f'material {self.material!r} is not one of {sorted(physsim.FABRICS)}'
@@ -232,6 +234,26 @@ class EstimateConfig:
       raise ValueError(
         f'need 0 <= gusts <= 1 and max_iter >= 0, got {self.gusts}, {self.max_iter}'
       )
+    for name, lo, hi in _RANGES:
+      v = getattr(self, name)
+      if not lo <= v <= hi:
+        raise ValueError(f'--{name}={v}: must be in [{lo:g}, {hi:g}]')
+    if max(self.posterior_grid) > 1000 or np.prod(self.posterior_grid) > 5e6:
+      raise ValueError(
+        f'--posterior_grid={",".join(map(str, self.posterior_grid))}: at most 1000 '
+        'cells per dimension and 5 million in all'
+      )
+
+
+# The other numeric fields' allowed ranges (EstimateConfig.check): beyond
+# them a search is a typo (or would not fit in memory), never a setting.
+_RANGES = (
+  ('sharpness', 1e-6, 1e6), ('cloth_resolution', 2, 200),
+  ('garment_spacing', 0.005, 0.5), ('cameras', 1, 64), ('q', 1, 4096),
+  ('n_init', 1, 100_000), ('max_iter', 0, 10_000), ('stop_rel_change', 0.0, 1.0),
+  ('stop_window', 1, 10_000), ('min_iter', 0, 10_000), ('replicates', 0, 4096),
+  ('workers', 0, 4096), ('seed', 0, 2**31 - 1),
+)  # fmt: skip
 
 
 # The paper's protocol: Bayesian optimisation to the lowest PSD (qUCB there,
