@@ -4,7 +4,7 @@ Runs both optimisers side by side in one process on the same initial designs
 and reports the final simple regret (median and interquartile range over
 seeds) and the median wall time per iteration, excluding the objective.
 
-  python benchmarks/bo_vs_botorch.py --seeds=10 --out=/tmp/bo_vs_botorch.json
+  python -m benchmarks.bo_vs_botorch --seeds=10 --out=/tmp/bo_vs_botorch.json
 
 BoTorch (and torch) are benchmark-only dependencies; without them only the
 JAX optimiser runs. Both libraries are limited to one CPU thread so that the
@@ -18,27 +18,41 @@ os.environ.setdefault(
   '--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1',
 )
 
-import json  # noqa: E402
-import sys  # noqa: E402
+import dataclasses  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-from absl import app, flags  # noqa: E402
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import bo  # noqa: E402
+from benchmarks import out_path  # noqa: E402
+from experiments.pipeline import cli, files  # noqa: E402
 
-_SEEDS = flags.DEFINE_integer('seeds', 10, 'Number of seeds per problem.')
-_PROBLEMS = flags.DEFINE_list(
-  'problems', ['branin', 'hartmann6', 'fabric3'], 'Problems to run.'
-)
-_OUT = flags.DEFINE_string('out', '', 'Optional JSON output path.')
-_SKIP_BOTORCH = flags.DEFINE_bool('skip_botorch', False, 'Run only the JAX side.')
-_ACQ = flags.DEFINE_string(
-  'acquisition', 'logei', "JAX acquisition ('logei' or 'ucb')."
-)
-_KERNEL = flags.DEFINE_string('kernel', 'matern52', "JAX kernel ('matern52' or 'rbf').")
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The JAX optimiser against BoTorch.
+
+  Attributes:
+    seeds: number of seeds per problem.
+    problems: problems to run (branin, hartmann6, fabric3).
+    out: JSON output path (rewritten after each problem).
+    skip_botorch: run only the JAX side.
+    acquisition: JAX acquisition ('logei' or 'ucb').
+    kernel: JAX kernel ('matern52' or 'rbf').
+  """
+
+  seeds: int = 10
+  problems: tuple[str, ...] = ('branin', 'hartmann6', 'fabric3')
+  out: str = out_path('bo_vs_botorch')
+  skip_botorch: bool = False
+  acquisition: str = cli.choice('logei', ['logei', 'ucb'])
+  kernel: str = cli.choice('matern52', ['matern52', 'rbf'])
+
+
+PRESETS = {
+  'default': Args(),
+  'smoke': Args(seeds=1, problems=('branin',), skip_botorch=True),
+}
 
 # ---- problems ----
 
@@ -110,7 +124,7 @@ def _initial_design(bounds, n_init, x0, seed):
 # ---- runners ----
 
 
-def run_jax(fun, bounds, n_init, n_iter, x0, seed):
+def run_jax(args: Args, fun, bounds, n_init, n_iter, x0, seed):
   secs = []
   res = bo.minimize(
     fun,
@@ -119,8 +133,8 @@ def run_jax(fun, bounds, n_init, n_iter, x0, seed):
     n_iter=n_iter,
     x0=x0,
     seed=seed,
-    acquisition=_ACQ.value,
-    kernel=_KERNEL.value,
+    acquisition=args.acquisition,
+    kernel=args.kernel,
     callback=lambda info: secs.append(info.seconds),
   )
   return res.y_best, secs
@@ -170,9 +184,11 @@ def _summary(regrets, secs):
   )
 
 
-def main(argv):
-  del argv
-  have_botorch = not _SKIP_BOTORCH.value
+def main(args: Args) -> None:
+  unknown = sorted(set(args.problems) - set(PROBLEMS))
+  if unknown or not args.problems:
+    raise ValueError(f'unknown --problems {unknown}; known: {list(PROBLEMS)}')
+  have_botorch = not args.skip_botorch
   if have_botorch:
     try:
       import botorch  # noqa: F401
@@ -185,7 +201,7 @@ def main(argv):
       have_botorch = False
   out = {'machine': os.uname().nodename, 'cpu_threads': 1, 'problems': {}}
   rows = []
-  for name in _PROBLEMS.value:
+  for name in args.problems:
     fun, bounds, opt, n_init, n_iter, x0 = PROBLEMS[name]
     bounds = np.asarray(bounds)
     if isinstance(x0, str):
@@ -193,8 +209,8 @@ def main(argv):
     entry = {'n_init': n_init, 'n_iter': n_iter}
     jr, js, compile_s = [], [], None
     br, bs = [], []
-    for seed in range(_SEEDS.value):
-      y, secs = run_jax(fun, bounds, n_init, n_iter, x0, seed)
+    for seed in range(args.seeds):
+      y, secs = run_jax(args, fun, bounds, n_init, n_iter, x0, seed)
       if compile_s is None:
         compile_s, secs = secs[0], secs[1:]
       jr.append(y - opt)
@@ -218,10 +234,8 @@ def main(argv):
         f'[{e["regret_q25"]:.3g}, {e["regret_q75"]:.3g}] | '
         f'{e["sec_per_iter_median"]:.3f} |'
       )
-    if _OUT.value:
-      with open(_OUT.value, 'w') as f:
-        json.dump(out, f, indent=2)
-  print(f'\n{_SEEDS.value} seeds each; regret = best observed - optimum.\n')
+    files.write_json(args.out, out)  # after each problem: a partial run is kept
+  print(f'\n{args.seeds} seeds each; regret = best observed - optimum.\n')
   print('| problem (init+iters) | optimiser | median regret | IQR | s/iter |')
   print('|---|---|---|---|---|')
   print('\n'.join(rows))
@@ -229,7 +243,8 @@ def main(argv):
     print(
       f'{name}: JAX first-iteration compile {e["jax"]["first_iter_compile_s"]:.1f} s'
     )
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

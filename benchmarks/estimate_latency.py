@@ -6,7 +6,7 @@ timed (the table shows their median run; all are in the JSON). Searches are
 not bitwise repeatable on a GPU, so runs of one setting may differ in length.
 Prints a table and writes JSON.
 
-  python benchmarks/estimate_latency.py --recording=/tmp/eval/fabrics/gray_interlock/0000 \
+  python -m benchmarks.estimate_latency --recording=/tmp/eval/fabrics/gray_interlock/0000 \
       --material=gray_interlock --model=/tmp/t1/physnet_depth/simulation/gray_interlock \
       --out=out/estimate_latency.json
 """
@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import tempfile
 import time
 
-from absl import app, flags, logging
+from absl import logging
 
 import physsim
-from experiments.pipeline import embedding, files, search
+from benchmarks import out_path
+from experiments.pipeline import cli, embedding, files, search
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 
@@ -33,48 +33,66 @@ SETTINGS = {
   'paper': ('paper', {}, {}),  # the paper's argmin (q=4, n_init=8, <= 30 iterations)
   'gp_on_gpu': ('default', {}, dict(gp_on_cpu=False)),  # GP on JAX's default device
   'q16': ('default', dict(q=16, n_init=32), {}),
+  'smoke': ('smoke', {}, {}),  # a CPU-sized search (checks the script)
 }
 
-FLAGS = flags.FLAGS
-flags.DEFINE_string('recording', None, 'a dataset sequence folder')
-flags.DEFINE_string('material', 'gray_interlock', 'its fabric')
-flags.DEFINE_string('model', None, 'its trained network')
-flags.DEFINE_string('out', 'out/estimate_latency.json', 'JSON result')
-flags.DEFINE_list('settings', list(SETTINGS), 'which settings')
-flags.DEFINE_enum('backend', 'auto', physsim.BACKENDS, 'simulator (physsim.rollout)')
-flags.DEFINE_integer(
-  'repeats',
-  1,
-  'timed runs after the compile run (the table shows their median; a '
-  "timed run can still compile shapes the first run's search did not reach)",
-)
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The estimate-latency benchmark.
+
+  Attributes:
+    recording: a dataset sequence folder (required).
+    material: its fabric.
+    model: its trained network (required).
+    out: JSON result.
+    settings: which settings (default, paper, gp_on_gpu, q16, smoke).
+    backend: simulator (physsim.rollout).
+    repeats: timed runs after the compile run (the table shows their median;
+      a timed run can still compile shapes the first run's search did not
+      reach).
+  """
+
+  recording: str = cli.required()
+  material: str = 'gray_interlock'
+  model: str = cli.required()
+  out: str = out_path('estimate_latency')
+  settings: tuple[str, ...] = ('default', 'paper', 'gp_on_gpu', 'q16')
+  backend: str = cli.choice('auto', physsim.BACKENDS)
+  repeats: int = 1
 
 
-def main(argv):
-  del argv
+PRESETS = {
+  'default': Args(),
+  'paper': Args(settings=('paper',)),
+  'smoke': Args(settings=('smoke',), backend='c'),
+}
+
+
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint at INFO
-  net = embedding.load_embedding(FLAGS.model)
+  unknown = sorted(set(args.settings) - set(SETTINGS))
+  if unknown or not args.settings:
+    raise ValueError(f'unknown --settings {unknown}; known: {list(SETTINGS)}')
+  net = embedding.load_embedding(args.model)
   rows = []
-  unknown = sorted(set(FLAGS.settings) - set(SETTINGS))
-  if unknown:
-    raise app.UsageError(f'unknown --settings {unknown}; known: {list(SETTINGS)}')
-  for name in FLAGS.settings:
+  for name in args.settings:
     preset, overrides, kwargs = SETTINGS[name]
     config = dataclasses.replace(
-      objective_lib.PRESETS[preset], material=FLAGS.material, backend=FLAGS.backend,
+      objective_lib.PRESETS[preset], material=args.material, backend=args.backend,
       **overrides,
     )  # fmt: skip
     rec = recording_lib.load_recording(
-      FLAGS.recording, fps=config.fps, size=net.image_size, frames=config.frames,
+      args.recording, fps=config.fps, size=net.image_size, frames=config.frames,
       rgb=net.modality == 'rgb',
     )  # fmt: skip
     runs = []
     evaluator = search.Evaluator()  # one compile per setting, reused by its runs
-    for _ in range(1 + FLAGS.repeats):  # the first run compiles
+    for _ in range(1 + args.repeats):  # the first run compiles
       with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         r = search.estimate(
-          config, rec, FLAGS.model, tmp, progress=False, evaluator=evaluator,
+          config, rec, args.model, tmp, progress=False, evaluator=evaluator,
           **kwargs,
         )  # fmt: skip
         runs.append({
@@ -116,13 +134,12 @@ def main(argv):
       f'{r["objective_s"]:.1f} | {out:.1f} ({100 * out / t:.0f}%) | '
       f'{r["search_s"]:.1f} | {r["evaluations"]} | {r["iterations"]} |'
     )
-  os.makedirs(os.path.dirname(os.path.abspath(FLAGS.out)), exist_ok=True)
   files.write_json(
-    FLAGS.out,
-    {'recording': FLAGS.recording, 'backend': FLAGS.backend, 'rows': rows},
+    args.out,
+    {'recording': args.recording, 'backend': args.backend, 'rows': rows},
   )  # fmt: skip
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  flags.mark_flags_as_required(['recording', 'model'])
-  app.run(main)
+  cli.run(Args, PRESETS, main)

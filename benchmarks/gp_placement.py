@@ -5,33 +5,48 @@ Times every ``Minimizer.ask`` (GP fit + q-point proposal) of a short search on a
 cheap quadratic, and the final ``minimizer_samples`` (the estimate's
 uncertainty), twice per device: the first pays the compiles.
 
-  python benchmarks/gp_placement.py --out=out/gp_placement.json
+  python -m benchmarks.gp_placement --out=out/gp_placement.json
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 
 import jax
 import numpy as np
-from absl import app, flags
 
 import bo
-from experiments.pipeline import files
+from benchmarks import out_path
+from experiments.pipeline import cli, files
 
-FLAGS = flags.FLAGS
-flags.DEFINE_integer('q', 4, 'points per proposal (the estimate default)')
-flags.DEFINE_integer('n_init', 8, 'initial design')
-flags.DEFINE_integer('n_iter', 6, 'proposals')
-flags.DEFINE_string('out', 'out/gp_placement.json', 'JSON result')
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The GP placement benchmark.
+
+  Attributes:
+    q: points per proposal (the estimate default).
+    n_init: initial design.
+    n_iter: proposals.
+    out: JSON result.
+  """
+
+  q: int = 4
+  n_init: int = 8
+  n_iter: int = 6
+  out: str = out_path('gp_placement')
+
+
+PRESETS = {'default': Args(), 'smoke': Args(n_init=4, n_iter=2)}
 
 BOUNDS = np.array([[-1.0, 1.0]] * 3)
 
 
-def _search(device, seed: int) -> dict:
+def _search(args: Args, device, seed: int) -> dict:
   opt = bo.Minimizer(
-    BOUNDS, n_init=FLAGS.n_init, n_iter=FLAGS.n_iter, q=FLAGS.q, seed=seed,
+    BOUNDS, n_init=args.n_init, n_iter=args.n_iter, q=args.q, seed=seed,
     device=device, stop_rel_change=None,
   )  # fmt: skip
   state, ask_s = opt.start(), 0.0
@@ -46,12 +61,11 @@ def _search(device, seed: int) -> dict:
   return {'ask_s': ask_s, 'samples_s': time.perf_counter() - t}
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   rows = []
   for name, device in (('cpu', jax.devices('cpu')[0]), ('default', None)):
     for run in range(2):
-      row = {'gp_device': name, 'run': run, **_search(device, run)}
+      row = {'gp_device': name, 'run': run, **_search(args, device, run)}
       row['device'] = str(device or jax.devices()[0])
       rows.append(row)
       print(json.dumps(row), flush=True)
@@ -63,10 +77,11 @@ def main(argv):
       f'{r["samples_s"]:.2f} |'
     )
   files.write_json(
-    FLAGS.out,
-    {'q': FLAGS.q, 'n_init': FLAGS.n_init, 'n_iter': FLAGS.n_iter, 'rows': rows},
+    args.out,
+    {'q': args.q, 'n_init': args.n_init, 'n_iter': args.n_iter, 'rows': rows},
   )
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -9,7 +9,7 @@ turns (after one untimed warm-up read, so every timed read finds the files in
 the page cache), ``--repeats`` times; the table shows the medians and the
 speed-up over the first variant.
 
-  python benchmarks/load_inputs.py --dataset=data/sim --materials=gray_interlock
+  python -m benchmarks.load_inputs --dataset=data/sim --materials=gray_interlock
 """
 
 from __future__ import annotations
@@ -20,21 +20,41 @@ import time
 
 import jax.numpy as jnp
 import numpy as np
-from absl import app, flags
 
 import model as model_lib
-from experiments.pipeline import embedding, files
+from benchmarks import out_path
+from experiments.pipeline import cli, embedding, files
 from experiments.pipeline import training as train_lib
 
-FLAGS = flags.FLAGS
-flags.DEFINE_string('dataset', None, 'dataset root (generate_dataset --out)')
-flags.DEFINE_list('materials', ['gray_interlock'], 'materials to read')
-flags.DEFINE_list('workers', ['1', str(min(16, os.cpu_count() or 1))], 'thread counts')
-flags.DEFINE_list('mappings', ['jax', 'numpy'], 'depth mapping backends')
-flags.DEFINE_enum('network', 'physnet', ['physnet', 'sdn'], 'frames or clips')
-flags.DEFINE_enum('modality', 'depth', list(embedding.MODALITIES), 'depth or rgb')
-flags.DEFINE_integer('repeats', 3, 'timed reads per thread count')
-flags.DEFINE_string('out', 'out/load_inputs.json', 'JSON result')
+MAPPINGS = ('jax', 'numpy')
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The input-loading benchmark.
+
+  Attributes:
+    dataset: dataset root (generate_dataset --out; required).
+    materials: materials to read.
+    workers: thread counts.
+    mappings: depth mapping backends (jax, numpy).
+    network: frames or clips.
+    modality: depth or rgb.
+    repeats: timed reads per thread count.
+    out: JSON result.
+  """
+
+  dataset: str = cli.required()
+  materials: tuple[str, ...] = ('gray_interlock',)
+  workers: tuple[int, ...] = (1, min(16, os.cpu_count() or 1))
+  mappings: tuple[str, ...] = MAPPINGS
+  network: str = cli.choice('physnet', ['physnet', 'sdn'])
+  modality: str = cli.choice('depth', embedding.MODALITIES)
+  repeats: int = 3
+  out: str = out_path('load_inputs')
+
+
+PRESETS = {'default': Args(), 'smoke': Args(repeats=1)}
 
 
 _HOST_MAPPING = model_lib.depth_input
@@ -44,29 +64,33 @@ def _via_jax(depth, mode='relative'):
   return np.asarray(_HOST_MAPPING(jnp.asarray(depth), mode))
 
 
-def _read(cfg, mapping: str, workers: int) -> float:
+def _read(args: Args, cfg, mapping: str, workers: int) -> float:
   model_lib.depth_input = _via_jax if mapping == 'jax' else _HOST_MAPPING
   try:
     t0 = time.perf_counter()
-    train_lib.load_inputs(cfg, FLAGS.dataset, FLAGS.materials, workers=workers)
+    train_lib.load_inputs(cfg, args.dataset, args.materials, workers=workers)
     return time.perf_counter() - t0
   finally:
     model_lib.depth_input = _HOST_MAPPING
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
+  bad = [m for m in args.mappings if m not in MAPPINGS]
+  if bad or not args.mappings:
+    raise ValueError(f'--mappings={",".join(args.mappings)}: need some of {MAPPINGS}')
+  if not args.workers or min(args.workers) < 1:
+    raise ValueError(f'--workers={",".join(map(str, args.workers))}: need positive')
   cfg = dataclasses.replace(
-    train_lib.PRESETS['paper'], network=FLAGS.network, modality=FLAGS.modality
+    train_lib.PRESETS['paper'], network=args.network, modality=args.modality
   )
-  x, _, _ = train_lib.load_inputs(cfg, FLAGS.dataset, FLAGS.materials)  # warm-up
-  variants = [(m, int(w)) for m in FLAGS.mappings for w in FLAGS.workers]
+  x, _, _ = train_lib.load_inputs(cfg, args.dataset, args.materials)  # warm-up
+  variants = [(m, int(w)) for m in args.mappings for w in args.workers]
   # jax with a pool is not a variant worth its time: one per mapping is enough
   variants = [v for v in variants if v[0] != 'jax' or v[1] == variants[0][1]]
   times = {v: [] for v in variants}
-  for _ in range(FLAGS.repeats):  # interleaved, so drift hits every variant alike
+  for _ in range(args.repeats):  # interleaved, so drift hits every variant alike
     for v in variants:
-      times[v].append(_read(cfg, *v))
+      times[v].append(_read(args, cfg, *v))
   base = float(np.median(times[variants[0]]))
   rows = [
     {
@@ -88,12 +112,12 @@ def main(argv):
       f'{r["items_per_s"]:.0f} | {r["speedup"]:.2f}x |'
     )
   files.write_json(
-    FLAGS.out,
-    {'dataset': FLAGS.dataset, 'materials': FLAGS.materials, 'items': len(x),
+    args.out,
+    {'dataset': args.dataset, 'materials': list(args.materials), 'items': len(x),
      'item_shape': list(x.shape[1:]), 'cores': os.cpu_count(), 'rows': rows},
   )  # fmt: skip
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  flags.mark_flags_as_required(['dataset'])
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -20,65 +20,98 @@ without the forces; for 'warp', also at the direct run's masses (area weight
 ``--event_trace`` times the parts of MuJoCo Warp's step in the direct run
 (its own event scopes: smooth dynamics, constraints, solver, integration).
 
-  python benchmarks/physsim_throughput.py --batch_sizes=1,8,64 --out=out/physsim_cpu.json
-  python benchmarks/physsim_throughput.py --batch_sizes=210,1024 --direct --paper_dataset
-  python benchmarks/physsim_throughput.py --backends=warp --c_baseline=false
+  python -m benchmarks.physsim_throughput --batch_sizes=1,8,64 --out=out/physsim_cpu.json
+  python -m benchmarks.physsim_throughput --batch_sizes=210,1024 --direct --paper_dataset
+  python -m benchmarks.physsim_throughput --backends=warp --c_baseline=false
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
-import json
 import multiprocessing
 import os
 import platform
-import tempfile
 import time
 from unittest import mock
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from absl import app, flags
 
 import physsim
+from benchmarks import ints, out_path
+from experiments.pipeline import cli, files
 from physsim import rollout as sim
 
-FLAGS = flags.FLAGS
-flags.DEFINE_integer('resolution', 25, 'cloth vertices per side')
-flags.DEFINE_list(
-  'batch_sizes', ['1', '16', '256', '1024', '4096'], 'device batch sizes'
-)
-flags.DEFINE_list('backends', ['warp', 'mjx'], "the project's device rollouts to time")
-flags.DEFINE_float('seconds', 0.5, 'simulated seconds per timed MJX call')
-flags.DEFINE_float('c_seconds', 0.5, 'simulated seconds per world for MuJoCo C')
-flags.DEFINE_integer('c_worlds_per_core', 1, 'worlds each C process simulates')
-flags.DEFINE_integer('repeats', 2, 'timed MJX calls per batch size (median)')
-flags.DEFINE_bool('paper_dataset', False, 'also time 210 sequences x (1+3) s directly')
-flags.DEFINE_float('gust_intensity', 0.2, 'RMS gust intensity of the benchmarked wind')
-flags.DEFINE_integer('iterations', None, 'override the solver iteration cap')
-flags.DEFINE_string('solver', None, "override the solver ('CG' or 'Newton')")
-flags.DEFINE_float(
-  'edge_solref', None, "override the edges' constraint time constant, s"
-)
-flags.DEFINE_float('tolerance', None, "override the solver's relative tolerance")
-flags.DEFINE_integer(
-  'ls_iterations', None, "override the solver's line-search iterations (MuJoCo's opt)"
-)
-flags.DEFINE_bool('event_trace', False, "time the parts of MuJoCo Warp's step (direct)")
-flags.DEFINE_string(
-  'save_last', '', "save each device row's last frame (.npz) to compare settings"
-)
-flags.DEFINE_enum(
-  'graph_mode', None, ['auto', 'jax', 'warp'], "override MJX's graph mode"
-)
-flags.DEFINE_bool('direct', False, 'also time MuJoCo Warp called directly (module doc)')
-flags.DEFINE_bool(
-  'ablate_forces', False, "also time the rollout with the direct run's constant force"
-)
-flags.DEFINE_bool('c_baseline', True, 'also time MuJoCo C on 1 and all cores')
-flags.DEFINE_string('out', 'out/physsim_throughput.json', 'JSON output path')
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The simulation-throughput benchmark. The solver overrides (iterations,
+  solver, edge_solref, tolerance, ls_iterations, graph_mode) leave the
+  project's setting where 0 or empty.
+
+  Attributes:
+    resolution: cloth vertices per side.
+    batch_sizes: device batch sizes (comma-separated).
+    backends: the project's device rollouts to time (warp, mjx).
+    seconds: simulated seconds per timed MJX call.
+    c_seconds: simulated seconds per world for MuJoCo C.
+    c_worlds_per_core: worlds each C process simulates.
+    repeats: timed MJX calls per batch size (median).
+    paper_dataset: also time 210 sequences x (1+3) s directly.
+    gust_intensity: RMS gust intensity of the benchmarked wind.
+    iterations: override the solver iteration cap (0: the project's).
+    solver: override the solver ('CG' or 'Newton'; empty: the project's).
+    edge_solref: override the edges' constraint time constant, s (0: the
+      project's).
+    tolerance: override the solver's relative tolerance (0: the project's).
+    ls_iterations: override the solver's line-search iterations (MuJoCo's opt;
+      0: the project's).
+    event_trace: time the parts of MuJoCo Warp's step (direct).
+    save_last: save each device row's last frame (.npz) to compare settings.
+    graph_mode: override MJX's graph mode (empty: the project's).
+    direct: also time MuJoCo Warp called directly (module doc).
+    ablate_forces: also time the rollout with the direct run's constant force.
+    c_baseline: also time MuJoCo C on 1 and all cores.
+    out: JSON output path.
+  """
+
+  resolution: int = 25
+  batch_sizes: tuple[str, ...] = ('1', '16', '256', '1024', '4096')
+  backends: tuple[str, ...] = ('warp', 'mjx')
+  seconds: float = 0.5
+  c_seconds: float = 0.5
+  c_worlds_per_core: int = 1
+  repeats: int = 2
+  paper_dataset: bool = False
+  gust_intensity: float = 0.2
+  iterations: int = 0
+  solver: str = cli.choice('', ['', 'CG', 'Newton'])
+  edge_solref: float = 0.0
+  tolerance: float = 0.0
+  ls_iterations: int = 0
+  event_trace: bool = False
+  save_last: str = ''
+  graph_mode: str = cli.choice('', ['', 'auto', 'jax', 'warp'])
+  direct: bool = False
+  ablate_forces: bool = False
+  c_baseline: bool = True
+  out: str = out_path('physsim_throughput')
+
+
+PRESETS = {
+  'default': Args(),
+  # checks the script on a CPU in about a minute (the MJX rollout compiles)
+  'smoke': Args(
+    resolution=8,
+    batch_sizes=('1', '2'),
+    backends=('mjx',),
+    seconds=0.05,
+    c_seconds=0.05,
+    repeats=1,
+  ),  # fmt: skip
+}
 
 _PAPER_SEQUENCES, _PAPER_SECONDS, _WARMUP = 210, 3.0, 1.0
 
@@ -117,13 +150,13 @@ def _constant_force(c, model, qpos, qvel, t, w):
   return jnp.zeros((c.body.shape[0], 3), lift.dtype).at[:, 1].set(lift)
 
 
-def _ablated_row(model, b, backend):
+def _ablated_row(args: Args, model, b, backend):
   """The device row with the direct run's constant force in place of the wind
   and bending (programs rebuilt); for 'warp' also at the direct run's masses."""
   model.programs.clear()
   if backend == 'mjx':
     with mock.patch.object(sim, '_applied_forces', _constant_force):
-      row = _device_row(model, b, 'mjx')
+      row = _device_row(args, model, b, 'mjx')
   else:
     import warp as wp
     from mujoco.mjx.third_party import mujoco_warp as mjw
@@ -141,15 +174,15 @@ def _ablated_row(model, b, backend):
         mjw.step(self.m, self.d)
 
     with mock.patch.object(warp_frames._Worlds, '_substeps', substeps):
-      row = _device_row(model, b, 'warp', area_weight=0.2)
+      row = _device_row(args, model, b, 'warp', area_weight=0.2)
   model.programs.clear()
   return {**row, 'backend': f'{backend}, constant force (ablation)'}
 
 
-def _device_row(model, b, backend, area_weight=None):
-  frames = max(1, round(FLAGS.seconds * 20))
+def _device_row(args: Args, model, b, backend, area_weight=None):
+  frames = max(1, round(args.seconds * 20))
   fn = sim.jit_program(model, frames, 20.0, 0.0, backend=backend)
-  wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity)
+  wind = physsim.Wind(gust_intensity=args.gust_intensity)
 
   def params(seed):
     p = _params(b, seed)
@@ -160,14 +193,14 @@ def _device_row(model, b, backend, area_weight=None):
   compiled = fn.lower(w).compile()
   compile_s = time.perf_counter() - t0
   times, valid = [], None
-  for r in range(FLAGS.repeats + 1):  # first call warms caches/graphs
+  for r in range(args.repeats + 1):  # first call warms caches/graphs
     w = _inputs(model, params(r), wind, jax.random.key(r))
     t0 = time.perf_counter()
     xs, valid = jax.block_until_ready(compiled(w))
     if r:
       times.append(time.perf_counter() - t0)
-  if FLAGS.save_last and area_weight is None:  # the last timed call's worlds
-    base, _ = os.path.splitext(FLAGS.save_last)
+  if args.save_last and area_weight is None:  # the last timed call's worlds
+    base, _ = os.path.splitext(args.save_last)
     np.savez(f'{base}_{backend}_{b}.npz', last=np.asarray(xs[:, -1]), valid=valid)
   steps = b * frames * round(0.05 / model.config.timestep)
   run_s = float(np.median(times))
@@ -182,7 +215,7 @@ def _device_row(model, b, backend, area_weight=None):
   }
 
 
-def _direct_row(model, b):
+def _direct_row(args: Args, model, b):
   """MuJoCo Warp's own step on the same model, ``b`` worlds (module doc)."""
   import mujoco
   import warp as wp
@@ -199,7 +232,7 @@ def _direct_row(model, b):
   x = np.zeros((b, mjm.nbody, 6), np.float32)  # a steady push of half the weight
   x[:, bodies, 1] = 0.5 * 9.81 * mjm.body_mass[bodies]
   wp.copy(d.xfrc_applied, wp.array(x, dtype=wp.spatial_vector, device=d.qpos.device))
-  steps = max(1, round(FLAGS.seconds / model.config.timestep))
+  steps = max(1, round(args.seconds / model.config.timestep))
   cuda = d.qpos.device.is_cuda
   t0 = time.perf_counter()
   if cuda:
@@ -213,7 +246,7 @@ def _direct_row(model, b):
   wp.synchronize()
   compile_s = time.perf_counter() - t0  # first pass: kernels, graph, caches
   times = []
-  for _ in range(FLAGS.repeats):
+  for _ in range(args.repeats):
     t0 = time.perf_counter()
     run()
     wp.synchronize()
@@ -228,7 +261,7 @@ def _direct_row(model, b):
     'world_steps_per_s': b * steps / run_s,
     'valid_fraction': float(np.mean(np.all(np.isfinite(qpos), axis=1))),
   }
-  if FLAGS.event_trace and cuda:
+  if args.event_trace and cuda:
     row['event_ms_per_step'] = _event_trace(m, d)
   return row
 
@@ -261,7 +294,7 @@ def _event_trace(m, d, steps=10, before=None):
   return flat(trace)
 
 
-def _project_trace(model, b, seconds=1.0):
+def _project_trace(args: Args, model, b, seconds=1.0):
   """``_event_trace`` of the project's 'warp' frame (its forces, then MuJoCo
   Warp's step) on ``b`` worlds after ``seconds`` of gusty wind from rest: the
   same parts as the direct run's trace, on the project's physics."""
@@ -269,7 +302,7 @@ def _project_trace(model, b, seconds=1.0):
 
   from physsim import warp_frames
 
-  wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity)
+  wind = physsim.Wind(gust_intensity=args.gust_intensity)
   w = jax.tree.map(np.asarray, _inputs(model, _params(b), wind, jax.random.key(0)))
   substeps = round(0.05 / model.config.timestep)
   device = wp.get_device()
@@ -290,12 +323,12 @@ def _project_trace(model, b, seconds=1.0):
     return _event_trace(st.m, st.d, before=st.forces)
 
 
-def _c_job(args):
-  mesh, material, config, b, seconds, seed = args
+def _c_job(job):
+  mesh, material, config, b, seconds, gusts, seed = job
   model = physsim.build(mesh, material, config)
   p = _params(b, seed)
   p = physsim.params.make(*(np.atleast_1d(x) for x in p))
-  wind = physsim.Wind(gust_intensity=FLAGS.gust_intensity if FLAGS.is_parsed() else 0.2)
+  wind = physsim.Wind(gust_intensity=gusts)
   w = jax.tree.map(np.asarray, _inputs(model, p, wind, jax.random.key(seed)))._asdict()
   w['body_mass'] = model.body_masses(p.area_weight)
   w['speed'], w['bending'] = p.wind_speed, p.bending_scale
@@ -306,32 +339,33 @@ def _c_job(args):
   return time.perf_counter() - t0, b * frames * substeps, float(valid.mean())
 
 
-def _c_row(model, cores):
-  args = [
+def _c_row(args: Args, model, cores):
+  jobs = [
     (
       model.mesh,
       model.material,
       model.config,
-      FLAGS.c_worlds_per_core,
-      FLAGS.c_seconds,
+      args.c_worlds_per_core,
+      args.c_seconds,
+      args.gust_intensity,
       i,
     )
     for i in range(cores)
   ]
   if cores == 1:
-    results = [_c_job(args[0])]
+    results = [_c_job(jobs[0])]
   else:
     ctx = multiprocessing.get_context('spawn')
     with (
       sim.cpu_only_children(),
       concurrent.futures.ProcessPoolExecutor(cores, mp_context=ctx) as pool,
     ):
-      results = list(pool.map(_c_job, args))
+      results = list(pool.map(_c_job, jobs))
   wall = max(r[0] for r in results)  # all processes run at once
   steps = sum(r[1] for r in results)
   return {
     'backend': f'mujoco-c x{cores}',
-    'batch': cores * FLAGS.c_worlds_per_core,
+    'batch': cores * args.c_worlds_per_core,
     'compile_s': 0.0,
     'run_s': wall,
     'world_steps_per_s': steps / wall,
@@ -357,47 +391,48 @@ def _paper_dataset(model, backend):
   }
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
+  batch_sizes = ints('batch_sizes', args.batch_sizes)
+  bad = [b for b in args.backends if b not in ('warp', 'mjx')]
+  if bad or not args.backends:
+    raise ValueError(f'--backends={",".join(args.backends)}: need warp and/or mjx')
   overrides = {
     k: v
     for k, v in (
-      ('iterations', FLAGS.iterations), ('solver', FLAGS.solver),
-      ('edge_solref', FLAGS.edge_solref), ('tolerance', FLAGS.tolerance),
-      ('graph_mode', FLAGS.graph_mode),
+      ('iterations', args.iterations), ('solver', args.solver),
+      ('edge_solref', args.edge_solref), ('tolerance', args.tolerance),
+      ('graph_mode', args.graph_mode),
     )
     if v
   }  # fmt: skip
   config = physsim.SimConfig(**overrides)
-  model = physsim.build(physsim.square(FLAGS.resolution), 'gray_interlock', config)
-  if FLAGS.ls_iterations:  # not a SimConfig setting: patched on the compiled model
-    model.mj_model.opt.ls_iterations = FLAGS.ls_iterations
+  model = physsim.build(physsim.square(args.resolution), 'gray_interlock', config)
+  if args.ls_iterations:  # not a SimConfig setting: patched on the compiled model
+    model.mj_model.opt.ls_iterations = args.ls_iterations
   cores = os.cpu_count() or 1
   device = jax.devices()[0]
-  rows = [_c_row(model, 1), _c_row(model, cores)] if FLAGS.c_baseline else []
-  for b in map(int, FLAGS.batch_sizes):
+  rows = [_c_row(args, model, 1), _c_row(args, model, cores)] if args.c_baseline else []
+  for b in batch_sizes:
     project = []
-    for backend in FLAGS.backends:
-      project.append(_device_row(model, b, backend))
+    for backend in args.backends:
+      project.append(_device_row(args, model, b, backend))
       print(project[-1], flush=True)
-    for backend in FLAGS.backends if FLAGS.ablate_forces else ():
-      project.append(_ablated_row(model, b, backend))
+    for backend in args.backends if args.ablate_forces else ():
+      project.append(_ablated_row(args, model, b, backend))
       print(project[-1], flush=True)
     rows += project
-    if (
-      FLAGS.event_trace and 'warp' in FLAGS.backends and jax.default_backend() == 'gpu'
-    ):
+    if args.event_trace and 'warp' in args.backends and jax.default_backend() == 'gpu':
       row = next(r for r in project if r['backend'] == 'warp')
-      row['event_ms_per_step'] = _project_trace(model, b)
-    if FLAGS.direct:
-      rows.append(_direct_row(model, b))
+      row['event_ms_per_step'] = _project_trace(args, model, b)
+    if args.direct:
+      rows.append(_direct_row(args, model, b))
       for r in project:
         r['x_direct'] = r['world_steps_per_s'] / rows[-1]['world_steps_per_s']
       print(rows[-1], flush=True)
   paper_steps = _PAPER_SEQUENCES * (_PAPER_SECONDS + _WARMUP) / model.config.timestep
   for r in rows:
     r['paper_dataset_s'] = paper_steps / r['world_steps_per_s']
-  c_all = rows[1]['world_steps_per_s'] if FLAGS.c_baseline else float('nan')
+  c_all = rows[1]['world_steps_per_s'] if args.c_baseline else float('nan')
   result = {
     'machine': {
       'platform': platform.platform(),
@@ -405,7 +440,7 @@ def main(argv):
       'jax_device': str(device),
       'jax': jax.__version__,
     },
-    'resolution': FLAGS.resolution,
+    'resolution': args.resolution,
     'timestep': model.config.timestep,
     'solver': f'{model.config.solver} x{model.config.iterations}',
     'ls_iterations': int(model.mj_model.opt.ls_iterations),
@@ -413,10 +448,10 @@ def main(argv):
     'devices': [str(d) for d in jax.local_devices()],
     'rows': rows,
   }
-  if FLAGS.paper_dataset:
-    result['paper_dataset'] = {b: _paper_dataset(model, b) for b in FLAGS.backends}
+  if args.paper_dataset:
+    result['paper_dataset'] = {b: _paper_dataset(model, b) for b in args.backends}
   print(
-    f'\n{FLAGS.resolution}x{FLAGS.resolution} cloth, dt {model.config.timestep * 1e3:g} ms, '
+    f'\n{args.resolution}x{args.resolution} cloth, dt {model.config.timestep * 1e3:g} ms, '
     f'{result["solver"]}, device {device}, {cores} CPU cores'
   )
   print(
@@ -439,13 +474,9 @@ def main(argv):
       f'\nPaper dataset, 210 x (1+3) s in one {backend} call: {d["run_s"]:.2f} s '
       f'after {d["compile_s"]:.1f} s compile; valid {d["valid_fraction"]:.3f}'
     )
-  os.makedirs(os.path.dirname(FLAGS.out) or '.', exist_ok=True)
-  with tempfile.NamedTemporaryFile(
-    'w', dir=os.path.dirname(FLAGS.out) or '.', delete=False
-  ) as f:
-    json.dump(result, f, indent=1)
-  os.replace(f.name, FLAGS.out)
+  files.write_json(args.out, result)
+  print(f'wrote {args.out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -11,47 +11,78 @@ cameras per call). Both MuJoCo rows are checked against our depth on one frame.
 The cloth frames are analytic (a swing that grows toward +y down the cloth plus
 travelling ripples), so no simulation is needed; coverage matches the dataset.
 
-  PYTHONPATH=. python benchmarks/render_throughput.py --batch_sizes=1,4 --frames=4 \
+  python -m benchmarks.render_throughput --batch_sizes=1,4 --frames=4 \
       --resolution=64
-  PYTHONPATH=. python benchmarks/render_throughput.py   # GPU: 256 px, B up to 210
+  python -m benchmarks.render_throughput   # GPU: 256 px, B up to 210
 """
 
 from __future__ import annotations
 
-import json
+import dataclasses
 import os
 import platform
-import tempfile
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from absl import app, flags
 
+from benchmarks import OUT, ints
+from experiments.pipeline import cli, files
 from physsim import camera, devices, mesh, render
 
-FLAGS = flags.FLAGS
-flags.DEFINE_integer('resolution', 256, 'image width and height, pixels')
-flags.DEFINE_list('batch_sizes', ['1', '16', '64', '210'], 'worlds B per call')
-flags.DEFINE_integer('cameras', 6, 'cameras C per world')
-flags.DEFINE_integer('frames', 60, 'frames T per world')
-flags.DEFINE_list('methods', ['raster', 'brute'], 'physsim.render methods')
-flags.DEFINE_integer('cloth_resolution', 25, 'cloth vertices per side')
-flags.DEFINE_integer('repeats', 3, 'timed calls per row (median)')
-flags.DEFINE_integer('chunk', None, 'frames per vmapped chunk (default per method)')
-flags.DEFINE_integer(
-  'world_chunk', 0, 'worlds per call (0: what fits in free device memory)'
-)
-flags.DEFINE_integer('fragments_per_pass', None, 'raster fragments per pass')
-flags.DEFINE_integer(
-  'brute_max_frames', 20000, 'skip brute rows above this many frames per call'
-)
-flags.DEFINE_integer('mujoco_frames', 200, 'frames timed for mujoco.Renderer (0: skip)')
-flags.DEFINE_bool('mjwarp', False, "also time MuJoCo Warp's batch renderer (GPU)")
-flags.DEFINE_string(
-  'out', None, 'JSON path (default benchmarks/results/render_<device>.json)'
-)
+METHODS = ('raster', 'brute')
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The depth-rendering benchmark.
+
+  Attributes:
+    resolution: image width and height, pixels.
+    batch_sizes: worlds B per call (comma-separated).
+    cameras: cameras C per world.
+    frames: frames T per world.
+    methods: physsim.render methods (raster, brute).
+    cloth_resolution: cloth vertices per side.
+    repeats: timed calls per row (median).
+    chunk: frames per vmapped chunk (0: the method's default).
+    world_chunk: worlds per call (0: what fits in free device memory).
+    fragments_per_pass: raster fragments per pass (0: the default).
+    brute_max_frames: skip brute rows above this many frames per call.
+    mujoco_frames: frames timed for mujoco.Renderer (0: skip).
+    mjwarp: also time MuJoCo Warp's batch renderer (GPU).
+    out: JSON path (empty: out/benchmarks/render_<device>.json).
+  """
+
+  resolution: int = 256
+  batch_sizes: tuple[str, ...] = ('1', '16', '64', '210')
+  cameras: int = 6
+  frames: int = 60
+  methods: tuple[str, ...] = METHODS
+  cloth_resolution: int = 25
+  repeats: int = 3
+  chunk: int = 0
+  world_chunk: int = 0
+  fragments_per_pass: int = 0
+  brute_max_frames: int = 20000
+  mujoco_frames: int = 200
+  mjwarp: bool = False
+  out: str = ''
+
+
+PRESETS = {
+  'default': Args(),
+  # checks the script on a CPU in seconds
+  'smoke': Args(
+    resolution=32,
+    batch_sizes=('1', '2'),
+    cameras=2,
+    frames=4,
+    repeats=1,
+    mujoco_frames=0,
+  ),  # fmt: skip
+}
 
 
 def _trajectory(m: mesh.Mesh, b: int, t: int, seed: int = 0) -> np.ndarray:
@@ -78,23 +109,23 @@ def _poses(b: int, c: int, seed: int = 0) -> camera.Pose:
   return jax.vmap(lambda k: camera.sample_poses(k, c))(keys)
 
 
-def _jax_row(method, b, m, intr):
+def _jax_row(args: Args, method, b, m, intr):
   """B worlds rendered by ``physsim.render``: split over every local device
   (``physsim.devices``), in world chunks that fit free device memory (the
   frames of 210 worlds x 6 cameras x 60 frames at 256 px are 18.5 GiB alone),
   each chunk's frames reduced on the device (as a sweep would hand them on)."""
-  c, t = FLAGS.cameras, FLAGS.frames
+  c, t = args.cameras, args.frames
   mesh_ = devices.world_mesh()
   k = mesh_.devices.size
   fn = render.make_depth_renderer(
     m.faces,
     intr,
     method=method,
-    chunk=FLAGS.chunk,
-    fragments_per_pass=FLAGS.fragments_per_pass,
+    chunk=args.chunk or None,
+    fragments_per_pass=args.fragments_per_pass or None,
   )
   per_world = 3 * c * t * intr.width * intr.height * 4  # frames + working buffers
-  chunk = FLAGS.world_chunk or devices.chunk_size(per_world, cap=b)
+  chunk = args.world_chunk or devices.chunk_size(per_world, cap=b)
   chunk = min(devices.padded(chunk, k), devices.padded(b, k))
   sharded = jax.jit(
     lambda pos, poses: jnp.mean(devices.shard_worlds(fn, mesh_)(pos, poses) > 0)
@@ -105,7 +136,7 @@ def _jax_row(method, b, m, intr):
   compiled = sharded.lower(pos, poses).compile()
   compile_s = time.perf_counter() - t0
   times, coverage = [], []
-  for r in range(FLAGS.repeats + 1):  # the first call warms up
+  for r in range(args.repeats + 1):  # the first call warms up
     pos = jnp.asarray(_trajectory(m, b, t, seed=r))
     poses = _poses(b, c, seed=r)
     jax.block_until_ready((pos, poses))
@@ -157,19 +188,19 @@ def _mjcf(m, poses, fovy):
 </mujoco>"""
 
 
-def _square_intrinsics():
+def _square_intrinsics(args: Args):
   # MuJoCo derives the horizontal FoV from the aspect ratio: square pixels.
-  r = FLAGS.resolution
+  r = args.resolution
   return camera.Intrinsics(r, r, 45.0, 45.0)
 
 
-def _mujoco_rows(m):
+def _mujoco_rows(args: Args, m):
   """mujoco.Renderer depth frames/s, with and without mesh re-upload."""
   import mujoco
   from mujoco.rendering.classic import gl_context
 
-  intr = _square_intrinsics()
-  poses = _poses(1, FLAGS.cameras)
+  intr = _square_intrinsics(args)
+  poses = _poses(1, args.cameras)
   poses = camera.Pose(poses.rotation[0], poses.position[0])
   model = mujoco.MjModel.from_xml_string(_mjcf(m, poses, intr.fov_y_deg))
   data = mujoco.MjData(model)
@@ -179,22 +210,22 @@ def _mujoco_rows(m):
     gl_context.GLContext = __import__(
       f'mujoco.{backend}', fromlist=['GLContext']
     ).GLContext
-  renderer = mujoco.Renderer(model, FLAGS.resolution, FLAGS.resolution)
+  renderer = mujoco.Renderer(model, args.resolution, args.resolution)
   renderer.enable_depth_rendering()
   n_v = len(m.vertices)
   if model.mesh_vertnum[0] != n_v:
     raise RuntimeError('MuJoCo changed the mesh vertex count; cannot re-upload')
-  frames = _trajectory(m, 1, FLAGS.mujoco_frames)[0]
+  frames = _trajectory(m, 1, args.mujoco_frames)[0]
   gpos, gmat = data.geom_xpos[0].copy(), data.geom_xmat[0].reshape(3, 3).copy()
   rows = []
   for upload in (True, False):
     t0 = time.perf_counter()
-    for i in range(FLAGS.mujoco_frames):
+    for i in range(args.mujoco_frames):
       if upload:
         # Mesh-local coordinates: MuJoCo recentres meshes in the geom frame.
         model.mesh_vert[:n_v] = (frames[i] - gpos) @ gmat
         mujoco.mjr_uploadMesh(model, renderer._mjr_context, 0)
-      renderer.update_scene(data, camera=f'c{i % FLAGS.cameras}')
+      renderer.update_scene(data, camera=f'c{i % args.cameras}')
       depth = renderer.render()
     run_s = time.perf_counter() - t0
     rows.append(
@@ -203,13 +234,13 @@ def _mujoco_rows(m):
         'batch': 1,
         'frames_per_call': 1,
         'compile_s': 0.0,
-        'run_s': run_s / FLAGS.mujoco_frames,
-        'frames_per_s': FLAGS.mujoco_frames / run_s,
+        'run_s': run_s / args.mujoco_frames,
+        'frames_per_s': args.mujoco_frames / run_s,
       }
     )
     if upload:  # check against ours on the last frame
-      last = FLAGS.mujoco_frames - 1
-      c = last % FLAGS.cameras
+      last = args.mujoco_frames - 1
+      c = last % args.cameras
       pose = camera.Pose(poses.rotation[c], poses.position[c])
       ours = np.asarray(render.depth_image(frames[last], m.faces, intr, pose))
       ref = np.where(depth < 18.0, depth, 0.0)
@@ -221,7 +252,7 @@ def _mujoco_rows(m):
   return rows
 
 
-def _mjwarp_rows(m, batch_sizes):
+def _mjwarp_rows(args: Args, m, batch_sizes):
   """MuJoCo Warp batched ray-cast depth on the static mesh (GPU only)."""
   import mujoco
   import mujoco_warp as mjw
@@ -229,8 +260,8 @@ def _mjwarp_rows(m, batch_sizes):
 
   if not wp.is_cuda_available():
     raise RuntimeError('MuJoCo Warp rendering is benchmarked on CUDA only')
-  intr = _square_intrinsics()
-  poses = _poses(1, FLAGS.cameras)
+  intr = _square_intrinsics(args)
+  poses = _poses(1, args.cameras)
   poses = camera.Pose(poses.rotation[0], poses.position[0])
   mjm = mujoco.MjModel.from_xml_string(_mjcf(m, poses, intr.fov_y_deg))
   mjd = mujoco.MjData(mjm)
@@ -243,7 +274,7 @@ def _mjwarp_rows(m, batch_sizes):
     rc = mjw.create_render_context(
       mjm,
       nworld=b,
-      cam_res=(FLAGS.resolution, FLAGS.resolution),
+      cam_res=(args.resolution, args.resolution),
       render_rgb=False,
       render_depth=True,
     )
@@ -251,13 +282,13 @@ def _mjwarp_rows(m, batch_sizes):
     wp.synchronize()
     compile_s = time.perf_counter() - t0
     times = []
-    for _ in range(FLAGS.repeats):
+    for _ in range(args.repeats):
       t0 = time.perf_counter()
       mjw.render(mw, dw, rc)
       wp.synchronize()
       times.append(time.perf_counter() - t0)
     run_s = float(np.median(times))
-    frames = b * FLAGS.cameras
+    frames = b * args.cameras
     rows.append(
       {
         'backend': 'mujoco_warp.render (static)',
@@ -271,35 +302,37 @@ def _mjwarp_rows(m, batch_sizes):
   return rows
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
+  batch_sizes = ints('batch_sizes', args.batch_sizes)
+  bad = [m for m in args.methods if m not in METHODS]
+  if bad or not args.methods:
+    raise ValueError(f'--methods={",".join(args.methods)}: need some of {METHODS}')
   device = jax.devices()[0]
   kind = device.device_kind.replace(' ', '_').lower()
-  m = mesh.square(FLAGS.cloth_resolution)
-  intr = camera.Intrinsics(FLAGS.resolution, FLAGS.resolution)
-  batch_sizes = [int(b) for b in FLAGS.batch_sizes]
+  m = mesh.square(args.cloth_resolution)
+  intr = camera.Intrinsics(args.resolution, args.resolution)
   rows = []
-  for method in FLAGS.methods:
+  for method in args.methods:
     for b in batch_sizes:
-      frames = b * FLAGS.cameras * FLAGS.frames
-      if method == 'brute' and frames > FLAGS.brute_max_frames:
+      frames = b * args.cameras * args.frames
+      if method == 'brute' and frames > args.brute_max_frames:
         continue
-      rows.append(_jax_row(method, b, m, intr))
+      rows.append(_jax_row(args, method, b, m, intr))
       print(rows[-1], flush=True)
-  if FLAGS.mujoco_frames > 0:
+  if args.mujoco_frames > 0:
     try:
-      rows += _mujoco_rows(m)
+      rows += _mujoco_rows(args, m)
     except Exception as e:  # noqa: BLE001 - no GL here: report, keep going
       print(f'mujoco.Renderer skipped: {type(e).__name__}: {e}')
-  if FLAGS.mjwarp:
+  if args.mjwarp:
     try:
-      rows += _mjwarp_rows(m, batch_sizes)
+      rows += _mjwarp_rows(args, m, batch_sizes)
     except Exception as e:  # noqa: BLE001
       print(f'mujoco_warp render skipped: {type(e).__name__}: {e}')
   print(
-    f'\nDepth frames/s, {FLAGS.resolution}x{FLAGS.resolution}, cloth '
-    f'{FLAGS.cloth_resolution}x{FLAGS.cloth_resolution} ({len(m.faces)} triangles), '
-    f'C={FLAGS.cameras}, T={FLAGS.frames}, on {device.device_kind}\n'
+    f'\nDepth frames/s, {args.resolution}x{args.resolution}, cloth '
+    f'{args.cloth_resolution}x{args.cloth_resolution} ({len(m.faces)} triangles), '
+    f'C={args.cameras}, T={args.frames}, on {device.device_kind}\n'
   )
   print('| backend | B | frames/call | compile s | run s | frames/s |')
   print('|---|---:|---:|---:|---:|---:|')
@@ -308,13 +341,14 @@ def main(argv):
       f'| {r["backend"]} | {r["batch"]} | {r["frames_per_call"]} | '
       f'{r["compile_s"]:.2f} | {r["run_s"]:.4f} | {r["frames_per_s"]:,.0f} |'
     )
-  out = FLAGS.out or f'benchmarks/results/render_{kind}.json'
+  out = args.out or os.path.join(OUT, f'render_{kind}.json')
+  settings = dataclasses.asdict(args)
   result = {
     'device': device.device_kind,
     'platform': platform.platform(),
     'jax': jax.__version__,
     'flags': {
-      k: FLAGS[k].value
+      k: (settings[k] or None) if k in ('chunk', 'fragments_per_pass') else settings[k]
       for k in (
         'resolution',
         'batch_sizes',
@@ -331,14 +365,9 @@ def main(argv):
     },
     'rows': rows,
   }
-  os.makedirs(os.path.dirname(out) or '.', exist_ok=True)
-  with tempfile.NamedTemporaryFile(
-    'w', dir=os.path.dirname(out) or '.', delete=False
-  ) as f:
-    json.dump(result, f, indent=1)
-  os.replace(f.name, out)
+  files.write_json(out, result)
   print(f'wrote {out}')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -9,52 +9,60 @@ simulations' parameters are retrieved, each against a random reference
 (1 = chance, 0 = exact). Prints a table and writes
 ``<workdir>/retrieval_ablation.json``; finished runs are reused.
 
-  PYTHONPATH=. python benchmarks/retrieval_ablation.py --workdir=out/selection \\
+  python -m benchmarks.retrieval_ablation --workdir=out/selection \\
       --sequences=32 --seeds=0,1,2
   # the paper's cloth, cameras and 3 s clips (one fabric, 64x64, MuJoCo C):
   python -m experiments.generate_dataset --preset=paper --materials=gray_interlock \\
       --resolution=64 --backend=c --out=out/paper64/data
-  PYTHONPATH=. python benchmarks/retrieval_ablation.py --workdir=out/paper64 \\
+  python -m benchmarks.retrieval_ablation --workdir=out/paper64 \\
       --dataset=out/paper64/data --image_size=64
 """
 
 import dataclasses
 import json
 import os
-import sys
 import time
 
 import numpy as np
-from absl import app, flags, logging
+from absl import logging
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import model as model_lib
+import physsim
+from experiments.pipeline import cli, demo, files
+from experiments.pipeline import datasets as gen
+from experiments.pipeline import training as train_lib
+from physsim import params as params_lib
 
-import model as model_lib  # noqa: E402
-import physsim  # noqa: E402
-from experiments.pipeline import datasets as gen  # noqa: E402
-from experiments.pipeline import demo, files  # noqa: E402
-from experiments.pipeline import training as train_lib  # noqa: E402
-from physsim import params as params_lib  # noqa: E402
 
-FLAGS = flags.FLAGS
-# The demo's settings (experiments/demo.py), which this study builds on.
-flags.DEFINE_string('workdir', 'out/demo', 'data and runs go here')
-flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
-flags.DEFINE_integer('sequences', 24, 'training simulations')
-flags.DEFINE_enum(
-  'backend', 'auto', physsim.BACKENDS, "'auto': MuJoCo Warp on a GPU, else C"
-)
-_EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs per run')
-_SEEDS = flags.DEFINE_list('seeds', ['0', '1', '2'], 'training seeds per variant')
-_DATASET = flags.DEFINE_string(
-  'dataset', '', "an existing dataset (default: the demo's, made under --workdir)"
-)
-_IMAGE_SIZE = flags.DEFINE_integer('image_size', 0, "input size (0: the demo's)")
-_ONLY = flags.DEFINE_list(
-  'only',
-  [],
-  'run only the variants whose names start with one of these (e.g. paper,raw)',
-)
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The retrieval ablation, on the demo's settings (experiments/demo.py).
+
+  Attributes:
+    workdir: data and runs go here.
+    material: the fabric.
+    sequences: training simulations.
+    backend: 'auto': MuJoCo Warp on a GPU, else C.
+    epochs: epochs per run.
+    seeds: training seeds per variant.
+    dataset: an existing dataset (default: the demo's, made under --workdir).
+    image_size: input size (0: the demo's).
+    only: run only the variants whose names start with one of these (e.g.
+      paper,raw).
+  """
+
+  workdir: str = 'out/demo'
+  material: str = 'gray_interlock'
+  sequences: int = 24
+  backend: str = cli.choice('auto', physsim.BACKENDS)
+  epochs: int = 10
+  seeds: tuple[int, ...] = (0, 1, 2)
+  dataset: str = ''
+  image_size: int = 0
+  only: tuple[str, ...] = ()
+
+
+PRESETS = {'default': Args()}
 VARIANTS = {
   'paper (2-D, relative depth)': {},
   '8-D embedding': {'embed_dim': 8},
@@ -84,30 +92,29 @@ def raw_retrieval(cfg, root: str, material: str, data) -> dict:
   return model_lib.retrieval.score(emb, videos, test_idx, fit_idx)
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
-  wd, material, sequences = FLAGS.workdir, FLAGS.material, FLAGS.sequences
+  wd, material, sequences = args.workdir, args.material, args.sequences
   t0 = time.time()
-  data_cfg, _, train_cfg, _ = demo.configs(material, sequences, 0, FLAGS.backend)
-  root = _DATASET.value or os.path.join(wd, 'data')
-  if not _DATASET.value:
+  data_cfg, _, train_cfg, _ = demo.configs(material, sequences, 0, args.backend)
+  root = args.dataset or os.path.join(wd, 'data')
+  if not args.dataset:
     gen.run(data_cfg, root)
   base = train_lib.replace(
-    train_cfg, epochs=_EPOCHS.value, val_fraction=0.25, materials=(material,)
+    train_cfg, epochs=args.epochs, val_fraction=0.25, materials=(material,)
   )
-  if _IMAGE_SIZE.value:
-    base = dataclasses.replace(base, image_size=_IMAGE_SIZE.value)
+  if args.image_size:
+    base = dataclasses.replace(base, image_size=args.image_size)
   names = params_lib.FIELDS
 
   def chosen(variant: str) -> bool:
-    return not _ONLY.value or any(variant.startswith(p) for p in _ONLY.value)
+    return not args.only or any(variant.startswith(p) for p in args.only)
 
   rows, inputs = [], {}
   for variant, over in VARIANTS.items():
     if not chosen(variant):
       continue
-    for seed in map(int, _SEEDS.value):
+    for seed in args.seeds:
       cfg = train_lib.replace(base, seed=seed, **over)
       mode = cfg.input_mode
       if mode not in inputs:
@@ -129,7 +136,7 @@ def main(argv):
   for variant, mode in RAW.items():
     if not chosen(variant):
       continue
-    for seed in map(int, _SEEDS.value):
+    for seed in args.seeds:
       cfg = train_lib.replace(base, seed=seed, input_mode=mode)
       if mode not in inputs:
         inputs[mode] = train_lib.load_inputs(cfg, root, [material])
@@ -146,7 +153,7 @@ def main(argv):
     f'{n}_vs_chance' for n in names
   ]
   print(
-    f'\n{material}, {root}, seeds {_SEEDS.value}, '
+    f'\n{material}, {root}, seeds {list(args.seeds)}, '
     f'{time.time() - t0:.0f} s; mean (min-max) over seeds at the epoch chosen by '
     'validation triplet accuracy; retrieval relative to a random reference '
     '(1 = chance)\n'
@@ -165,7 +172,7 @@ def main(argv):
     'material': material,
     'dataset': root,
     'image_size': base.image_size,
-    'epochs': _EPOCHS.value,
+    'epochs': args.epochs,
     'variants': VARIANTS,
     'raw': RAW,
     'runs': rows,
@@ -178,4 +185,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

@@ -18,7 +18,7 @@ whether that choice gives better estimates:
 Prints a table and writes ``<workdir>/selection_study.json``. Everything
 resumes from ``--workdir``.
 
-  PYTHONPATH=. python benchmarks/selection_study.py --workdir=out/selection \
+  python -m benchmarks.selection_study --workdir=out/selection \
       --sequences=32 --epochs=10 --recordings=4
 """
 
@@ -26,35 +26,44 @@ import dataclasses
 import json
 import os
 import shutil
-import sys
 import time
 
 import numpy as np
-from absl import app, flags, logging
+from absl import logging
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import model as model_lib
+import physsim
+from experiments.pipeline import cli, demo, embedding, files, search
+from experiments.pipeline import datasets as gen
+from experiments.pipeline import recording as recording_lib
+from experiments.pipeline import training as train_lib
+from model import checkpoint
 
-import model as model_lib  # noqa: E402
-import physsim  # noqa: E402
-from experiments.pipeline import datasets as gen  # noqa: E402
-from experiments.pipeline import demo, embedding, files, search  # noqa: E402
-from experiments.pipeline import recording as recording_lib  # noqa: E402
-from experiments.pipeline import training as train_lib  # noqa: E402
-from model import checkpoint  # noqa: E402
 
-FLAGS = flags.FLAGS
-# The demo's settings (experiments/demo.py), which this study builds on.
-flags.DEFINE_string('workdir', 'out/demo', 'data and runs go here')
-flags.DEFINE_string('material', 'gray_interlock', 'the fabric')
-flags.DEFINE_integer('sequences', 24, 'training simulations')
-flags.DEFINE_enum(
-  'backend', 'auto', physsim.BACKENDS, "'auto': MuJoCo Warp on a GPU, else C"
-)
-_EPOCHS = flags.DEFINE_integer('epochs', 10, 'epochs (every one is kept)')
-_RECORDINGS = flags.DEFINE_integer('recordings', 4, 'real-like recordings')
-_ALL_EPOCHS = flags.DEFINE_bool(
-  'all_epochs', True, 'estimate with every epoch (else only the picked ones)'
-)
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The epoch-selection study, on the demo's settings (experiments/demo.py).
+
+  Attributes:
+    workdir: data and runs go here.
+    material: the fabric.
+    sequences: training simulations.
+    backend: 'auto': MuJoCo Warp on a GPU, else C.
+    epochs: epochs (every one is kept).
+    recordings: real-like recordings.
+    all_epochs: estimate with every epoch (else only the picked ones).
+  """
+
+  workdir: str = 'out/demo'
+  material: str = 'gray_interlock'
+  sequences: int = 24
+  backend: str = cli.choice('auto', physsim.BACKENDS)
+  epochs: int = 10
+  recordings: int = 4
+  all_epochs: bool = True
+
+
+PRESETS = {'default': Args()}
 
 
 def train_all_epochs(workdir: str, material: str, sequences: int, epochs: int, backend):
@@ -120,20 +129,17 @@ def spearman(a, b) -> float:
   return float(np.corrcoef(ra, rb)[0, 1])
 
 
-def main(argv):
-  del argv
+def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
-  wd, material, sequences = FLAGS.workdir, FLAGS.material, FLAGS.sequences
+  wd, material, sequences = args.workdir, args.material, args.sequences
   t0 = time.time()
-  run_dir, evals = train_all_epochs(
-    wd, material, sequences, _EPOCHS.value, FLAGS.backend
-  )
+  run_dir, evals = train_all_epochs(wd, material, sequences, args.epochs, args.backend)
   chosen = picks(evals)
-  _, rec_cfg, _, est_cfg = demo.configs(material, sequences, 0, FLAGS.backend)
+  _, rec_cfg, _, est_cfg = demo.configs(material, sequences, 0, args.backend)
   space = physsim.search_space(material)
   centre = dict(zip(physsim.Params._fields, map(float, space.center()), strict=True))
   rec_root = os.path.join(wd, 'recordings')
-  n_rec = _RECORDINGS.value
+  n_rec = args.recordings
   gen.run(dataclasses.replace(rec_cfg, sequences=n_rec, batch_size=n_rec), rec_root)
   recordings, skipped = {}, {}
   for i in range(n_rec):
@@ -146,7 +152,7 @@ def main(argv):
       skipped[i] = str(e)
       print(f'recording {i} skipped: {e}')
   results = {}
-  epochs = [r['epoch'] for r in (evals if _ALL_EPOCHS.value else chosen.values())]
+  epochs = [r['epoch'] for r in (evals if args.all_epochs else chosen.values())]
   for epoch in sorted(set(epochs)):
     row = next(r for r in evals if r['epoch'] == epoch)
     model_dir = export_epoch(run_dir, row, os.path.join(wd, 'epochs', str(epoch)))
@@ -236,4 +242,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)

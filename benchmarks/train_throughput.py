@@ -9,7 +9,7 @@ Throughput counts 3 * batch images per step. The same network (checked by
 parameter count) runs in PyTorch in the same process, eager and under
 ``torch.compile``; compile time is reported apart from the steady state.
 
-  PYTHONPATH=. python benchmarks/train_throughput.py --batch=32 --image_size=256 \\
+  python -m benchmarks.train_throughput --batch=32 --image_size=256 \\
       --steps=20 --repeats=5 --precision=float32
 
 Precision: 'float32' (strict: JAX 'highest' matmul precision, PyTorch TF32
@@ -23,42 +23,59 @@ import os
 # JAX must leave room for PyTorch on the same GPU.
 os.environ.setdefault('XLA_PYTHON_CLIENT_MEM_FRACTION', '0.45')
 
-import json  # noqa: E402
+import dataclasses  # noqa: E402
 import re  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from absl import app, flags  # noqa: E402
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import model  # noqa: E402
+from benchmarks import OUT  # noqa: E402
+from experiments.pipeline import cli, files  # noqa: E402
 from model import train  # noqa: E402
 
-_BATCH = flags.DEFINE_integer('batch', 32, 'Triplets per step.')
-_IMAGE = flags.DEFINE_integer('image_size', 256, 'Square image side.')
-_CHANNELS = flags.DEFINE_integer('channels', 1, 'Input channels (1 depth, 3 RGB).')
-_STEPS = flags.DEFINE_integer('steps', 20, 'Timed steps per repeat.')
-_REPEATS = flags.DEFINE_integer(
-  'repeats', 5, 'Timed repeats per contender, round robin; the median is reported.'
-)
-_WARMUP = flags.DEFINE_integer('warmup', 3, 'Untimed steps after compiling.')
-_PRECISION = flags.DEFINE_enum(
-  'precision', 'float32', ['float32', 'tf32', 'bfloat16'], 'Compute precision.'
-)
-_POOL_IMPLS = flags.DEFINE_list(
-  'pool_impls',
-  ['blocks', 'window'],
-  'PhySNetConfig.pool_impl values to time, one JAX row each (the first is the default).',
-)
-_SKIP_TORCH = flags.DEFINE_bool('skip_torch', False, 'Run only the JAX side.')
-_TORCH_COMPILE = flags.DEFINE_bool('torch_compile', True, 'Also time torch.compile.')
-_OUT = flags.DEFINE_string(
-  'out', '', 'JSON path (default benchmarks/results/train_<device>.json).'
-)
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The training-throughput benchmark.
+
+  Attributes:
+    batch: triplets per step.
+    image_size: square image side.
+    channels: input channels (1 depth, 3 RGB).
+    steps: timed steps per repeat.
+    repeats: timed repeats per contender, round robin; the median is reported.
+    warmup: untimed steps after compiling.
+    precision: compute precision.
+    pool_impls: PhySNetConfig.pool_impl values to time, one JAX row each (the
+      first is the default).
+    skip_torch: run only the JAX side.
+    torch_compile: also time torch.compile.
+    out: JSON path (empty: out/benchmarks/train_<device>.json).
+  """
+
+  batch: int = 32
+  image_size: int = 256
+  channels: int = 1
+  steps: int = 20
+  repeats: int = 5
+  warmup: int = 3
+  precision: str = cli.choice('float32', ['float32', 'tf32', 'bfloat16'])
+  pool_impls: tuple[str, ...] = ('blocks', 'window')
+  skip_torch: bool = False
+  torch_compile: bool = True
+  out: str = ''
+
+
+PRESETS = {
+  'default': Args(),
+  # checks the script on a CPU in about a minute
+  'smoke': Args(
+    batch=2, image_size=64, steps=2, repeats=1, warmup=1, skip_torch=True
+  ),  # fmt: skip
+}
 
 _JAX_PRECISION = {'float32': 'highest', 'tf32': 'tensorfloat32', 'bfloat16': 'default'}
 
@@ -230,41 +247,40 @@ def bench_torch(
   return info, run
 
 
-def main(argv):
-  del argv
-  args = (_BATCH.value, _IMAGE.value, _CHANNELS.value, _WARMUP.value, _PRECISION.value)
-  benches = [bench_jax(*args, impl) for impl in _POOL_IMPLS.value]
+def main(args: Args) -> None:
+  common = (args.batch, args.image_size, args.channels, args.warmup, args.precision)
+  benches = [bench_jax(*common, impl) for impl in args.pool_impls]
   torch_note = ''
-  if not _SKIP_TORCH.value:
+  if not args.skip_torch:
     try:
       import torch
     except ImportError:
       torch_note = 'torch is not importable: PyTorch rows skipped.'
       print(torch_note)
     else:
-      benches.append(bench_torch(torch, False, *args))
-      if _TORCH_COMPILE.value:
+      benches.append(bench_torch(torch, False, *common))
+      if args.torch_compile:
         try:
-          benches.append(bench_torch(torch, True, *args))
+          benches.append(bench_torch(torch, True, *common))
         except (
           Exception
         ) as e:  # a broken inductor toolchain should not lose the other rows
           torch_note = f'torch.compile failed: {type(e).__name__}: {e}'
           print(torch_note)
   times = [[] for _ in benches]
-  for _ in range(_REPEATS.value):
+  for _ in range(args.repeats):
     for i, (_, run) in enumerate(benches):
-      times[i].append(run(_STEPS.value))
+      times[i].append(run(args.steps))
   rows = []
   for (info, _), ts in zip(benches, times, strict=True):
-    per_step = float(np.median(ts)) / _STEPS.value
+    per_step = float(np.median(ts)) / args.steps
     rows.append(
       {
         **info,
         'final_loss': info['final_loss'](),
         'step_ms': 1e3 * per_step,
-        'images_per_s': 3 * _BATCH.value / per_step,
-        'step_ms_repeats': [1e3 * t / _STEPS.value for t in ts],
+        'images_per_s': 3 * args.batch / per_step,
+        'step_ms_repeats': [1e3 * t / args.steps for t in ts],
       }
     )
   ref = {r['mode']: r['images_per_s'] for r in rows if r['framework'] == 'torch'}
@@ -273,9 +289,9 @@ def main(argv):
       r[f'speedup_vs_torch_{mode}'] = r['images_per_s'] / ips
   device = _device_name()
   print(
-    f'\nPhySNet triplet train step, batch {_BATCH.value} triplets ({3 * _BATCH.value} images), '
-    f'{_IMAGE.value}x{_IMAGE.value}x{_CHANNELS.value}, {_PRECISION.value}, '
-    f'{jax.devices()[0].device_kind}, median of {_REPEATS.value} x {_STEPS.value} steps\n'
+    f'\nPhySNet triplet train step, batch {args.batch} triplets ({3 * args.batch} images), '
+    f'{args.image_size}x{args.image_size}x{args.channels}, {args.precision}, '
+    f'{jax.devices()[0].device_kind}, median of {args.repeats} x {args.steps} steps\n'
   )
   cols = ['framework', 'mode', 'params', 'compile_s', 'step_ms', 'images_per_s'] + [
     f'speedup_vs_torch_{m}' for m in ref
@@ -285,33 +301,27 @@ def main(argv):
   for r in rows:
     cells = [f'{r[c]:.3g}' if isinstance(r[c], float) else str(r[c]) for c in cols]
     print('| ' + ' | '.join(cells) + ' |')
-  out = _OUT.value or os.path.join(
-    os.path.dirname(os.path.abspath(__file__)), 'results', f'train_{device}.json'
-  )
+  out = args.out or os.path.join(OUT, f'train_{device}.json')
   result = {
     'flags': {
-      'batch': _BATCH.value,
-      'image_size': _IMAGE.value,
-      'channels': _CHANNELS.value,
-      'steps': _STEPS.value,
-      'repeats': _REPEATS.value,
-      'warmup': _WARMUP.value,
-      'precision': _PRECISION.value,
+      'batch': args.batch,
+      'image_size': args.image_size,
+      'channels': args.channels,
+      'steps': args.steps,
+      'repeats': args.repeats,
+      'warmup': args.warmup,
+      'precision': args.precision,
     },
     'device': jax.devices()[0].device_kind,
     'jax_version': jax.__version__,
     'note': torch_note,
     'rows': rows,
   }
-  os.makedirs(os.path.dirname(out), exist_ok=True)
-  tmp = out + '.tmp'
-  with open(tmp, 'w') as f:
-    json.dump(result, f, indent=2)
-  os.replace(tmp, out)
+  files.write_json(out, result)
   print(f'\nwrote {out}')
   if not all(np.isfinite(r['final_loss']) for r in rows if r['framework'] == 'jax'):
     raise SystemExit('JAX loss is not finite')
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(Args, PRESETS, main)
