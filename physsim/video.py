@@ -323,16 +323,22 @@ def _read_array(path: str) -> _Raw:
     raise ValueError(f'{path}: not a readable NumPy file ({e})') from None
   fps = None
   if isinstance(data, np.lib.npyio.NpzFile):
-    with data:
-      keys = list(data.keys())
-      if 'depth' in keys:
-        depth = data['depth']
-      elif len([k for k in keys if k != 'fps']) == 1:
-        depth = data[next(k for k in keys if k != 'fps')]
-      else:
-        raise ValueError(f'{path}: .npz needs a "depth" array, has {keys}')
-      if 'fps' in keys:
-        fps = _scalar_fps(path, data['fps'])
+    # Members load lazily: their errors (pickled objects, truncation) here.
+    try:
+      with data:
+        keys = list(data.keys())
+        if 'depth' in keys:
+          depth = data['depth']
+        elif len([k for k in keys if k != 'fps']) == 1:
+          depth = data[next(k for k in keys if k != 'fps')]
+        else:
+          raise ValueError(f'{path}: .npz needs a "depth" array, has {keys}')
+        if 'fps' in keys:
+          fps = _scalar_fps(path, data['fps'])
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+      if str(e).startswith(path):
+        raise
+      raise ValueError(f'{path}: not a readable NumPy file ({e})') from None
     kind = 'npz'
   else:
     depth, kind = data, 'npy'
