@@ -40,7 +40,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from tqdm import tqdm
 
 from model import (
   checkpoint,
@@ -53,6 +52,7 @@ from model import (
   splits,
   triplets,
 )
+from model import progress as progress_lib
 from model.physnet import PhySNetConfig
 from model.sdn import SDNConfig
 
@@ -652,7 +652,8 @@ def fit(
     groups: ``(N,)`` int group ids for the 'simulation' split (None: labels).
     config: training config.
     workdir: run folder; an existing checkpoint there is resumed.
-    progress: show a tqdm bar.
+    progress: show a progress bar on stderr (tqdm's on a terminal; in a log,
+      a line every 5%: model.progress).
     videos: clip ids, cameras and true parameters of the items; with the
       'simulation' split, every eval row then also holds the parameter
       retrieval of the validation and test simulations (``evaluate_retrieval``).
@@ -714,7 +715,7 @@ def fit(
     t0 = time.perf_counter()
     with (
       open(log_path, 'a') as log,
-      tqdm(total=total, initial=start, disable=not progress, desc='fit') as bar,
+      progress_lib.bar(total, 'fit', initial=start, disable=not progress) as bar,
     ):
 
       def write(row):
