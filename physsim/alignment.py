@@ -11,7 +11,9 @@ trusting it the cloth is found in the camera frame:
   smallest rectangle around its in-plane outline, the side of it nearest the
   top of the image (or along ``up``) as the top edge, then a straight line
   through the real cloth points along that edge, whose ends are the pins;
-* **up**: the user's, else the normal of a floor: a background plane whose
+* **up**: given (the user's ``up`` in the camera frame, the camera file's
+  world axis named by ``--world_up``, or the gravity its IMU measured:
+  ``up_from`` says which), else the normal of a floor: a background plane whose
   normal is square to the top edge (within 17 degrees) and to the line of
   sight (within 45 degrees; a wall behind the cloth faces the camera), on
   the pins' side; else the cloth's own plane, in which the direction from the
@@ -48,13 +50,25 @@ class ClothFit(NamedTuple):
     pins: (2, 3) the pinned top corners.
     plane: the cloth's fitted plane.
     up: (3,) unit up direction used.
-    up_from: ``'floor'``, ``'cloth plane'`` or ``'user'``.
+    up_from: ``'floor'``, ``'cloth plane'`` or where a given up came from
+      (``'user'``, ``'world_up'``, ``'gravity'``).
+    floor_up: (3,) up from a floor in view, or None (for cross-checks).
+    cloth_up: (3,) up from the cloth's plane (tilted as far as the cloth is
+      swung in the first frames).
   """
 
   pins: np.ndarray
   plane: Plane
   up: np.ndarray
   up_from: str
+  floor_up: np.ndarray | None = None
+  cloth_up: np.ndarray | None = None
+
+
+def angle_deg(a, b) -> float:
+  """Angle between two directions, degrees."""
+  c = float(_unit(a) @ _unit(b))
+  return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
 def _unit(v):
@@ -123,6 +137,7 @@ def fit_pins(
   pins: np.ndarray | None = None,
   background: list[Plane] = (),
   up: np.ndarray | None = None,
+  up_from: str = 'user',
   frames: int = 5,
   plane_tol: float = 0.03,
   seed: int = 0,
@@ -134,7 +149,8 @@ def fit_pins(
     intrinsics: the camera at this resolution.
     pins: (2, 3) the user's pins (camera frame), or None to fit them.
     background: the background planes removed (a floor among them gives up).
-    up: (3,) the user's up direction in the camera frame, or None.
+    up: (3,) a given up direction in the camera frame, or None.
+    up_from: where ``up`` came from (``'user'``, ``'world_up'``, ``'gravity'``).
     frames: first frames whose median shows the cloth at (or near) rest.
     plane_tol: RANSAC inlier distance, metres.
     seed: RANSAC's randomness.
@@ -158,16 +174,16 @@ def fit_pins(
   edge_axis = _unit(pins[1] - pins[0])
   cloth_up = np.cross(normal, edge_axis)
   cloth_up = _unit(cloth_up * np.sign(cloth_up @ (pins.mean(axis=0) - centre)))
+  floor = _floor_up(list(background), pins)
   if up is not None:
-    up_vec, up_from = _unit(up), 'user'
+    up_vec = _unit(up)
   else:
-    floor = _floor_up(list(background), pins)
     up_vec, up_from = (
       (floor, 'floor') if floor is not None else (cloth_up, 'cloth plane')
     )
   if not user_pins:
     pins = _top_corners(points, up_vec, edge_axis, intrinsics.fx)
-  return ClothFit(pins, plane, up_vec, up_from)
+  return ClothFit(pins, plane, up_vec, up_from, floor, cloth_up)
 
 
 def camera_pose(

@@ -9,6 +9,10 @@ Accepted forms (``read_camera``), told apart by their keys:
   looking along -z), ``"distortion"`` (OpenCV's k1 k2 p1 p2 [k3 ...]) and
   ``"fps"`` (the recording's frame rate). Other keys (notes, frame counts) are
   ignored.
+* any form may add ``"gravity"``: 3 numbers, the direction gravity pulls
+  (down) in the camera's axes (``"axes"``; OpenCV's by default), e.g. a depth
+  camera's IMU at rest (an accelerometer at rest reads its opposite: give
+  minus the reading); its size does not matter.
 * **ROS CameraInfo YAML**: ``camera_calibration``'s file (``image_width``,
   ``image_height``, ``camera_matrix: {data}``, ``distortion_coefficients``)
   or a CameraInfo message (``width``, ``height``, ``K``/``k``, ``D``/``d``).
@@ -50,6 +54,8 @@ FORMS = (
 # OpenGL camera axes (x right, y up, looking along -z) in OpenCV's.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 ORTHONORMAL_TOL = 1e-3
+# What --world_up may name.
+WORLD_AXES = ('x', 'y', 'z', '+x', '+y', '+z', '-x', '-y', '-z')
 # The largest camera file read (a camera's takes a few kB).
 MAX_FILE_BYTES = 1 << 20
 # The largest image side a camera file may give, pixels.
@@ -72,6 +78,8 @@ class CameraFile(NamedTuple):
     fps: the recording's frame rate when the file gives it, else None.
     form: which accepted form the file was read as.
     path: the file.
+    gravity: (3,) unit direction of gravity (down) in the camera frame
+      (OpenCV axes), or None.
   """
 
   intrinsics: Intrinsics
@@ -81,6 +89,27 @@ class CameraFile(NamedTuple):
   fps: float | None
   form: str
   path: str
+  gravity: np.ndarray | None = None
+
+  def world_up(self, axis: str) -> np.ndarray:
+    """(3,) the user world's ``axis`` ('x', '-z', ...) in the camera frame
+    (OpenCV axes), from the file's camera-to-world pose.
+
+    Raises:
+      ValueError: naming --world_up and the file: no pose in the user's world,
+        or not an axis.
+    """
+    if axis not in WORLD_AXES:
+      raise ValueError(f'--world_up={axis}: must be one of {", ".join(WORLD_AXES)}')
+    if self.pose is None or self.world != 'user':
+      raise ValueError(
+        f'--world_up={axis}: {self.path} has no "cam_to_world" (or "world_to_cam") '
+        "in your world to turn it into the camera's frame; give --up (camera "
+        'frame) or "gravity" in the camera file instead'
+      )
+    e = np.zeros(3)
+    e['xyz'.index(axis[-1])] = -1.0 if axis.startswith('-') else 1.0
+    return np.asarray(self.pose.rotation, np.float64).T @ e
 
   @property
   def distorted(self) -> bool:
@@ -178,6 +207,20 @@ def _pose(path: str, d: dict) -> Pose | None:
   return Pose(r.astype(np.float32), m[:3, 3].astype(np.float32))
 
 
+def _gravity(path: str, d: dict) -> np.ndarray | None:
+  if d.get('gravity') is None:
+    return None
+  g = _numbers(path, 'gravity', d['gravity'], (3,))
+  norm = float(np.linalg.norm(g))
+  if not norm > 0:
+    raise _error(path, f'"gravity" must be a direction, got {g.tolist()}')
+  axes = str(d.get('axes', 'opencv')).lower()
+  if axes not in ('opencv', 'opengl'):
+    raise _error(path, f'"axes" must be "opencv" or "opengl", got {axes!r}')
+  g = g / norm
+  return _GL_TO_CV @ g if axes == 'opengl' else g
+
+
 def _fps(path: str, d: dict) -> float | None:
   if 'fps' not in d or d['fps'] is None:
     return None
@@ -238,7 +281,9 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
         raise _error(path, '"extrinsics" needs "rotation" and "position"') from None
       check_rotation(r, f'{path}: "extrinsics"')
       pose = Pose(r.astype(np.float32), p.astype(np.float32))
-    return CameraFile(intr, (), pose, 'simulator', _fps(path, d), 'project', path)
+    return CameraFile(
+      intr, (), pose, 'simulator', _fps(path, d), 'project', path, _gravity(path, d)
+    )
   if 'image_width' in d or 'camera_matrix' in d and 'width' not in d:
     w, h = _size(path, d, 'image_width', 'image_height')
     k = _numbers(path, 'camera_matrix', d.get('camera_matrix'), (3, 3))
@@ -276,7 +321,10 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
   distortion = tuple(
     float(c) for c in _numbers(path, 'distortion', dist or [], None).ravel()
   )
-  return CameraFile(intr, distortion, _pose(path, d), 'user', _fps(path, d), form, path)
+  return CameraFile(
+    intr, distortion, _pose(path, d), 'user', _fps(path, d), form, path,
+    _gravity(path, d),
+  )  # fmt: skip
 
 
 def read_camera(path: str) -> CameraFile:

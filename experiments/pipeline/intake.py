@@ -52,6 +52,14 @@ from physsim import alignment, camera_files, dataset, scene, video
 
 # Pin spacing may differ from the simulated cloth's by this share.
 PIN_SPACING_TOL = 0.2
+# Two sources of up (--up, --world_up, gravity, a floor) that differ by more
+# than this many degrees are reported.
+UP_CROSS_CHECK_DEG = 3.0
+# How each source of up is named in the summary.
+UP_WORDS = {
+  'user': '--up', 'world_up': '--world_up', 'gravity': 'the camera file\'s "gravity"',
+  'floor': 'the floor', 'cloth plane': 'the cloth plane', 'camera file': 'the camera file',
+}  # fmt: skip
 # Least share of the simulated cloth's vertices in view from the pose.
 MIN_VISIBLE = 0.5
 # ... and the fewest pixels it may cover (a camera 100 m away sees a speck).
@@ -84,7 +92,12 @@ class IntakeConfig:
     pins: the two pinned top corners in the camera frame (OpenCV axes, x
       right, y down, z forward), x1,y1,z1,x2,y2,z2 metres; empty: fitted.
     up: the upward direction in the camera frame (OpenCV axes), x,y,z;
-      empty: from a floor in view, else the cloth's plane.
+      empty: --world_up, else the camera file's "gravity", else a floor in
+      view, else the cloth's plane (a guess: tilted as far as the wind
+      swings the cloth in the first frames).
+    world_up: which axis of the camera file's world points up (x, y, z, -x,
+      -y, -z), for a file with "cam_to_world" (your rig's calibration); empty:
+      not known.
     wind_toward_camera: the wind blows toward the camera (default: away).
     min_overlap: least IoU of the recording's cloth in the first frame with
       the simulated cloth seen from the fitted pose, at rest or swung about
@@ -106,6 +119,7 @@ class IntakeConfig:
   plane_tol: float = 0.03
   pins: tuple[float, ...] = ()
   up: tuple[float, ...] = ()
+  world_up: str = ''
   wind_toward_camera: bool = False
   min_overlap: float = 0.5
   allow_no_camera: bool = False
@@ -132,6 +146,11 @@ class IntakeConfig:
       raise ValueError(f'pins must be 6 numbers x1,y1,z1,x2,y2,z2, got {self.pins}')
     if self.up and (len(self.up) != 3 or not np.linalg.norm(self.up) > 0):
       raise ValueError(f'up must be 3 numbers x,y,z not all 0, got {self.up}')
+    if self.world_up and self.world_up not in camera_files.WORLD_AXES:
+      raise ValueError(
+        f'--world_up={self.world_up}: must be one of '
+        f'{", ".join(camera_files.WORLD_AXES)}'
+      )
     if not 0 < self.plane_tol < 0.5 or not 0 <= self.min_overlap <= 1:
       raise ValueError(
         f'need 0 < plane_tol < 0.5 m and 0 <= min_overlap <= 1, got '
@@ -150,7 +169,8 @@ class Intake(NamedTuple):
     intrinsics: its camera, or None (unknown: training-like cameras).
     pose: its camera's pose in the simulator's world, or None.
     pins_camera: (2, 3) the pins in the camera frame, left first, or None.
-    up_from: where up came from ('floor', 'cloth plane', 'user', 'camera file').
+    up_from: where up came from ('user', 'world_up', 'gravity', 'floor',
+      'cloth plane', 'camera file'; ``UP_WORDS``).
     valid_fraction: (T,) share of valid pixels before the background went.
     cloth_fraction: (T,) share of pixels kept as cloth.
     overlap: IoU of the first frame's cloth with the simulated cloth at its
@@ -163,6 +183,7 @@ class Intake(NamedTuple):
     swing_deg: the swing angle of that best overlap.
     silhouette: (H, W) bool, the simulated cloth at that angle, or None.
     camera_file: the camera file's path, or ''.
+    warnings: what the user should check (sources of up that disagree).
   """
 
   depth: np.ndarray
@@ -183,6 +204,7 @@ class Intake(NamedTuple):
   swing_deg: float | None = None
   silhouette: np.ndarray | None = None
   camera_file: str = ''
+  warnings: tuple[str, ...] = ()
 
 
 def is_sequence(path: str) -> bool:
@@ -370,6 +392,39 @@ def take_in(
   return _align(intake, cam, config, est, bg.planes, workdir)
 
 
+def given_ups(cam: camera_files.CameraFile, config: IntakeConfig) -> list:
+  """[(source, (3,) up in the camera frame)] of the ups the user gave, most
+  trusted first: --up, --world_up (through the file's cam_to_world), the
+  file's "gravity"."""
+  out = []
+  if config.up:
+    out.append(('user', np.asarray(config.up, np.float64)))
+  if config.world_up:
+    out.append(('world_up', cam.world_up(config.world_up)))
+  if cam.gravity is not None:
+    out.append(('gravity', -np.asarray(cam.gravity, np.float64)))
+  return out
+
+
+def cross_check(given: list, fit: alignment.ClothFit) -> tuple[str, ...]:
+  """A warning for each pair of sources of up (those given, and a floor in
+  view) more than ``UP_CROSS_CHECK_DEG`` apart."""
+  sources = list(given)
+  if fit.floor_up is not None:
+    sources.append(('floor', fit.floor_up))
+  out = []
+  for i, (a, va) in enumerate(sources):
+    for b, vb in sources[i + 1 :]:
+      angle = alignment.angle_deg(va, vb)
+      if angle > UP_CROSS_CHECK_DEG:
+        out.append(
+          f'up from {UP_WORDS[a]} and from {UP_WORDS[b]} differ by {angle:.1f} '
+          f'degrees (more than {UP_CROSS_CHECK_DEG:g}); {UP_WORDS[fit.up_from]} was '
+          'used: check them'
+        )
+  return tuple(out)
+
+
 def _check_size(path: str, w: int, h: int, cam) -> None:
   """Frames big enough to hold a cloth, and of the camera file's shape."""
   if w < MIN_SIZE[0] or h < MIN_SIZE[1]:
@@ -391,10 +446,12 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
         'pinned corners in the camera frame)'
       )
     user = np.asarray(config.pins, np.float64).reshape(2, 3) if config.pins else None
+    given = given_ups(cam, config)
     fit = alignment.fit_pins(
       intake.depth, intr, pins=user, background=planes, plane_tol=config.plane_tol,
-      up=np.asarray(config.up, np.float64) if config.up else None,
+      up=given[0][1] if given else None, up_from=given[0][0] if given else 'user',
     )  # fmt: skip
+    warnings = cross_check(given, fit)
     pose, pins = alignment.camera_pose(
       fit.pins, fit.up, pins_world, wind_toward_camera=config.wind_toward_camera
     )
@@ -408,7 +465,7 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
       )
     up_from = fit.up_from
   else:
-    pose, up_from = cam.pose, 'camera file'
+    pose, up_from, warnings = cam.pose, 'camera file', ()
     pins = alignment.pins_in_camera(pose, pins_world)
   seen = alignment.visible_share(mesh.vertices, pose, intr)
   sims = silhouettes(mesh, pins_world, intr, pose)  # at rest first, then swung
@@ -423,7 +480,7 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
   overlap = float(ious[best])
   out = intake._replace(
     pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap,
-    swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best],
+    swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best], warnings=warnings,
   )  # fmt: skip
   if overlap < config.min_overlap:
     where = ''
@@ -456,7 +513,7 @@ def summary(intake: Intake) -> str:
     lines.append(
       '  pins (camera frame, m): '
       + ', '.join('(' + ', '.join(f'{v:.3f}' for v in q) + ')' for q in p)
-      + f'; {spacing:.3f} m apart; up from the {intake.up_from}'
+      + f'; {spacing:.3f} m apart; up from {UP_WORDS[intake.up_from]}'
     )
   if intake.pose is not None:
     c = np.asarray(intake.pose.position)
@@ -470,6 +527,7 @@ def summary(intake: Intake) -> str:
     )
   elif intake.intrinsics is None:
     lines.append('  camera unknown: training-like cameras will be simulated')
+  lines += [f'  warning: {w}' for w in intake.warnings]
   return '\n'.join(lines)
 
 
@@ -494,6 +552,7 @@ def to_json(intake: Intake) -> dict:
     'overlap_iou': intake.overlap,
     'swing_deg': intake.swing_deg,
     'background_planes': [{'normal': n, 'offset': o} for n, o in intake.planes],
+    'warnings': list(intake.warnings),
   }
 
 
