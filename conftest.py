@@ -1,9 +1,11 @@
 """Test session settings for the whole suite.
 
-Tiers: ``python -m pytest -m "not slow" tests`` is the fast tier (minutes on
-two cores); tests marked ``slow`` compile MuJoCo Warp or run whole searches
-and studies; ``gpu`` tests need a CUDA device and skip without one. CI runs
-every tier (``python -m pytest -q tests``, as README says).
+Tiers: ``python -m pytest -q tests`` (README's command) is the fast tier:
+pyproject's ``addopts`` leave out tests marked ``slow`` (whole searches,
+trainings and studies end to end). ``-m slow`` runs those alone and
+``-m "slow or not slow"`` both; ``.ci/run`` runs the fast tier, then the slow
+one on both cores with pytest-xdist. ``gpu`` tests need a CUDA device and skip
+without one (``-m gpu`` on a GPU machine).
 """
 
 from __future__ import annotations

@@ -18,6 +18,8 @@ from experiments.pipeline import report
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
 
+pytestmark = pytest.mark.slow  # the shape calibration study end to end
+
 # Two pairs of recordings at the demo's size, searched with the smallest budget
 # that still fits a GP (MuJoCo C on this CPU): the whole study end to end.
 SMOKE = dataclasses.replace(

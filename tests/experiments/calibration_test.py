@@ -25,6 +25,8 @@ from experiments.pipeline import report, search
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
 
+pytestmark = pytest.mark.slow  # the calibration study end to end
+
 S = 0.3  # observation noise, unit-cube coordinates
 SN, C_TRUE = 0.5, 1.0
 A = SN / (2 * S**2 * C_TRUE)  # makes c = C_TRUE exact
@@ -57,7 +59,6 @@ def _fake_runs(
   return runs
 
 
-@pytest.mark.slow
 def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
   config = calibration.Config(
     pairs=100, sharpness_grid=(0.25, C_TRUE, 4.0),
@@ -96,7 +97,6 @@ def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
   assert 'recalibrated (held out)' in calibration.table(out)
 
 
-@pytest.mark.slow
 def test_recalibration_repairs_a_too_sharp_likelihood_on_held_out_recordings(
   tmp_path,
 ):
@@ -123,7 +123,6 @@ def test_recalibration_repairs_a_too_sharp_likelihood_on_held_out_recordings(
     assert abs(fixed[f]['interval_50'] - 0.5) < 0.12, f
 
 
-@pytest.mark.slow
 def test_a_quantity_the_video_does_not_inform_keeps_its_nominal_levels(tmp_path):
   # Area weight left out of the likelihood: its posterior is the prior, whose
   # intervals hold truths drawn from the prior exactly as often as they say,
@@ -370,7 +369,6 @@ def _tables(sharpness: float, seed: int = 0) -> dict:
   }  # fmt: skip
 
 
-@pytest.mark.slow
 def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
   # New recordings (another seed and noise) read with tables calibrated
   # elsewhere: the exact likelihood's intervals hold the truth as often as

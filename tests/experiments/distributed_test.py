@@ -11,6 +11,8 @@ import pytest
 
 from experiments.pipeline import distributed
 
+pytestmark = pytest.mark.slow  # several processes simulate and train
+
 _ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 

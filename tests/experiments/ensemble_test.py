@@ -27,6 +27,8 @@ from tests.experiments.estimate_fixtures import (
   write_recording,
 )
 
+pytestmark = pytest.mark.slow  # trains and searches with ensembles
+
 # The ensemble's program against its members' programs: one float32 embedding
 # and PSD per member on both paths, combined in float32 (ensemble) or float64.
 _MEAN_RTOL = 1e-4

@@ -33,6 +33,8 @@ from tests.experiments.estimate_fixtures import (
   write_recording,
 )
 
+pytestmark = pytest.mark.slow  # whole searches per method
+
 # The initial design only: every stage runs (simulate, render, embed, PSD, GP
 # posterior, figures) without compiling the BO proposal step.
 _SHORT = dataclasses.replace(CONFIG, max_iter=0, min_iter=0)

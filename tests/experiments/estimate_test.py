@@ -29,6 +29,8 @@ from tests.experiments.estimate_fixtures import (
   write_recording,
 )
 
+pytestmark = pytest.mark.slow  # whole searches on the estimate fixtures
+
 # The truth's PSD is zero but for the mm quantisation of the recording.
 _TRUTH_PSD_TOLERANCE = 1e-3
 # The same candidate scores the same in every call (common random numbers,
@@ -515,7 +517,6 @@ def test_bad_config_is_refused_before_anything_is_written(env, tmp_path):
   assert not os.path.exists(workdir)
 
 
-@pytest.mark.slow
 def test_fused_objective_on_mjx_matches_mujoco_c(env):
   # The same fused program with MJX (MuJoCo Warp, traced) in place of the
   # MuJoCo C callback: PSDs agree to the two simulators' parity (float32

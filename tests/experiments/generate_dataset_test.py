@@ -14,6 +14,8 @@ import physsim
 from experiments.pipeline import datasets as gd
 from physsim import dataset
 
+pytestmark = pytest.mark.slow  # dataset sweeps simulated and rendered
+
 # A smoke sweep on the MuJoCo C backend (MJX compiles for ~90 s on this CPU).
 _SMOKE = dataclasses.replace(gd.PRESETS['smoke'], backend='c', workers=1)
 # Depth where the cloth is can only lie between the nearest and farthest camera

@@ -17,6 +17,8 @@ from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from tests.experiments import estimate_fixtures as fx
 
+pytestmark = pytest.mark.slow  # joint searches over several recordings
+
 GRID = (2, 3, 2)  # bending, wind, area weight cells
 
 

@@ -18,6 +18,8 @@ from tests.experiments.estimate_fixtures import (
   write_recording,
 )
 
+pytestmark = pytest.mark.slow  # maps the distance landscape by simulation
+
 # The truth's PSD is zero but for the mm quantisation of the recording.
 _TRUTH_PSD_TOLERANCE = 1e-3
 

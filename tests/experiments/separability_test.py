@@ -12,6 +12,8 @@ import pytest
 
 from experiments.studies import separability as sep
 
+pytestmark = pytest.mark.slow  # the separability study end to end
+
 # Sampling error of a covariance and of fitted slopes from 3,600 noisy worlds.
 _SAMPLED = 0.1
 

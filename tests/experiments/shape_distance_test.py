@@ -31,6 +31,8 @@ from tests.experiments.estimate_fixtures import (
 )
 from tests.physsim.shape_test import reference_summary
 
+pytestmark = pytest.mark.slow  # whole searches with the shape distance
+
 # float32 summaries of points ~2 m away, squared: m^2.
 _SHAPE_ATOL = 1e-8
 # The truth's discrepancy: the recording went through 16-bit mm PNGs.

@@ -13,6 +13,8 @@ import model as model_lib
 from experiments.pipeline import training as train
 from experiments.studies import table1
 
+pytestmark = pytest.mark.slow  # Table 1's smoke runs train networks
+
 MATERIAL = 'gray_interlock'
 # Cells are printed with one decimal.
 _PRINT_TOLERANCE_PCT = 0.05 + 1e-9

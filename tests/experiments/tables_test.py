@@ -11,6 +11,8 @@ from experiments.pipeline.recording import Recording
 from experiments.studies import table1, tables
 from physsim import camera
 
+pytestmark = pytest.mark.slow  # Tables 2 and 3 estimated end to end
+
 
 def _res(wind, weight, factor, centre=(50.0, 5.0, 2.0)):
   one = lambda w, a, b: {'wind_speed_pct': w, 'area_weight_pct': a, 'bending_factor': b}

@@ -15,6 +15,8 @@ from experiments.pipeline import training as train
 from experiments.studies import table1
 from physsim import dataset
 
+pytestmark = pytest.mark.slow  # trains PhySNet on depth and RGB
+
 MATERIAL = 'gray_interlock'
 # Table 1's smoke runs (half the simulations held out: two labels on each side).
 _SMOKE = train.replace(table1.PRESETS['smoke'].train, materials=(MATERIAL,))
