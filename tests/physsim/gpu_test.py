@@ -19,9 +19,12 @@ pytestmark = pytest.mark.gpu
 # parity test's tolerance (tests/physsim/rollout_test.py).
 _PARITY_TOL = 5e-3  # m, max over vertices
 _PARITY_MEDIAN_TOL = 1e-4  # m
-# The same float32 ray-caster on two devices: only the reduction order may
-# differ; at ~1.5 m a depth step of 1e-5 m is ~100 float32 ulps.
-_RENDER_TOL = 1e-5  # m
+# The same float32 ray-caster on two devices: XLA's GPU and CPU compilers
+# fuse and contract (FMA) the projection and 1/z interpolation differently;
+# up to 7.5e-5 m has been seen at ~1.5 m (H200). The bound is the one the
+# renderer is held to against MuJoCo's OpenGL depth (render_test), far below a
+# wrong triangle (cm) or a one-pixel shift.
+_RENDER_TOL = 2e-4  # m
 _FRAMES, _FPS = 8, 20.0
 
 
