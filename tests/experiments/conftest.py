@@ -55,5 +55,5 @@ def depth_only_dataset(rgb_dataset, tmp_path_factory):
 
 @pytest.fixture(scope='session')
 def table1_workdir(tmp_path_factory):
-  """Workdir of experiments.table1; train_test trains two of its runs (reused there)."""
+  """Workdir of experiments.table1; training_test trains two of its runs (reused there)."""
   return str(tmp_path_factory.mktemp('table1'))

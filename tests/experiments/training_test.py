@@ -1,4 +1,4 @@
-"""Tests for experiments.train: depth and RGB runs, inputs.json, restore, resume, bad input."""
+"""experiments.pipeline.training (experiments.train): depth and RGB runs, inputs.json, restore, resume, bad input."""
 
 import json
 import os
