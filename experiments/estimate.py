@@ -64,6 +64,12 @@ class Args:
       posterior take it as that recording's wind prior (--wind_speed is one
       recording's).
     wind_speed_sds: their standard uncertainties (m/s), one per reading.
+    alignment_sd: where the intake placed the camera (a camera file in the
+      user's world) and --camera_sd_m and --camera_sd_deg are both 0, the
+      posterior carries the intake's estimate of its own error
+      (intake.alignment_error: large in tilt when up came from the cloth's
+      plane) as camera_sd_m and camera_sd_deg; --noalignment_sd: trust the
+      placement exactly.
     intake: how the recording is read, cleaned and aligned.
     search: the estimate's settings.
   """
@@ -77,6 +83,7 @@ class Args:
   intake_only: bool = False
   wind_speeds: tuple[float, ...] = ()
   wind_speed_sds: tuple[float, ...] = ()
+  alignment_sd: bool = True
   intake: intake.IntakeConfig = intake.IntakeConfig()
   search: objective_lib.EstimateConfig = objective_lib.EstimateConfig()
 
@@ -110,14 +117,57 @@ def joint_winds(args: Args) -> list[tuple[float, float]] | None:
   return list(zip(args.wind_speeds, args.wind_speed_sds, strict=True))
 
 
-def _take_in(args: Args, path: str, workdir: str, size=None, frames: bool = True):
+def _take_in(args: Args, path: str, workdir: str, frames: bool = True):
   """One recording taken in; its summary printed and its files written."""
   ik = intake.take_in(path, args.intake, args.camera_json, args.search, workdir=workdir)
   print(intake.summary(ik))
   intake.write(ik, workdir, args.search, frames=frames)
-  if size is None:
-    return ik
-  return intake.to_recording(ik, args.search.fps, size, args.search.frames)
+  return ik
+
+
+def with_alignment_error(args: Args, config, intakes: list):
+  """``config`` with the intakes' own alignment error as its camera error
+  (the largest of them) where ``args.alignment_sd`` and the user gave none;
+  and the line that says so, or None."""
+  sds = [ik.alignment_sd for ik in intakes if ik is not None and any(ik.alignment_sd)]
+  if not (args.alignment_sd and sds) or config.camera_sd_m or config.camera_sd_deg:
+    return config, None
+  m, deg = max(s[0] for s in sds), max(s[1] for s in sds)
+  config = dataclasses.replace(config, camera_sd_m=m, camera_sd_deg=deg)
+  config.check()
+  return config, (
+    f"the posterior carries the alignment's own error: the camera placed to "
+    f'{100 * m:.1f} cm and {deg:g} degrees (1 sd; --camera_sd_m and '
+    '--camera_sd_deg set it, --noalignment_sd trusts the placement exactly)'
+  )
+
+
+def alignment_record(intakes: list, config) -> dict | None:
+  """What estimate.json says of the recordings' alignment, or None (none
+  taken in)."""
+  taken = [ik for ik in intakes if ik is not None]
+  if not taken:
+    return None
+  guesses = [intake.guess_note(ik) for ik in taken if ik.up_is_guess]
+  return {
+    'up_from': [ik.up_from for ik in taken],
+    'up_is_guess': bool(guesses),
+    'intake_alignment_sd': [
+      {'m': ik.alignment_sd[0], 'deg': ik.alignment_sd[1]} for ik in taken
+    ],
+    'camera_sd_m': config.camera_sd_m,
+    'camera_sd_deg': config.camera_sd_deg,
+    'warnings': guesses + [w for ik in taken for w in ik.warnings],
+  }
+
+
+def _record_alignment(path: str, record: dict | None) -> None:
+  """Adds ``record`` to the result JSON the search wrote at ``path``."""
+  if record is None or not os.path.isfile(path):
+    return
+  data = recording_lib.read_json(path)
+  data['alignment'] = record
+  files.write_json(path, data)
 
 
 def _needs_intake(args: Args, path: str) -> bool:
@@ -180,7 +230,7 @@ def _main(args: Args, config, winds) -> None:
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return
   net = network(args)
-  recs = []
+  recs, intakes = [], []
   for i, path in enumerate(args.recording):
     if _needs_intake(args, path):
       if net.modality == 'rgb':
@@ -188,8 +238,11 @@ def _main(args: Args, config, winds) -> None:
           f'{path}: an RGB network needs a dataset sequence with colour frames; '
           'the intake reads depth only'
         )
-      recs.append(_take_in(args, path, _intake_dir(args, i), size=net.image_size))
+      ik = _take_in(args, path, _intake_dir(args, i))
+      intakes.append(ik)
+      recs.append(intake.to_recording(ik, config.fps, net.image_size, config.frames))
     else:
+      intakes.append(None)
       recs.append(
         recording_lib.load_recording(
           path,
@@ -199,20 +252,27 @@ def _main(args: Args, config, winds) -> None:
           rgb=net.modality == 'rgb',
         )  # fmt: skip
       )
+  config, carried = with_alignment_error(args, config, intakes)
   warning = report.shape_camera_warning(
     config, any(_needs_intake(args, p) for p in args.recording)
   )
-  for line in (warning, report.synthetic_warning(config)):
+  for line in (warning, report.synthetic_warning(config), carried):
     if line:
       print(line)
+  record = alignment_record(intakes, config)
   if len(recs) > 1:
     result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
+    _record_alignment(os.path.join(args.workdir, search.JOINT_FILE), record)
     print(report.joint_table(result))
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
     result = search.estimate(config, recs[0], args.model, args.workdir)
+    _record_alignment(os.path.join(args.workdir, search.ESTIMATE_FILE), record)
     print(report.report_table(result))
     ratios = [report.point_of(result['load_ratio'])]
+  for line in (record or {}).get('warnings', []):
+    if 'up is a guess' in line:
+      print(f'note: {line}')
   note = report.fan_setting_note(ratios, config.material)
   if note:
     print(note)

@@ -60,6 +60,16 @@ UP_WORDS = {
   'user': '--up', 'world_up': '--world_up', 'gravity': 'the camera file\'s "gravity"',
   'floor': 'the floor', 'cloth plane': 'the cloth plane', 'camera file': 'the camera file',
 }  # fmt: skip
+# The alignment's own error (1 sd of a tilt, degrees) by where up came from:
+# a given up (the rig's world, an IMU) is good to about a degree, a floor's
+# normal to two; the cloth's plane is a guess that a cloth swung by the wind
+# in the first frames tilts by the swing (the most EstimateConfig allows).
+UP_SD_DEG = {
+  'user': 1.0, 'world_up': 1.0, 'gravity': 1.0, 'floor': 2.0, 'cloth plane': 20.0,
+  'camera file': 0.0,
+}  # fmt: skip
+# Its shift (1 sd, metres): at least this, or two pixels at the pins' depth.
+MIN_SD_M = 0.01
 # Least share of the simulated cloth's vertices in view from the pose.
 MIN_VISIBLE = 0.5
 # ... and the fewest pixels it may cover (a camera 100 m away sees a speck).
@@ -184,6 +194,9 @@ class Intake(NamedTuple):
     silhouette: (H, W) bool, the simulated cloth at that angle, or None.
     camera_file: the camera file's path, or ''.
     warnings: what the user should check (sources of up that disagree).
+    alignment_sd: (metres, degrees) the alignment's own error, 1 sd
+      (``alignment_error``); (0, 0) for a camera already in the simulator's
+      world or none placed.
   """
 
   depth: np.ndarray
@@ -205,6 +218,12 @@ class Intake(NamedTuple):
   silhouette: np.ndarray | None = None
   camera_file: str = ''
   warnings: tuple[str, ...] = ()
+  alignment_sd: tuple[float, float] = (0.0, 0.0)
+
+  @property
+  def up_is_guess(self) -> bool:
+    """Up came from the cloth's own plane (no rig axis, IMU or floor)."""
+    return self.up_from == 'cloth plane'
 
 
 def is_sequence(path: str) -> bool:
@@ -425,6 +444,23 @@ def cross_check(given: list, fit: alignment.ClothFit) -> tuple[str, ...]:
   return tuple(out)
 
 
+def alignment_error(fit, pins, want_spacing: float, intr, warnings) -> tuple:
+  """(metres, degrees): the alignment's own error, 1 sd, for the estimate's
+  ``camera_sd_m``/``camera_sd_deg``: a tilt by where up came from
+  (``UP_SD_DEG``), at least as large as any disagreement between its sources;
+  a shift of two pixels at the pins' depth, at least ``MIN_SD_M``, or half the
+  pins' spacing error if larger."""
+  deg = UP_SD_DEG[fit.up_from]
+  if fit.floor_up is not None and fit.up_from not in ('floor', 'cloth plane'):
+    deg = max(deg, alignment.angle_deg(fit.up, fit.floor_up))
+  if warnings:  # sources of up more than UP_CROSS_CHECK_DEG apart
+    deg = max(deg, 2 * UP_CROSS_CHECK_DEG)
+  depth = float(np.mean(pins[:, 2]))
+  spacing = float(np.linalg.norm(pins[1] - pins[0]))
+  m = max(MIN_SD_M, 2 * depth / intr.fx, 0.5 * abs(spacing - want_spacing))
+  return (round(min(m, 0.2), 4), round(min(deg, 20.0), 2))
+
+
 def _check_size(path: str, w: int, h: int, cam) -> None:
   """Frames big enough to hold a cloth, and of the camera file's shape."""
   if w < MIN_SIZE[0] or h < MIN_SIZE[1]:
@@ -464,8 +500,9 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
         'depth_scale and --pins'
       )
     up_from = fit.up_from
+    sd = alignment_error(fit, pins, want, intr, warnings)
   else:
-    pose, up_from, warnings = cam.pose, 'camera file', ()
+    pose, up_from, warnings, sd = cam.pose, 'camera file', (), (0.0, 0.0)
     pins = alignment.pins_in_camera(pose, pins_world)
   seen = alignment.visible_share(mesh.vertices, pose, intr)
   sims = silhouettes(mesh, pins_world, intr, pose)  # at rest first, then swung
@@ -481,6 +518,7 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
   out = intake._replace(
     pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap,
     swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best], warnings=warnings,
+    alignment_sd=sd,
   )  # fmt: skip
   if overlap < config.min_overlap:
     where = ''
@@ -527,8 +565,26 @@ def summary(intake: Intake) -> str:
     )
   elif intake.intrinsics is None:
     lines.append('  camera unknown: training-like cameras will be simulated')
+  if any(intake.alignment_sd):
+    m, deg = intake.alignment_sd
+    lines.append(
+      f'  alignment error (estimated, 1 sd): {100 * m:.1f} cm, {deg:g} degrees'
+    )
+  if intake.up_is_guess:
+    lines.append(f'  warning: {guess_note(intake)}')
   lines += [f'  warning: {w}' for w in intake.warnings]
   return '\n'.join(lines)
+
+
+def guess_note(intake: Intake) -> str:
+  """What a recording whose up is a guess says (summary, table, estimate.json)."""
+  return (
+    f"{intake.source}: up is a guess from the cloth's own plane (no floor in view, "
+    'no --world_up, no "gravity" in the camera file); a cloth the wind swings in '
+    'the first frames tilts it, and the answer with it. The posterior carries a '
+    f'tilt of {intake.alignment_sd[1]:g} degrees (1 sd); give --world_up (your '
+    'camera file\'s up axis) or "gravity" to remove the guess'
+  )
 
 
 def to_json(intake: Intake) -> dict:
@@ -553,6 +609,8 @@ def to_json(intake: Intake) -> dict:
     'swing_deg': intake.swing_deg,
     'background_planes': [{'normal': n, 'offset': o} for n, o in intake.planes],
     'warnings': list(intake.warnings),
+    'alignment_sd': {'m': intake.alignment_sd[0], 'deg': intake.alignment_sd[1]},
+    'up_is_guess': intake.up_is_guess,
   }
 
 

@@ -109,6 +109,13 @@ def test_estimate_runs_on_the_recording_and_a_resume_must_match_its_camera(
   estimate.main(args)
   result = json.loads((tmp_path / 'est' / 'estimate.json').read_text())
   assert set(result['estimate']) >= {'bending_scale', 'wind_speed', 'area_weight'}
+  # The alignment's own error (up from the floor) was in the posterior.
+  taken = json.loads((tmp_path / 'est' / 'intake.json').read_text())
+  align = result['alignment']
+  assert align['up_from'] == ['floor'] and not align['up_is_guess']
+  assert align['camera_sd_deg'] == taken['alignment_sd']['deg'] >= 2.0
+  assert align['camera_sd_m'] == taken['alignment_sd']['m'] >= 0.01
+  assert result['config']['camera_sd_deg'] == align['camera_sd_deg']
   cam = json.loads(open(scene.camera_json).read())
   other = tmp_path / 'other_camera.json'
   other.write_text(json.dumps(dict(cam, fx=cam['fx'] * 1.1, fy=cam['fy'] * 1.1)))

@@ -15,6 +15,7 @@ import json
 import numpy as np
 import pytest
 
+from experiments import estimate
 from experiments.pipeline import intake, objective
 from physsim import alignment, camera, camera_files, scene
 from tests.physsim.alignment_test import _INTR, _PINS_WORLD, _pose, _scene_depth
@@ -144,3 +145,37 @@ def test_the_intake_takes_up_from_the_rig_not_the_swung_cloth(recording):
   assert 'differ by 10.0 degrees' in off.warnings[0]
   assert 'warning: up from --world_up and from the camera file' in intake.summary(off)
   assert intake.to_json(off)['warnings'] == list(off.warnings)
+
+
+def test_the_alignment_error_follows_where_up_came_from(recording):
+  path, cam, down, pose, root = recording
+  plain = _camera(root, cam, 'plain')
+  config = intake.IntakeConfig(min_overlap=0.3)
+  guessed = intake.take_in(path, config, plain, _CONFIG)
+  rigged = intake.take_in(
+    path, dataclasses.replace(config, world_up='z'), plain, _CONFIG
+  )
+  assert guessed.up_is_guess and not rigged.up_is_guess
+  assert guessed.alignment_sd[1] == intake.UP_SD_DEG['cloth plane'] == 20.0
+  assert rigged.alignment_sd[1] == intake.UP_SD_DEG['world_up'] == 1.0
+  # Two pixels at the pins' ~2.1 m with fx 150: about 2.8 cm.
+  assert rigged.alignment_sd[0] == pytest.approx(2 * 2.1 / 150, rel=0.1)
+  assert 'up is a guess' in intake.summary(guessed)
+  assert 'up is a guess' not in intake.summary(rigged)
+  assert intake.to_json(guessed)['up_is_guess'] is True
+  # The estimate carries it unless the user gave a camera error or said no.
+  args = estimate.Args(recording=(path,), search=_CONFIG)
+  carried, line = estimate.with_alignment_error(args, _CONFIG, [guessed, None])
+  assert (carried.camera_sd_m, carried.camera_sd_deg) == guessed.alignment_sd
+  assert 'alignment' in line and '20 degrees' in line
+  mine = dataclasses.replace(_CONFIG, camera_sd_m=0.05)
+  assert estimate.with_alignment_error(args, mine, [guessed]) == (mine, None)
+  off = dataclasses.replace(args, alignment_sd=False)
+  assert estimate.with_alignment_error(off, _CONFIG, [guessed]) == (_CONFIG, None)
+  record = estimate.alignment_record([guessed], carried)
+  assert record['up_is_guess'] and record['camera_sd_deg'] == 20.0
+  assert (
+    record['up_from'] == ['cloth plane'] and 'up is a guess' in record['warnings'][0]
+  )
+  assert not estimate.alignment_record([rigged], _CONFIG)['up_is_guess']
+  assert estimate.alignment_record([None], _CONFIG) is None
