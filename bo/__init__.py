@@ -3,7 +3,8 @@
 The public entry points are ``minimize`` (or ``Minimizer``, its loop as
 ask/tell steps, for drivers that batch many searches) and ``PosteriorSearch``
 (a likelihood-free posterior from a GP of a noisy discrepancy, with the same
-ask/tell interface); the GP (``gp``), kernels (``kernels``), acquisition
+ask/tell interface); ``batched`` asks many searches at once, their GP steps as
+one device program (a single ``ask`` is its batch of one); the GP (``gp``), kernels (``kernels``), acquisition
 functions (``acquisition``) and the proposal step (``propose``) are exposed as
 building blocks; ``calibration`` recalibrates a posterior's credible levels
 on simulations whose truth is known.
@@ -11,6 +12,7 @@ on simulations whose truth is known.
 
 from bo import (
   acquisition,
+  batched,
   calibration,
   gp,
   kernels,
@@ -32,6 +34,7 @@ __all__ = [
   'Result',
   'State',
   'acquisition',
+  'batched',
   'calibration',
   'gp',
   'kernels',

@@ -1,6 +1,7 @@
 """The optimisation loop: ``minimize``, its stopping rule and save/resume."""
 
 import dataclasses
+import functools
 import json
 import os
 import tempfile
@@ -12,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from bo import gp, propose, qmc
+from bo import batched, gp, propose, qmc
 
 _MIN_CAPACITY = 16
 
@@ -116,6 +117,19 @@ def _load(path: str) -> dict[str, Any]:
     return {k: z[k] for k in z.files}
 
 
+@functools.lru_cache(maxsize=32)
+def _propose_row(config: propose.ProposeConfig):
+  """One search's proposal as a ``bo.batched`` row function: the warm start
+  and the fitted hyperparameters as flat arrays."""
+  step = propose.cached_propose(config)
+
+  def row(x, y, mask, n_filled, key, init):
+    out = step(x, y, mask, n_filled, key, gp.params_from_array(init))
+    return out._replace(params=gp.params_to_array(out.params))
+
+  return row
+
+
 class State(NamedTuple):
   """Where one search stands (host arrays; ``Minimizer`` reads and returns it).
 
@@ -197,7 +211,8 @@ class Minimizer:
       dict(config._asdict(), bounds=bounds.tolist(), n_init=n_init, seed=seed)
     )
     self._key = jax.random.PRNGKey(seed)
-    self._step = propose.cached_propose(config)  # Validates before any eval.
+    self._config = config
+    propose.cached_propose(config)  # Validates before any eval.
 
   def _to_unit(self, x):
     return 2.0 * (x - self.lo) / self.width - 1.0
@@ -227,7 +242,12 @@ class Minimizer:
   def ask(self, state: State) -> tuple[np.ndarray, State]:
     """The next points to evaluate, original units: the initial design while
     nothing is told, then ``q`` proposals. Returns them and the state with the
-    refitted GP hyperparameters (pass that state to ``tell``)."""
+    refitted GP hyperparameters (pass that state to ``tell``). The batch of
+    one of ``bo.batched.ask_many``, which asks many searches at once."""
+    return batched.ask_many([self], [state])[0]
+
+  def ask_plan(self, state: State) -> batched.Ready | batched.Call:
+    """``ask`` as a ``bo.batched`` step: the answer, or the GP row to run."""
     if self.done(state):
       raise ValueError('ask() after the search has finished.')
     n, d, q = state.X.shape[0], self.d, self.q
@@ -235,7 +255,7 @@ class Minimizer:
       starts = np.zeros((0, d)) if self.x0 is None else self.x0[: self.n_init]
       n_rand = self.n_init - starts.shape[0]
       design = self._from_unit(2.0 * qmc.halton(n_rand, d, seed=self.seed) - 1.0)
-      return np.concatenate([starts, design]), state
+      return batched.Ready((np.concatenate([starts, design]), state))
     # Buffers grow in powers of two: O(log n) compiles in all, none while the
     # data fit the current buffer.
     cap = _capacity(n + q)
@@ -243,23 +263,29 @@ class Minimizer:
     mask[:n] = np.isfinite(state.Y)
     if not mask.any():
       u = 2.0 * qmc.halton(q, d, seed=self.seed, skip=n) - 1.0
-      return self._from_unit(u), state
+      return batched.Ready((self._from_unit(u), state))
     xb = np.zeros((cap, d))
     xb[:n] = self._to_unit(state.X)
     yb = np.zeros(cap)
     yb[:n] = np.where(mask[:n], state.Y, 0.0)
-    with jax.enable_x64(True), jax.default_device(self.device):
+    with jax.enable_x64(True):
       if state.params is None:
-        init = gp.default_params(d, jnp.float64)
+        init = np.asarray(gp.params_to_array(gp.default_params(d, jnp.float64)))
       else:
-        init = gp.params_from_array(jnp.asarray(state.params))
-      out = self._step(
-        jnp.asarray(xb), jnp.asarray(yb), jnp.asarray(mask), jnp.int32(n),
-        jax.random.fold_in(self._key, state.iteration), init,
-      )  # fmt: skip
-      u = np.asarray(out.x)
-      params = np.asarray(gp.params_to_array(out.params))
-    return self._from_unit(u), state._replace(params=params)
+        init = np.asarray(state.params, np.float64)
+      key = np.asarray(jax.random.fold_in(self._key, state.iteration))
+
+    def finish(out):
+      return self._from_unit(np.asarray(out.x)), state._replace(
+        params=np.asarray(out.params)
+      )
+
+    args = (xb, yb, mask, np.int32(n), key, init)
+    return batched.Call(_propose_row(self._config), args, finish)
+
+  def result_plan(self, state: State) -> batched.Ready:
+    """``result`` as a ``bo.batched`` step (no GP: the answer)."""
+    return batched.Ready(self.result(state))
 
   def tell(self, state: State, x, y) -> State:
     """Records the values ``y`` of the asked points ``x`` (non-finite: a

@@ -55,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import log_ndtr, logsumexp
 
-from bo import gp, qmc, synthetic
+from bo import batched, gp, qmc, synthetic
 from bo.loop import _capacity, _load, _save
 
 # LogNormal prior on the noise variance of the standardised log discrepancy:
@@ -364,6 +364,19 @@ def _synthetic_step(config, points, n_explore, fit_kw, x, r, mask, key, log_prio
   )  # fmt: skip
 
 
+@functools.lru_cache(maxsize=16)
+def _step_row(config: PosteriorConfig):
+  """``make_step(config)`` as a ``bo.batched`` row function (the key as its
+  raw data, so that rows stack as plain arrays)."""
+  step = make_step(config)
+
+  def row(x, y, mask, key_data, log_prior, init_params) -> Step:
+    key = jax.random.wrap_key_data(key_data)
+    return step(x, y, mask, key, log_prior, init_params)
+
+  return row
+
+
 class State(NamedTuple):
   """Where one posterior search stands (host arrays).
 
@@ -473,7 +486,7 @@ class PosteriorSearch:
     # One buffer size for the whole budget: one compile per search setting.
     self.capacity = _capacity(n_init + config.q * n_iter)
     self._key = jax.random.key(seed)
-    self._step = make_step(config)
+    make_step(config)  # validates the config
     prior_sha = hashlib.sha1(np.ascontiguousarray(self.log_prior).tobytes()).hexdigest()
     self.signature = json.dumps(
       dict(config._asdict(), n_init=n_init, seed=seed, prior_sha1=prior_sha)
@@ -515,7 +528,9 @@ class PosteriorSearch:
     y = np.asarray(y)
     return np.isfinite(y).all(axis=1) if self._synthetic else np.isfinite(y)
 
-  def _run_step(self, state: State) -> Step:
+  def _step_call(self, state: State, finish) -> batched.Call:
+    """The GP step on the data so far as a ``bo.batched`` row: buffers of the
+    search's capacity (padding masked), its own key for this iteration."""
     n = state.X.shape[0]
     cap = max(self.capacity, _capacity(n))
     mask = np.zeros(cap, bool)
@@ -527,37 +542,45 @@ class PosteriorSearch:
       y[:n] = np.where(mask[:n, None], state.Y, 0.0)
     else:
       y[:n] = np.log(np.maximum(np.where(mask[:n], state.Y, 1.0), _LOG_FLOOR))
-    with jax.enable_x64(True), jax.default_device(self.device):
+    with jax.enable_x64(True):
       init = state.params
       if init is None:  # the GP prior's medians
         p = gp.default_params(self.d, jnp.float64, self.config.noise_prior)
         init = np.tile(gp.params_to_array(p), (*self._y_shape, 1)).reshape(
           *self._y_shape, -1
         )
-      out = self._step(
-        jnp.asarray(x), jnp.asarray(y), jnp.asarray(mask),
-        jax.random.fold_in(self._key, state.iteration), jnp.asarray(self.log_prior),
-        jnp.asarray(init, jnp.float64),
-      )  # fmt: skip
-      out = jax.device_get(out)
-    return out
+      key = np.asarray(
+        jax.random.key_data(jax.random.fold_in(self._key, state.iteration))
+      )
+    args = (x, y, mask, key, self.log_prior, np.asarray(init, np.float64))
+    return batched.Call(_step_row(self.config), args, finish)
 
   def ask(self, state: State) -> tuple[np.ndarray, State]:
-    """The next candidates and the state (with the refitted GP)."""
+    """The next candidates and the state (with the refitted GP): the batch
+    of one of ``bo.batched.ask_many``, which asks many searches at once."""
+    return batched.ask_many([self], [state])[0]
+
+  def ask_plan(self, state: State) -> batched.Ready | batched.Call:
+    """``ask`` as a ``bo.batched`` step: the answer, or the GP row to run."""
     if self.done(state):
       raise ValueError('ask() after the search has finished.')
     n = state.X.shape[0]
     if n == 0:
       starts = np.zeros((0, self.d)) if self.x0 is None else self.x0[: self.n_init]
       rest = 2.0 * qmc.halton(self.n_init - len(starts), self.d, seed=self.seed) - 1.0
-      return np.concatenate([starts, rest]), state
+      return batched.Ready((np.concatenate([starts, rest]), state))
     if not self._ok(state.Y).any():  # every simulation failed: explore
       u = 2.0 * qmc.halton(self.config.q, self.d, seed=self.seed, skip=n) - 1.0
-      return u, state
-    out = self._run_step(state)
-    params = np.asarray(out.params)
-    history = np.concatenate([state.history, _quantiles(out.samples)[None]])
-    return np.asarray(out.x, np.float64), state._replace(params=params, history=history)
+      return batched.Ready((u, state))
+
+    def finish(out):
+      params = np.asarray(out.params)
+      history = np.concatenate([state.history, _quantiles(out.samples)[None]])
+      return np.asarray(out.x, np.float64), state._replace(
+        params=params, history=history
+      )
+
+    return self._step_call(state, finish)
 
   def tell(self, state: State, x, y) -> State:
     """Records discrepancies ``y (q,)`` (residuals ``(q, k)`` for
@@ -583,18 +606,26 @@ class PosteriorSearch:
     return state._replace(stopped=True)
 
   def result(self, state: State) -> Result:
-    """The posterior given every evaluation so far (one more GP fit)."""
+    """The posterior given every evaluation so far (one more GP fit; many
+    searches' at once: ``bo.batched.result_many``)."""
+    return batched.result_many([self], [state])[0]
+
+  def result_plan(self, state: State) -> batched.Call:
+    """``result`` as a ``bo.batched`` step."""
     if not self._ok(state.Y).any():
       raise ValueError('no finite discrepancy: every simulation failed')
-    out = self._run_step(state)
-    return Result(
-      np.asarray(out.samples), np.asarray(out.log_post), np.asarray(out.log_lik),
-      tuple(self.config.grid),
-      np.asarray(out.noise_sd) if self._synthetic else float(out.noise_sd),
-      float(out.floor),
-      np.asarray(out.mean), np.asarray(out.var),
-      state.X, state.Y, state.iteration, state.stopped,
-    )  # fmt: skip
+
+    def finish(out):
+      return Result(
+        np.asarray(out.samples), np.asarray(out.log_post), np.asarray(out.log_lik),
+        tuple(self.config.grid),
+        np.asarray(out.noise_sd) if self._synthetic else float(out.noise_sd),
+        float(out.floor),
+        np.asarray(out.mean), np.asarray(out.var),
+        state.X, state.Y, state.iteration, state.stopped,
+      )  # fmt: skip
+
+    return self._step_call(state, finish)
 
   def _rule(self, state: State) -> bool:
     h = state.history
