@@ -24,7 +24,6 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import bo  # noqa: E402
-from benchmarks import out_path  # noqa: E402
 from experiments.pipeline import cli, files  # noqa: E402
 
 
@@ -43,7 +42,7 @@ class Args:
 
   seeds: int = 10
   problems: tuple[str, ...] = ('branin', 'hartmann6', 'fabric3')
-  out: str = out_path('bo_vs_botorch')
+  out: str = 'out/benchmarks/bo_vs_botorch.json'
   skip_botorch: bool = False
   acquisition: str = cli.choice('logei', ['logei', 'ucb'])
   kernel: str = cli.choice('matern52', ['matern52', 'rbf'])

@@ -21,7 +21,6 @@ import time
 from absl import logging
 
 import physsim
-from benchmarks import out_path
 from experiments.pipeline import cli, embedding, files, search
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
@@ -56,7 +55,7 @@ class Args:
   recording: str = cli.required()
   material: str = 'gray_interlock'
   model: str = cli.required()
-  out: str = out_path('estimate_latency')
+  out: str = 'out/benchmarks/estimate_latency.json'
   settings: tuple[str, ...] = ('default', 'paper', 'gp_on_gpu', 'q16')
   backend: str = cli.choice('auto', physsim.BACKENDS)
   repeats: int = 1

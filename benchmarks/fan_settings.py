@@ -25,7 +25,6 @@ import json
 
 import numpy as np
 
-from benchmarks import out_path
 from experiments.pipeline import cli, files
 
 
@@ -43,7 +42,7 @@ class Args:
   results: tuple[str, ...] = cli.required(())
   split: float = 3.5
   ratio_split: float = 8.0
-  out: str = out_path('fan_settings')
+  out: str = 'out/benchmarks/fan_settings.json'
 
 
 PRESETS = {'default': Args()}

@@ -18,7 +18,6 @@ import jax
 import numpy as np
 
 import bo
-from benchmarks import out_path
 from experiments.pipeline import cli, files
 
 
@@ -36,7 +35,7 @@ class Args:
   q: int = 4
   n_init: int = 8
   n_iter: int = 6
-  out: str = out_path('gp_placement')
+  out: str = 'out/benchmarks/gp_placement.json'
 
 
 PRESETS = {'default': Args(), 'smoke': Args(n_init=4, n_iter=2)}

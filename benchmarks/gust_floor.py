@@ -38,7 +38,6 @@ import jax
 import numpy as np
 
 import physsim
-from benchmarks import floats, out_path
 from experiments.pipeline import cli, files
 
 
@@ -80,7 +79,7 @@ class Args:
   readings: tuple[str, ...] = ('0.02',)
   backend: str = 'auto'
   seed: int = 0
-  out: str = out_path('gust_floor')
+  out: str = 'out/benchmarks/gust_floor.json'
 
 
 PRESETS = {
@@ -113,9 +112,22 @@ def floor(s: float, reading: float, k: int) -> float:
   return float(100 * np.sqrt(2 / np.pi) * np.sqrt((s**2 + (2 * reading) ** 2) / k))
 
 
+def _positive_floats(name: str, values: tuple[str, ...]) -> list[float]:
+  """A list flag's values as positive numbers; a ValueError naming the flag."""
+  try:
+    out = [float(v) for v in values]
+  except ValueError:
+    out = []
+  if not out or not all(np.isfinite(v) and v > 0 for v in out):  # refuses NaN, inf
+    raise ValueError(
+      f'--{name}={",".join(values)}: need positive numbers, comma-separated'
+    )
+  return out
+
+
 def main(args: Args) -> None:
   winds, clips, readings = (
-    floats(n, getattr(args, n), positive=True) for n in ('winds', 'clips', 'readings')
+    _positive_floats(n, getattr(args, n)) for n in ('winds', 'clips', 'readings')
   )
   for name, low in (('gusts', 0.0), ('draws', 4), ('seconds', 0.5)):
     if not getattr(args, name) >= low:

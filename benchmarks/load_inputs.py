@@ -22,7 +22,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import model as model_lib
-from benchmarks import out_path
 from experiments.pipeline import cli, embedding, files
 from experiments.pipeline import training as train_lib
 
@@ -51,7 +50,7 @@ class Args:
   network: str = cli.choice('physnet', ['physnet', 'sdn'])
   modality: str = cli.choice('depth', embedding.MODALITIES)
   repeats: int = 3
-  out: str = out_path('load_inputs')
+  out: str = 'out/benchmarks/load_inputs.json'
 
 
 PRESETS = {'default': Args(), 'smoke': Args(repeats=1)}

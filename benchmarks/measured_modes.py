@@ -27,7 +27,6 @@ import glob
 import os
 
 import physsim
-from benchmarks import out_path
 from experiments.pipeline import cli, files
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import read_json
@@ -50,7 +49,7 @@ class Args:
 
   estimates: str = cli.required()
   measured_sd: float = 0.02
-  out: str = out_path('measured_modes')
+  out: str = 'out/benchmarks/measured_modes.json'
   seed: int = 0
   pairs: bool = False
 

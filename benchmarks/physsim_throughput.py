@@ -40,7 +40,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from benchmarks import ints, out_path
 from experiments.pipeline import cli, files
 from physsim import rollout as sim
 
@@ -78,7 +77,7 @@ class Args:
   """
 
   resolution: int = 25
-  batch_sizes: tuple[str, ...] = ('1', '16', '256', '1024', '4096')
+  batch_sizes: tuple[int, ...] = (1, 16, 256, 1024, 4096)
   backends: tuple[str, ...] = ('warp', 'mjx')
   seconds: float = 0.5
   c_seconds: float = 0.5
@@ -97,7 +96,7 @@ class Args:
   direct: bool = False
   ablate_forces: bool = False
   c_baseline: bool = True
-  out: str = out_path('physsim_throughput')
+  out: str = 'out/benchmarks/physsim_throughput.json'
 
 
 PRESETS = {
@@ -105,7 +104,7 @@ PRESETS = {
   # checks the script on a CPU in about a minute (the MJX rollout compiles)
   'smoke': Args(
     resolution=8,
-    batch_sizes=('1', '2'),
+    batch_sizes=(1, 2),
     backends=('mjx',),
     seconds=0.05,
     c_seconds=0.05,
@@ -392,7 +391,9 @@ def _paper_dataset(model, backend):
 
 
 def main(args: Args) -> None:
-  batch_sizes = ints('batch_sizes', args.batch_sizes)
+  batch_sizes = list(args.batch_sizes)
+  if not batch_sizes or min(batch_sizes) < 1:
+    raise ValueError(f'--batch_sizes={",".join(map(str, batch_sizes))}: need positive')
   bad = [b for b in args.backends if b not in ('warp', 'mjx')]
   if bad or not args.backends:
     raise ValueError(f'--backends={",".join(args.backends)}: need warp and/or mjx')

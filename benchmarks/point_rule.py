@@ -22,7 +22,6 @@ import numpy as np
 
 import bo
 import physsim
-from benchmarks import out_path
 from experiments.pipeline import cli, files
 from experiments.pipeline import posterior as posterior_lib
 
@@ -37,7 +36,7 @@ class Args:
   """
 
   tables: tuple[str, ...] = cli.required(())
-  out: str = out_path('point_rule')
+  out: str = 'out/benchmarks/point_rule.json'
 
 
 PRESETS = {'default': Args()}

@@ -27,7 +27,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks import OUT, ints
 from experiments.pipeline import cli, files
 from physsim import camera, devices, mesh, render
 
@@ -56,7 +55,7 @@ class Args:
   """
 
   resolution: int = 256
-  batch_sizes: tuple[str, ...] = ('1', '16', '64', '210')
+  batch_sizes: tuple[int, ...] = (1, 16, 64, 210)
   cameras: int = 6
   frames: int = 60
   methods: tuple[str, ...] = METHODS
@@ -76,7 +75,7 @@ PRESETS = {
   # checks the script on a CPU in seconds
   'smoke': Args(
     resolution=32,
-    batch_sizes=('1', '2'),
+    batch_sizes=(1, 2),
     cameras=2,
     frames=4,
     repeats=1,
@@ -303,7 +302,9 @@ def _mjwarp_rows(args: Args, m, batch_sizes):
 
 
 def main(args: Args) -> None:
-  batch_sizes = ints('batch_sizes', args.batch_sizes)
+  batch_sizes = list(args.batch_sizes)
+  if not batch_sizes or min(batch_sizes) < 1:
+    raise ValueError(f'--batch_sizes={",".join(map(str, batch_sizes))}: need positive')
   bad = [m for m in args.methods if m not in METHODS]
   if bad or not args.methods:
     raise ValueError(f'--methods={",".join(args.methods)}: need some of {METHODS}')
@@ -341,7 +342,7 @@ def main(args: Args) -> None:
       f'| {r["backend"]} | {r["batch"]} | {r["frames_per_call"]} | '
       f'{r["compile_s"]:.2f} | {r["run_s"]:.4f} | {r["frames_per_s"]:,.0f} |'
     )
-  out = args.out or os.path.join(OUT, f'render_{kind}.json')
+  out = args.out or f'out/benchmarks/render_{kind}.json'
   settings = dataclasses.asdict(args)
   result = {
     'device': device.device_kind,

@@ -25,7 +25,6 @@ import json
 import numpy as np
 
 import physsim
-from benchmarks import out_path
 from experiments.pipeline import cli, files, report
 from experiments.pipeline import posterior as posterior_lib
 from experiments.studies import tables as tables_lib
@@ -42,7 +41,7 @@ class Args:
   """
 
   tables: tuple[str, ...] = cli.required(())
-  out: str = out_path('tables_compare')
+  out: str = 'out/benchmarks/tables_compare.json'
 
 
 PRESETS = {'default': Args()}

@@ -32,7 +32,6 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import model  # noqa: E402
-from benchmarks import OUT  # noqa: E402
 from experiments.pipeline import cli, files  # noqa: E402
 from model import train  # noqa: E402
 
@@ -301,7 +300,7 @@ def main(args: Args) -> None:
   for r in rows:
     cells = [f'{r[c]:.3g}' if isinstance(r[c], float) else str(r[c]) for c in cols]
     print('| ' + ' | '.join(cells) + ' |')
-  out = args.out or os.path.join(OUT, f'train_{device}.json')
+  out = args.out or f'out/benchmarks/train_{device}.json'
   result = {
     'flags': {
       'batch': args.batch,

@@ -1,0 +1,92 @@
+"""Every benchmark is a script on the scripts' one config mechanism
+(``experiments.pipeline.cli``): a frozen ``Args`` with documented fields and
+presets, no raw absl flags, no ``sys.path`` edits, run as
+``python -m benchmarks.NAME``, and its results by default outside the source
+tree."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+import pathlib
+import subprocess
+import sys
+from unittest import mock
+
+import pytest
+from absl import flags
+
+from experiments.pipeline import cli
+
+_ROOT = pathlib.Path(__file__).resolve().parents[2]
+NAMES = sorted(
+  p.stem for p in (_ROOT / 'benchmarks').glob('*.py') if p.stem != '__init__'
+)
+
+
+def _module(name: str):
+  with mock.patch.dict(os.environ):  # some set XLA's settings on import
+    return importlib.import_module(f'benchmarks.{name}')
+
+
+def _presets(mod) -> dict:
+  """The presets ``cli.run`` gets (mesh_convergence's wrap its study's)."""
+  return {
+    k: v if isinstance(v, mod.Args) else mod.Args(study=v)
+    for k, v in mod.PRESETS.items()
+  }
+
+
+def test_every_benchmark_is_found():
+  assert len(NAMES) >= 18 and 'joint_pairs' in NAMES and 'train_throughput' in NAMES
+
+
+@pytest.mark.parametrize('name', NAMES)
+def test_a_benchmark_declares_its_settings_as_the_scripts_do(name):
+  text = (_ROOT / 'benchmarks' / f'{name}.py').read_text()
+  # the package is not installed: a module that imported it would not run as
+  # a file (python benchmarks/NAME.py), as the GPU job scripts run them
+  for raw in ('flags.DEFINE', 'FLAGS.', 'sys.path', 'app.run(', 'from benchmarks'):
+    assert raw not in text, f'{name}: {raw}'
+  assert 'cli.run(' in text and "if __name__ == '__main__':" in text
+  mod = _module(name)
+  assert dataclasses.is_dataclass(mod.Args)
+  assert mod.Args.__dataclass_params__.frozen
+  presets = _presets(mod)
+  assert 'default' in presets
+  cli.leaves(mod.Args)  # every field documented, of a type a flag carries
+  fv = flags.FlagValues()
+  cli.define_flags(mod.Args, presets, fv)  # flag names unique, presets valid
+  for preset in presets.values():  # results go to the user's folder
+    for leaf in cli.leaves(mod.Args):
+      if leaf.path[-1] in ('out', 'workdir'):
+        value = str(getattr(preset, leaf.path[-1]))
+        assert not value.startswith('benchmarks'), f'{name}: {value}'
+
+
+def test_default_json_paths_are_outside_the_source_tree():
+  for name in ('gp_placement', 'point_rule', 'gust_floor', 'physsim_throughput'):
+    assert _module(name).Args().out == f'out/benchmarks/{name}.json'
+
+
+def test_list_flags_are_refused_by_name():
+  gust_floor = _module('gust_floor')
+  assert gust_floor._positive_floats('winds', ('1', '2.5')) == [1.0, 2.5]
+  for bad in (('a',), ('1', 'nan'), (), ('-1',), ('inf',)):
+    with pytest.raises(ValueError, match=r'--winds=.*: need positive numbers'):
+      gust_floor._positive_floats('winds', bad)
+
+
+def test_a_benchmark_runs_as_a_module_and_names_a_missing_flag(tmp_path):
+  env = dict(os.environ, PYTHONPATH=str(_ROOT))
+  run = lambda *a: subprocess.run(  # noqa: E731
+    [sys.executable, '-m', *a], cwd=_ROOT, env=env, capture_output=True, text=True,
+    timeout=300,
+  )  # fmt: skip
+  helped = run('benchmarks.point_rule', '--help')
+  assert '--tables' in helped.stdout + helped.stderr
+  missing = run('benchmarks.point_rule')
+  assert missing.returncode == 2
+  assert missing.stderr.startswith('error: missing --tables')
+  assert 'Traceback' not in missing.stderr
