@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import textwrap
 
 import matplotlib
 import numpy as np
@@ -260,101 +261,150 @@ def describe(x_best, y_best, space) -> str:
   )
 
 
+WIDTH = 100  # columns the printed table and its notes fit in
+# What the table calls each quantity (short enough for WIDTH).
+ROW_NAMES = {
+  'bending_scale': 'bending (x)',
+  'wind_speed': 'wind (m/s)',
+  'area_weight': 'weight (kg/m^2)',
+  'load_ratio': 'load ratio',
+}
+_ERROR_NAMES = {
+  'wind_speed_pct': ('wind', '%'),
+  'area_weight_pct': ('area weight', '%'),
+  'bending_factor': ('bending', 'x'),
+  'load_ratio_pct': ('load ratio', '%'),
+}
+
+
+def _markdown(head: list[str], rows: list[list[str]]) -> list[str]:
+  """A markdown table whose columns are padded to their widest cell, so that
+  it reads as a table in a terminal too."""
+  widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
+  line = lambda cells: (
+    '| ' + ' | '.join(c.ljust(w) for c, w in zip(cells, widths, strict=True)) + ' |'
+  )
+  return [line(head), '|' + '|'.join('-' * (w + 2) for w in widths) + '|'] + [
+    line(r) for r in rows
+  ]
+
+
+def notes(*paragraphs: str, width: int = WIDTH) -> list[str]:
+  """Notes under a table, each wrapped to ``width`` columns."""
+  return [
+    line
+    for p in paragraphs
+    if p
+    for line in textwrap.wrap(p, width, subsequent_indent='  ')
+  ]
+
+
+def errors_table(errors: dict) -> list[str]:
+  """The point's errors against the truth beside the range centre's, as a small
+  table (percent; a factor for bending)."""
+  rows = []
+  for key, (name, unit) in _ERROR_NAMES.items():
+    cell = lambda v: f'x{v:.2f}' if unit == 'x' else f'{v:.1f}%'  # noqa: B023
+    rows.append(
+      [name, cell(errors['estimate'][key]), cell(errors['range_centre'][key])]
+    )
+  return _markdown(['error against the truth', 'point', 'range centre'], rows)
+
+
 def report_table(result: dict) -> str:
-  """A markdown table of an estimate: the point, its credible intervals, and
-  how much narrower than the prior they are (posterior), or the GP's interval
-  (argmin); with ground truth also the truth, the range-centre guess and the
-  errors of both."""
-  space = physsim.search_space(result['material'])
-  centre = space.center()
+  """An estimate for a person, in at most ``WIDTH`` columns: per quantity the
+  point, its 50% and 90% credible intervals and how much narrower the 90% one
+  is than the prior's (posterior), or the GP's interval (the paper's argmin);
+  with ground truth the truth beside them and a small table of the point's
+  errors against the range centre's; notes wrapped under it."""
   retrieval = result.get('network_retrieval_vs_chance', {})
   truth = result.get('truth')
   posterior = result.get('point', 'argmin') != 'argmin'
-  rows = list(physsim.Params._fields) + ['load_ratio']
-  head = ['parameter']
-  head += ['true'] if truth else []
+  head = ['quantity'] + (['true'] if truth else [])
   if posterior:
-    point = 'least expected error' if result.get('point') == 'bayes' else 'median'
-    head += [point, '50% interval', '90% interval', 'prior/posterior width']
+    head += ['point', '50% interval', '90% interval', 'narrower']
   else:
-    head += ['estimated (argmin)', 'GP 90% interval (not calibrated)']
-  head += ['range centre'] if truth else []
-  head += ['network retrieval (1 = chance)']
-  lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+    head += ['point (argmin)', 'GP 90% interval']
+  head += ['retrieval'] if retrieval else []
   true = dict(truth or {})
   if truth:
     true['load_ratio'] = float(
       physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
     )
-  guess = dict(zip(physsim.Params._fields, map(float, centre), strict=True))
-  guess['load_ratio'] = float(physsim.load_ratio(centre.wind_speed, centre.area_weight))
   iv = lambda e, k: f'[{e[k][0]:.3g}, {e[k][1]:.3g}]'
-  for name in rows:
+  rows = []
+  for name in [*physsim.Params._fields, 'load_ratio']:
     e = result['load_ratio'] if name == 'load_ratio' else result['estimate'][name]
-    cells = [name if name != 'load_ratio' else 'load ratio rho v^2/(w g)']
-    cells += [f'{true[name]:.3g}'] if truth else []
+    cells = [ROW_NAMES[name]] + ([f'{true[name]:.3g}'] if truth else [])
+    cells += [f'{e["value"]:.3g}']
     if posterior:
-      cells += [f'{e["value"]:.3g}', iv(e, 'interval_50'), iv(e, 'interval_90'),
-                f'x{e["narrowing_90"]:.1f}']  # fmt: skip
+      cells += [iv(e, 'interval_50'), iv(e, 'interval_90'), f'x{e["narrowing_90"]:.1f}']
     else:
-      cells += [f'{e["value"]:.3g}', iv(e, 'interval_90')]
-    cells += [f'{guess[name]:.3g}'] if truth else []
-    na = '-' if name == 'load_ratio' else 'n/a'
-    cells += [f'{retrieval[name]:.2f}' if name in retrieval else na]
-    lines.append('| ' + ' | '.join(cells) + ' |')
-  lines.append('')
-  if posterior:
-    lines.append(
-      "prior/posterior width: the prior's 90% width over the posterior's "
-      "(x1.0: the video told nothing about it; the interval is the prior's)."
-    )
-    lines.append(calibration_line(result.get('calibration')))
+      cells += [iv(e, 'interval_90')]
+    if retrieval:
+      cells += [f'{retrieval[name]:.2f}' if name in retrieval else '-']
+    rows.append(cells)
+  lines = _markdown(head, rows)
   if truth:
-    err = result['errors']
-    lines.append(
-      'errors (estimate vs range centre): '
-      + json.dumps(
-        {
-          k: [round(err['estimate'][k], 2), round(err['range_centre'][k], 2)]
-          for k in err['estimate']
-        }
-      )
-    )
-  if retrieval:
-    lines.append(
-      'network retrieval: how well the network tells each parameter apart between '
-      f'held-out simulations ({_RETRIEVAL_MEANING})'
-    )
+    lines += [''] + errors_table(result['errors'])
+  lines.append('')
+  point = {
+    'bayes': 'the value with the least expected error',
+    'median': 'the posterior median',
+  }
+  lines += notes(
+    "load ratio: rho v^2 / (w g), wind pressure over weight, what the sheet's "
+    'shape measures best.',
+    f'point: {point.get(result.get("point"), "the best simulation (not calibrated)")}; '
+    "narrower: the prior's 90% width over the interval's (x1.0: the recording "
+    "told nothing about it, the interval is the prior's)."
+    if posterior
+    else "GP 90% interval: the Gaussian process's, not calibrated.",
+    calibration_line(result.get('calibration')) if posterior else '',
+    'retrieval: how well the network tells each quantity apart between held-out '
+    f'simulations, 1 = chance ({_RETRIEVAL_MEANING}).'
+    if retrieval
+    else '',
+  )
   return '\n'.join(lines)
 
 
 def joint_table(joint: dict) -> str:
-  """A markdown table of a joint estimate: shared bending and area weight, each
-  recording's wind and load ratio, beside each recording estimated alone."""
+  """A joint estimate for a person, in at most ``WIDTH`` columns: shared
+  bending and area weight and each recording's wind and load ratio (point,
+  90% interval, narrowing), each beside the same recording estimated alone."""
   iv = lambda e: f'[{e["interval_90"][0]:.3g}, {e["interval_90"][1]:.3g}]'
-  lines = [
-    '| quantity | median | 90% interval | prior/posterior width | alone: median [90%] |',
-    '|---|---|---|---|---|',
-  ]
+  rows = []
   for name in ('bending_scale', 'area_weight'):
     e = joint[name]
-    alone = '; '.join(
-      f'{r["alone"][name]["value"]:.3g} {iv(r["alone"][name])}'
-      for r in joint['recordings']
-    )
-    lines.append(
-      f'| {name} (shared) | {e["median"]:.3g} | {iv(e)} | x{e["narrowing_90"]:.1f} | {alone} |'
-    )
+    rows.append([f'{ROW_NAMES[name]}, shared', f'{e["median"]:.3g}', iv(e),
+                 f'x{e["narrowing_90"]:.1f}', '-', '-'])  # fmt: skip
   for k, r in enumerate(joint['recordings']):
     for name in ('wind_speed', 'load_ratio'):
-      e = r[name]
-      a = r['alone'][name] if name in r['alone'] else None
-      alone = f'{a["value"]:.3g} {iv(a)}' if a else '-'
-      lines.append(
-        f'| {name}, recording {k} | {e["median"]:.3g} | {iv(e)} | '
-        f'x{e["narrowing_90"]:.1f} | {alone} |'
-      )
-  lines += ['', calibration_line(joint.get('calibration'))]
+      e, a = r[name], r['alone'].get(name)
+      rows.append([
+        f'{ROW_NAMES[name]}, rec. {k}', f'{e["median"]:.3g}', iv(e),
+        f'x{e["narrowing_90"]:.1f}', f'{a["value"]:.3g}' if a else '-',
+        iv(a) if a else '-',
+      ])  # fmt: skip
+  head = ['quantity', 'point', '90% interval', 'narrower', 'alone', 'alone 90%']
+  lines = _markdown(head, rows)
+  alone = [
+    [f'recording {k}']
+    + [
+      f'{r["alone"][n]["value"]:.3g} {iv(r["alone"][n])}'
+      for n in ('bending_scale', 'area_weight')
+    ]
+    for k, r in enumerate(joint['recordings'])
+  ]
+  lines += [''] + _markdown(
+    ['each alone', ROW_NAMES['bending_scale'], ROW_NAMES['area_weight']], alone
+  )
+  lines += [''] + notes(
+    "point: the joint posterior's median; narrower: the prior's 90% width over "
+    "the interval's; alone: the same recording estimated by itself.",
+    calibration_line(joint.get('calibration')),
+  )
   return '\n'.join(lines)
 
 

@@ -94,3 +94,92 @@ def test_shape_estimates_quote_their_own_calibration():
 def test_iterations_of_counts_the_initial_design_as_iteration_zero():
   it = report.iterations_of(n_evals=10, n_init=4, q=2)
   assert list(it) == [0, 0, 0, 0, 1, 1, 2, 2, 3, 3]
+
+
+def _entry(value, lo50, hi50, lo90, hi90, narrowing):
+  return {
+    'value': value, 'posterior_median': value, 'interval_50': [lo50, hi50],
+    'interval_90': [lo90, hi90], 'narrowing_90': narrowing,
+  }  # fmt: skip
+
+
+def _result(**extra):
+  truth = {'bending_scale': 2.0, 'wind_speed': 4.0, 'area_weight': 0.2}
+  best = physsim.Params(0.5, 5.0, 0.25)
+  space = physsim.search_space('gray_interlock')
+  return {
+    'material': 'gray_interlock',
+    'point': 'bayes',
+    'estimate': {
+      'bending_scale': _entry(0.5, 0.3, 0.9, 0.12, 3.1, 1.2),
+      'wind_speed': _entry(5.0, 4.7, 5.3, 4.41, 5.62, 4.2),
+      'area_weight': _entry(0.25, 0.2, 0.3, 0.15, 0.33, 1.5),
+    },
+    'load_ratio': _entry(1.02, 0.9, 1.1, 0.81, 1.23, 3.3),
+    'truth': truth,
+    'errors': report.errors(best, truth, space),
+    'calibration': {
+      'recalibrated': True,
+      'mode': 'known wind',
+      'n_calibration_recordings': 200,
+      'setting': 'gray interlock, demo size, five networks of the shipped recipe '
+      'with their own simulations and a long description of what was measured',
+      'networks': 5,
+      'coverage': {
+        k: {'interval_90': 0.9, 'interval_50': 0.5}
+        for k in ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
+      },
+    },  # fmt: skip
+    **extra,
+  }
+
+
+def test_the_table_fits_the_terminal_and_prints_what_the_result_holds():
+  r = {'bending_scale': 1.05, 'wind_speed': 0.4, 'area_weight': 0.95}
+  table = report.report_table(_result(network_retrieval_vs_chance=r))
+  lines = table.splitlines()
+  assert max(map(len, lines)) <= report.WIDTH
+  wind = next(x for x in lines if x.startswith('| wind'))
+  assert '| 4 ' in wind and '| 5 ' in wind  # the truth, then the point
+  assert '[4.7, 5.3]' in wind and '[4.41, 5.62]' in wind and 'x4.2' in wind
+  assert '| 0.40 ' in wind  # its retrieval
+  ratio = next(x for x in lines if x.startswith('| load ratio'))
+  assert f'{float(physsim.load_ratio(4.0, 0.2)):.3g}' in ratio  # the true ratio
+  # The errors as a table: wind 25% off (5 vs 4), the centre 3.5 m/s 12.5%.
+  err = next(x for x in lines if x.startswith('| wind ') and '%' in x)
+  assert '25.0%' in err and '12.5%' in err
+  bending = next(x for x in lines if x.startswith('| bending ') and 'x4.00' in x)
+  assert 'x2.00' in bending  # the range centre (1) against a true 2
+  assert 'least expected error' in table  # the note says what the point is
+  assert 'calibration (known wind)' in table
+
+
+def test_the_argmin_table_and_no_truth():
+  result = _result(point='argmin', truth=None)
+  table = report.report_table(result)
+  assert 'point (argmin)' in table and 'GP 90% interval' in table
+  assert 'error against the truth' not in table and 'calibration' not in table
+  assert max(map(len, table.splitlines())) <= report.WIDTH
+
+
+def test_the_joint_table_fits_and_sets_each_recording_beside_itself_alone():
+  alone = _result()['estimate']
+  rec = lambda w: {
+    'wind_speed': {'median': w, 'interval_90': [w - 0.2, w + 0.2], 'narrowing_90': 5.0},
+    'load_ratio': {'median': 1.0, 'interval_90': [0.9, 1.1], 'narrowing_90': 4.0},
+    'alone': {**alone, 'load_ratio': _entry(1.01, 0.9, 1.1, 0.8, 1.2, 3.0)},
+  }  # fmt: skip
+  shared = {'median': 0.21, 'interval_90': [0.19, 0.23], 'narrowing_90': 6.5}
+  joint = {
+    'bending_scale': {**shared, 'median': 1.3}, 'area_weight': shared,
+    'recordings': [rec(2.0), rec(3.0), rec(3.5)], 'calibration': None,
+  }  # fmt: skip
+  table = report.joint_table(joint)
+  lines = table.splitlines()
+  assert max(map(len, lines)) <= report.WIDTH
+  assert any(
+    x.startswith('| weight (kg/m^2), shared') and '[0.19, 0.23]' in x for x in lines
+  )
+  rec2 = next(x for x in lines if x.startswith('| wind (m/s), rec. 2'))
+  assert '| 3.5 ' in rec2 and '[3.3, 3.7]' in rec2 and '[4.41, 5.62]' in rec2
+  assert sum(x.startswith('| recording ') for x in lines) == 3
