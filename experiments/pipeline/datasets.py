@@ -405,8 +405,9 @@ def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str |
   lo, hi = np.percentile(valid, [1, 99]) if valid.size else (0.0, 1.0)
   cmap = plt.get_cmap('viridis').with_extremes(bad='white')
   fig, axes = plt.subplots(
-    len(seqs), len(cols), figsize=(1.6 * len(cols), 1.6 * len(seqs)), squeeze=False
-  )
+    len(seqs), len(cols), figsize=(1.6 * len(cols) + 1.0, 1.6 * len(seqs) + 0.4),
+    squeeze=False, layout='constrained',  # labels and colour bar inside the canvas
+  )  # fmt: skip
   for i, (s, r) in enumerate(zip(seqs, rows, strict=True)):
     for j, c in enumerate(cols):
       ax = axes[i, j]

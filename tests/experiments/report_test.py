@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 import physsim
 from experiments.pipeline import report
@@ -183,3 +184,36 @@ def test_the_joint_table_fits_and_sets_each_recording_beside_itself_alone():
   rec2 = next(x for x in lines if x.startswith('| wind (m/s), rec. 2'))
   assert '| 3.5 ' in rec2 and '[3.3, 3.7]' in rec2 and '[4.41, 5.62]' in rec2
   assert sum(x.startswith('| recording ') for x in lines) == 3
+
+
+def _texts_inside(fig) -> list[str]:
+  """The texts of ``fig`` (titles, labels, ticks, colour-bar labels) drawn
+  partly outside its canvas."""
+  canvas = FigureCanvasAgg(fig)  # the figure was closed after saving
+  canvas.draw()
+  renderer = canvas.get_renderer()
+  box = fig.bbox
+  out = []
+  for t in fig.findobj(lambda a: hasattr(a, 'get_text') and a.get_visible()):
+    if not t.get_text():
+      continue
+    e = t.get_window_extent(renderer)
+    if e.x0 < box.x0 - 1 or e.y0 < box.y0 - 1 or e.x1 > box.x1 + 1 or e.y1 > box.y1 + 1:
+      out.append(t.get_text())
+  return out
+
+
+@pytest.mark.parametrize('n_frames', [2, 6])
+def test_the_montage_keeps_its_labels_inside_the_canvas(
+  n_frames, tmp_path, monkeypatch
+):
+  figs = []
+  monkeypatch.setattr(
+    report.files, 'savefig', lambda fig, path, dpi=100: figs.append(fig)
+  )
+  depth = np.random.default_rng(0).uniform(1.0, 2.0, (n_frames, 16, 16))
+  report.plot_montage(depth, depth, 20.0, str(tmp_path / 'montage.png'), n=n_frames)
+  (fig,) = figs
+  assert _texts_inside(fig) == []
+  labels = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, 'get_text'))]
+  assert any(lbl.startswith('depth (m)') for lbl in labels)
