@@ -15,8 +15,8 @@ Backends (``BACKENDS``; ``'auto'`` picks ``'warp'`` on a GPU, else ``'c'``):
 * ``'mjx'``: ``mjx.step`` (``impl='warp'``) per substep inside a
   ``lax.scan``, the forces in JAX between the steps. The same kernels, one
   hand-over per substep; kept as a cross-check of ``'warp'``.
-* ``'c'``: MuJoCo C in worker processes, float64 NumPy forces: the oracle,
-  and the fastest on a CPU.
+* ``'c'``: MuJoCo C in worker threads (MuJoCo releases the GIL while it
+  steps), float64 NumPy forces: the oracle, and the fastest on a CPU.
 
 Per-world fields (``WorldInputs``: ``body_mass`` from the area weight, wind
 speed, direction, gusts and bending scale) are all arrays, so new values never
@@ -33,7 +33,6 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import dataclasses
-import multiprocessing
 import os
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -436,22 +435,23 @@ def _np_world_inputs(w: dict, i: int) -> dict:
   return {k: (g if k == 'gusts' else np.asarray(w[k][i], np.float64)) for k in w}
 
 
-def _c_worker(args):
-  mesh, material, config, worlds, frames, substeps, warm_frames = args
-  model = build(mesh, material, config)
-  return [_c_world(model, w, frames, substeps, warm_frames) for w in worlds]
+def _c_threads(model: ClothModel, workers: int):
+  """The model's ``workers`` threads for MuJoCo C, each with its own compiled
+  copy of the cloth (``_c_world`` sets a world's masses on the MjModel it is
+  given), started once and kept with the model.
 
-
-def _c_pool(model: ClothModel, workers: int):
-  """The model's pool of ``workers`` MuJoCo C processes, started once (spawned:
-  JAX is not fork-safe) and kept with the model, so repeated batches do not pay
-  the start-up of fresh interpreters."""
-  key = ('c_pool', workers)
+  Threads, not processes: MuJoCo releases the GIL inside ``mj_step``, where a
+  rollout spends its time, so threads use the cores as worker processes did,
+  and a library user's plain script (no ``if __name__ == '__main__'`` guard,
+  which spawned processes re-import) works.
+  """
+  key = ('c_threads', workers)
   if key not in model.programs:
-    ctx = multiprocessing.get_context('spawn')
-    model.programs[key] = concurrent.futures.ProcessPoolExecutor(
-      workers, mp_context=ctx
-    )
+    copies = [model] + [
+      build(model.mesh, model.material, model.config) for _ in range(workers - 1)
+    ]
+    pool = concurrent.futures.ThreadPoolExecutor(workers, 'mujoco-c')
+    model.programs[key] = (pool, copies)
   return model.programs[key]
 
 
@@ -464,13 +464,16 @@ def _c_rollout(model, w: dict, frames, substeps, warm_frames, workers):
   if workers <= 1:
     xs = [_c_world(model, wi, frames, substeps, warm_frames) for wi in worlds]
   else:
+    pool, copies = _c_threads(model, workers)
     chunks = [worlds[i::workers] for i in range(workers)]
-    args = [
-      (model.mesh, model.material, model.config, ch, frames, substeps, warm_frames)
-      for ch in chunks
-    ]
-    with cpu_only_children():  # workers spawned now keep off the GPU
-      parts = list(_c_pool(model, workers).map(_c_worker, args))
+    parts = list(
+      pool.map(
+        lambda k: [
+          _c_world(copies[k], wi, frames, substeps, warm_frames) for wi in chunks[k]
+        ],
+        range(workers),
+      )
+    )
     xs = [None] * b
     for i, part in enumerate(parts):
       for j, x in enumerate(part):
@@ -540,7 +543,7 @@ def rollout_fn(
     frames, fps, warmup: the frame plan (as ``simulate``).
     backend: ``'warp'`` (MuJoCo Warp a frame at a time, ``physsim.warp_frames``),
       ``'mjx'`` (``mjx.step`` per substep in a ``lax.scan``), ``'c'`` (MuJoCo
-      C through a host callback, ``workers`` processes; default all cores) or
+      C through a host callback, ``workers`` threads; default all cores) or
       ``'auto'`` (``resolve_backend``).
     workers: see ``backend``.
 
@@ -629,7 +632,7 @@ def simulate(
       (MuJoCo C, one world at a time, float64 forces; the oracle and CPU
       fallback) or ``'auto'`` (``'warp'`` on a GPU, else ``'c'``).
     space: allowed parameter ranges (default: the union over the paper's fabrics).
-    workers: processes for the C backend (default: all cores).
+    workers: threads for the C backend (default: all cores).
     material: the fabric (or one per world) whose measured bending a scale of 1
       means; default the model's. MuJoCo's bending stencil is linear in the
       rigidity, so one compiled model simulates every material of the same
