@@ -62,7 +62,7 @@ CONFIG = est.EstimateConfig(
   stop_rel_change=0.1,
   stop_window=3,
   backend='c',
-  workers=1,  # spawning C workers costs more than 6x6 cloths
+  workers=1,  # worker threads cost more than 6x6 cloths gain
   # The recording is rendered without the sensor model (an inverse crime), so
   # candidates are compared without it too; its effect is tested separately.
   sensor_noise=False,
