@@ -38,7 +38,9 @@ class Args:
 
   Attributes:
     recording: the depth video: a folder of 16-bit PNGs in mm, .npy/.npz in
-      metres, a video file, or a dataset sequence folder (meta.json, cam0/).
+      metres, a ROS 1/2 or RealSense bag (its depth, CameraInfo and IMU
+      topics: --depth_topic, --info_topic, --imu_topic), a video file, or a
+      dataset sequence folder (meta.json, cam0/).
       Several, comma-separated: one fabric in several recordings (e.g. two
       fan settings), estimated jointly (one bending and area weight, one wind
       each).

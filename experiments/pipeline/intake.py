@@ -48,7 +48,7 @@ import numpy as np
 import physsim
 from experiments.pipeline import cli, files, objective
 from experiments.pipeline import recording as recording_lib
-from physsim import alignment, camera_files, dataset, scene, video
+from physsim import alignment, bags, camera_files, dataset, scene, video
 
 # Pin spacing may differ from the simulated cloth's by this share.
 PIN_SPACING_TOL = 0.2
@@ -113,6 +113,9 @@ class IntakeConfig:
       the simulated cloth seen from the fitted pose, at rest or swung about
       its top edge (the best of 0-90 degrees); below it the search is
       refused.
+    depth_topic, info_topic, imu_topic: a ROS bag's (or RealSense .bag's)
+      depth image, CameraInfo and IMU topics; empty: found by name
+      (physsim.bags), the candidates listed when ambiguous.
     allow_no_camera: take in a recording without a camera file (no
       --camera_json): nothing can then be removed as background but by
       depth_range or mask, nor the camera placed, so training-like cameras
@@ -132,6 +135,9 @@ class IntakeConfig:
   world_up: str = ''
   wind_toward_camera: bool = False
   min_overlap: float = 0.5
+  depth_topic: str = ''
+  info_topic: str = ''
+  imu_topic: str = ''
   allow_no_camera: bool = False
 
   def check(self) -> None:
@@ -339,29 +345,44 @@ def take_in(
   config.check()
   if is_sequence(path) and not camera_json:
     return _passthrough(path, est)
-  if not camera_json and not config.allow_no_camera:
+  bag = None
+  if bags.is_bag(path):
+    bag = bags.read_bag(
+      path, depth_topic=config.depth_topic, info_topic=config.info_topic,
+      imu_topic=config.imu_topic, start=config.start,
+    )  # fmt: skip
+  bag_camera = bag.camera if bag is not None else None
+  if not camera_json and bag_camera is None and not config.allow_no_camera:
     raise ValueError(
       f'{path}: no camera file (--camera_json): without it no background can be '
       'removed but by depth_range or mask (a blank wall would pass as cloth) and '
       'the camera cannot be placed; give it, or pass --allow_no_camera to '
       'simulate training-like cameras anyway'
     )
-  cam = camera_files.read_camera(camera_json) if camera_json else None
+  cam = camera_files.read_camera(camera_json) if camera_json else bag_camera
+  if cam is not None and bag is not None and bag.gravity is not None:
+    if cam.gravity is None:
+      cam = cam._replace(gravity=bag.gravity)
   frames_path = os.path.join(path, 'cam0') if is_sequence(path) else path
-  header = video.read_header(frames_path, config.frame_glob, config.start)
+  header = (
+    None if bag else video.read_header(frames_path, config.frame_glob, config.start)
+  )
   if header is not None:
     _check_size(path, header.width, header.height, cam)
-  src_fps = config.fps or (cam.fps if cam else None) or None
+  src_fps = config.fps or (cam.fps if cam else None) or (bag.fps if bag else None)
   frames_path, truth = path, None
   if is_sequence(path):  # a dataset sequence with another camera file: camera 0
     frames_path = os.path.join(path, 'cam0')
     truth = recording_lib.truth_of(
       recording_lib.read_json(os.path.join(path, 'meta.json'))
     )
-  vid = video.load_depth_video(
-    frames_path, source_fps=src_fps, fps=None, size=None, depth_scale=config.depth_scale,
-    start=config.start, pattern=config.frame_glob,
-  )  # fmt: skip
+  if bag is not None:
+    vid = video.DepthVideo(bag.depth, src_fps, False, f'bag:{os.path.abspath(path)}')
+  else:
+    vid = video.load_depth_video(
+      frames_path, source_fps=src_fps, fps=None, size=None,
+      depth_scale=config.depth_scale, start=config.start, pattern=config.frame_glob,
+    )  # fmt: skip
   if vid.normalised:
     raise ValueError(
       f'{path}: normalised (8-bit) depth has no absolute scale; the estimate '
@@ -404,7 +425,7 @@ def take_in(
   intake = Intake(
     bg.depth, vid.fps, index + config.start, intr, None, None, '', valid,
     bg.fraction, None, planes, path, truth, cam.form if cam else '',
-    camera_file=camera_json,
+    camera_file=camera_json, warnings=bag.notes if bag is not None else (),
   )  # fmt: skip
   if cam is None:
     return intake
@@ -517,7 +538,8 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
   overlap = float(ious[best])
   out = intake._replace(
     pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap,
-    swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best], warnings=warnings,
+    swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best],
+    warnings=intake.warnings + tuple(warnings),
     alignment_sd=sd,
   )  # fmt: skip
   if overlap < config.min_overlap:

@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 
 from experiments import estimate
 from experiments.pipeline import cli, intake, objective
-from physsim import camera_files, video
+from physsim import bags, camera_files, video
 from tests.experiments.bad_inputs_test import png_header_only, tree_digest
 
 _ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -46,6 +46,7 @@ N_EXAMPLES = {
   'flags': 300,
   'pipeline': 250,
   'command_line': 6,
+  'bag': 60,
 }
 
 
@@ -444,3 +445,39 @@ def test_the_command_line_says_one_line_and_exits_2(scratch, data):
 
 def test_the_suite_tries_500_inputs_or_more():
   assert sum(N_EXAMPLES.values()) >= 500
+
+
+# --- bags ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def bag_bytes(tmp_path_factory):
+  pytest.importorskip('rosbags')
+  from rosbags.typesys import Stores  # noqa: PLC0415
+
+  from tests.physsim.bags_test import write_bag  # noqa: PLC0415
+
+  path, _, _ = write_bag(
+    tmp_path_factory.mktemp('bag') / 'rec.bag', Stores.ROS1_NOETIC, frames=3, tf=False
+  )
+  return pathlib.Path(path).read_bytes()
+
+
+@_settings('bag')
+@given(data=st.data())
+def test_damaged_bags_are_read_or_refused_by_name(scratch, bag_bytes, data):
+  raw = bytearray(bag_bytes)
+  how = data.draw(st.sampled_from(['truncate', 'flip', 'both']))
+  if how in ('truncate', 'both'):
+    raw = raw[: data.draw(st.integers(0, len(raw)))]
+  if how in ('flip', 'both') and raw:
+    for _ in range(data.draw(st.integers(1, 8))):
+      i = data.draw(st.integers(0, len(raw) - 1))
+      raw[i] = data.draw(st.integers(0, 255))
+  path = _write(os.path.join(scratch, 'damaged.bag'), bytes(raw))
+  try:
+    rec = bags.read_bag(path)
+  except ValueError as e:
+    assert_names(e, path)
+    return
+  assert np.isfinite(rec.depth).all() and rec.depth.ndim == 3
