@@ -16,8 +16,8 @@ def test_the_shape_distance_needs_no_network():
 
 
 def test_a_distance_that_embeds_without_a_network_is_refused():
-  with pytest.raises(ValueError, match='missing --model: --distance=psd'):
-    embedding.for_distance('', 'psd', 32)
+  with pytest.raises(ValueError, match='missing --model: --distance=energy'):
+    embedding.for_distance('', 'energy', 32)
 
 
 @pytest.mark.parametrize('size', [8, 2048])

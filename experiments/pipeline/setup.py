@@ -1,0 +1,142 @@
+"""What an estimate is built from, resolved once at the edge.
+
+A command line or a library user names settings and a network's folder; the
+pipeline needs values: the network and what it was trained on, how it was
+made (recipe, held-out accuracy, retrieval), the rest mesh and the midpoint
+of its pins, the search box, and the calibration tables that match these
+settings. ``resolve`` reads each of them once and checks them together (the
+settings, a network of another fabric, a distance that needs a network), so
+that the objective, the search and the report take these values instead of
+re-reading config fields and folders.
+
+  from experiments.pipeline import objective, setup
+  s = setup.resolve(objective.PRESETS['smoke'], model_dir)
+  s.network.embedding.image_size   # the frames it compares
+  s.calibration                     # report.calibration_note of these settings
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+import physsim
+from experiments.pipeline import embedding, report
+from experiments.pipeline import objective as obj_lib
+
+
+class Network(NamedTuple):
+  """The network an estimate compares frames through, and how it was made.
+
+  Attributes:
+    model_dir: its folder ('' for none: the shape distance; several members
+      of an ensemble joined by commas).
+    embedding: the loaded network (``embedding.EmbeddingNet``).
+    recipe: ``embedding.network_recipe`` (None without a network).
+    accuracy: its held-out triplet accuracy, if recorded.
+    retrieval: its parameter retrieval over chance, if recorded.
+  """
+
+  model_dir: str
+  embedding: embedding.EmbeddingNet
+  recipe: dict | None
+  accuracy: float | None
+  retrieval: dict[str, float] | None
+
+
+class Setup(NamedTuple):
+  """Everything an estimate of one fabric needs besides its recordings.
+
+  Attributes:
+    config: the checked settings.
+    network: the network and its record (``Network``).
+    mesh: the rest mesh simulated (``objective.mesh``).
+    pin_centre: (3,) the midpoint of its pinned vertices, where a camera's
+      placement error turns about.
+    space: the fabric's search box.
+    calibration: ``report.calibration_note`` of these settings, network and
+      mode (None where no calibration is shipped).
+  """
+
+  config: obj_lib.EstimateConfig
+  network: Network
+  mesh: physsim.Mesh
+  pin_centre: np.ndarray
+  space: physsim.SearchSpace
+  calibration: dict | None
+
+
+def network(
+  model_dir: str,
+  distance: str,
+  image_size: int,
+  material: str,
+  *,
+  allow_other_material: bool = False,
+) -> Network:
+  """The network for ``distance`` (``embedding.for_distance``) with its record.
+
+  Raises:
+    ValueError: no network for a distance that embeds, an image size out of
+      range, or a network trained on other fabrics than ``material`` (unless
+      ``allow_other_material``), naming the folder and both fabrics.
+  """
+  net = embedding.for_distance(model_dir, distance, image_size)
+  if net.materials and material not in net.materials and not allow_other_material:
+    raise ValueError(
+      f'{model_dir} was trained on {list(net.materials)}, not {material}; pass '
+      '--allow_other_material to search with it anyway'
+    )
+  return Network(
+    model_dir,
+    net,
+    embedding.network_recipe(model_dir),
+    embedding.network_accuracy(model_dir) if model_dir else None,
+    embedding.network_retrieval(model_dir) if model_dir else None,
+  )
+
+
+def resolve(
+  config: obj_lib.EstimateConfig,
+  model_dir: str = '',
+  *,
+  image_size: int = 64,
+  allow_other_material: bool = False,
+  joint: bool = False,
+  recordings: int = 1,
+) -> Setup:
+  """Checks ``config`` and reads what an estimate with it is built from, once.
+
+  Args:
+    config: the estimate's settings.
+    model_dir: the fabric's trained network ('' for none: ``--distance=shape``).
+    image_size: pixels a side the frames are compared at without a network.
+    allow_other_material: accept a network trained on other fabrics.
+    joint, recordings: a joint estimate of that many recordings (the
+      calibration's mode depends on it).
+
+  Raises:
+    ValueError: a setting out of range (``EstimateConfig.check``) or a network
+      that does not fit (``network``).
+  """
+  config.check()
+  net = network(
+    model_dir, config.distance, image_size, config.material,
+    allow_other_material=allow_other_material,
+  )  # fmt: skip
+  mesh = obj_lib.mesh(config)
+  return Setup(
+    config=config,
+    network=net,
+    mesh=mesh,
+    pin_centre=mesh.vertices[mesh.pinned].mean(0),
+    space=physsim.search_space(config.material),
+    calibration=report.calibration_note(
+      config,
+      joint=joint,
+      recordings=recordings,
+      network=net.recipe,
+      accuracy=net.accuracy,
+    ),  # fmt: skip
+  )
