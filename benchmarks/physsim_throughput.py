@@ -109,7 +109,7 @@ PRESETS = {
     seconds=0.05,
     c_seconds=0.05,
     repeats=1,
-  ),  # fmt: skip
+  ),
 }
 
 _PAPER_SEQUENCES, _PAPER_SECONDS, _WARMUP = 210, 3.0, 1.0

@@ -80,7 +80,7 @@ PRESETS = {
     frames=4,
     repeats=1,
     mujoco_frames=0,
-  ),  # fmt: skip
+  ),
 }
 
 

@@ -62,7 +62,17 @@ class Args:
   only: tuple[str, ...] = ()
 
 
-PRESETS = {'default': Args()}
+PRESETS = {
+  'default': Args(),
+  # checks the script on a CPU: one variant and the raw pixels, one seed
+  'smoke': Args(
+    workdir='out/retrieval_smoke',
+    sequences=12,
+    epochs=2,
+    seeds=(0,),
+    only=('paper', 'raw pixels, relative'),
+  ),
+}
 VARIANTS = {
   'paper (2-D, relative depth)': {},
   '8-D embedding': {'embed_dim': 8},

@@ -63,7 +63,17 @@ class Args:
   all_epochs: bool = True
 
 
-PRESETS = {'default': Args()}
+PRESETS = {
+  'default': Args(),
+  # checks the script on a CPU: a short training, one recording, the picked epochs
+  'smoke': Args(
+    workdir='out/selection_smoke',
+    sequences=12,
+    epochs=2,
+    recordings=1,
+    all_epochs=False,
+  ),
+}
 
 
 def train_all_epochs(workdir: str, material: str, sequences: int, epochs: int, backend):

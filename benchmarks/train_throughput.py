@@ -71,9 +71,7 @@ class Args:
 PRESETS = {
   'default': Args(),
   # checks the script on a CPU in about a minute
-  'smoke': Args(
-    batch=2, image_size=64, steps=2, repeats=1, warmup=1, skip_torch=True
-  ),  # fmt: skip
+  'smoke': Args(batch=2, image_size=64, steps=2, repeats=1, warmup=1, skip_torch=True),
 }
 
 _JAX_PRECISION = {'float32': 'highest', 'tf32': 'tensorfloat32', 'bfloat16': 'default'}
