@@ -72,6 +72,12 @@ class Args:
       (intake.alignment_error: large in tilt when up came from the cloth's
       plane) as camera_sd_m and camera_sd_deg; --noalignment_sd: trust the
       placement exactly.
+    allow_guessed_up: estimate from a recording whose up is a guess from the
+      cloth's own plane (no floor in view, no --world_up, --up or "gravity"):
+      a cloth the wind swings in the first frames tilts that guess by the
+      swing, and the camera with it (issue 40: 2 m too high, the wind read
+      at a third). Refused unless this is set; the posterior then carries a
+      20-degree tilt (1 sd).
     intake: how the recording is read, cleaned and aligned.
     search: the estimate's settings.
   """
@@ -86,6 +92,7 @@ class Args:
   wind_speeds: tuple[float, ...] = ()
   wind_speed_sds: tuple[float, ...] = ()
   alignment_sd: bool = True
+  allow_guessed_up: bool = False
   intake: intake.IntakeConfig = intake.IntakeConfig()
   search: objective_lib.EstimateConfig = objective_lib.EstimateConfig()
 
@@ -241,6 +248,14 @@ def _main(args: Args, config, winds) -> None:
           'the intake reads depth only'
         )
       ik = _take_in(args, path, _intake_dir(args, i))
+      if ik.up_is_guess and not args.allow_guessed_up:
+        raise ValueError(
+          f"{path}: up is a guess from the cloth's own plane (no floor in view), "
+          'which a cloth swung by the wind tilts, and the camera and the answer '
+          "with it; give --world_up=AXIS (the camera file's world axis that points "
+          'up), "gravity" in the camera file, or --up; or --allow_guessed_up to '
+          'estimate anyway with a 20-degree tilt uncertainty'
+        )
       intakes.append(ik)
       recs.append(intake.to_recording(ik, config.fps, net.image_size, config.frames))
     else:

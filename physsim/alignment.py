@@ -10,7 +10,9 @@ trusting it the cloth is found in the camera frame:
   (``fit_pins``): a RANSAC plane through the cloth in the first frames, the
   smallest rectangle around its in-plane outline, the side of it nearest the
   top of the image (or along ``up``) as the top edge, then a straight line
-  through the real cloth points along that edge, whose ends are the pins;
+  through the real cloth points along that edge, whose ends are the pins
+  (or, where the wind lifts the sheet's middle above its pinned corners, the
+  upper half's lateral ends, whichever pair is nearer the simulated spacing);
 * **up**: given (the user's ``up`` in the camera frame, the camera file's
   world axis named by ``--world_up``, or the gravity its IMU measured:
   ``up_from`` says which), else the normal of a floor: a background plane whose
@@ -130,6 +132,27 @@ def _top_corners(
   return np.stack(ends)
 
 
+def _side_corners(
+  points: np.ndarray, up: np.ndarray, edge: np.ndarray, fx: float
+) -> np.ndarray:
+  """(2, 3) the cloth's ends along the edge in its upper half, each the
+  highest of the points within 2 cm of the extreme: the pins where a strong
+  wind lifts the sheet's middle above them (only the corners are pinned), so
+  that its highest band lies between them."""
+  h = points @ up
+  upper = points[h >= np.quantile(h, 0.5)]
+  axis = _unit(edge - (edge @ up) * up)
+  t = upper @ axis
+  ends = []
+  for sign in (-1.0, 1.0):
+    near = upper[sign * t >= (sign * t).max() - 0.02]
+    hn = near @ up
+    corner = near[hn >= hn.max() - 0.01].mean(axis=0)
+    half_pixel = 0.5 * corner[2] / fx
+    ends.append(corner + half_pixel * (sign * axis + up))
+  return np.stack(ends)
+
+
 def fit_pins(
   depth: np.ndarray,
   intrinsics: Intrinsics,
@@ -141,6 +164,7 @@ def fit_pins(
   frames: int = 5,
   plane_tol: float = 0.03,
   seed: int = 0,
+  spacing: float | None = None,
 ) -> ClothFit:
   """The cloth's pins, plane and up in a background-free depth video.
 
@@ -154,6 +178,9 @@ def fit_pins(
     frames: first frames whose median shows the cloth at (or near) rest.
     plane_tol: RANSAC inlier distance, metres.
     seed: RANSAC's randomness.
+    spacing: the simulated cloth's pin spacing, metres, or None. Given, the
+      pins are the pair nearest to it of the highest band's ends and the
+      upper half's lateral ends (``_side_corners``); else the former.
   """
   points = _cloth_points(depth, intrinsics, frames)
   plane, inliers = fit_plane(points, plane_tol, seed=seed)
@@ -183,6 +210,10 @@ def fit_pins(
     )
   if not user_pins:
     pins = _top_corners(points, up_vec, edge_axis, intrinsics.fx)
+    if spacing is not None:
+      side = _side_corners(points, up_vec, edge_axis, intrinsics.fx)
+      off = lambda p: abs(float(np.linalg.norm(p[1] - p[0])) - spacing)
+      pins = min((pins, side), key=off)
   return ClothFit(pins, plane, up_vec, up_from, floor, cloth_up)
 
 

@@ -507,6 +507,7 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
     fit = alignment.fit_pins(
       intake.depth, intr, pins=user, background=planes, plane_tol=config.plane_tol,
       up=given[0][1] if given else None, up_from=given[0][0] if given else 'user',
+      spacing=float(np.linalg.norm(pins_world[1] - pins_world[0])),
     )  # fmt: skip
     warnings = cross_check(given, fit)
     pose, pins = alignment.camera_pose(

@@ -179,3 +179,74 @@ def test_the_alignment_error_follows_where_up_came_from(recording):
   )
   assert not estimate.alignment_record([rigged], _CONFIG)['up_is_guess']
   assert estimate.alignment_record([None], _CONFIG) is None
+
+
+@pytest.fixture(scope='module')
+def lifted(tmp_path_factory):
+  """Issue 40's recording, simulated: 3.52 m/s on a cloth pinned at its two
+  top corners, whose middle the wind lifts above them; the camera of
+  ``scratch`` (2.5 m off, to the side), its first 5 frames, the floor out of
+  view; frames and an OpenCV camera file in a z-up rig world."""
+  import jax  # noqa: PLC0415
+
+  import physsim  # noqa: PLC0415
+  from physsim import dataset  # noqa: PLC0415
+
+  truth = dict(bending_scale=1.0, wind_speed=3.52, area_weight=0.185)
+  mesh = physsim.square(25)
+  out = physsim.simulate(
+    physsim.build(mesh, 'gray_interlock'), physsim.params.make(**truth), frames=24,
+    fps=20.0, warmup=1.0, wind=physsim.Wind(gust_intensity=0.2),
+    key=jax.random.key(11)[None], backend='c', workers=1,
+    space=physsim.search_space('gray_interlock'),
+  )  # fmt: skip
+  intr = camera.Intrinsics.from_pinhole(320, 240, 260.0, 260.0, 158.0, 121.0)
+  pose = camera.look_at((0.8, -2.3, 1.45), (0.0, 0.25, 1.05))
+  render = physsim.make_depth_renderer(mesh.faces, intr)
+  poses = jax.tree.map(lambda a: np.asarray(a)[None, None], pose)
+  depth = np.asarray(render(np.asarray(out.positions), poses))[0, 0]
+  root = tmp_path_factory.mktemp('lifted')
+  folder = root / 'depth'
+  folder.mkdir()
+  for t, f in enumerate(dataset.depth_to_mm(depth)):
+    dataset.imwrite(str(folder / f'{t:04d}.png'), f)
+  m = np.eye(4)
+  m[:3, :3] = _USER_FROM_SIM @ np.asarray(pose.rotation, np.float64)
+  m[:3, 3] = _USER_FROM_SIM @ np.asarray(pose.position) + _SHIFT
+  cam = root / 'camera.json'
+  cam.write_text(json.dumps({
+    'width': 320, 'height': 240, 'fx': 260.0, 'fy': 260.0, 'cx': 158.0, 'cy': 121.0,
+    'fps': 20, 'cam_to_world': m.tolist(),
+  }))  # fmt: skip
+  return str(folder), str(cam), depth, intr, pose
+
+
+def test_pins_of_a_cloth_lifted_above_them(lifted):
+  _, _, depth, intr, pose = lifted
+  up = np.asarray(pose.rotation, np.float64).T @ [0, 0, 1.0]
+  want = alignment.pins_in_camera(pose, _PINS_WORLD)
+  points = alignment._cloth_points(depth, intr, 5)
+  assert (points @ up).max() > (want @ up).max() + 0.03  # lifted above its pins
+  band = alignment.fit_pins(depth, intr, up=up)  # the highest band's ends only
+  fit = alignment.fit_pins(depth, intr, up=up, spacing=1.0)
+  err = lambda p: np.linalg.norm(np.sort(p, axis=0) - np.sort(want, axis=0), axis=1)
+  assert err(band.pins).max() > 0.08 and err(fit.pins).max() < 0.03
+
+
+def test_a_guessed_up_is_refused_with_the_flags_that_fix_it(lifted, tmp_path):
+  frames, cam, _, _, pose = lifted
+  args = estimate.Args(
+    recording=(frames,), camera_json=cam, workdir=str(tmp_path / 'w'),
+    search=dataclasses.replace(_CONFIG, distance='shape', likelihood='gibbs'),
+  )  # fmt: skip
+  with pytest.raises(
+    ValueError, match=r'depth: up is a guess .*--world_up=AXIS.*--allow_guessed_up'
+  ):
+    estimate.main(args)
+  ik = intake.take_in(frames, intake.IntakeConfig(world_up='z'), cam, _CONFIG)
+  assert ik.up_from == 'world_up' and _rotation_error_deg(ik.pose, pose) < 2.0
+  np.testing.assert_allclose(ik.pose.position, pose.position, atol=0.05)
+  guessed = intake.take_in(frames, intake.IntakeConfig(), cam, _CONFIG)
+  assert guessed.up_is_guess
+  # Issue 40's failure, now refused: the camera placed over a metre too high.
+  assert np.asarray(guessed.pose.position)[2] - pose.position[2] > 1.0
