@@ -15,7 +15,7 @@ set -u
 R=${1:-/tmp/one}
 REC=${2:-$R/eval/fabrics/gray_interlock/0000}
 GI=gray_interlock
-SETTINGS=${SETTINGS:-default,gp_on_gpu,q8_init8}
+SETTINGS=${SETTINGS:-default,gp_on_gpu,q16}
 export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 mkdir -p "$R/logs"
 T0=$SECONDS
