@@ -126,9 +126,13 @@ def run(calls: Sequence[Call], devices: Sequence | None = None,
   they run as a ``vmap`` (``mode='vmap'``: one batched program, which suits a
   GPU, whose GP loops otherwise wait on kernel launches) or a ``lax.map``
   (``'map'``, the default on CPUs: one row after another, each with the code
-  of a batch of one, so a search proposes bit for bit the same points alone
-  as in any batch; padding rows are skipped; and jaxopt's L-BFGS-B loops,
-  which ``gp.fit`` keeps out of ``vmap`` on CPU, stay unbatched).
+  of a batch of one; padding rows are skipped, and the batch is padded to
+  every device, so that a search proposes bit for bit the same points alone
+  as in any batch over the same devices (XLA compiles a mesh of two devices
+  to other roundings than a mesh of one: 1e-8 apart after an L-BFGS-B); and
+  jaxopt's L-BFGS-B loops, which ``gp.fit`` keeps out of ``vmap`` on CPU, stay
+  unbatched). With 'vmap' a batch's rows agree with a single row's to float
+  reassociation only.
 
   Args:
     calls: the rows.
@@ -155,7 +159,10 @@ def run(calls: Sequence[Call], devices: Sequence | None = None,
     devs = [d for d in devs if d.platform == devs[0].platform]
     how = mode or default_mode(devs)
     rows = [calls[i].args for i in members]
-    n_pad = _pad(max(len(rows), min_rows if how == 'map' else 1))
+    # 'map' pads to every device (skipped rows are free): any batch size runs
+    # the program of one mesh, whose arithmetic differs from another's.
+    least = max(min_rows, len(devs)) if how == 'map' else 1
+    n_pad = _pad(max(len(rows), least))
     rows += [rows[0]] * (n_pad - len(rows))
     live = np.arange(n_pad) < len(members)
     mesh = jax.sharding.Mesh(np.asarray(_mesh_devices(devs, n_pad)), (AXIS,))
