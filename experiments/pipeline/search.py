@@ -4,7 +4,8 @@ Each recording has its own search: a ``bo.PosteriorSearch`` (the default,
 ``point='median'``: the posterior of bending, wind and area weight) or a
 ``bo.Minimizer`` (``point='argmin'``, the paper's protocol), with its own state
 file, stopping rule and resume. Searches advance together: each step asks
-every unfinished search for its candidates, scores all candidates of
+every unfinished search for its candidates (their GP steps as one program:
+``bo.batched``), scores all candidates of
 recordings of one ``Problem.structure`` in one call of that structure's
 ``Objective`` (MJX costs about the same per step for 4 worlds as for ~64), and
 tells each search its values. A candidate's score does not depend on which
@@ -17,7 +18,6 @@ batch it was in (per-candidate keys), so each search goes as it would alone.
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import hashlib
 import json
@@ -63,11 +63,11 @@ class Job(NamedTuple):
 
 
 def gp_device(i: int = 0):
-  """Where search ``i`` fits its GP: a CPU device. The GP holds tens to
-  hundreds of points, so on a GPU its L-BFGS loops only wait on kernel
-  launches, while the GPU has the simulations to run. Searches are spread over
-  the CPU devices (``cli.host_devices`` makes one per core), as one device runs
-  its programs one at a time."""
+  """Where search ``i`` fits its GP when asked alone: a CPU device. The GP
+  holds tens to hundreds of points, so on a GPU its L-BFGS loops only wait on
+  kernel launches, while the GPU has the simulations to run. ``estimate_many``
+  asks all its searches at once (``bo.batched``), spread over every CPU device
+  (``cli.host_devices`` makes one per core)."""
   cpus = jax.local_devices(backend='cpu')  # this process's, under jax.distributed
   return cpus[i % len(cpus)]
 
@@ -366,6 +366,11 @@ def estimate_many(
       out[i] = e
   evaluate = evaluator or Evaluator()
   seconds_before = evaluate.seconds
+  # The searches' GP steps run as one program per setting (bo.batched), their
+  # rows stacked over the recordings and spread over the host's CPU devices
+  # (one per core: cli.host_devices) or the local GPUs. On CPUs the rows of
+  # searches that finished are skipped, so the program compiles once.
+  gp_devices = jax.local_devices(backend='cpu') if gp_on_cpu else jax.local_devices()
   gp_seconds = 0.0
 
   def finish(finished):
@@ -389,7 +394,10 @@ def estimate_many(
       )  # fmt: skip
       frames.update({s.index: sc.frames for s, sc in zip(redo, scores, strict=True)})
     t0 = time.perf_counter()
-    results = list(pool.map(lambda s: s.opt.result(s.state), ok))
+    results = bo.batched.result_many(
+      [s.opt for s in ok], [s.state for s in ok], devices=gp_devices,
+      min_rows=len(live),
+    )  # fmt: skip
     t_result = time.perf_counter() - t0
     for s, res in zip(ok, results, strict=True):
       job = jobs[s.index]
@@ -407,9 +415,6 @@ def estimate_many(
       if progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
-  # Searches propose in threads, each on its own CPU device (gp_device), so
-  # many recordings use the host's cores.
-  pool = concurrent.futures.ThreadPoolExecutor(min(len(live), os.cpu_count() or 1) or 1)
   # Searches that finished before: their result stands (run.json matched).
   ended = [s for s in live if s.done()]
   for s in ended:
@@ -420,10 +425,12 @@ def estimate_many(
   step = 0
   while active := [s for s in live if not s.done()]:
     t0 = time.perf_counter()
+    got = bo.batched.ask_many(
+      [s.opt for s in active], [s.state for s in active], devices=gp_devices,
+      min_rows=len(live),
+    )  # fmt: skip
     asked = []
-    for s, (x, state) in zip(
-      active, pool.map(lambda s: s.opt.ask(s.state), active), strict=True
-    ):
+    for s, (x, state) in zip(active, got, strict=True):
       s.state = state
       asked.append(x)
     t1 = time.perf_counter()
@@ -451,7 +458,6 @@ def estimate_many(
       )
     finish(ended)
     step += 1
-  pool.shutdown()
   return out
 
 

@@ -147,3 +147,59 @@ def test_one_structure_is_one_call(env, monkeypatch):
   # (P, q, 3) per call: P padded to a power of two (2 recordings, then 1)
   assert calls[:2] == [(2, n_init, 3), (1, n_init, 3)]
   assert calls[2:4] == [(2, q, 3), (1, q, 3)]
+
+
+# A posterior search alone and inside a batch runs its GP steps as one row of
+# the same program (bo.batched): its candidates agree to the last bits, its
+# grid posterior and summaries to round-off.
+_BATCH_TOLERANCE = 1e-9
+POSTERIOR = dataclasses.replace(
+  CONFIG, point='median', posterior_grid=(4, 8, 4), q=4, replicates=1
+)
+
+
+def _posterior_state(workdir):
+  with np.load(os.path.join(workdir, em.POSTERIOR_STATE)) as z:
+    return {k: z[k] for k in z.files}
+
+
+def _assert_close(a, b, path=''):
+  """Nested JSON values equal, numbers to ``_BATCH_TOLERANCE``."""
+  if isinstance(a, dict):
+    assert set(a) == set(b), path
+    for k in a:
+      _assert_close(a[k], b[k], f'{path}.{k}')
+  elif isinstance(a, list):
+    assert len(a) == len(b), path
+    for i, (x, y) in enumerate(zip(a, b, strict=True)):
+      _assert_close(x, y, f'{path}[{i}]')
+  elif isinstance(a, float):
+    np.testing.assert_allclose(b, a, rtol=_BATCH_TOLERANCE, err_msg=path)
+  else:
+    assert a == b, path
+
+
+def test_a_posterior_alone_and_in_a_batch_of_three(env):
+  jobs = [
+    em.Job(dataclasses.replace(POSTERIOR, gusts=config.gusts), rec, env['model'],
+           os.path.join(env['root'], f'post_many{i}'))
+    for i, (config, rec) in enumerate(env['recs'])
+  ]  # fmt: skip
+  together = em.estimate_many(jobs, progress=False, figures=False)
+  alone = em.estimate(*jobs[1][:3], os.path.join(env['root'], 'post_alone'),
+                      progress=False)  # fmt: skip
+  a = _posterior_state(os.path.join(env['root'], 'post_alone'))
+  b = _posterior_state(jobs[1].workdir)
+  np.testing.assert_allclose(b['X'], a['X'], rtol=0, atol=_BATCH_TOLERANCE)
+  np.testing.assert_allclose(b['Y'], a['Y'], rtol=_REPEAT_TOLERANCE)
+  np.testing.assert_allclose(b['history'], a['history'], atol=_BATCH_TOLERANCE)
+  with (
+    np.load(os.path.join(env['root'], 'post_alone', em.POSTERIOR_FILE)) as pa,
+    np.load(os.path.join(jobs[1].workdir, em.POSTERIOR_FILE)) as pb,
+  ):
+    np.testing.assert_allclose(pb['log_post'], pa['log_post'], atol=_BATCH_TOLERANCE)
+    np.testing.assert_allclose(pb['samples'], pa['samples'], atol=_BATCH_TOLERANCE)
+  for key in ('estimate', 'load_ratio', 'point_unit', 'argmin', 'evaluations'):
+    _assert_close(alone[key], together[1][key], key)
+  # each recording's posterior is its own
+  assert together[0]['estimate'] != together[1]['estimate']
