@@ -368,8 +368,9 @@ def estimate_many(
   seconds_before = evaluate.seconds
   # The searches' GP steps run as one program per setting (bo.batched), their
   # rows stacked over the recordings and spread over the host's CPU devices
-  # (one per core: cli.host_devices) or the local GPUs. On CPUs the rows of
-  # searches that finished are skipped, so the program compiles once.
+  # (one per core: cli.host_devices) or the local GPUs. The batch keeps its
+  # first size (on CPUs the rows of searches that finished are skipped), so
+  # the program compiles once.
   gp_devices = jax.local_devices(backend='cpu') if gp_on_cpu else jax.local_devices()
   gp_seconds = 0.0
 
