@@ -9,8 +9,9 @@ a cloth size, a fan setting) by the expected information gain about bending
 and area weight from the estimate's posterior draws (``bo.design``, the
 Laplace gain with the simulator's slopes and gust noise, MuJoCo C on the
 CPU, cached in ``<workdir>/plan_slopes/``), prints a table and one line of
-advice, and writes ``plan.json`` to the estimate's workdir. About a minute a
-candidate on two CPU cores the first time, instant after.
+advice, and writes ``plan.json`` to the estimate's workdir. Up to a minute a
+candidate and posterior node on two CPU cores the first time (a 17 x 17
+swatch), instant after.
 """
 
 from __future__ import annotations

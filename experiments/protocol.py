@@ -46,7 +46,8 @@ def main(args: Args) -> None:
   print(protocol.markdown(result))
   for pair in result['convergence']:
     print('mesh convergence (first truth):', protocol.convergence_line(pair))
-  print(f'{result["seconds"]:.0f} s; wrote {args.workdir}/{protocol.RESULT_FILE} '
+  print(f'{result["seconds"]:.0f} s ({result["simulation_seconds"]:.0f} s of simulation '
+        f'from scratch); wrote {args.workdir}/{protocol.RESULT_FILE} '
         f'and {protocol.FIGURE_FILE}')  # fmt: skip
   if args.figure:
     os.makedirs(os.path.dirname(args.figure) or '.', exist_ok=True)
