@@ -57,6 +57,7 @@ from bo import design  # noqa: E402
 from experiments.pipeline import files  # noqa: E402
 
 RESULT_FILE = 'protocol.json'
+SUMMARY_FILE = 'protocol_summary.json'  # without the slopes: small enough to commit
 FIGURE_FILE = 'protocol.png'
 CACHE_DIR = 'slopes'
 CHAOS_NUDGE = 1e-3  # log bending
@@ -540,6 +541,16 @@ def run(config: Config, workdir: str) -> dict:
     'config': dataclasses.asdict(config),
   }  # fmt: skip
   files.write_json(os.path.join(workdir, RESULT_FILE), result)
+  summary = {k: v for k, v in result.items() if k != 'slopes'}
+  summary['table'] = [
+    {k: (v if k not in MODES else {f: v[f] for f in ('bending', 'area_weight')})
+     for k, v in e.items()}
+    for e in result['table']
+  ]  # fmt: skip
+  summary['convergence'] = [
+    {n: {m: r[m] for m in MODES} for n, r in pair.items()} for pair in convergence
+  ]
+  files.write_json(os.path.join(workdir, SUMMARY_FILE), summary)
   plot(result, os.path.join(workdir, FIGURE_FILE))
   return result
 

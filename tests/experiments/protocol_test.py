@@ -25,6 +25,8 @@ def test_smoke_preset_end_to_end(tmp_path, capsys):
     result = json.load(f)
   assert os.path.getsize(tmp_path / 'w' / protocol.FIGURE_FILE) > 1000
   assert figure.exists()
+  with open(tmp_path / 'w' / protocol.SUMMARY_FILE) as f:
+    assert 'slopes' not in json.load(f)  # the small file to commit
   assert {e['set'] for e in result['table']} == {'sheet', 'swatch', 'both'}
   for e in result['table']:
     for mode in protocol.MODES:
