@@ -38,7 +38,8 @@ class SDNConfig:
     in_channels: channels C of each frame (1 depth, 3 RGB).
     num_frames: clip length T.
     num_components: K frequency bins kept.
-    selection: 'strongest' or 'lowest' (see the module docstring).
+    selection: 'strongest' (per clip, the K frequency bins of largest mean
+      power) or 'lowest' (the K lowest bins, the same for every clip).
     use_phase: also feed the phase of each kept bin.
     drop_dc: never keep the zero-frequency bin.
     trunk: the PhySNet trunk; its ``in_channels`` is overwritten by

@@ -331,9 +331,10 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
   user errors as one line (exit status 2) unless ``--verbose``; Ctrl-C as one
   line naming the command that resumes (exit status 130). Under a
   multi-process launch (``distributed``) the processes are joined first."""
-  from experiments.pipeline import distributed  # noqa: PLC0415 - imports jax
+  from experiments.pipeline import distributed, jax_cache  # noqa: PLC0415 - imports jax
 
   host_devices()
+  jax_cache.enable()  # a later process loads what this one compiles
   distributed.initialize()
   define_flags(cls, presets, module_name=sys.argv[0])
 
@@ -358,3 +359,11 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
   except KeyboardInterrupt:  # before main started (imports, flag parsing)
     print(f'interrupted; resume with: {resume_command()}', file=sys.stderr)
     sys.exit(130)
+  except SystemExit as e:
+    # absl ends --help with status 1; asking for help is no failure.
+    if e.code == 1 and _HELP_FLAGS & set(sys.argv[1:]):
+      sys.exit(0)
+    raise
+
+
+_HELP_FLAGS = {'--help', '-h', '-?', '--helpshort', '--helpfull'}

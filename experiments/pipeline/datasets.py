@@ -58,7 +58,7 @@ class Config:
       all materials, in order, are grouped in fixed chunks of this size (one
       compiled model serves every material), and gusts are drawn per chunk,
       so a resume must use the same batch size (checked).
-    workers: processes for the C backend (0: all cores).
+    workers: threads for the C backend (0: all cores).
     gust_intensity: RMS relative wind fluctuation.
     rgb: also write shaded colour frames, each material in its
       physsim.FABRIC_COLORS colour (as the estimate renders RGB candidates).

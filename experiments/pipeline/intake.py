@@ -113,9 +113,12 @@ class IntakeConfig:
       the simulated cloth seen from the fitted pose, at rest or swung about
       its top edge (the best of 0-90 degrees); below it the search is
       refused.
-    depth_topic, info_topic, imu_topic: a ROS bag's (or RealSense .bag's)
-      depth image, CameraInfo and IMU topics; empty: found by name
-      (physsim.bags), the candidates listed when ambiguous.
+    depth_topic: a ROS bag's (or RealSense .bag's) depth image topic; empty:
+      found by name (physsim.bags), the candidates listed when ambiguous.
+    info_topic: the bag's CameraInfo topic of that depth stream; empty: found
+      by name.
+    imu_topic: the bag's IMU (accelerometer) topic, for gravity; empty: found
+      by name.
     allow_no_camera: take in a recording without a camera file (no
       --camera_json): nothing can then be removed as background but by
       depth_range or mask, nor the camera placed, so training-like cameras

@@ -80,7 +80,7 @@ class EstimateConfig:
     frames: most frames compared (at fps); a longer recording is cut, a
       shorter one sets how many frames are simulated.
     fps: frame rate of the comparison, Hz: simulations render at it and the
-      recording is resampled to it (flag ``--sim_fps``; ``--fps`` is the
+      recording is resampled to it (flag ``--sim_fps``; estimate's ``--fps`` is the
       recording's own rate).
     warmup: simulated seconds before the first frame.
     gusts: RMS relative gust intensity of the simulated wind.
@@ -113,16 +113,18 @@ class EstimateConfig:
       (physsim.shape: how far it is blown back and lifted; no network;
       needs the recording's camera pose); or 'energy+shape', the geometric
       mean of the energy PSD and that.
-    camera_sd_m, camera_sd_deg: how far the recording's camera may be off in
-      the simulator's world (the alignment's rigid error, 1 sd per axis, a
-      shift and a rotation about the pins): every simulation is rendered from
-      a camera moved by such an error and read as from the given one, so the
-      shape discrepancy scatters as the recording's does and the posterior
-      carries the alignment's error. 0, 0: a camera known exactly (simulated
-      recordings). The intake's pins were within about 2 cm and its camera
-      within 3 degrees on its test recording (docs/recordings.md).
+    camera_sd_m: how far the recording's camera may be shifted from where the
+      simulator's world has it, metres (1 sd per axis): every simulation is
+      rendered from a camera moved by such an error and read as from the given
+      one, so the shape discrepancy scatters as the recording's does and the
+      posterior carries the alignment's error. 0 (with camera_sd_deg 0): a
+      camera known exactly (simulated recordings). The intake's pins were
+      within about 2 cm on its test recording (docs/recordings.md).
+    camera_sd_deg: the same for the camera's rotation about the pins, degrees
+      (1 sd per axis); the intake's camera was within 3 degrees on its test
+      recording.
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
-    workers: processes of the C backend (0: one per core); does not change
+    workers: threads of the C backend (0: one per core); does not change
       results, so a resumed run may use another value.
     sensor_noise: pass candidates' rendered depth through the depth-sensor
       model (physsim.sensor) before embedding, as the recording went through

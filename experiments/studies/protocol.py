@@ -225,8 +225,9 @@ class Config:
     warmup: seconds simulated before the clip.
     fps: frames per second summarised.
     camera_fps: the depth camera's frame rate (its noise averages over it).
-    step_bending, step_area_weight, step_wind: half-steps of the central
-      differences in log space.
+    step_bending: half-step of the central differences in log bending.
+    step_area_weight: half-step of the central differences in log area weight.
+    step_wind: half-step of the central differences in log wind speed.
     setup_mm: set-up repeatability added to every position statistic, mm.
     curvature_floor: floor of the curvature statistic's noise (size / m).
     shrink: weight of the gust covariance's diagonal (``bo.design.shrink``).

@@ -87,7 +87,7 @@ class Config:
       split are set per run).
     materials: fabric names; empty = every material in the dataset.
     columns: '<network>_<modality>' columns to train; empty = all four.
-    splits: splits to train; empty = both. With ``columns`` and ``splits``
+    splits: splits to train, 'simulation' and/or 'random'; empty = both. With ``columns`` and ``splits``
       several processes (one per GPU) share the runs; a last run without
       them reuses every finished run and writes the table.
     train_only: train, but write no table or maps (a share of the runs).

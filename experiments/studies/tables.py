@@ -101,12 +101,13 @@ class Config:
       ``benchmarks/measured_modes.py`` draw for recording k with this seed).
       Recording k of every evaluation set gets the same relative error for
       one seed: pooling several sets, give each its own.
-    camera_error_m, camera_error_deg: with > 0, every recording's camera is
-      given misplaced, as an alignment would place it: its pose moved by a
-      random rigid error of this size (1 sd per axis, a shift and a rotation
-      about the pins; ``physsim.shape.misplaced_pose``) drawn from
-      (reading_seed, recording seq_id). The estimate's own ``camera_sd_m`` /
-      ``camera_sd_deg`` say whether it models such an error.
+    camera_error_m: with > 0, every recording's camera is given misplaced, as
+      an alignment would place it: its pose shifted by a random error of this
+      size, metres (1 sd per axis; ``physsim.shape.misplaced_pose``), drawn
+      from (reading_seed, recording seq_id). The estimate's own
+      ``camera_sd_m`` / ``camera_sd_deg`` say whether it models such an error.
+    camera_error_deg: the same for a rotation about the pins, degrees (1 sd
+      per axis).
   """
 
   methods: tuple[str, ...] = METHODS

@@ -86,6 +86,7 @@ def test_a_benchmark_runs_as_a_module_and_names_a_missing_flag(tmp_path):
   )  # fmt: skip
   helped = run('benchmarks.point_rule', '--help')
   assert '--tables' in helped.stdout + helped.stderr
+  assert helped.returncode == 0  # asking for help is no failure
   missing = run('benchmarks.point_rule')
   assert missing.returncode == 2
   assert missing.stderr.startswith('error: missing --tables')

@@ -131,6 +131,15 @@ def test_every_script_documents_every_flag(name):
   assert set(presets) == set(fv['preset'].parser.enum_values)
 
 
+@pytest.mark.parametrize('name', SCRIPTS)
+def test_each_flags_help_says_what_differs_from_its_neighbours(name):
+  # Fields described together (``a, b: text``) gave two flags one help text.
+  script = importlib.import_module(f'experiments.{name}')
+  docs = [leaf.doc.strip() for leaf in cli.leaves(script.Args)]
+  shared = {d[:60] for d in docs if docs.count(d) > 1}
+  assert not shared, f'flags of experiments.{name} share help: {shared}'
+
+
 def _imports(path: pathlib.Path) -> set[str]:
   tree = ast.parse(path.read_text())
   out = set()

@@ -1,0 +1,52 @@
+"""experiments.pipeline.posterior: readings, the prior they make, and the joint."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments.pipeline import posterior
+
+SPACE = physsim.SearchSpace()  # wind 1-6 m/s, area weight 0.1-0.37 kg/m^2
+
+
+@pytest.mark.parametrize(
+  'reading, message',
+  [
+    (
+      dict(wind_speed=-3.0, wind_speed_sd=0.1),
+      r'--wind_speed=-3.0: a reading must be > 0',
+    ),
+    (dict(wind_speed=3.0), r'--wind_speed=3.0 needs --wind_speed_sd > 0'),
+    (dict(area_weight=0.9, area_weight_sd=0.01), r'outside the search range'),
+  ],
+)
+def test_readings_are_refused_with_their_own_reason(reading, message):
+  with pytest.raises(ValueError, match=message):
+    posterior.Measured(**reading).check(SPACE)
+
+
+def test_a_reading_in_range_passes():
+  posterior.Measured(wind_speed=3.0, wind_speed_sd=0.06).check(SPACE)
+
+
+def test_the_prior_is_a_gaussian_of_the_reading_in_physical_units():
+  """log prior at the box centre and one reading sd away, by hand."""
+  measured = posterior.Measured(wind_speed=3.5, wind_speed_sd=0.25)
+  # Unit cube -> wind 1 + (u + 1) / 2 * 5: u = 0 is 3.5 m/s, u = 0.1 is 3.75.
+  points = np.array([[0.0, 0.0, 0.0], [0.0, 0.1, 0.0]])
+  lp = posterior.log_prior(points, SPACE, measured)
+  np.testing.assert_allclose(lp, [0.0, -0.5], atol=1e-12)
+  assert np.all(posterior.log_prior(points, SPACE, posterior.Measured()) == 0.0)
+
+
+def test_simulated_readings_repeat_by_seed_and_recording():
+  truth = {'bending_scale': 1.0, 'wind_speed': 3.0, 'area_weight': 0.2}
+  a = posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=7)
+  assert a == posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=7)
+  assert a.wind_speed_sd == pytest.approx(0.06)
+  assert abs(a.wind_speed - 3.0) < 5 * 0.06
+  assert a != posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=8)
+  with pytest.raises(ValueError, match="no instrument reads 'bending_scale'"):
+    posterior.simulated_reading('bending_scale', truth, 0.02, seed=4, seq=7)
