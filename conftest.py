@@ -10,8 +10,11 @@ without one (``-m gpu`` on a GPU machine).
 
 from __future__ import annotations
 
+import atexit
 import gc
 import os
+import shutil
+import tempfile
 
 # Quiet and small: no TF-style logging, no preallocation if a GPU is present.
 os.environ.setdefault('TF_CPP_MIN_LOG_LEVEL', '2')
@@ -22,6 +25,13 @@ if 'xla_force_host_platform_device_count' not in os.environ.get('XLA_FLAGS', '')
   os.environ['XLA_FLAGS'] = (
     os.environ.get('XLA_FLAGS', '') + ' --xla_force_host_platform_device_count=2'
   ).strip()
+
+# Scripts the tests run (cli.run turns JAX's persistent compilation cache on)
+# share one cache for this session, never the user's: a later subprocess loads
+# what an earlier one compiled, and nothing outlives the run.
+if 'PHYSNET_JAX_CACHE' not in os.environ:
+  os.environ['PHYSNET_JAX_CACHE'] = tempfile.mkdtemp(prefix='physnet-jax-cache-')
+  atexit.register(shutil.rmtree, os.environ['PHYSNET_JAX_CACHE'], True)
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
