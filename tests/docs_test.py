@@ -55,10 +55,12 @@ def _git(*args: str) -> subprocess.CompletedProcess:
 
 def _git_checkout() -> bool:
   try:
-    proc = _git('rev-parse', '--is-inside-work-tree')
+    proc = _git('rev-parse', '--show-toplevel')
   except (OSError, subprocess.SubprocessError):
     return False
-  return proc.returncode == 0 and proc.stdout.strip() == 'true'
+  # The project's own checkout, not a copy inside another repository.
+  top = proc.stdout.strip()
+  return proc.returncode == 0 and os.path.realpath(top) == os.path.realpath(_ROOT)
 
 
 def test_benchmarks_is_short():
