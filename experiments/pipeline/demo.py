@@ -76,17 +76,7 @@ def configs(
     batch_size=32,
     seed=network_seed,
   )
-  est = dataclasses.replace(
-    EstimateConfig(material=material),
-    cloth_resolution=_CLOTH,
-    frames=_FRAMES,
-    warmup=0.5,
-    q=8,
-    n_init=16,
-    max_iter=6,
-    backend=backend,
-    seed=seed,
-  )
+  est = EstimateConfig.preset('demo', material=material, backend=backend, seed=seed)
   return data, recording, training, est
 
 

@@ -178,6 +178,20 @@ class EstimateConfig:
     sensor noise; a posterior needs fresh ones per simulation."""
     return self.point == 'argmin'
 
+  @classmethod
+  def preset(cls, name: str, **fields) -> EstimateConfig:
+    """A named preset (``PRESETS``: 'default', the paper-size posterior;
+    'paper', the paper's argmin; 'demo', the demo's CPU size; 'smoke', a
+    quicker look) with ``fields`` replaced, e.g.
+    ``EstimateConfig.preset('demo', material='black_denim')``.
+
+    Raises:
+      ValueError: an unknown preset, naming the known ones.
+    """
+    if name not in PRESETS:
+      raise ValueError(f'no estimate preset {name!r}: one of {sorted(PRESETS)}')
+    return dataclasses.replace(PRESETS[name], **fields)
+
   def check(self) -> None:
     """Raises ValueError naming the first field outside its allowed values
     (every number finite first: ``cli.check_numbers``)."""
@@ -272,6 +286,11 @@ PAPER = EstimateConfig(
 PRESETS = {
   'default': EstimateConfig(),
   'paper': PAPER,
+  # What experiments.demo estimates with: the demo network's cloth and clip,
+  # minutes on a CPU.
+  'demo': EstimateConfig(
+    cloth_resolution=10, frames=16, warmup=0.5, q=8, n_init=16, max_iter=6
+  ),
   # A quick look on a CPU: small cloth, short clip, few iterations.
   'smoke': EstimateConfig(
     cloth_resolution=10,

@@ -10,6 +10,7 @@ import dataclasses
 
 import jax
 import numpy as np
+import pytest
 
 from experiments.pipeline import objective as obj
 
@@ -55,3 +56,14 @@ def test_the_mesh_and_its_pin_centre():
   np.testing.assert_allclose(obj.pin_centre(config), pins.mean(0), atol=1e-12)
   # The two pinned corners share a height: the centre is on the top edge.
   assert obj.pin_centre(config)[2] == np.max(m.vertices[:, 2])
+
+
+def test_presets_are_reachable_from_the_library():
+  demo = obj.EstimateConfig.preset('demo', material='black_denim')
+  assert demo.material == 'black_denim'
+  assert demo.cloth_resolution == obj.PRESETS['demo'].cloth_resolution
+  assert obj.EstimateConfig.preset('paper').point == 'argmin'
+  with pytest.raises(
+    ValueError, match=r"no estimate preset 'tiny': one of \['default'"
+  ):
+    obj.EstimateConfig.preset('tiny')
