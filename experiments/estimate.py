@@ -27,7 +27,7 @@ import os
 
 from absl import logging
 
-from experiments.pipeline import cli, embedding, files, intake, report, search
+from experiments.pipeline import cli, files, intake, report, search, setup
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 
@@ -185,25 +185,18 @@ def _needs_intake(args: Args, path: str) -> bool:
   return bool(args.camera_json) or not intake.is_sequence(path)
 
 
-def network(args: Args) -> embedding.EmbeddingNet:
-  """The estimate's network (``--model``), or none for ``--distance=shape``.
+def network(args: Args) -> setup.Network:
+  """The estimate's network (``--model``) with its record, or none for
+  ``--distance=shape`` (``setup.network``: the library's own checks).
 
   Raises:
-    ValueError: no model for a distance that embeds, a bad ``image_size``
-      (``embedding.for_distance``), or a network of another fabric (unless
-      ``allow_other_material``).
+    ValueError: no model for a distance that embeds, a bad ``image_size``, or
+      a network of another fabric (unless ``allow_other_material``).
   """
-  net = embedding.for_distance(args.model, args.search.distance, args.image_size)
-  if (
-    net.materials
-    and args.search.material not in net.materials
-    and not args.allow_other_material
-  ):
-    raise ValueError(
-      f'{args.model} was trained on {list(net.materials)}, not '
-      f'{args.search.material}; pass --allow_other_material to search with it anyway'
-    )
-  return net
+  return setup.network(
+    args.model, args.search.distance, args.image_size, args.search.material,
+    allow_other_material=args.allow_other_material,
+  )  # fmt: skip
 
 
 def _intake_dir(args: Args, i: int) -> str:
@@ -227,6 +220,12 @@ def main(args: Args) -> None:
 
 
 def _main(args: Args, config, winds) -> None:
+  n = len(args.recording)
+  print(
+    f'{config.material}: {n} recording{"s" * (n > 1)} into {args.workdir}; reading '
+    'and aligning, then the first simulations compile (a minute or two on a CPU)',
+    flush=True,
+  )  # a line within seconds: the first step's output comes much later
   # Before any intake writes: no workdir may hold another recording's run.
   for i, path in enumerate(args.recording):
     if args.intake_only or _needs_intake(args, path):
@@ -238,7 +237,13 @@ def _main(args: Args, config, winds) -> None:
       _take_in(args, path, _intake_dir(args, i))
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return
-  net = network(args)
+  loaded = network(args)
+  net = loaded.embedding
+  # The network restored here is the one the search uses (not restored twice).
+  kw = dict(
+    allow_other_material=args.allow_other_material,
+    nets={args.model: net} if args.model else None,
+  )
   recs, intakes = [], []
   for i, path in enumerate(args.recording):
     if _needs_intake(args, path):
@@ -278,12 +283,12 @@ def _main(args: Args, config, winds) -> None:
       print(line)
   record = alignment_record(intakes, config)
   if len(recs) > 1:
-    result = search.estimate_joint(config, recs, args.model, args.workdir, winds)
+    result = search.estimate_joint(config, recs, args.model, args.workdir, winds, **kw)
     _record_alignment(os.path.join(args.workdir, search.JOINT_FILE), record)
     print(report.joint_table(result))
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
-    result = search.estimate(config, recs[0], args.model, args.workdir)
+    result = search.estimate(config, recs[0], args.model, args.workdir, **kw)
     _record_alignment(os.path.join(args.workdir, search.ESTIMATE_FILE), record)
     print(report.report_table(result))
     ratios = [report.point_of(result['load_ratio'])]
@@ -293,8 +298,21 @@ def _main(args: Args, config, winds) -> None:
   note = report.fan_setting_note(ratios, config.material)
   if note:
     print(note)
+  where = os.path.abspath(args.workdir)
   if len(recs) == 1:
-    print(f'estimate.json and pictures in {os.path.abspath(args.workdir)}')
+    pictures = (
+      ('posterior.png', 'trace.png', 'montage.png')
+      if config.posterior
+      else ('trace.png', 'montage.png')
+    )
+    print(
+      f'{where}/estimate.json; pictures: ' + ', '.join(f'{where}/{p}' for p in pictures)
+    )
+  else:
+    print(
+      f"{where}/{search.JOINT_FILE}; each recording's estimate.json and pictures: "
+      f'{where}/recording_<k>/'
+    )
 
 
 if __name__ == '__main__':

@@ -33,6 +33,7 @@ import physsim
 from experiments.pipeline import embedding, files, report
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline import setup as setup_lib
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import Recording, read_json
 
@@ -54,12 +55,15 @@ class Job(NamedTuple):
     model_dir: its material's trained network; '' for none (the shape
       distance alone: frames compared at the recording's loaded size).
     workdir: where its state, JSON and pictures go.
+    allow_other_material: search with a network trained on other fabrics
+      than ``config.material`` (else refused, ``setup.check_material``).
   """
 
   config: EstimateConfig
   recording: Recording
   model_dir: str
   workdir: str
+  allow_other_material: bool = False
 
 
 def gp_device(i: int = 0):
@@ -284,6 +288,8 @@ def estimate(
   progress: bool = True,
   gp_on_cpu: bool = True,
   evaluator: Evaluator | None = None,
+  allow_other_material: bool = False,
+  nets: dict[str, embedding.EmbeddingNet] | None = None,
 ) -> dict:
   """Runs (or resumes) one estimate; returns and writes ``estimate.json``.
 
@@ -298,20 +304,22 @@ def estimate(
     gp_on_cpu: fit the GP and propose on the CPU (``gp_device``).
     evaluator: an ``Evaluator`` to reuse (its compiled objectives) across
       estimates in one process; default a new one.
+    allow_other_material: search with a network of other fabrics.
+    nets: the network already restored, by ``model_dir`` (not restored again).
 
   Returns:
     The result dict written to ``estimate.json``.
 
   Raises:
-    ValueError: ``model_dir`` is not a trained run or takes another frame
-      size, an RGB network and a recording without colour frames, a recording
+    ValueError: ``model_dir`` is not a trained run, was trained on another
+      fabric, or takes another frame size, an RGB network and a recording without colour frames, a recording
       shorter than an SDN clip, ``workdir`` holds an estimate of another
       recording, camera, model or config, or every candidate simulation blew
       up (naming the recording).
   """
   (out,) = estimate_many(
-    [Job(config, recording, model_dir, workdir)], progress=progress,
-    gp_on_cpu=gp_on_cpu, evaluator=evaluator,
+    [Job(config, recording, model_dir, workdir, allow_other_material)],
+    progress=progress, gp_on_cpu=gp_on_cpu, evaluator=evaluator, nets=nets,
   )  # fmt: skip
   if isinstance(out, Exception):
     raise out
@@ -346,15 +354,23 @@ def estimate_many(
   t_start = time.perf_counter()
   out: list[dict | Exception | None] = [None] * len(jobs)
   nets = dict(nets or {})
+  # Each network restored and its record read once (setup.record), and every
+  # job's fabric checked against it (setup.check_material).
+  networks: dict[str, setup_lib.Network] = {}
   live: list[_Search] = []
   for i, job in enumerate(jobs):
     try:
       if not job.model_dir:  # the shape distance: frames at the recording's size
         net = embedding.no_network(job.recording.depth.shape[1:])
       else:
-        if job.model_dir not in nets:
-          nets[job.model_dir] = embedding.load_embedding(job.model_dir)
-        net = nets[job.model_dir]
+        if job.model_dir not in networks:
+          networks[job.model_dir] = setup_lib.record(
+            job.model_dir, nets.get(job.model_dir)
+          )
+        setup_lib.check_material(
+          networks[job.model_dir], job.config.material, job.allow_other_material
+        )
+        net = networks[job.model_dir].embedding
       problem = obj_lib.make_problem(job.config, net, job.recording)
       opt = make_searcher(
         job.config, problem.space, job.workdir, gp_on_cpu=gp_on_cpu, index=i
@@ -410,7 +426,7 @@ def estimate_many(
       )
       out[s.index] = write_result(
         job, s, res, frames[s.index],
-        retrieval=embedding.network_retrieval(job.model_dir), figures=figures,
+        network=networks.get(job.model_dir), figures=figures,
         **timing,
       )  # fmt: skip
       if progress:
@@ -467,7 +483,7 @@ def write_result(
   search: _Search,
   res,
   best_frames: np.ndarray,
-  retrieval: dict[str, float] | None = None,
+  network: setup_lib.Network | None = None,
   figures: bool = True,
   **timing,
 ) -> dict:
@@ -481,8 +497,10 @@ def write_result(
     res: ``search.opt.result(...)``: a ``bo.Result`` or ``bo.posterior.Result``.
     best_frames: the lowest-PSD candidate's camera-0 frames as its network saw
       them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
-    retrieval: the network's ``network_retrieval``, recorded beside the
-      estimate (a parameter near 1 is not constrained by the video).
+    network: the network and its record (``setup.record``; None for none):
+      its recipe and accuracy choose the calibration, its retrieval is
+      recorded beside the estimate (a parameter near 1 is not constrained by
+      the video).
     figures: draw the pictures (else only the JSON and ``posterior.npz``).
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
@@ -500,9 +518,10 @@ def write_result(
   else:
     result.update(_posterior_summary(
       config, space, res, workdir, recording.truth, figures,
-      network=embedding.network_recipe(job.model_dir),
-      accuracy=embedding.network_accuracy(job.model_dir),
+      network=network.recipe if network else None,
+      accuracy=network.accuracy if network else None,
     ))  # fmt: skip
+  retrieval = network.retrieval if network else None
   material = physsim.load_material(physsim.fabric(config.material).material)
   point = result['point_unit']
   bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
@@ -645,6 +664,7 @@ def estimate_joint(
   model_dir: str,
   workdir: str,
   winds: list[tuple[float, float]] | None = None,
+  allow_other_material: bool = False,
   **kw,
 ) -> dict:
   """One fabric seen in several recordings (e.g. two fan settings): a joint
@@ -670,6 +690,7 @@ def estimate_joint(
       the joint posterior through it. Its intervals are recalibrated where
       the calibration has tables for the mode 'joint pair, known winds' (the
       shipped one has none: they are reported as indicative).
+    allow_other_material: search with a network of other fabrics.
     **kw: ``estimate_many``'s keywords.
 
   Returns:
@@ -683,7 +704,7 @@ def estimate_joint(
       reading the search box cannot hold, or a recording whose estimate
       failed (named).
   """
-  jobs = joint_jobs(config, recordings, model_dir, workdir, winds)
+  jobs = joint_jobs(config, recordings, model_dir, workdir, winds, allow_other_material)
   return combine_joint(jobs, estimate_many(jobs, **kw), workdir)
 
 
@@ -693,6 +714,7 @@ def joint_jobs(
   model_dir: str,
   workdir: str,
   winds: list[tuple[float, float]] | None = None,
+  allow_other_material: bool = False,
 ) -> list[Job]:
   """The searches of one fabric's joint estimate (``estimate_joint``'s
   arguments and checks), one per recording under ``<workdir>/recording_<k>``."""
@@ -724,7 +746,7 @@ def joint_jobs(
     for c in configs:
       c.measured.check(space)
   return [
-    Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'))
+    Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'), allow_other_material)
     for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
   ]
 

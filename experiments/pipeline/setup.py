@@ -67,6 +67,34 @@ class Setup(NamedTuple):
   calibration: dict | None
 
 
+def check_material(net: Network, material: str, allow_other: bool = False) -> None:
+  """Refuses a network trained on other fabrics than ``material`` (unless
+  ``allow_other``), naming its folder and both fabrics: the one rule of the
+  command line and the library.
+
+  Raises:
+    ValueError: ``material`` is not among the network's fabrics.
+  """
+  trained = net.embedding.materials
+  if trained and material not in trained and not allow_other:
+    raise ValueError(
+      f'{net.model_dir} was trained on {list(trained)}, not {material}; pass '
+      '--allow_other_material to search with it anyway'
+    )
+
+
+def record(model_dir: str, loaded: embedding.EmbeddingNet | None = None) -> Network:
+  """The trained run at ``model_dir`` (``loaded`` if the caller has restored
+  it already) with its recipe, accuracy and retrieval, each read once."""
+  return Network(
+    model_dir,
+    loaded if loaded is not None else embedding.load_embedding(model_dir),
+    embedding.network_recipe(model_dir),
+    embedding.network_accuracy(model_dir),
+    embedding.network_retrieval(model_dir),
+  )
+
+
 def network(
   model_dir: str,
   distance: str,
@@ -83,18 +111,9 @@ def network(
       ``allow_other_material``), naming the folder and both fabrics.
   """
   net = embedding.for_distance(model_dir, distance, image_size)
-  if net.materials and material not in net.materials and not allow_other_material:
-    raise ValueError(
-      f'{model_dir} was trained on {list(net.materials)}, not {material}; pass '
-      '--allow_other_material to search with it anyway'
-    )
-  return Network(
-    model_dir,
-    net,
-    embedding.network_recipe(model_dir),
-    embedding.network_accuracy(model_dir) if model_dir else None,
-    embedding.network_retrieval(model_dir) if model_dir else None,
-  )
+  out = record(model_dir, net) if model_dir else Network('', net, None, None, None)
+  check_material(out, material, allow_other_material)
+  return out
 
 
 def resolve(
