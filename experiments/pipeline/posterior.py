@@ -300,17 +300,19 @@ LABELS = {
 
 
 def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
-         summary: dict | None = None) -> None:  # fmt: skip
+         summary: dict | None = None, point: str = 'median') -> None:  # fmt: skip
   """Marginals (bending, wind, area weight, load ratio) over the prior, and the
   pairs: wind x area weight with the load ratio's iso-lines (the ridge the
-  video measures), bending x wind, bending x area weight. The marked median
-  and intervals are ``summary``'s (``summarise``, e.g. recalibrated) where
-  given, else the draws' own."""
+  video measures), bending x wind, bending x area weight. The marked point
+  (``summary[name][point]``: 'median' or 'bayes'), median and intervals, the
+  iso-lines included, are ``summary``'s (``summarise``, e.g. recalibrated:
+  what the table prints) where given, else the draws' own."""
   post, prior = physical(samples_unit, space), physical(prior_unit, space)
   ratio = lambda p: physsim.load_ratio(p[:, 1], p[:, 2])
   cols = [*(post[:, i] for i in range(3)), ratio(post)]
   pcols = [*(prior[:, i] for i in range(3)), ratio(prior)]
   names = [*FIELDS, 'load_ratio']
+  stats = {}
   fig, axes = plt.subplots(2, 4, figsize=(17, 7.4), layout='constrained')
   true = None
   if truth is not None:
@@ -327,10 +329,13 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
     ax.hist(x, bins=bins, weights=np.full(len(x), 1 / len(x)), alpha=0.75,
             color='C0', label='posterior')  # fmt: skip
     s = summary[name] if summary else _stats(x, px, log)
+    stats[name] = s
     for level, ls in ((90, ':'), (50, '--')):
       for v in s[f'interval_{level}']:
         ax.axvline(v, color='C0', ls=ls, lw=1)
     ax.axvline(s['median'], color='C0', lw=1.5, label='median; 50%, 90%')
+    if point != 'median' and point in s:
+      ax.axvline(s[point], color='k', lw=1.5, label='point')
     if true is not None:
       ax.axvline(true[j], color='r', lw=1.5, label='truth')
     ax.set(xlabel=LABELS[name], yticks=[], xscale='log' if log else 'linear')
@@ -352,12 +357,15 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
     ax.hist2d(post[:, i], post[:, j], bins=[ex, ey], cmap='viridis')
     if (i, j) == (1, 2):  # iso-lines of the load ratio: w = rho v^2 / (g r)
       v = np.linspace(ex[0], ex[-1], 100)
-      for r in np.quantile(ratio(post), [0.05, 0.5, 0.95]):
+      lr = stats['load_ratio']
+      for r in (lr['interval_90'][0], lr['median'], lr['interval_90'][1]):
         w = physsim.params.AIR_DENSITY * v**2 / (physsim.params.GRAVITY * r)
         ax.plot(v, w, 'w--', lw=0.8)
       ax.set_ylim(ey[0], ey[-1])
     if true is not None:
       ax.plot(true[i], true[j], 'r+', ms=14, mew=2)
+    key = point if point in stats[FIELDS[i]] else 'median'
+    ax.plot(stats[FIELDS[i]][key], stats[FIELDS[j]][key], 'wx', ms=10, mew=2)
     ax.set(xlabel=LABELS[FIELDS[i]], ylabel=LABELS[FIELDS[j]])
     if i == 0:
       ax.set_xscale('log')
@@ -367,6 +375,7 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
     'grey: prior (the search box, times any\nmeasured wind or area weight)\n'
     'blue: posterior given the video\n'
     'white dashes: the load ratio\'s median\nand 90% interval (iso-lines)\n'
+    'white x: the point; black line: the point\nwhere it is not the median\n'
     'red: truth (simulated recordings)',
     va='top', fontsize=9,
   )  # fmt: skip

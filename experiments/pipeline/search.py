@@ -519,7 +519,7 @@ def write_result(
     result.update(_posterior_summary(
       config, space, res, workdir, recording.truth, figures,
       network=network.recipe if network else None,
-      accuracy=network.accuracy if network else None,
+      accuracy=network.accuracy if network else None, source=recording.source,
     ))  # fmt: skip
   retrieval = network.retrieval if network else None
   material = physsim.load_material(physsim.fabric(config.material).material)
@@ -581,9 +581,16 @@ def _argmin_summary(config, space, res: bo.Result, x_best) -> dict:
   }
 
 
+def _name(source: str) -> str:
+  """A recording's name for a title: its file or folder (a dataset sequence:
+  material/sequence)."""
+  parts = os.path.normpath(source).split(os.sep) if source else []
+  return '/'.join(parts[-2:]) if parts and parts[-1].isdigit() else (parts or [''])[-1]
+
+
 def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
                        network: dict | None = None,
-                       accuracy: float | None = None) -> dict:  # fmt: skip
+                       accuracy: float | None = None, source: str = '') -> dict:  # fmt: skip
   """The posterior median as the point, credible intervals, the prior's width;
   writes ``posterior.npz`` and ``posterior.png``. ``network``: the network's
   recipe, which the calibration's must match for its tables to apply;
@@ -619,8 +626,8 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
   if figures:
     posterior_lib.plot(
       res.samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
-      title=f'{config.material}: posterior given {os.path.basename(workdir)}',
-      summary=summary,
+      title=f'{config.material}: posterior given {_name(source) or os.path.basename(workdir)}',
+      summary=summary, point=which,
     )  # fmt: skip
   recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
   return {

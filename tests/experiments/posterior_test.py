@@ -50,3 +50,38 @@ def test_simulated_readings_repeat_by_seed_and_recording():
   assert a != posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=8)
   with pytest.raises(ValueError, match="no instrument reads 'bending_scale'"):
     posterior.simulated_reading('bending_scale', truth, 0.02, seed=4, seq=7)
+
+
+def test_the_picture_draws_the_intervals_the_table_prints(tmp_path, monkeypatch):
+  """The load ratio's iso-lines are the summary's (recalibrated) 90% interval
+  and median, not the draws' raw quantiles; the point is marked."""
+  figs = []
+  monkeypatch.setattr(
+    posterior.files, 'savefig', lambda fig, path, dpi=100: figs.append(fig)
+  )
+  rng = np.random.default_rng(0)
+  samples = rng.uniform(-0.3, 0.3, (400, 3))
+  prior = rng.uniform(-1, 1, (400, 3))
+  entry = lambda m, lo, hi: {
+    'median': m, 'bayes': 1.1 * m, 'interval_50': [0.9 * m, 1.1 * m], 'interval_90': [lo, hi]
+  }  # fmt: skip
+  summary = {
+    'bending_scale': entry(1.0, 0.5, 2.0), 'wind_speed': entry(3.5, 3.0, 4.0),
+    'area_weight': entry(0.23, 0.2, 0.26), 'load_ratio': entry(5.6, 4.1, 7.3),
+  }  # fmt: skip
+  posterior.plot(samples, prior, SPACE, None, str(tmp_path / 'p.png'),
+                 title='gray_interlock: posterior given rec_7', summary=summary,
+                 point='bayes')  # fmt: skip
+  (fig,) = figs
+  ax = fig.axes[4]  # wind x area weight
+  drawn = []
+  for line in ax.get_lines():
+    if line.get_linestyle() == '--':
+      v, w = line.get_data()
+      drawn.append(float(np.median(v**2 / (9.81 * w))))  # rho = 1
+  np.testing.assert_allclose(sorted(drawn), [4.1, 5.6, 7.3], rtol=1e-9)
+  marks = [line.get_data() for line in ax.get_lines() if line.get_marker() == 'x']
+  np.testing.assert_allclose(
+    np.ravel(marks), [3.85, 0.253], rtol=1e-9
+  )  # the Bayes point
+  assert fig._suptitle.get_text().endswith('rec_7')
