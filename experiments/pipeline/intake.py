@@ -642,7 +642,8 @@ def to_json(intake: Intake) -> dict:
 
 def overlay(intake: Intake, mesh) -> np.ndarray:
   """BGR picture: the first frame's depth (grey, removed background dark
-  blue) with the simulated cloth's outline (red) and the pins (green)."""
+  blue) with the simulated cloth's outline (red) and the pins (green), over a
+  legend that says so (``with_legend``)."""
   first = intake.depth[0]
   valid = first > 0
   img = np.zeros(first.shape + (3,), np.uint8)
@@ -670,7 +671,28 @@ def overlay(intake: Intake, mesh) -> np.ndarray:
       if z > 0:
         centre = (int(round((u / z + 0.5) * scale)), int(round((v / z + 0.5) * scale)))
         cv2.circle(img, centre, max(3, scale), (0, 255, 0), 2)
-  return img
+  return with_legend(img)
+
+
+# What the overlay's colours mean (BGR), drawn under the picture.
+LEGEND = (
+  ((0, 0, 255), 'simulated cloth outline'),
+  ((0, 255, 0), 'pins found'),
+  ((200, 200, 200), 'depth (near: light)'),
+  ((60, 20, 0), 'background removed'),
+)
+
+
+def with_legend(img: np.ndarray) -> np.ndarray:
+  """``img`` (BGR) over a band that names each colour of ``LEGEND``."""
+  row = 18
+  band = np.full((row * len(LEGEND) + 6, img.shape[1], 3), 255, np.uint8)
+  for k, (colour, text) in enumerate(LEGEND):
+    y = 4 + k * row
+    band[y + 2 : y + row - 4, 4:18] = colour
+    cv2.putText(band, text, (24, y + row - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                (0, 0, 0), 1, cv2.LINE_AA)  # fmt: skip
+  return np.concatenate([img, band], axis=0)
 
 
 def check_workdir(workdir: str, path: str, camera_json: str, run_file: str) -> None:

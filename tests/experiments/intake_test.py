@@ -260,3 +260,13 @@ def test_a_dataset_sequence_with_its_own_camera_file_keeps_its_pose_and_truth(tm
   np.testing.assert_allclose(ik.pins_camera, want, atol=1e-5)
   passthrough = intake.take_in(seq, intake.IntakeConfig(), '', ef.CONFIG)
   assert passthrough.passthrough and passthrough.truth == pytest.approx(ef.TRUTH)
+
+
+def test_the_overlay_has_a_legend_of_its_colours():
+  img = np.zeros((40, 64, 3), np.uint8)
+  out = intake.with_legend(img)
+  assert out.shape[1] == 64 and out.shape[0] > 40 + 18 * len(intake.LEGEND)
+  np.testing.assert_array_equal(out[:40], img)  # the picture itself untouched
+  band = out[40:].reshape(-1, 3)
+  for colour, _ in intake.LEGEND:
+    assert (band == colour).all(axis=1).any(), colour
