@@ -79,7 +79,9 @@ def assert_same_asks(a, b):
     np.testing.assert_allclose(xa, xb, rtol=0, atol=_REASSOCIATION_TOLERANCE)
 
 
-@pytest.mark.parametrize('mode', ['map', 'vmap'])
+@pytest.mark.parametrize(
+  'mode', ['map', pytest.param('vmap', marks=pytest.mark.slow)]
+)  # vmap: slow on CPUs
 def test_three_posterior_searches_together_ask_as_each_alone(mode):
   ids = [0, 1, 2]
   opts = [posterior_search(i) for i in ids]
@@ -106,6 +108,7 @@ def test_three_posterior_searches_together_ask_as_each_alone(mode):
   assert not np.allclose(results[0].log_post, results[1].log_post)
 
 
+@pytest.mark.slow  # several searches over several iterations
 def test_mixed_batch_fresh_failed_finished_other_settings_and_iterations():
   """One ask_many call with a search at its initial design, one at iteration
   2, one whose every simulation failed, and two Minimizers (another setting,
@@ -142,6 +145,7 @@ def test_mixed_batch_fresh_failed_finished_other_settings_and_iterations():
     batched.ask_many([a, b], [sa, done])
 
 
+@pytest.mark.slow  # three L-BFGS-B searches, alone and together
 def test_minimizers_together_ask_as_each_alone():
   """L-BFGS-B optima carry any change of rounding into the next iterations:
   over the same devices (one mesh, one program) alone and together agree."""

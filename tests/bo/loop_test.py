@@ -7,6 +7,7 @@ import tempfile
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from absl.testing import absltest
 
 import bo
@@ -143,6 +144,7 @@ class MinimizeTest(absltest.TestCase):
     # 4 + 8 points with one point of headroom fit a 16-slot buffer: one program.
     self.assertLessEqual(step._cache_size() - before, 1)
 
+  @pytest.mark.slow  # two whole searches
   def test_interleaved_ask_tell_equals_minimize(self):
     # Two searches stepped in lockstep (as experiments.estimate_many drives
     # them) each go exactly as minimize runs them alone.

@@ -48,6 +48,7 @@ def test_moments_match_monte_carlo():
     np.testing.assert_allclose(np.exp(log_m2[g]), (lik**2).mean(), rtol=_MC_RTOL)
 
 
+@pytest.mark.slow  # fits GPs to many replicates
 def test_noise_covariance_is_the_scatter_about_the_gp_means():
   # A smooth residual plus correlated noise of known covariance: the fitted
   # covariance must find both its scale and its correlation.

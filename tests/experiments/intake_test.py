@@ -101,6 +101,7 @@ def test_intake_only_writes_what_the_issue_lists(scene, tmp_path):
   assert stat.S_IMODE(os.stat(w / 'intake').st_mode) == 0o777 & ~umask
 
 
+@pytest.mark.slow  # a whole estimate, then its resume
 def test_estimate_runs_on_the_recording_and_a_resume_must_match_its_camera(
   scene, tmp_path
 ):

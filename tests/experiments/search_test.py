@@ -1,4 +1,4 @@
-"""Tests of search.estimate_many: lockstep batching changes no search.
+"""Tests of experiments.pipeline.search (estimate_many): lockstep batching changes no search.
 
 Recordings and the hand-made embedding come from ``estimate_fixtures``.
 """
@@ -20,6 +20,8 @@ from tests.experiments.estimate_fixtures import (
   write_hand_made_model,
   write_recording,
 )
+
+pytestmark = pytest.mark.slow  # whole searches in lockstep, resumed and alone
 
 OTHER_TRUTH = dict(bending_scale=3.0, wind_speed=2.0, area_weight=0.22)
 # Another structure: a different gust intensity is another fused program, so
