@@ -177,7 +177,7 @@ def test_the_command_line_asks_for_a_network_only_where_one_is_used(env):
   shape = estimate_cli.Args(
     search=dataclasses.replace(CONFIG, distance='shape'), image_size=48
   )
-  assert estimate_cli.network(shape).image_size == (48, 48)
+  assert estimate_cli.network(shape).embedding.image_size == (48, 48)
   with pytest.raises(
     ValueError, match='missing --model: --distance=energy embeds frames'
   ):
@@ -185,7 +185,7 @@ def test_the_command_line_asks_for_a_network_only_where_one_is_used(env):
   with pytest.raises(ValueError, match='--image_size=8: need 16-1024'):
     estimate_cli.network(dataclasses.replace(shape, image_size=8))
   given = dataclasses.replace(shape, model=env['model_dir'])  # a network still loads
-  assert estimate_cli.network(given).network is not None
+  assert estimate_cli.network(given).embedding.network is not None
 
 
 def test_the_synthetic_likelihood_needs_the_shape_distance():
