@@ -52,12 +52,12 @@ class Measured:
       if v == 0 and sd == 0:
         continue
       lo, hi = getattr(space, name)
-      if not v > 0:
-        raise ValueError(f'--{name}={v}: a reading must be > 0')
       if not sd > 0:
         raise ValueError(
           f'--{name}={v} needs --{name}_sd > 0 (its uncertainty), got {sd}'
         )
+      if not v > 0:
+        raise ValueError(f'--{name}={v}: a reading must be > 0')
       if v + 3 * sd < lo or v - 3 * sd > hi:
         raise ValueError(
           f'--{name}={v} +- {sd} lies outside the search range [{lo}, {hi}]'
