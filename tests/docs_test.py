@@ -83,20 +83,32 @@ def test_cited_results_are_not_ignored():
   assert proc.returncode == 1, f'cited but ignored by git: {proc.stdout.split()}'
 
 
-def test_committed_results_are_small():
-  if not _git_checkout():
-    pytest.skip('not a git checkout')
-  proc = _git('ls-files', '-z', '--', _RESULTS)
+def _tracked_sizes(folder: str) -> dict[str, int]:
+  proc = _git('ls-files', '-z', '--', folder)
   assert proc.returncode == 0, proc.stderr
   sizes = {}
   for path in filter(None, proc.stdout.split('\0')):
     full = os.path.join(_ROOT, path)
     if os.path.isfile(full):  # a file deleted but not yet committed is gone
       sizes[path] = os.path.getsize(full)
+  return sizes
+
+
+def test_committed_results_are_small():
+  if not _git_checkout():
+    pytest.skip('not a git checkout')
+  sizes = _tracked_sizes(_RESULTS)
   big = {p: s for p, s in sizes.items() if s > _MAX_FILE}
   assert not big, f'over {_MAX_FILE} bytes: {big}'
   total = sum(sizes.values())
   assert total <= _MAX_TOTAL, f'{total} bytes in {_RESULTS}, over {_MAX_TOTAL}'
+
+
+def test_committed_figures_are_small():
+  if not _git_checkout():
+    pytest.skip('not a git checkout')
+  big = {p: s for p, s in _tracked_sizes('docs/figures').items() if s > _MAX_FILE}
+  assert not big, f'over {_MAX_FILE} bytes (re-encode or drop): {big}'
 
 
 def test_docs_readme_lists_every_page():
