@@ -312,8 +312,8 @@ def estimate(
 
   Raises:
     ValueError: ``model_dir`` is not a trained run, was trained on another
-      fabric, or takes another frame size, an RGB network and a recording without colour frames, a recording
-      shorter than an SDN clip, ``workdir`` holds an estimate of another
+      fabric, or takes another frame size, an RGB network and a recording
+      without colour frames, a recording shorter than an SDN clip, ``workdir`` holds an estimate of another
       recording, camera, model or config, or every candidate simulation blew
       up (naming the recording).
   """
@@ -353,7 +353,7 @@ def estimate_many(
   """
   t_start = time.perf_counter()
   out: list[dict | Exception | None] = [None] * len(jobs)
-  nets = dict(nets or {})
+  nets = nets or {}
   # Each network restored and its record read once (setup.record), and every
   # job's fabric checked against it (setup.check_material).
   networks: dict[str, setup_lib.Network] = {}
