@@ -51,6 +51,11 @@ class Measured:
       v, sd = getattr(self, name), getattr(self, f'{name}_sd')
       if v == 0 and sd == 0:
         continue
+      if v == 0:
+        raise ValueError(
+          f'--{name}_sd={sd} was given without --{name} (the reading it is the '
+          'uncertainty of)'
+        )
       lo, hi = getattr(space, name)
       if not sd > 0:
         raise ValueError(

@@ -20,6 +20,10 @@ SPACE = physsim.SearchSpace()  # wind 1-6 m/s, area weight 0.1-0.37 kg/m^2
     ),
     (dict(wind_speed=3.0), r'--wind_speed=3.0 needs --wind_speed_sd > 0'),
     (dict(area_weight=0.9, area_weight_sd=0.01), r'outside the search range'),
+    (
+      dict(area_weight_sd=1e300),
+      r'--area_weight_sd=1e\+300 was given without --area_weight',
+    ),
   ],
 )
 def test_readings_are_refused_with_their_own_reason(reading, message):
