@@ -217,6 +217,44 @@ def fit_pins(
   return ClothFit(pins, plane, up_vec, up_from, floor, cloth_up)
 
 
+def pin_scatter(
+  depth: np.ndarray,
+  intrinsics: Intrinsics,
+  up: np.ndarray,
+  *,
+  windows: int = 8,
+  frames: int = 5,
+  spacing: float | None = None,
+) -> float:
+  """How far the fitted pins move across the recording, metres (the larger
+  of the two pins' RMS distance from their mean).
+
+  The pins hold still, so a fit that finds them in one stretch of frames and
+  elsewhere in another has not found them: a corner the camera sees edge-on
+  or not at all is replaced by a cloth point the wind moves. ``fit_pins``
+  runs on ``windows`` stretches of ``frames`` frames spread over ``depth``
+  (T, H, W), with ``up`` given; one stretch (a short recording) gives 0.
+  """
+  t = len(depth)
+  starts = sorted({round(s) for s in np.linspace(0, max(t - frames, 0), windows)})
+  if len(starts) < 2:
+    return 0.0
+  pins = []
+  for s in starts:
+    try:
+      fit = fit_pins(
+        depth[s : s + frames], intrinsics, up=up, frames=frames, spacing=spacing
+      )
+    except ValueError:  # too little cloth in this stretch
+      continue
+    pins.append(fit.pins)
+  if len(pins) < 2:
+    return 0.0
+  pins = np.asarray(pins)
+  rms = np.sqrt(((pins - pins.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
+  return float(rms.max())
+
+
 def camera_pose(
   pins_camera: np.ndarray,
   up_camera: np.ndarray,

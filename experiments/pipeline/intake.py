@@ -109,10 +109,11 @@ class IntakeConfig:
       -y, -z), for a file with "cam_to_world" (your rig's calibration); empty:
       not known.
     wind_toward_camera: the wind blows toward the camera (default: away).
-    min_overlap: least IoU of the recording's cloth in the first frame with
-      the simulated cloth seen from the fitted pose, at rest or swung about
-      its top edge (the best of 0-90 degrees); below it the search is
-      refused.
+    min_overlap: least IoU of the recording's cloth with the simulated
+      cloth seen from the fitted pose, at rest or swung about its top edge
+      (the best of 0-90 degrees, and of the first second's frames: a sheet
+      the wind billows matches a rigid swing only now and then); below it
+      the search is refused.
     depth_topic: a ROS bag's (or RealSense .bag's) depth image topic; empty:
       found by name (physsim.bags), the candidates listed when ambiguous.
     info_topic: the bag's CameraInfo topic of that depth stream; empty: found
@@ -192,14 +193,15 @@ class Intake(NamedTuple):
       'cloth plane', 'camera file'; ``UP_WORDS``).
     valid_fraction: (T,) share of valid pixels before the background went.
     cloth_fraction: (T,) share of pixels kept as cloth.
-    overlap: IoU of the first frame's cloth with the simulated cloth at its
-      best swing angle.
+    overlap: IoU of the recording's cloth with the simulated cloth at its
+      best swing angle, in the best frame of the first second.
     planes: background planes removed, (normal, offset) in the camera frame.
     source: the recording's path.
     truth: ground truth when the recording carries it.
     camera_form: the camera file's form, or ''.
     passthrough: a dataset sequence, taken as it is.
     swing_deg: the swing angle of that best overlap.
+    overlap_frame: the frame of that best overlap (the overlay shows it).
     silhouette: (H, W) bool, the simulated cloth at that angle, or None.
     camera_file: the camera file's path, or ''.
     warnings: what the user should check (sources of up that disagree).
@@ -228,6 +230,7 @@ class Intake(NamedTuple):
   camera_file: str = ''
   warnings: tuple[str, ...] = ()
   alignment_sd: tuple[float, float] = (0.0, 0.0)
+  overlap_frame: int = 0
 
   @property
   def up_is_guess(self) -> bool:
@@ -468,20 +471,25 @@ def cross_check(given: list, fit: alignment.ClothFit) -> tuple[str, ...]:
   return tuple(out)
 
 
-def alignment_error(fit, pins, want_spacing: float, intr, warnings) -> tuple:
+def alignment_error(
+  fit, pins, want_spacing: float, intr, warnings, scatter: float = 0.0
+) -> tuple:
   """(metres, degrees): the alignment's own error, 1 sd, for the estimate's
   ``camera_sd_m``/``camera_sd_deg``: a tilt by where up came from
   (``UP_SD_DEG``), at least as large as any disagreement between its sources;
   a shift of two pixels at the pins' depth, at least ``MIN_SD_M``, or half the
-  pins' spacing error if larger."""
+  pins' spacing error if larger. ``scatter`` (``alignment.pin_scatter``: how
+  far the fitted pins move over the recording) is a shift of its own and turns
+  the pins' line by its angle across their spacing."""
   deg = UP_SD_DEG[fit.up_from]
+  deg = max(deg, float(np.degrees(np.arctan2(scatter, want_spacing))))
   if fit.floor_up is not None and fit.up_from not in ('floor', 'cloth plane'):
     deg = max(deg, alignment.angle_deg(fit.up, fit.floor_up))
   if warnings:  # sources of up more than UP_CROSS_CHECK_DEG apart
     deg = max(deg, 2 * UP_CROSS_CHECK_DEG)
   depth = float(np.mean(pins[:, 2]))
   spacing = float(np.linalg.norm(pins[1] - pins[0]))
-  m = max(MIN_SD_M, 2 * depth / intr.fx, 0.5 * abs(spacing - want_spacing))
+  m = max(MIN_SD_M, 2 * depth / intr.fx, 0.5 * abs(spacing - want_spacing), scatter)
   return (round(min(m, 0.2), 4), round(min(deg, 20.0), 2))
 
 
@@ -525,7 +533,10 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
         'depth_scale and --pins'
       )
     up_from = fit.up_from
-    sd = alignment_error(fit, pins, want, intr, warnings)
+    scatter = 0.0
+    if not config.pins:
+      scatter = alignment.pin_scatter(intake.depth, intr, fit.up, spacing=want)
+    sd = alignment_error(fit, pins, want, intr, warnings, scatter)
   else:
     pose, up_from, warnings, sd = cam.pose, 'camera file', (), (0.0, 0.0)
     pins = alignment.pins_in_camera(pose, pins_world)
@@ -537,12 +548,14 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
       f'{cam.path}: from this camera {100 * seen:.0f}% of the simulated cloth is in '
       f'view, covering {area} pixels; check the camera pose (cam_to_world) or --pins'
     )
-  ious = [alignment.iou(intake.depth[0] > 0, sim) for sim in sims]
-  best = int(np.argmax(ious))
-  overlap = float(ious[best])
+  first_second = intake.depth[: max(1, int(round(intake.fps)))] > 0
+  ious = np.array([[alignment.iou(f, sim) for sim in sims] for f in first_second])
+  frame, best = np.unravel_index(int(np.argmax(ious)), ious.shape)
+  overlap = float(ious[frame, best])
   out = intake._replace(
     pose=pose, pins_camera=pins, up_from=up_from, overlap=overlap,
     swing_deg=float(SWINGS_DEG[best]), silhouette=sims[best],
+    overlap_frame=int(frame),
     warnings=intake.warnings + tuple(warnings),
     alignment_sd=sd,
   )  # fmt: skip
@@ -633,6 +646,7 @@ def to_json(intake: Intake) -> dict:
     'cloth_fraction': intake.cloth_fraction.tolist(),
     'overlap_iou': intake.overlap,
     'swing_deg': intake.swing_deg,
+    'overlap_frame': intake.overlap_frame,
     'background_planes': [{'normal': n, 'offset': o} for n, o in intake.planes],
     'warnings': list(intake.warnings),
     'alignment_sd': {'m': intake.alignment_sd[0], 'deg': intake.alignment_sd[1]},
@@ -641,10 +655,11 @@ def to_json(intake: Intake) -> dict:
 
 
 def overlay(intake: Intake, mesh) -> np.ndarray:
-  """BGR picture: the first frame's depth (grey, removed background dark
-  blue) with the simulated cloth's outline (red) and the pins (green), over a
-  legend that says so (``with_legend``)."""
-  first = intake.depth[0]
+  """BGR picture: the depth of the frame that best matched the simulated
+  cloth (``overlap_frame``; grey, removed background dark blue) with the
+  simulated cloth's outline (red) and the pins (green), over a legend that
+  says so (``with_legend``)."""
+  first = intake.depth[min(intake.overlap_frame, len(intake.depth) - 1)]
   valid = first > 0
   img = np.zeros(first.shape + (3,), np.uint8)
   if valid.any():
