@@ -564,9 +564,17 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
     if workdir:
       write(out, workdir, est, frames=False)
       where = f'; see {os.path.join(workdir, OVERLAY_FILE)}'
+    guess = ''
+    if out.up_is_guess:
+      guess = (
+        "; up was a guess from the cloth's own plane: --world_up=AXIS (the camera "
+        'file\'s world axis that points up), "gravity" in the camera file or --up '
+        'places the camera without it'
+      )
     raise ValueError(
       f'{intake.source}: the simulated cloth at the fitted pose overlaps the '
       f"recording's by IoU {overlap:.2f} < min_overlap {config.min_overlap}{where}"
+      f'{guess}'
     )
   return out
 
