@@ -37,7 +37,13 @@ from physsim.camera import (
   sample_poses,
   world_to_camera,
 )
-from physsim.cloth import ClothModel, SimConfig, build, reference_rigidity
+from physsim.cloth import (
+  ClothModel,
+  SimConfig,
+  build,
+  reference_rigidity,
+  stable_timestep,
+)
 from physsim.forces import Gusts, face_wind_forces, sample_gusts
 from physsim.materials import FABRICS, Fabric, Material, fabric, load_material
 from physsim.mesh import GARMENTS, Mesh, garment, square
@@ -112,6 +118,7 @@ __all__ = [
   'pose_from_dict',
   'pose_to_dict',
   'reference_rigidity',
+  'stable_timestep',
   'resolve_backend',
   'BACKENDS',
   'rollout_fn',

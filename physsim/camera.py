@@ -295,6 +295,21 @@ class PoseRanges:
     """
     return cls(distance=(2.6, 3.0), azimuth_deg=(30.0, 40.0), mirror_azimuth=True)
 
+  def for_cloth(self, size: float, height: float = 1.5) -> PoseRanges:
+    """These ranges for a ``size`` m square whose top edge is at ``height``:
+    distances, the target's offsets and its jitter scaled by ``size`` about
+    the top edge's midpoint, so a 20 cm swatch fills the view as the 1 m sheet
+    does (angles unchanged)."""
+    if not size > 0:
+      raise ValueError(f'cloth size must be > 0 m, got {size}')
+    tx, ty, tz = self.target
+    return dataclasses.replace(
+      self,
+      distance=(self.distance[0] * size, self.distance[1] * size),
+      target=(tx * size, ty * size, height - (height - tz) * size),
+      target_jitter=self.target_jitter * size,
+    )
+
   def to_dict(self) -> dict[str, Any]:
     """JSON-ready fields."""
     return dataclasses.asdict(self)

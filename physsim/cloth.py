@@ -40,6 +40,7 @@ a row, and ArcSim's min-over-sides rule.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import jax
 import jax.numpy as jnp
@@ -84,6 +85,26 @@ class SimConfig:
   bending_damping: float = 0.0
   tolerance: float = 1e-8
   graph_mode: str = 'auto'
+
+
+# The bending force is explicit, so the largest stable step shrinks as the
+# square of the mesh spacing: MuJoCo C held bending 10x on a 12.4 mm mesh at
+# 2 ms and blew up at 4.5x on a 6 mm mesh at 2 ms (experiments.studies.protocol).
+STABLE_STEP_AT = (0.0124, 0.002)  # (edge, metres; step, seconds)
+
+
+def stable_timestep(edge: float, frame_dt: float, timestep: float = 0.002) -> float:
+  """The largest step at most ``timestep`` and stable for a mesh whose
+  shortest edge is ``edge`` metres, that divides the frame interval
+  ``frame_dt`` into whole substeps. A 1 m sheet of up to 81 vertices a side
+  keeps 2 ms; a 20 cm swatch of 25 gets about 0.9 ms."""
+  if not (edge > 0 and frame_dt > 0 and timestep > 0):
+    raise ValueError(
+      f'need edge, frame_dt and timestep > 0, got {edge}, {frame_dt}, {timestep}'
+    )
+  h0, dt0 = STABLE_STEP_AT
+  bound = min(timestep, dt0 * (edge / h0) ** 2)
+  return frame_dt / math.ceil(frame_dt / bound - 1e-9)
 
 
 def reference_rigidity(material: str) -> float:

@@ -75,6 +75,13 @@ class Mesh:
     return float(self.face_areas.sum())
 
   @property
+  def shortest_edge(self) -> float:
+    """The shortest rest edge, metres (what limits the simulator's step)."""
+    p = self.vertices[self.faces]
+    edges = p - np.roll(p, 1, axis=1)
+    return float(np.linalg.norm(edges, axis=-1).min())
+
+  @property
   def edges(self) -> np.ndarray:
     """(E, 2) unique undirected edges, sorted."""
     e = np.concatenate(

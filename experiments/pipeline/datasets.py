@@ -49,6 +49,8 @@ class Config:
     cameras: cameras per sequence.
     resolution: image width = height, pixels.
     cloth_resolution: cloth vertices per side.
+    cloth_size: the square cloth's side, metres (the cameras' distances and
+      target scale with it: ``PoseRanges.for_cloth``).
     seed: the only seed.
     backend: ``'auto'`` (MuJoCo Warp a frame at a time on a GPU, else MuJoCo
       C), ``'warp'``, ``'mjx'`` or ``'c'`` (``physsim.rollout``).
@@ -83,6 +85,7 @@ class Config:
   cameras: int = 6
   resolution: int = 256
   cloth_resolution: int = 25
+  cloth_size: float = 1.0
   seed: int = 0
   backend: str = cli.choice('auto', physsim.BACKENDS)
   batch_size: int = 30
@@ -151,7 +154,10 @@ def _draw_poses(config: Config, keys, seq_idx, attempt: int) -> physsim.Pose:
     key = jax.random.fold_in(key, i)
     if attempt:
       key = jax.random.fold_in(key, attempt)
-    return physsim.sample_poses(key, config.cameras, POSES[config.poses])
+    ranges = POSES[config.poses]
+    if not config.garment:
+      ranges = ranges.for_cloth(config.cloth_size)
+    return physsim.sample_poses(key, config.cameras, ranges)
 
   return jax.vmap(one)(keys, seq_idx)
 
@@ -204,7 +210,7 @@ def _frame_cameras(config: Config, draw, render, poses, frames, valid):
 def _mesh(config: Config) -> physsim.Mesh:
   if config.garment:
     return physsim.garment(config.garment, config.garment_spacing)
-  return physsim.square(config.cloth_resolution)
+  return physsim.square(config.cloth_resolution, config.cloth_size)
 
 
 def _material_stream(seed: int, material: str) -> int:
@@ -235,6 +241,8 @@ def _check_config(config: Config) -> None:
     raise ValueError(f'poses must be one of {tuple(POSES)}, got {config.poses!r}')
   if config.cloth_resolution < 2:
     raise ValueError(f'cloth_resolution must be >= 2, got {config.cloth_resolution}')
+  if not 0.05 <= config.cloth_size <= 3.0:
+    raise ValueError(f'cloth_size must be in [0.05, 3] m, got {config.cloth_size}')
   if not 0.0 <= config.min_coverage < 1.0 or config.pose_draws < 1:
     raise ValueError(
       f'need 0 <= min_coverage < 1 and pose_draws >= 1, got {config.min_coverage} '
@@ -253,6 +261,8 @@ def _identity(config: Config, backend: str) -> dict:
     d.pop(k)
   if not config.min_coverage:  # datasets made before the re-draw match
     d.pop('min_coverage'), d.pop('pose_draws')
+  if config.cloth_size == 1.0:  # ... and before the size was a setting
+    d.pop('cloth_size')
   return d
 
 
@@ -458,10 +468,11 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     _check_workdir(workdir, config, backend, given)
   intrinsics = physsim.Intrinsics(width=config.resolution, height=config.resolution)
   mesh = _mesh(config)
-  # MuJoCo's stiffest safe constraint time constant is two steps.
+  # A fine mesh needs a shorter step; MuJoCo's stiffest safe constraint time
+  # constant is two steps.
+  step = physsim.stable_timestep(mesh.shortest_edge, 1.0 / config.fps, config.timestep)
   sim_config = physsim.SimConfig(
-    timestep=config.timestep,
-    edge_solref=max(physsim.SimConfig.edge_solref, 2 * config.timestep),
+    timestep=step, edge_solref=max(physsim.SimConfig.edge_solref, 2 * step)
   )
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size

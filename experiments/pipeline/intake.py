@@ -531,7 +531,9 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
         f'{intake.source}: the pins are {spacing:.3f} m apart but the simulated '
         f"cloth's are {want:.3f} m; check the camera file's intrinsics, the "
         'depth_scale and --pins'
-      )
+        + ('' if est.garment else f', or give the cloth\'s side as --cloth_size '
+           f'(now {est.cloth_size:g} m)')
+      )  # fmt: skip
     up_from = fit.up_from
     scatter = 0.0
     if not config.pins:

@@ -74,8 +74,11 @@ class EstimateConfig:
       (common random numbers), with no calibrated interval.
     material: paper fabric name (physsim.FABRICS): the search box and the
       bending reference.
-    garment: '' for the 1 m square, else a physsim.GARMENTS name.
+    garment: '' for the square cloth, else a physsim.GARMENTS name.
     cloth_resolution: square cloth vertices per side.
+    cloth_size: the square cloth's side, metres (1: the paper's sheet; a
+      small swatch shows bending); the simulator's step shrinks with the
+      mesh spacing (physsim.stable_timestep).
     garment_spacing: garment grid spacing, metres.
     frames: most frames compared (at fps); a longer recording is cut, a
       shorter one sets how many frames are simulated.
@@ -141,6 +144,7 @@ class EstimateConfig:
   material: str = 'gray_interlock'
   garment: str = ''
   cloth_resolution: int = 25
+  cloth_size: float = 1.0
   garment_spacing: float = 0.04
   frames: int = 60
   fps: float = cli.renamed(20.0, 'sim_fps')
@@ -264,7 +268,7 @@ class EstimateConfig:
 # The other numeric fields' allowed ranges (EstimateConfig.check): beyond
 # them a search is a typo (or would not fit in memory), never a setting.
 _RANGES = (
-  ('sharpness', 1e-6, 1e6), ('cloth_resolution', 2, 200),
+  ('sharpness', 1e-6, 1e6), ('cloth_resolution', 2, 200), ('cloth_size', 0.05, 3.0),
   ('garment_spacing', 0.005, 0.5), ('cameras', 1, 64), ('q', 1, 4096),
   ('n_init', 1, 100_000), ('max_iter', 0, 10_000), ('stop_rel_change', 0.0, 1.0),
   ('stop_window', 1, 10_000), ('min_iter', 0, 10_000), ('replicates', 0, 4096),
@@ -308,7 +312,16 @@ def mesh(config: EstimateConfig) -> physsim.Mesh:
   """The rest mesh an estimate simulates: the square or the garment."""
   if config.garment:
     return physsim.garment(config.garment, config.garment_spacing)
-  return physsim.square(config.cloth_resolution)
+  return physsim.square(config.cloth_resolution, config.cloth_size)
+
+
+def sim_config(config: EstimateConfig) -> physsim.SimConfig:
+  """The simulator's settings of an estimate's mesh: the default step, or a
+  shorter one that a fine mesh needs to stay stable (``stable_timestep``)."""
+  step = physsim.stable_timestep(mesh(config).shortest_edge, 1.0 / config.fps)
+  return physsim.SimConfig(
+    timestep=step, edge_solref=max(physsim.SimConfig.edge_solref, 2 * step)
+  )
 
 
 def pin_centre(config: EstimateConfig) -> np.ndarray:
@@ -322,7 +335,7 @@ def cloth(config: EstimateConfig) -> physsim.ClothModel:
   """The compiled cloth of an estimate's mesh. Worlds name their fabric's
   bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
   model and its compiles."""
-  return physsim.build(mesh(config), 'gray_interlock')
+  return physsim.build(mesh(config), 'gray_interlock', sim_config(config))
 
 
 class ProblemData(NamedTuple):
@@ -379,7 +392,8 @@ class Problem(NamedTuple):
     c, n = self.config, self.net
     return (
       c.garment, c.garment_spacing if c.garment else 0.0,
-      0 if c.garment else c.cloth_resolution, self.n_frames, c.fps, c.warmup,
+      0 if c.garment else c.cloth_resolution, 0.0 if c.garment else c.cloth_size,
+      self.n_frames, c.fps, c.warmup,
       c.gusts, physsim.resolve_backend(c.backend), c.workers, self.intr,
       self.data.poses.position.shape[0], c.sensor_noise, c.distance,
       c.camera_sd_m, c.camera_sd_deg,
@@ -438,7 +452,10 @@ def make_problem(
   if recording.pose is not None:
     poses = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32)[None], recording.pose)
   else:
-    poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras)
+    ranges = physsim.PoseRanges()
+    if not config.garment:
+      ranges = ranges.for_cloth(config.cloth_size)
+    poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras, ranges)
   rec_points = jnp.zeros((1, 1), jnp.float32)  # no network: nothing embedded
   if net.network is not None:
     inputs = embedding.network_inputs(

@@ -138,7 +138,8 @@ def covered(result: dict, truth: dict) -> dict:
 # pins the posterior down; coverage measured with other values does not carry
 # over.
 _CALIBRATED_FIELDS = (
-  'likelihood', 'sharpness', 'material', 'garment', 'cloth_resolution', 'frames',
+  'likelihood', 'sharpness', 'material', 'garment', 'cloth_resolution', 'cloth_size',
+  'frames',
   'fps', 'distance', 'camera_sd_m', 'camera_sd_deg', 'warmup', 'gusts',
   'sensor_noise', 'q', 'n_init', 'max_iter', 'posterior_grid',
 )  # fmt: skip
@@ -201,6 +202,8 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   if 'distance' in calibrated:  # files from before the camera's error was a setting
     calibrated.setdefault('camera_sd_m', 0.0)
     calibrated.setdefault('camera_sd_deg', 0.0)
+  if 'cloth_resolution' in calibrated:  # files from before the size was a setting
+    calibrated.setdefault('cloth_size', 1.0)
   differs = [n for n in _CALIBRATED_FIELDS
              if n in calibrated and not _same(getattr(config, n), calibrated[n])]  # fmt: skip
   mode = calibration_mode(config.measured, joint)

@@ -42,8 +42,10 @@ class Recipe:
     bending_scale: the truth: bending stiffness over the fabric's.
     wind_speed: the truth: mean wind at the cloth, m/s.
     area_weight: the truth: kg/m^2.
-    cloth_resolution: vertices per side of the 1 m sheet.
-    timestep: the simulation step, seconds.
+    cloth_resolution: vertices per side of the sheet.
+    cloth_size: its side, metres.
+    timestep: the simulation step, seconds (shorter where the mesh needs it:
+      ``physsim.stable_timestep``).
     gust_intensity: the gusts' relative strength.
     frames: frames written.
     fps: the camera's frame rate.
@@ -65,6 +67,7 @@ class Recipe:
   wind_speed: float = 3.52
   area_weight: float = 0.185
   cloth_resolution: int = 41
+  cloth_size: float = 1.0
   timestep: float = 1 / 600
   gust_intensity: float = 0.3
   frames: int = 90
@@ -130,13 +133,13 @@ def depth(recipe: Recipe, backend: str = 'c') -> np.ndarray:
   """(T, H, W) the camera's noisy depth in metres (0: no return)."""
   if recipe.wind_speed <= 0 or recipe.area_weight <= 0 or recipe.bending_scale <= 0:
     raise ValueError(f'the truth must be positive, got {recipe.truth}')
-  mesh = physsim.square(recipe.cloth_resolution)
+  mesh = physsim.square(recipe.cloth_resolution, recipe.cloth_size)
+  step = physsim.stable_timestep(mesh.shortest_edge, 1 / recipe.fps, recipe.timestep)
   model = physsim.build(
     mesh,
     recipe.material,
     physsim.SimConfig(
-      timestep=recipe.timestep,
-      edge_solref=max(physsim.SimConfig.edge_solref, 2 * recipe.timestep),
+      timestep=step, edge_solref=max(physsim.SimConfig.edge_solref, 2 * step)
     ),
   )
   out = physsim.simulate(
