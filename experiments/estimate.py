@@ -27,7 +27,7 @@ import os
 
 from absl import logging
 
-from experiments.pipeline import cli, files, intake, report, search, setup
+from experiments.pipeline import cli, files, intake, report, search, setup, takes
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 
@@ -78,6 +78,12 @@ class Args:
       swing, and the camera with it (issue 40: 2 m too high, the wind read
       at a third). Refused unless this is set; the posterior then carries a
       20-degree tilt (1 sd).
+    protocol: a protocol file (JSON or YAML; experiments.pipeline.takes)
+      listing the recordings, each with its own camera file, cloth size,
+      anemometer reading and up axis, instead of --recording.
+    cloth_sizes: with several recordings: each one's cloth side (m), in the
+      recordings' order (a sheet and a swatch of one fabric); empty: all
+      --cloth_size.
     intake: how the recording is read, cleaned and aligned.
     search: the estimate's settings.
   """
@@ -93,6 +99,8 @@ class Args:
   wind_speed_sds: tuple[float, ...] = ()
   alignment_sd: bool = True
   allow_guessed_up: bool = False
+  protocol: str = ''
+  cloth_sizes: tuple[float, ...] = ()
   intake: intake.IntakeConfig = intake.IntakeConfig()
   search: objective_lib.EstimateConfig = objective_lib.EstimateConfig()
 
@@ -126,11 +134,54 @@ def joint_winds(args: Args) -> list[tuple[float, float]] | None:
   return list(zip(args.wind_speeds, args.wind_speed_sds, strict=True))
 
 
-def _take_in(args: Args, path: str, workdir: str, frames: bool = True):
+def recording_takes(args: Args) -> list[takes.Take]:
+  """The recordings and each one's own set-up, from --protocol or from
+  --recording (with --camera_json, --cloth_sizes, --wind_speeds).
+
+  Raises:
+    ValueError: both or neither given, or a bad entry (named), before any
+      recording is read.
+  """
+  if args.protocol:
+    if args.recording or args.cloth_sizes or args.wind_speeds or args.camera_json:
+      raise ValueError(
+        f'--protocol={args.protocol} lists the recordings and their set-ups; give '
+        'it without --recording, --camera_json, --cloth_sizes and --wind_speeds'
+      )
+    return takes.read(args.protocol)
+  if not args.recording:
+    raise ValueError('missing --recording or --protocol (see --help)')
+  if args.cloth_sizes and len(args.recording) < 2:
+    raise ValueError('--cloth_sizes is for several recordings; use --cloth_size')
+  return takes.from_flags(
+    args.recording, args.camera_json, args.cloth_sizes, joint_winds(args)
+  )
+
+
+def take_settings(args: Args, take: takes.Take):
+  """(intake settings, estimate settings) of one recording: the flags'
+  with the recording's own cloth size, up axis and wind reading."""
+  ik = args.intake
+  if take.world_up:
+    ik = dataclasses.replace(ik, world_up=take.world_up)
+  config = args.search
+  if take.cloth_size:
+    config = dataclasses.replace(config, cloth_size=take.cloth_size)
+  if take.wind is not None:
+    measured = dataclasses.replace(
+      config.measured, wind_speed=take.wind[0], wind_speed_sd=take.wind[1]
+    )
+    config = dataclasses.replace(config, measured=measured)
+  config.check()
+  return ik, config
+
+
+def _take_in(args: Args, take: takes.Take, workdir: str, frames: bool = True):
   """One recording taken in; its summary printed and its files written."""
-  ik = intake.take_in(path, args.intake, args.camera_json, args.search, workdir=workdir)
+  ik_config, config = take_settings(args, take)
+  ik = intake.take_in(take.path, ik_config, take.camera_json, config, workdir=workdir)
   print(intake.summary(ik))
-  intake.write(ik, workdir, args.search, frames=frames)
+  intake.write(ik, workdir, config, frames=frames)
   return ik
 
 
@@ -179,10 +230,10 @@ def _record_alignment(path: str, record: dict | None) -> None:
   files.write_json(path, data)
 
 
-def _needs_intake(args: Args, path: str) -> bool:
+def _needs_intake(take: takes.Take) -> bool:
   """Everything but this project's own simulated sequences without a camera
   file is taken in."""
-  return bool(args.camera_json) or not intake.is_sequence(path)
+  return bool(take.camera_json) or not intake.is_sequence(take.path)
 
 
 def network(args: Args) -> setup.Network:
@@ -199,9 +250,9 @@ def network(args: Args) -> setup.Network:
   )  # fmt: skip
 
 
-def _intake_dir(args: Args, i: int) -> str:
-  """Where recording ``i``'s intake goes."""
-  return args.workdir if len(args.recording) == 1 else f'{args.workdir}/intake_{i}'
+def _intake_dir(args: Args, i: int, n: int) -> str:
+  """Where recording ``i`` of ``n``'s intake goes."""
+  return args.workdir if n == 1 else f'{args.workdir}/intake_{i}'
 
 
 def main(args: Args) -> None:
@@ -209,32 +260,42 @@ def main(args: Args) -> None:
   ``files.locked``) for the intake and the search."""
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   cli.check_numbers(args)
-  config = args.search
-  config.check()
+  args.search.check()
   args.intake.check()
-  if not args.recording:
-    raise ValueError('missing --recording (see --help)')
-  winds = joint_winds(args)  # checked before anything is read
+  recorded = recording_takes(args)  # checked before anything is read
+  for take in recorded:
+    take_settings(args, take)
   with files.locked(args.workdir):
-    _main(args, config, winds)
+    _main(args, recorded)
 
 
-def _main(args: Args, config, winds) -> None:
-  n = len(args.recording)
+def _guess_refused(path: str) -> ValueError:
+  return ValueError(
+    f"{path}: up is a guess from the cloth's own plane (no floor in view), "
+    'which a cloth swung by the wind tilts, and the camera and the answer '
+    "with it; give --world_up=AXIS (the camera file's world axis that points "
+    'up), "gravity" in the camera file, or --up; or --allow_guessed_up to '
+    'estimate anyway with a 20-degree tilt uncertainty'
+  )
+
+
+def _main(args: Args, recorded: list[takes.Take]) -> None:
+  n = len(recorded)
+  config = args.search
   print(
     f'{config.material}: {n} recording{"s" * (n > 1)} into {args.workdir}; reading '
     'and aligning, then the first simulations compile (a minute or two on a CPU)',
     flush=True,
   )  # a line within seconds: the first step's output comes much later
   # Before any intake writes: no workdir may hold another recording's run.
-  for i, path in enumerate(args.recording):
-    if args.intake_only or _needs_intake(args, path):
+  for i, take in enumerate(recorded):
+    if args.intake_only or _needs_intake(take):
       intake.check_workdir(
-        _intake_dir(args, i), path, args.camera_json, search.RUN_FILE
+        _intake_dir(args, i, n), take.path, take.camera_json, search.RUN_FILE
       )
   if args.intake_only:
-    for i, path in enumerate(args.recording):
-      _take_in(args, path, _intake_dir(args, i))
+    for i, take in enumerate(recorded):
+      _take_in(args, take, _intake_dir(args, i, n))
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return
   loaded = network(args)
@@ -244,51 +305,57 @@ def _main(args: Args, config, winds) -> None:
     allow_other_material=args.allow_other_material,
     nets={args.model: net} if args.model else None,
   )
-  recs, intakes = [], []
-  for i, path in enumerate(args.recording):
-    if _needs_intake(args, path):
+  recs, intakes, configs, carried = [], [], [], []
+  for i, take in enumerate(recorded):
+    _, own = take_settings(args, take)
+    if _needs_intake(take):
       if net.modality == 'rgb':
         raise ValueError(
-          f'{path}: an RGB network needs a dataset sequence with colour frames; '
-          'the intake reads depth only'
+          f'{take.path}: an RGB network needs a dataset sequence with colour '
+          'frames; the intake reads depth only'
         )
-      ik = _take_in(args, path, _intake_dir(args, i))
+      ik = _take_in(args, take, _intake_dir(args, i, n))
       if ik.up_is_guess and not args.allow_guessed_up:
-        raise ValueError(
-          f"{path}: up is a guess from the cloth's own plane (no floor in view), "
-          'which a cloth swung by the wind tilts, and the camera and the answer '
-          "with it; give --world_up=AXIS (the camera file's world axis that points "
-          'up), "gravity" in the camera file, or --up; or --allow_guessed_up to '
-          'estimate anyway with a 20-degree tilt uncertainty'
-        )
+        raise _guess_refused(take.path)
       intakes.append(ik)
-      recs.append(intake.to_recording(ik, config.fps, net.image_size, config.frames))
+      recs.append(intake.to_recording(ik, own.fps, net.image_size, own.frames))
     else:
       intakes.append(None)
       recs.append(
         recording_lib.load_recording(
-          path,
-          fps=config.fps,
+          take.path,
+          fps=own.fps,
           size=net.image_size,
-          frames=config.frames,
+          frames=own.frames,
           rgb=net.modality == 'rgb',
         )  # fmt: skip
       )
-  config, carried = with_alignment_error(args, config, intakes)
+    # each recording carries its own intake's alignment error
+    own, line = with_alignment_error(args, own, intakes[-1:])
+    configs.append(own)
+    if line:
+      carried.append(f'{take.path}: {line}' if n > 1 else line)
   warning = report.shape_camera_warning(
-    config, any(_needs_intake(args, p) for p in args.recording)
+    configs[0], any(_needs_intake(t) for t in recorded)
   )
-  for line in (warning, report.synthetic_warning(config), carried):
+  for line in (warning, report.synthetic_warning(configs[0]), *carried):
     if line:
       print(line)
-  record = alignment_record(intakes, config)
-  if len(recs) > 1:
-    result = search.estimate_joint(config, recs, args.model, args.workdir, winds, **kw)
+  record = alignment_record(intakes, configs[0])
+  if n > 1:
+    winds = [t.wind or (0.0, 0.0) for t in recorded]
+    overrides = [
+      {k: getattr(c, k) for k in search.PER_RECORDING} for c in configs
+    ]  # fmt: skip
+    result = search.estimate_joint(
+      config, recs, args.model, args.workdir,
+      winds if any(t.wind for t in recorded) else None, overrides=overrides, **kw,
+    )  # fmt: skip
     _record_alignment(os.path.join(args.workdir, search.JOINT_FILE), record)
     print(report.joint_table(result))
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
-    result = search.estimate(config, recs[0], args.model, args.workdir, **kw)
+    result = search.estimate(configs[0], recs[0], args.model, args.workdir, **kw)
     _record_alignment(os.path.join(args.workdir, search.ESTIMATE_FILE), record)
     print(report.report_table(result))
     ratios = [report.point_of(result['load_ratio'])]
@@ -299,10 +366,10 @@ def _main(args: Args, config, winds) -> None:
   if note:
     print(note)
   where = os.path.abspath(args.workdir)
-  if len(recs) == 1:
+  if n == 1:
     pictures = (
       ('posterior.png', 'trace.png', 'montage.png')
-      if config.posterior
+      if configs[0].posterior
       else ('trace.png', 'montage.png')
     )
     print(

@@ -46,6 +46,11 @@ BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
 _RESUMABLE_FIELDS = ('workers', 'calibration')
 
 
+# The settings a joint estimate's recordings may each have their own of; the
+# rest (material, likelihood, grid, search) they share.
+PER_RECORDING = ('cloth_size', 'cloth_resolution', 'camera_sd_m', 'camera_sd_deg')
+
+
 class Job(NamedTuple):
   """One recording to estimate.
 
@@ -672,6 +677,7 @@ def estimate_joint(
   workdir: str,
   winds: list[tuple[float, float]] | None = None,
   allow_other_material: bool = False,
+  overrides: list[dict] | None = None,
   **kw,
 ) -> dict:
   """One fabric seen in several recordings (e.g. two fan settings): a joint
@@ -698,6 +704,9 @@ def estimate_joint(
       the calibration has tables for the mode 'joint pair, known winds' (the
       shipped one has none: they are reported as indicative).
     allow_other_material: search with a network of other fabrics.
+    overrides: per recording, the settings that are its own
+      (``PER_RECORDING``: its cloth's size and mesh, its camera's error), or
+      None; a sheet and a swatch of one fabric share one posterior this way.
     **kw: ``estimate_many``'s keywords.
 
   Returns:
@@ -711,7 +720,9 @@ def estimate_joint(
       reading the search box cannot hold, or a recording whose estimate
       failed (named).
   """
-  jobs = joint_jobs(config, recordings, model_dir, workdir, winds, allow_other_material)
+  jobs = joint_jobs(
+    config, recordings, model_dir, workdir, winds, allow_other_material, overrides
+  )
   return combine_joint(jobs, estimate_many(jobs, **kw), workdir)
 
 
@@ -722,6 +733,7 @@ def joint_jobs(
   workdir: str,
   winds: list[tuple[float, float]] | None = None,
   allow_other_material: bool = False,
+  overrides: list[dict] | None = None,
 ) -> list[Job]:
   """The searches of one fabric's joint estimate (``estimate_joint``'s
   arguments and checks), one per recording under ``<workdir>/recording_<k>``."""
@@ -752,6 +764,22 @@ def joint_jobs(
     space = physsim.search_space(config.material)
     for c in configs:
       c.measured.check(space)
+  if overrides is not None:
+    if len(overrides) != len(recordings):
+      raise ValueError(
+        f'{len(overrides)} sets of settings for {len(recordings)} recordings'
+      )
+    for o in overrides:
+      if set(o) - set(PER_RECORDING):
+        raise ValueError(
+          f'settings {sorted(set(o) - set(PER_RECORDING))} are shared by a joint '
+          f"estimate's recordings; a recording's own are {PER_RECORDING}"
+        )
+    configs = [
+      dataclasses.replace(c, **o) for c, o in zip(configs, overrides, strict=True)
+    ]
+    for c in configs:
+      c.check()
   return [
     Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'), allow_other_material)
     for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
@@ -785,7 +813,7 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   configs = [job.config for job in jobs]
   model_dir = jobs[0].model_dir
   winds = None
-  if configs[0].measured.wind_speed_sd > 0:  # a reading at each recording
+  if any(c.measured.wind_speed_sd > 0 for c in configs):  # readings (some may lack)
     winds = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
   m = configs[0].measured
   config = dataclasses.replace(  # the settings the recordings share
@@ -811,7 +839,7 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
       'alone': results[k]['estimate'],
       'wind_speed': s['wind_speed'],
       'load_ratio': s['load_ratio'],
-      **({'measured_wind': list(winds[k])} if winds is not None else {}),
+      **({'measured_wind': list(winds[k])} if winds and winds[k][1] > 0 else {}),
       **({'truth': job.recording.truth} if job.recording.truth else {}),
     })  # fmt: skip
     posterior_lib.plot(

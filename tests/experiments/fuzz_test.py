@@ -272,7 +272,7 @@ def _check_all(args: estimate.Args) -> None:
   cli.check_numbers(args)
   args.search.check()
   args.intake.check()
-  estimate.joint_winds(args)
+  estimate.recording_takes(args)
 
 
 @_settings('flags')

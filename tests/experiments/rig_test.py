@@ -173,3 +173,49 @@ def test_a_swatch_is_estimated_at_its_size_from_the_command_line(tmp_path):
   assert 'cloth_size' in result['calibration'].get('differs', [])
   lo, hi = result['estimate']['wind_speed']['interval_90']
   assert lo < hi and np.isfinite([lo, hi]).all()
+
+
+@pytest.mark.slow
+def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_path):
+  """Issue 39, item 3, at a tiny mesh: the sheet (a 2% anemometer) and a 30 cm
+  swatch (no reading), each with its own camera file and up axis, estimated
+  jointly from a protocol file; each recording's search simulates its own
+  cloth, and joint.json holds the shared bending and area weight."""
+  import subprocess  # noqa: PLC0415
+  import sys  # noqa: PLC0415
+
+  sheet = rig.write(rig.SMOKE, str(tmp_path / 'sheet'))
+  r = dataclasses.replace(
+    rig.SMOKE, cloth_size=0.3, wind_speed=2.0, seed=12,
+    eye=_scaled(rig.SMOKE.eye, 0.3), target=_scaled(rig.SMOKE.target, 0.3),
+  )  # fmt: skip
+  swatch = rig.write(r, str(tmp_path / 'swatch'))
+  protocol = tmp_path / 'protocol.json'
+  protocol.write_text(json.dumps({'recordings': [
+    {'recording': 'sheet/depth', 'camera_json': 'sheet/camera.json',
+     'world_up': 'z', 'wind_speed': 3.52 * 1.01, 'wind_speed_sd': 0.07},
+    {'recording': 'swatch/depth', 'camera_json': 'swatch/camera_imu.json',
+     'cloth_size': 0.3},
+  ]}))  # fmt: skip
+  assert os.path.isdir(sheet['depth']) and os.path.isdir(swatch['depth'])
+  done = subprocess.run(
+    [sys.executable, '-m', 'experiments.estimate', '--preset=smoke',
+     f'--protocol={protocol}', '--distance=shape', '--max_iter=1',
+     f'--workdir={tmp_path / "w"}'],
+    capture_output=True, text=True,
+  )  # fmt: skip
+  assert done.returncode == 0, done.stderr[-2000:]
+  joint = json.load(open(tmp_path / 'w' / 'joint.json'))
+  own = [
+    json.load(open(tmp_path / 'w' / f'recording_{k}' / 'estimate.json'))
+    for k in range(2)
+  ]
+  assert [o['config']['cloth_size'] for o in own] == [1.0, 0.3]
+  up = [json.load(open(tmp_path / 'w' / f'intake_{k}' / 'intake.json'))['up_from']
+        for k in range(2)]  # fmt: skip
+  assert up == ['world_up', 'gravity']
+  assert joint['recordings'][0]['measured_wind'] == [3.52 * 1.01, 0.07]
+  assert 'measured_wind' not in joint['recordings'][1]
+  for name in ('bending_scale', 'area_weight'):
+    lo, hi = joint[name]['interval_90']
+    assert 0 < lo < hi, (name, lo, hi)

@@ -1,0 +1,145 @@
+"""The recordings of one estimate, each with its own set-up.
+
+A fabric measured by a protocol is seen in recordings that differ in more than
+the fan: the 1 m sheet and a small swatch, each filmed by its own camera, each
+fan read by an anemometer or not. A joint estimate shares bending and area
+weight across them; everything else is the recording's own (``Take``). Short
+lists come as flags (``--recording=a,b --cloth_sizes=1,0.25``); longer ones
+as a protocol file (JSON or YAML)::
+
+  {"recordings": [
+    {"recording": "sheet/depth", "camera_json": "sheet/camera.json",
+     "wind_speed": 2.1, "wind_speed_sd": 0.05},
+    {"recording": "swatch/depth", "camera_json": "swatch/camera.json",
+     "cloth_size": 0.25, "world_up": "z"}
+  ]}
+
+Paths in the file are relative to the file's folder.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import NamedTuple
+
+# What a protocol file's entry may say (the rest is the estimate's flags).
+KEYS = ('recording', 'camera_json', 'cloth_size', 'wind_speed', 'wind_speed_sd',
+        'world_up')  # fmt: skip
+CLOTH_SIZE_RANGE = (0.05, 3.0)  # metres, as EstimateConfig.cloth_size
+UP_AXES = ('x', 'y', 'z', '-x', '-y', '-z')
+
+
+class Take(NamedTuple):
+  """One recording and its own set-up.
+
+  Attributes:
+    path: the recording.
+    camera_json: its camera file, or ''.
+    cloth_size: the cloth's side, metres, or 0 (the estimate's --cloth_size).
+    wind: an anemometer's reading at it, (m/s, its standard uncertainty), or
+      None.
+    world_up: its camera file's up axis, or '' (the intake's --world_up).
+  """
+
+  path: str
+  camera_json: str = ''
+  cloth_size: float = 0.0
+  wind: tuple[float, float] | None = None
+  world_up: str = ''
+
+
+def _number(where: str, key: str, value, lo: float, hi: float) -> float:
+  if isinstance(value, bool) or not isinstance(value, (int, float)):
+    raise ValueError(f'{where}: "{key}" must be a number, got {value!r}')
+  v = float(value)
+  if not (math.isfinite(v) and lo <= v <= hi):
+    raise ValueError(f'{where}: "{key}"={value} must be in [{lo}, {hi}]')
+  return v
+
+
+def _take(where: str, entry, base: str) -> Take:
+  if not isinstance(entry, dict):
+    raise ValueError(f'{where}: must be an object with "recording", got {entry!r}')
+  unknown = sorted(set(entry) - set(KEYS))
+  if unknown:
+    raise ValueError(f'{where}: unknown keys {unknown}; known: {list(KEYS)}')
+  paths = {}
+  for key in ('recording', 'camera_json'):
+    value = entry.get(key, '')
+    if not isinstance(value, str) or (key == 'recording' and not value):
+      raise ValueError(f'{where}: "{key}" must be a path, got {value!r}')
+    path = os.path.join(base, value) if value else ''
+    if path and not os.path.exists(path):
+      raise ValueError(f'{where}: "{key}" {path}: no such file or folder')
+    paths[key] = path
+  size = 0.0
+  if 'cloth_size' in entry:
+    size = _number(where, 'cloth_size', entry['cloth_size'], *CLOTH_SIZE_RANGE)
+  wind = None
+  if 'wind_speed' in entry or 'wind_speed_sd' in entry:
+    if not ('wind_speed' in entry and 'wind_speed_sd' in entry):
+      raise ValueError(f'{where}: "wind_speed" and "wind_speed_sd" come together')
+    wind = (
+      _number(where, 'wind_speed', entry['wind_speed'], 0.0, 100.0),
+      _number(where, 'wind_speed_sd', entry['wind_speed_sd'], 1e-9, 100.0),
+    )
+  up = entry.get('world_up', '')
+  if up not in ('', *UP_AXES):
+    raise ValueError(f'{where}: "world_up"={up!r} must be one of {list(UP_AXES)}')
+  return Take(paths['recording'], paths['camera_json'], size, wind, up)
+
+
+def read(path: str) -> list[Take]:
+  """The takes of a protocol file (JSON, or YAML by its extension).
+
+  Raises:
+    ValueError: an unreadable file, no recordings, or an entry that is not
+      one (named by its index and key), before any recording is read.
+  """
+  try:
+    with open(path) as f:
+      text = f.read()
+    if path.lower().endswith(('.yaml', '.yml')):
+      import yaml  # noqa: PLC0415 - only YAML protocol files need it
+
+      data = yaml.safe_load(text)
+    else:
+      import json  # noqa: PLC0415
+
+      data = json.loads(text)
+  except Exception as e:  # OSError, JSON's, YAML's own, RecursionError
+    raise ValueError(
+      f'{path}: not a readable protocol file ({type(e).__name__})'
+    ) from e
+  entries = data.get('recordings') if isinstance(data, dict) else None
+  if not isinstance(entries, list) or not entries:
+    raise ValueError(f'{path}: needs "recordings": a list of one or more entries')
+  base = os.path.dirname(os.path.abspath(path))
+  return [_take(f'{path}: recordings[{k}]', e, base) for k, e in enumerate(entries)]
+
+
+def from_flags(
+  recordings, camera_json: str = '', cloth_sizes=(), winds=None
+) -> list[Take]:
+  """The takes the flags describe: one camera file for all (or none), a
+  cloth size per recording (or none: the estimate's), the wind readings of
+  ``estimate.joint_winds``.
+
+  Raises:
+    ValueError: sizes for another number of recordings, or out of range.
+  """
+  n = len(recordings)
+  if cloth_sizes and len(cloth_sizes) != n:
+    raise ValueError(
+      f'--cloth_sizes={",".join(map(str, cloth_sizes))}: need one size for each '
+      f'of the {n} recordings'
+    )
+  for s in cloth_sizes:
+    _number('--cloth_sizes', 'cloth_size', s, *CLOTH_SIZE_RANGE)
+  sizes = list(cloth_sizes) or [0.0] * n
+  winds = winds or [None] * n
+  return [
+    Take(p, camera_json, float(s), w)
+    for p, s, w in zip(recordings, sizes, winds, strict=True)
+  ]

@@ -1,0 +1,100 @@
+"""Tests for experiments/pipeline/takes.py and estimate's --protocol and
+--cloth_sizes: each recording's own set-up read from a protocol file (JSON
+or YAML, paths relative to it) or from flags, and every bad entry refused in
+one line naming the file, the entry and the key before any recording is read."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from experiments import estimate
+from experiments.pipeline import takes
+
+
+@pytest.fixture
+def folder(tmp_path):
+  for name in ('sheet', 'swatch'):
+    (tmp_path / name).mkdir()
+    (tmp_path / name / 'camera.json').write_text('{}')
+  return tmp_path
+
+
+def _write(path, data):
+  path.write_text(json.dumps(data))
+  return str(path)
+
+
+def test_a_protocol_file_gives_each_recording_its_own_set_up(folder):
+  path = _write(folder / 'protocol.json', {'recordings': [
+    {'recording': 'sheet', 'camera_json': 'sheet/camera.json', 'wind_speed': 2.1,
+     'wind_speed_sd': 0.05},
+    {'recording': 'swatch', 'camera_json': 'swatch/camera.json', 'cloth_size': 0.25,
+     'world_up': 'z'},
+  ]})  # fmt: skip
+  sheet, swatch = takes.read(path)
+  assert sheet == takes.Take(
+    str(folder / 'sheet'), str(folder / 'sheet' / 'camera.json'), 0.0, (2.1, 0.05)
+  )
+  assert (swatch.cloth_size, swatch.wind, swatch.world_up) == (0.25, None, 'z')
+  yaml_path = folder / 'protocol.yaml'
+  yaml_path.write_text('recordings:\n  - recording: swatch\n    cloth_size: 0.3\n')
+  assert takes.read(str(yaml_path)) == [takes.Take(str(folder / 'swatch'), '', 0.3)]
+
+
+@pytest.mark.parametrize(
+  'entry, message',
+  [
+    ({'recording': 'nowhere'}, r'recordings\[0\]: "recording" .*nowhere: no such'),
+    ({'recording': 'sheet', 'size': 1}, r"recordings\[0\]: unknown keys \['size'\]"),
+    ({'recording': 'sheet', 'cloth_size': 0.01}, r'"cloth_size"=0.01 must be in'),
+    ({'recording': 'sheet', 'cloth_size': 'big'}, r'"cloth_size" must be a number'),
+    ({'recording': 'sheet', 'wind_speed': 2.0}, r'"wind_speed_sd" come together'),
+    ({'recording': 'sheet', 'world_up': 'up'}, r'"world_up"=\'up\' must be one of'),
+    ({'recording': 'sheet', 'wind_speed': 2.0, 'wind_speed_sd': 0},
+     r'"wind_speed_sd"=0 must be in'),
+  ],
+)  # fmt: skip
+def test_a_bad_entry_is_refused_naming_file_entry_and_key(folder, entry, message):
+  path = _write(folder / 'p.json', {'recordings': [entry]})
+  with pytest.raises(ValueError, match=message) as e:
+    takes.read(path)
+  assert str(e.value).startswith(path) and '\n' not in str(e.value)
+
+
+@pytest.mark.parametrize('text', ['[1, 2', '{"recordings": []}', '[]', '{"a": 1}'])
+def test_a_file_that_is_no_protocol_is_refused(folder, text):
+  path = folder / 'p.json'
+  path.write_text(text)
+  with pytest.raises(ValueError, match=r'p.json: (not a readable|needs "recordings")'):
+    takes.read(str(path))
+
+
+def test_flags_give_one_size_per_recording():
+  got = takes.from_flags(('a', 'b'), 'c.json', (1.0, 0.25), [(2.0, 0.1), (3.0, 0.1)])
+  assert [(t.path, t.camera_json, t.cloth_size, t.wind) for t in got] == [
+    ('a', 'c.json', 1.0, (2.0, 0.1)), ('b', 'c.json', 0.25, (3.0, 0.1)),
+  ]  # fmt: skip
+  with pytest.raises(ValueError, match=r'--cloth_sizes=1.0: need one size for each'):
+    takes.from_flags(('a', 'b'), cloth_sizes=(1.0,))
+  with pytest.raises(ValueError, match=r'--cloth_sizes: "cloth_size"=9.0 must be in'):
+    takes.from_flags(('a', 'b'), cloth_sizes=(1.0, 9.0))
+
+
+def test_estimate_takes_a_protocol_or_recordings_not_both(folder):
+  path = _write(folder / 'p.json', {'recordings': [{'recording': 'sheet'}]})
+  both = estimate.Args(protocol=path, recording=('x',))
+  with pytest.raises(ValueError, match=r'give it without --recording'):
+    estimate.recording_takes(both)
+  with pytest.raises(ValueError, match=r'missing --recording or --protocol'):
+    estimate.recording_takes(estimate.Args())
+  with pytest.raises(ValueError, match=r'--cloth_sizes is for several recordings'):
+    estimate.recording_takes(estimate.Args(recording=('a',), cloth_sizes=(0.3,)))
+  (take,) = estimate.recording_takes(estimate.Args(protocol=path))
+  ik, config = estimate.take_settings(estimate.Args(), take._replace(cloth_size=0.3))
+  assert config.cloth_size == 0.3 and ik == estimate.Args().intake
+  ik, config = estimate.take_settings(
+    estimate.Args(), take._replace(world_up='-y', wind=(2.0, 0.1))
+  )
+  assert ik.world_up == '-y' and config.measured.wind_speed == 2.0
