@@ -196,8 +196,11 @@ def write(recipe: Recipe, out: str, backend: str = 'c') -> dict:
   described = json.loads(json.dumps(dataclasses.asdict(recipe)))
   recipe_path = os.path.join(out, 'recipe.json')
   if os.path.exists(out):
-    if os.path.isfile(recipe_path) and dataset.read_json(recipe_path) == described:
-      return paths
+    # a field the recipe gained since is at its default in an older recording
+    defaults = json.loads(json.dumps(dataclasses.asdict(Recipe())))
+    if os.path.isfile(recipe_path):
+      if {**defaults, **dataset.read_json(recipe_path)} == described:
+        return paths
     raise ValueError(f'{out}: exists and holds no recording of this recipe')
   frames = depth(recipe, backend)
   tmp = f'{out}.tmp'
