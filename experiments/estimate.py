@@ -362,9 +362,15 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   for line in (record or {}).get('warnings', []):
     if 'up is a guess' in line:
       print(f'note: {line}')
-  note = report.fan_setting_note(ratios, config.material)
-  if note:
-    print(note)
+  for note in (
+    report.fan_setting_note(ratios, config.material),
+    # experiments.plan reads one recording's posterior
+    report.next_recording_note(result['estimate'], configs[0], args.workdir)
+    if n == 1
+    else None,
+  ):
+    if note:
+      print(note)
   where = os.path.abspath(args.workdir)
   if n == 1:
     pictures = (

@@ -636,3 +636,40 @@ def fan_setting_note(load_ratios, material: str) -> str | None:
     'with an anemometer reading, and estimate them jointly (--recording=a,b,c '
     '--wind_speeds=...; docs/identifiability.md)'
   )
+
+
+# Below this narrowing (the prior's 90% width over the posterior's) a
+# recording has told little about a fabric parameter.
+LITTLE_NARROWING = 1.5
+
+
+def next_recording_note(shared: dict, config, workdir: str) -> str | None:
+  """The one line ``estimate`` prints after every estimate whose bending or
+  area weight the recordings left near the prior (``shared``: an estimate's
+  ``estimate`` entries, or a joint estimate's shared ones): what to record or
+  measure next by the protocol study's bound (docs/protocol.md), and the
+  command that ranks candidates with the simulator from this posterior."""
+  little = [
+    name for name in ('bending_scale', 'area_weight')
+    if shared.get(name, {}).get('narrowing_90', np.inf) < LITTLE_NARROWING
+  ]  # fmt: skip
+  if not little:
+    return None
+  steps = []
+  if 'area_weight' in little and not config.measured.area_weight_sd > 0:
+    steps.append(
+      'weigh the sheet and measure its sides (--area_weight=... --area_weight_sd=...)'
+    )
+  if 'bending_scale' in little and config.cloth_size > 0.5:
+    steps.append(
+      'film a 20-30 cm swatch of it in a ~2 m/s fan from about 0.5 m and estimate '
+      'both together (--protocol=FILE with its cloth_size)'
+    )
+  if not steps:
+    return None
+  told = ' and '.join(n.replace('_scale', '').replace('_', ' ') for n in little)
+  return (
+    f'next: the recording(s) told little about {told}; ' + '; '.join(steps) + '. '
+    f'python -m experiments.plan --workdir={workdir} ranks what to record next '
+    'with the simulator'
+  )

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 import physsim
-from experiments.pipeline import report
+from experiments.pipeline import objective, posterior, report
 
 # Percent errors and factors are ratios of a few floats: exact to rounding.
 TOL = 1e-9
@@ -217,3 +219,23 @@ def test_the_montage_keeps_its_labels_inside_the_canvas(
   assert _texts_inside(fig) == []
   labels = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, 'get_text'))]
   assert any(lbl.startswith('depth (m)') for lbl in labels)
+
+
+def test_the_next_recording_line_names_what_was_left_at_the_prior():
+  config = objective.EstimateConfig()
+  told = {'bending_scale': {'narrowing_90': 1.0}, 'area_weight': {'narrowing_90': 1.1}}
+  line = report.next_recording_note(told, config, 'out/e')
+  assert line.startswith('next: the recording(s) told little about bending and area')
+  assert '--area_weight=' in line and '20-30 cm swatch' in line
+  assert 'python -m experiments.plan --workdir=out/e' in line and '\n' not in line
+  # a scale's reading given, and a swatch already filmed: nothing left to advise
+  weighed = dataclasses.replace(
+    config, cloth_size=0.25,
+    measured=posterior.Measured(area_weight=0.18, area_weight_sd=0.004),
+  )  # fmt: skip
+  assert report.next_recording_note(told, weighed, 'out/e') is None
+  narrowed = {
+    'bending_scale': {'narrowing_90': 3.0},
+    'area_weight': {'narrowing_90': 4},
+  }
+  assert report.next_recording_note(narrowed, config, 'out/e') is None
