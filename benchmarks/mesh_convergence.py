@@ -44,6 +44,8 @@ class Config:
     winds: wind speeds, m/s.
     resolutions: cloth vertices per side of the meshes compared.
     estimate_resolution: the estimate's cloth (EstimateConfig.cloth_resolution).
+    cloth_size: the square's side, metres (EstimateConfig.cloth_size); each
+      mesh simulates at the step it needs (physsim.stable_timestep).
     bending: bending scale.
     gusts: RMS relative gust intensity.
     frames: frames per simulation.
@@ -57,6 +59,7 @@ class Config:
   winds: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
   resolutions: tuple[int, ...] = (17, 25, 33)
   estimate_resolution: int = 25
+  cloth_size: float = 1.0
   bending: float = 1.0
   gusts: float = 0.2
   frames: int = 60
@@ -90,6 +93,15 @@ PRESETS = {
     warmup=0.2,
     seeds=(0, 1),
   ),
+  # issue 39: the protocol's 20 cm swatch in a gentle fan (docs/protocol.md)
+  'swatch': Config(
+    fabrics=('gray_interlock',),
+    winds=(1.0, 2.0, 3.0),
+    resolutions=(9, 17, 25, 33),
+    cloth_size=0.2,
+    frames=30,
+    warmup=1.0,
+  ),
 }
 STATS = ('mean_deflection_m', 'centre_dominant_hz', 'flutter_fraction', 'strain_p99')
 # A deflection curve rising by less than this per m/s carries no wind information.
@@ -100,8 +112,10 @@ def simulate_resolution(config: Config, resolution: int) -> dict:
   """Every fabric x wind x gust seed on one mesh as one batch; motion statistics
   per world. A seed's gust modes do not depend on the mesh (``physsim.forces``),
   so world (fabric, wind, seed) sees the same gusts on every mesh."""
-  mesh = physsim.square(resolution)
-  model = physsim.build(mesh, config.fabrics[0])
+  mesh = physsim.square(resolution, config.cloth_size)
+  step = physsim.stable_timestep(mesh.shortest_edge, 1.0 / config.fps)
+  sim_config = physsim.SimConfig(timestep=step, edge_solref=max(0.004, 2 * step))
+  model = physsim.build(mesh, config.fabrics[0], sim_config)
   f, w, s = np.meshgrid(
     np.arange(len(config.fabrics)), config.winds, config.seeds, indexing='ij'
   )
@@ -135,19 +149,20 @@ def simulate_resolution(config: Config, resolution: int) -> dict:
   return {'rows': rows, 'seconds': time.time() - t0}
 
 
-def equivalent_wind(winds, deflection, target: float) -> float:
+def equivalent_wind(winds, deflection, target: float, size: float = 1.0) -> float:
   """The wind at which a deflection-vs-wind curve reaches ``target``.
 
   Linear interpolation along the curve from the lowest wind, up to its first
   flat segment: beyond it the sheet is blown flat and deflects alike over a
   range of winds, so deflection no longer names a wind (NaN), as it is for a
-  ``target`` outside the curve's range.
+  ``target`` outside the curve's range. A ``size`` m cloth deflects ``size``
+  times as far, so its flat slope is too.
   """
   winds = np.asarray(winds, np.float64)
   d = np.asarray(deflection, np.float64)
   for k in range(len(winds) - 1):
     lo, hi = d[k], d[k + 1]
-    if (hi - lo) / (winds[k + 1] - winds[k]) < _FLAT_M_PER_MS:
+    if (hi - lo) / (winds[k + 1] - winds[k]) < _FLAT_M_PER_MS * size:
       return float('nan')
     if lo <= target <= hi:
       return float(winds[k] + (target - lo) / (hi - lo) * (winds[k + 1] - winds[k]))
@@ -168,7 +183,10 @@ def compare(config: Config, done: dict) -> list[dict]:
       curve = [base.get((r['fabric'], w, r['seed'])) for w in config.winds]
       if r['valid'] and all(c and c['valid'] for c in curve):
         row['equivalent_wind'] = equivalent_wind(
-          config.winds, [c['mean_deflection_m'] for c in curve], r['mean_deflection_m']
+          config.winds,
+          [c['mean_deflection_m'] for c in curve],
+          r['mean_deflection_m'],
+          config.cloth_size,
         )
       out.append(row)
   return out
