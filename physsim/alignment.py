@@ -217,42 +217,77 @@ def fit_pins(
   return ClothFit(pins, plane, up_vec, up_from, floor, cloth_up)
 
 
-def pin_scatter(
+class PinTrack(NamedTuple):
+  """The pins fitted over the whole recording (``track_pins``).
+
+  Attributes:
+    pins: (2, 3) each pin's most upwind fit (camera frame).
+    candidates: (K, 2, 3) every stretch's fit, the first fit first, each pair
+      in the first fit's order.
+    scatter: the larger of the two pins' RMS distance from their mean over
+      the candidates, metres (0 for one candidate).
+  """
+
+  pins: np.ndarray
+  candidates: np.ndarray
+  scatter: float
+
+
+def track_pins(
   depth: np.ndarray,
   intrinsics: Intrinsics,
+  first: np.ndarray,
   up: np.ndarray,
   *,
   windows: int = 8,
   frames: int = 5,
   spacing: float | None = None,
-) -> float:
-  """How far the fitted pins move across the recording, metres (the larger
-  of the two pins' RMS distance from their mean).
+  wind_toward_camera: bool = False,
+) -> PinTrack:
+  """The pins from the whole recording, not only its first frames.
 
-  The pins hold still, so a fit that finds them in one stretch of frames and
-  elsewhere in another has not found them: a corner the camera sees edge-on
-  or not at all is replaced by a cloth point the wind moves. ``fit_pins``
-  runs on ``windows`` stretches of ``frames`` frames spread over ``depth``
-  (T, H, W), with ``up`` given; one stretch (a short recording) gives 0.
+  The pins hold still while the wind moves the cloth downwind of them, so a
+  corner the camera sees edge-on (or, past the sensor's grazing angle, not
+  at all) is fitted at a cloth point behind it, and differently in each
+  stretch of frames. ``fit_pins`` runs on ``windows`` stretches of ``frames``
+  frames spread over ``depth`` (T, H, W) with ``up`` given; each pin is taken
+  from the stretch that puts it most upwind (the cloth's least swept-back
+  moment), and how far the fits move (``scatter``) is the error left.
+
+  Args:
+    depth: (T, H, W) metres, 0 where not cloth.
+    intrinsics: the camera at this resolution.
+    first: (2, 3) the first frames' fit.
+    up: (3,) up in the camera frame.
+    windows: stretches fitted.
+    frames: frames per stretch.
+    spacing: the simulated cloth's pin spacing (``fit_pins``).
+    wind_toward_camera: the wind blows toward the camera, not away.
   """
+  first = np.asarray(first, np.float64)
+  edge = first[1] - first[0]
+  candidates = [first]
   t = len(depth)
   starts = sorted({round(s) for s in np.linspace(0, max(t - frames, 0), windows)})
-  if len(starts) < 2:
-    return 0.0
-  pins = []
-  for s in starts:
+  for s in starts if len(starts) > 1 else ():
     try:
       fit = fit_pins(
         depth[s : s + frames], intrinsics, up=up, frames=frames, spacing=spacing
       )
     except ValueError:  # too little cloth in this stretch
       continue
-    pins.append(fit.pins)
-  if len(pins) < 2:
-    return 0.0
-  pins = np.asarray(pins)
-  rms = np.sqrt(((pins - pins.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
-  return float(rms.max())
+    p = fit.pins if (fit.pins[1] - fit.pins[0]) @ edge > 0 else fit.pins[::-1]
+    candidates.append(p)
+  c = np.asarray(candidates)
+  rms = np.sqrt(((c - c.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
+  # downwind: level, square to the pins' line, away from the camera (or toward)
+  x = _unit(edge)
+  level = _unit(_unit(up) - (_unit(up) @ x) * x)
+  down = np.cross(level, x)
+  if (float(down @ first.mean(axis=0)) > 0) == wind_toward_camera:
+    down = -down
+  pins = np.stack([c[np.argmin(c[:, k] @ down), k] for k in range(2)])
+  return PinTrack(pins, c, float(rms.max()) if len(c) > 1 else 0.0)
 
 
 def camera_pose(

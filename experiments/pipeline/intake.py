@@ -478,7 +478,7 @@ def alignment_error(
   ``camera_sd_m``/``camera_sd_deg``: a tilt by where up came from
   (``UP_SD_DEG``), at least as large as any disagreement between its sources;
   a shift of two pixels at the pins' depth, at least ``MIN_SD_M``, or half the
-  pins' spacing error if larger. ``scatter`` (``alignment.pin_scatter``: how
+  pins' spacing error if larger. ``scatter`` (``alignment.track_pins``: how
   far the fitted pins move over the recording) is a shift of its own and turns
   the pins' line by its angle across their spacing."""
   deg = UP_SD_DEG[fit.up_from]
@@ -521,8 +521,15 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
       spacing=float(np.linalg.norm(pins_world[1] - pins_world[0])),
     )  # fmt: skip
     warnings = cross_check(given, fit)
+    found, scatter = fit.pins, 0.0
+    if not config.pins:  # the whole recording's most upwind fit, and its spread
+      track = alignment.track_pins(
+        intake.depth, intr, fit.pins, fit.up, wind_toward_camera=config.wind_toward_camera,
+        spacing=float(np.linalg.norm(pins_world[1] - pins_world[0])),
+      )  # fmt: skip
+      found, scatter = track.pins, track.scatter
     pose, pins = alignment.camera_pose(
-      fit.pins, fit.up, pins_world, wind_toward_camera=config.wind_toward_camera
+      found, fit.up, pins_world, wind_toward_camera=config.wind_toward_camera
     )
     spacing = float(np.linalg.norm(pins[1] - pins[0]))
     want = float(np.linalg.norm(pins_world[1] - pins_world[0]))
@@ -535,9 +542,6 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
            f'(now {est.cloth_size:g} m)')
       )  # fmt: skip
     up_from = fit.up_from
-    scatter = 0.0
-    if not config.pins:
-      scatter = alignment.pin_scatter(intake.depth, intr, fit.up, spacing=want)
     sd = alignment_error(fit, pins, want, intr, warnings, scatter)
   else:
     pose, up_from, warnings, sd = cam.pose, 'camera file', (), (0.0, 0.0)
