@@ -119,3 +119,35 @@ def test_camera_pose_from_exact_pins_is_exact_whatever_their_order():
   assert alignment.visible_share(_PINS_WORLD, pose, _INTR) == 1.0
   far = camera.Pose(pose.rotation, np.asarray(pose.position) - [0, 100.0, 0])
   assert alignment.visible_share(_PINS_WORLD, far, _INTR) == 1.0  # still in front
+
+
+def test_track_pins_takes_each_pin_from_its_most_upwind_stretch(monkeypatch):
+  """The camera looks along +z at pins 2.5 m away, level (up = -y): downwind
+  (away from the camera) is +z. Scripted stretch fits move the left pin back
+  (a corner fitted behind its pin) while the right one holds: the track keeps
+  the left pin's nearest fit and the right's, and its scatter is the left
+  pin's RMS spread by hand; with the wind toward the camera, the farthest."""
+  first = np.array([[-0.5, 0.0, 2.70], [0.5, 0.0, 2.5]])
+  fits = [
+    np.array([[-0.49, 0.0, 2.58], [0.5, 0.0, 2.5]]),
+    np.array([[0.5, 0.0, 2.5], [-0.51, 0.0, 2.64]]),  # either order
+    np.array([[-0.5, 0.0, 2.76], [0.5, 0.0, 2.5]]),
+  ]
+  calls = iter(fits)
+  monkeypatch.setattr(
+    alignment,
+    'fit_pins',
+    lambda *a, **k: alignment.ClothFit(next(calls), None, None, ''),
+  )
+  depth = np.zeros((15, 4, 4))
+  up = np.array([0.0, -1.0, 0.0])
+  track = alignment.track_pins(depth, None, first, up, windows=3, frames=5)
+  np.testing.assert_allclose(track.pins, [[-0.49, 0.0, 2.58], [0.5, 0.0, 2.5]])
+  left = np.array([first[0], fits[0][0], fits[1][1], fits[2][0]])
+  rms = np.sqrt(((left - left.mean(0)) ** 2).sum(1).mean())
+  assert track.scatter == pytest.approx(rms, rel=1e-12) and len(track.candidates) == 4
+  calls = iter(fits)
+  toward = alignment.track_pins(
+    depth, None, first, up, windows=3, frames=5, wind_toward_camera=True
+  )
+  np.testing.assert_allclose(toward.pins[0], [-0.5, 0.0, 2.76])
