@@ -45,6 +45,10 @@ class Args:
     distance: the estimate's --distance.
     max_iter: the estimate's --max_iter.
     smoke: a tiny recording and the estimate's smoke preset (a test's run).
+    recipe: the recording's recipe: 'default' (the estimator's physics, a
+      finer mesh, gustier, another noise model) or 'mismatched' (also a
+      fan off the normal, another gust spectrum, drag, damping, stretchier
+      edges: rig.MISMATCHED).
     backend: the simulator of recording and estimate.
   """
 
@@ -53,6 +57,7 @@ class Args:
   distance: str = 'shape'
   max_iter: int = 3
   smoke: bool = False
+  recipe: str = cli.choice('default', tuple(rig.RECIPES))
   backend: str = cli.choice('c', ['c', 'auto', 'mjx', 'warp'])
 
 
@@ -102,7 +107,7 @@ def _estimate(args: Args, mode: str, paths: dict) -> dict:
     return row
   result = json.loads(open(os.path.join(workdir, 'estimate.json')).read())
   wind = result['estimate']['wind_speed']
-  truth = rig.Recipe().wind_speed if not args.smoke else rig.SMOKE.wind_speed
+  truth = rig.RECIPES[args.recipe].wind_speed
   lo, hi = wind['interval_90']
   row.update(
     wind=wind['value'], interval_90=[lo, hi],
@@ -133,7 +138,13 @@ def table(rows: list[dict], truth: float) -> str:
 
 def main(args: Args) -> None:
   modes = _modes(args.modes)
-  recipe = rig.SMOKE if args.smoke else rig.Recipe()
+  recipe = rig.RECIPES[args.recipe]
+  if args.smoke:
+    changed = {
+      f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)
+      if getattr(recipe, f.name) != getattr(rig.Recipe(), f.name)
+    }  # fmt: skip
+    recipe = dataclasses.replace(rig.SMOKE, **changed)
   os.makedirs(args.workdir, exist_ok=True)
   print(f'recording: {recipe.truth}, {recipe.cloth_resolution}^2 vertices', flush=True)
   paths = rig.write(recipe, os.path.join(args.workdir, 'recording'), args.backend)

@@ -60,6 +60,13 @@ class Recipe:
     noise: the camera's depth error (unlike the estimator's default model).
     imu_error_deg: the accelerometer's gravity direction error, degrees.
     seed: gusts, depth noise and the IMU's error.
+    fan_yaw_deg: the fan's axis turned about the vertical from the cloth's
+      normal, degrees (the estimator assumes 0).
+    gust_modes: frozen-turbulence modes of the gusts (the estimator's: 8).
+    air_drag: drag on the flow along the cloth (the estimator's: 0).
+    bending_damping: Rayleigh damping of bending, seconds (the estimator's: 0).
+    edge_solref: the edges' constraint time constant, seconds (the
+      estimator's: 0.004; longer is a stretchier cloth).
   """
 
   material: str = 'gray_interlock'
@@ -86,6 +93,11 @@ class Recipe:
   )  # fmt: skip
   imu_error_deg: float = 0.5
   seed: int = 11
+  fan_yaw_deg: float = 0.0
+  gust_modes: int = 8
+  air_drag: float = 0.0
+  bending_damping: float = 0.0
+  edge_solref: float = 0.004
 
   @property
   def truth(self) -> dict:
@@ -101,6 +113,15 @@ class Recipe:
       (self.width - 1) / 2 - 1.5, (self.height - 1) / 2 + 1.5,
     )  # fmt: skip
 
+
+# Issue 39, item 6: the simulator itself unlike the estimator's, as the world
+# is: a fan 10 degrees off the cloth's normal, another gust spectrum, drag
+# along the cloth, damped bending, stretchier edges.
+MISMATCHED = Recipe(
+  fan_yaw_deg=10.0, gust_modes=16, air_drag=0.1, bending_damping=0.002,
+  edge_solref=0.008,
+)  # fmt: skip
+RECIPES = {'default': Recipe(), 'mismatched': MISMATCHED}
 
 # The smallest that the intake still fits (a 12-vertex cloth's far corner is
 # lost to the sensor's edge band and its pins come out 0.78 m apart).
@@ -139,13 +160,18 @@ def depth(recipe: Recipe, backend: str = 'c') -> np.ndarray:
     mesh,
     recipe.material,
     physsim.SimConfig(
-      timestep=step, edge_solref=max(physsim.SimConfig.edge_solref, 2 * step)
+      timestep=step, edge_solref=max(recipe.edge_solref, 2 * step),
+      air_drag=recipe.air_drag, bending_damping=recipe.bending_damping,
     ),
-  )
+  )  # fmt: skip
+  yaw = np.deg2rad(recipe.fan_yaw_deg)
+  wind = physsim.Wind(
+    direction=(float(np.sin(yaw)), float(np.cos(yaw)), 0.0),
+    gust_intensity=recipe.gust_intensity, gust_modes=recipe.gust_modes,
+  )  # fmt: skip
   out = physsim.simulate(
     model, physsim.params.make(**recipe.truth), frames=recipe.frames,
-    fps=recipe.fps, warmup=recipe.warmup,
-    wind=physsim.Wind(gust_intensity=recipe.gust_intensity),
+    fps=recipe.fps, warmup=recipe.warmup, wind=wind,
     key=jax.random.key(recipe.seed)[None], backend=backend, workers=1,
   )  # fmt: skip
   intr = recipe.intrinsics()

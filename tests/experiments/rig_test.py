@@ -219,3 +219,19 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   for name in ('bending_scale', 'area_weight'):
     lo, hi = joint[name]['interval_90']
     assert 0 < lo < hi, (name, lo, hi)
+
+
+def test_the_mismatched_recipe_changes_the_physics_and_stays_a_cloth():
+  """rig.MISMATCHED's knobs (fan off the normal, gust spectrum, drag, damping,
+  stretchier edges) each reach the simulator: the sheet hangs elsewhere, and
+  it is still a 1 m cloth at 2-3.5 m from the camera, not a blown-up one."""
+  knobs = ('fan_yaw_deg', 'gust_modes', 'air_drag', 'bending_damping', 'edge_solref')
+  short = dataclasses.replace(rig.SMOKE, frames=6, warmup=0.3)
+  mismatched = dataclasses.replace(
+    short, **{k: getattr(rig.MISMATCHED, k) for k in knobs}
+  )
+  assert all(getattr(rig.MISMATCHED, k) != getattr(rig.Recipe(), k) for k in knobs)
+  a, b = rig.depth(short), rig.depth(mismatched)
+  both = (a > 0) & (b > 0)
+  assert np.abs(a - b)[both].mean() > 0.01  # metres: another physics
+  assert 1.5 < b[b > 0].min() and b.max() < 3.6 and (b > 0).mean() > 0.005
