@@ -262,7 +262,7 @@ def _run_script(tmp_path, body: str, *flags_):
 
 
 _SCRIPT = """
-import dataclasses, os, signal
+import dataclasses, signal, threading, time
 from experiments.pipeline import cli
 
 @dataclasses.dataclass(frozen=True)
@@ -278,7 +278,10 @@ class Args:
 
 def main(args):
   if args.name == 'interrupt':
-    os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C
+    # Ctrl-C, to this thread: a process-wide kill may land on one of JAX's
+    # threads, and the main thread raise before Python sees it
+    signal.pthread_kill(threading.get_ident(), signal.SIGINT)
+    time.sleep(10)
   raise ValueError(f'--name={args.name}: refused\\nsecond line')
 
 if __name__ == '__main__':
