@@ -277,6 +277,9 @@ class Args:
   name: str = ''
 
 def main(args):
+  # as from a terminal: a shell's background job starts with SIGINT ignored,
+  # and then Python installs no KeyboardInterrupt for it
+  signal.signal(signal.SIGINT, signal.default_int_handler)
   if args.name == 'interrupt':
     # Ctrl-C, to this thread: a process-wide kill may land on one of JAX's
     # threads, and the main thread raise before Python sees it
