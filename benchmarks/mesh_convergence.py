@@ -113,9 +113,9 @@ def simulate_resolution(config: Config, resolution: int) -> dict:
   per world. A seed's gust modes do not depend on the mesh (``physsim.forces``),
   so world (fabric, wind, seed) sees the same gusts on every mesh."""
   mesh = physsim.square(resolution, config.cloth_size)
-  step = physsim.stable_timestep(mesh.shortest_edge, 1.0 / config.fps)
-  sim_config = physsim.SimConfig(timestep=step, edge_solref=max(0.004, 2 * step))
-  model = physsim.build(mesh, config.fabrics[0], sim_config)
+  model = physsim.build(
+    mesh, config.fabrics[0], physsim.config_for_mesh(mesh, config.fps)
+  )
   f, w, s = np.meshgrid(
     np.arange(len(config.fabrics)), config.winds, config.seeds, indexing='ij'
   )

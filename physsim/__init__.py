@@ -41,6 +41,7 @@ from physsim.cloth import (
   ClothModel,
   SimConfig,
   build,
+  config_for_mesh,
   reference_rigidity,
   stable_timestep,
 )
@@ -117,6 +118,7 @@ __all__ = [
   'params',
   'pose_from_dict',
   'pose_to_dict',
+  'config_for_mesh',
   'reference_rigidity',
   'stable_timestep',
   'resolve_backend',

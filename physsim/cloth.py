@@ -109,6 +109,21 @@ def stable_timestep(edge: float, frame_dt: float, timestep: float = 0.002) -> fl
   return frame_dt / math.ceil(frame_dt / bound - 1e-9)
 
 
+def config_for_mesh(
+  mesh: Mesh,
+  fps: float,
+  timestep: float = 0.002,
+  edge_solref: float = SimConfig.edge_solref,
+  **fields,
+) -> SimConfig:
+  """``SimConfig`` for ``mesh`` recorded at ``fps``: the step
+  ``stable_timestep`` gives its shortest edge (at most ``timestep``), edges no
+  stiffer than two steps (MuJoCo's stiffest safe time constant), and any other
+  ``fields``."""
+  step = stable_timestep(mesh.shortest_edge, 1.0 / fps, timestep)
+  return SimConfig(timestep=step, edge_solref=max(edge_solref, 2 * step), **fields)
+
+
 def reference_rigidity(material: str) -> float:
   """D0 in N*m: the material's measured bending as one plate rigidity."""
   bend = materials.load_material(material).bending

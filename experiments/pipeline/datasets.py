@@ -470,10 +470,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   mesh = _mesh(config)
   # A fine mesh needs a shorter step; MuJoCo's stiffest safe constraint time
   # constant is two steps.
-  step = physsim.stable_timestep(mesh.shortest_edge, 1.0 / config.fps, config.timestep)
-  sim_config = physsim.SimConfig(
-    timestep=step, edge_solref=max(physsim.SimConfig.edge_solref, 2 * step)
-  )
+  sim_config = physsim.config_for_mesh(mesh, config.fps, config.timestep)
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size
   render = _chunked(

@@ -318,10 +318,7 @@ def mesh(config: EstimateConfig) -> physsim.Mesh:
 def sim_config(config: EstimateConfig) -> physsim.SimConfig:
   """The simulator's settings of an estimate's mesh: the default step, or a
   shorter one that a fine mesh needs to stay stable (``stable_timestep``)."""
-  step = physsim.stable_timestep(mesh(config).shortest_edge, 1.0 / config.fps)
-  return physsim.SimConfig(
-    timestep=step, edge_solref=max(physsim.SimConfig.edge_solref, 2 * step)
-  )
+  return physsim.config_for_mesh(mesh(config), config.fps)
 
 
 def pin_centre(config: EstimateConfig) -> np.ndarray:

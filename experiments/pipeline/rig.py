@@ -155,15 +155,11 @@ def depth(recipe: Recipe, backend: str = 'c') -> np.ndarray:
   if recipe.wind_speed <= 0 or recipe.area_weight <= 0 or recipe.bending_scale <= 0:
     raise ValueError(f'the truth must be positive, got {recipe.truth}')
   mesh = physsim.square(recipe.cloth_resolution, recipe.cloth_size)
-  step = physsim.stable_timestep(mesh.shortest_edge, 1 / recipe.fps, recipe.timestep)
-  model = physsim.build(
-    mesh,
-    recipe.material,
-    physsim.SimConfig(
-      timestep=step, edge_solref=max(recipe.edge_solref, 2 * step),
-      air_drag=recipe.air_drag, bending_damping=recipe.bending_damping,
-    ),
+  sim_config = physsim.config_for_mesh(
+    mesh, recipe.fps, recipe.timestep, recipe.edge_solref,
+    air_drag=recipe.air_drag, bending_damping=recipe.bending_damping,
   )  # fmt: skip
+  model = physsim.build(mesh, recipe.material, sim_config)
   yaw = np.deg2rad(recipe.fan_yaw_deg)
   wind = physsim.Wind(
     direction=(float(np.sin(yaw)), float(np.cos(yaw)), 0.0),

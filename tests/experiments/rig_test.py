@@ -122,14 +122,19 @@ def _scaled(point, size):
   return tuple(float(c) for c in (np.asarray(point) - [0, 0, 1.5]) * size + [0, 0, 1.5])
 
 
+def _swatch(**fields) -> rig.Recipe:
+  """The smoke recipe as a 30 cm swatch at 2 m/s, filmed from 30% of the distance."""
+  return dataclasses.replace(
+    rig.SMOKE, cloth_size=0.3, wind_speed=2.0, eye=_scaled(rig.SMOKE.eye, 0.3),
+    target=_scaled(rig.SMOKE.target, 0.3), **fields,
+  )  # fmt: skip
+
+
 def test_a_swatch_is_taken_in_at_its_size_and_refused_at_the_sheets(tmp_path):
   """Issue 39, item 1: a 30 cm swatch filmed as the sheet is, from 30% of the
   distance; the intake fits it with --cloth_size=0.3 and, at the default 1 m,
   refuses in one line naming both sizes and the flag."""
-  r = dataclasses.replace(
-    rig.SMOKE, cloth_size=0.3, wind_speed=2.0,
-    eye=_scaled(rig.SMOKE.eye, 0.3), target=_scaled(rig.SMOKE.target, 0.3),
-  )  # fmt: skip
+  r = _swatch()
   paths = rig.write(r, str(tmp_path / 'swatch'))
   swatch = dataclasses.replace(_CONFIG, cloth_size=0.3)
   ik = intake.take_in(
@@ -155,10 +160,7 @@ def test_a_swatch_is_estimated_at_its_size_from_the_command_line(tmp_path):
   import subprocess  # noqa: PLC0415
   import sys  # noqa: PLC0415
 
-  r = dataclasses.replace(
-    rig.SMOKE, cloth_size=0.3, wind_speed=2.0,
-    eye=_scaled(rig.SMOKE.eye, 0.3), target=_scaled(rig.SMOKE.target, 0.3),
-  )  # fmt: skip
+  r = _swatch()
   paths = rig.write(r, str(tmp_path / 'swatch'))
   done = subprocess.run(
     [sys.executable, '-m', 'experiments.estimate', '--preset=smoke',
@@ -185,10 +187,7 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   import sys  # noqa: PLC0415
 
   sheet = rig.write(rig.SMOKE, str(tmp_path / 'sheet'))
-  r = dataclasses.replace(
-    rig.SMOKE, cloth_size=0.3, wind_speed=2.0, seed=12,
-    eye=_scaled(rig.SMOKE.eye, 0.3), target=_scaled(rig.SMOKE.target, 0.3),
-  )  # fmt: skip
+  r = _swatch(seed=12)
   swatch = rig.write(r, str(tmp_path / 'swatch'))
   protocol = tmp_path / 'protocol.json'
   protocol.write_text(json.dumps({'recordings': [
