@@ -15,10 +15,17 @@ as a user runs it (``python -m experiments.estimate``), with up from:
   (``--noalignment_sd``, the default before issue 40): what the intake's own
   error estimate guards against.
 
+With ``--winds`` it makes one recording per wind (recording k with the
+recipe's seed + k: other gusts, noise and IMU error) and summarises each mode
+over them (mean and worst error, intervals that hold the truth);
+``--recipe_fields`` changes the recipe (a study of which difference costs
+what, e.g. ``--recipe_fields=gust_intensity=0.2``).
+
 Prints a table and writes ``<workdir>/windy_rig.json``; reruns resume.
 
   python -m benchmarks.windy_rig
   python -m benchmarks.windy_rig --modes=world_up,none --max_iter=2
+  python -m benchmarks.windy_rig --preset=gpu --recipe=mismatched
 """
 
 from __future__ import annotations
@@ -29,10 +36,14 @@ import os
 import subprocess
 import sys
 import time
+from concurrent import futures
+
+import numpy as np
 
 from experiments.pipeline import cli, files, rig
 
 MODES = ('world_up', 'imu', 'none', 'guessed', 'trusted')
+BACKENDS = ('c', 'auto', 'mjx', 'warp')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,7 +60,13 @@ class Args:
       finer mesh, gustier, another noise model) or 'mismatched' (also a
       fan off the normal, another gust spectrum, drag, damping, stretchier
       edges: rig.MISMATCHED).
-    backend: the simulator of recording and estimate.
+    backend: the estimate's simulator.
+    record_backend: the recording's simulator ('': the estimate's).
+    winds: comma-separated winds, m/s: one recording each, the k-th with the
+      recipe's seed + k ('': one recording at the recipe's wind).
+    recipe_fields: comma-separated ``field=value`` changes to the recipe
+      (numbers; e.g. ``gust_intensity=0.2,cloth_resolution=25``).
+    parallel: estimates run at once (processes).
   """
 
   workdir: str = 'out/benchmarks/windy_rig'
@@ -58,12 +75,24 @@ class Args:
   max_iter: int = 3
   smoke: bool = False
   recipe: str = cli.choice('default', tuple(rig.RECIPES))
-  backend: str = cli.choice('c', ['c', 'auto', 'mjx', 'warp'])
+  backend: str = cli.choice('c', BACKENDS)
+  record_backend: str = cli.choice('', ('', *BACKENDS))
+  winds: str = ''
+  recipe_fields: str = ''
+  parallel: int = 1
 
 
 PRESETS = {
   'default': Args(),
   'smoke': Args(smoke=True, modes='world_up,none', max_iter=1),
+  # one GPU: six recordings of strong wind, estimated two at a time
+  'gpu': Args(
+    modes='world_up',
+    backend='auto',
+    record_backend='c',
+    parallel=2,
+    winds='3.0,3.25,3.52,3.75,4.0,4.5',
+  ),
 }
 
 
@@ -73,6 +102,52 @@ def _modes(text: str) -> list[str]:
   if bad or not modes:
     raise ValueError(f'--modes={text}: need a comma-separated subset of {MODES}')
   return modes
+
+
+def _changed(recipe: rig.Recipe, text: str) -> rig.Recipe:
+  """``recipe`` with ``--recipe_fields``' ``field=value`` pairs, each value
+  parsed as its field's number type."""
+  fields = {f.name: f for f in dataclasses.fields(recipe)}
+  out = {}
+  for item in (x for x in text.split(',') if x):
+    name, _, value = item.partition('=')
+    kind = type(getattr(recipe, name, None))
+    if name not in fields or kind not in (int, float) or not value:
+      numeric = sorted(n for n in fields if type(getattr(recipe, n)) in (int, float))
+      raise ValueError(
+        f'--recipe_fields={text}: {item!r} is not field=number of {numeric}'
+      )
+    try:
+      out[name] = kind(value)
+    except ValueError:
+      raise ValueError(
+        f'--recipe_fields={text}: {value!r} is not a {kind.__name__}'
+      ) from None
+  return dataclasses.replace(recipe, **out)
+
+
+def recordings(args: Args) -> list[tuple[str, rig.Recipe]]:
+  """Each recording's folder name (under the workdir) and recipe."""
+  recipe = rig.RECIPES[args.recipe]
+  if args.smoke:
+    changed = {
+      f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)
+      if getattr(recipe, f.name) != getattr(rig.Recipe(), f.name)
+    }  # fmt: skip
+    recipe = dataclasses.replace(rig.SMOKE, **changed)
+  recipe = _changed(recipe, args.recipe_fields)
+  if not args.winds:
+    return [('', recipe)]
+  try:
+    winds = [float(w) for w in args.winds.split(',') if w]
+  except ValueError:
+    winds = []
+  if not winds or not all(0 < w < 20 for w in winds):
+    raise ValueError(f'--winds={args.winds}: need comma-separated winds in (0, 20) m/s')
+  return [
+    (f'rec{k:02d}', dataclasses.replace(recipe, wind_speed=w, seed=recipe.seed + k))
+    for k, w in enumerate(winds)
+  ]
 
 
 def _flags(mode: str, paths: dict) -> list[str]:
@@ -85,9 +160,9 @@ def _flags(mode: str, paths: dict) -> list[str]:
   return [f'--camera_json={cam}', *extra.get(mode, [])]
 
 
-def _estimate(args: Args, mode: str, paths: dict) -> dict:
+def _estimate(args: Args, mode: str, paths: dict, where: str, truth: float) -> dict:
   """One estimate as a user runs it; its outcome, read from its files."""
-  workdir = os.path.join(args.workdir, f'est_{mode}')
+  workdir = os.path.join(where, f'est_{mode}')
   command = [
     sys.executable, '-m', 'experiments.estimate', f'--recording={paths["depth"]}',
     *_flags(mode, paths), f'--workdir={workdir}', f'--distance={args.distance}',
@@ -97,66 +172,117 @@ def _estimate(args: Args, mode: str, paths: dict) -> dict:
   t0 = time.perf_counter()
   done = subprocess.run(command, capture_output=True, text=True)
   seconds = time.perf_counter() - t0
-  log = os.path.join(args.workdir, f'est_{mode}.log')
+  log = os.path.join(where, f'est_{mode}.log')
   files.write_text(log, done.stdout + done.stderr)
-  row = {'mode': mode, 'command': ' '.join(command[1:]), 'exit': done.returncode,
-         'seconds': round(seconds, 1), 'log': log}  # fmt: skip
+  row = {'mode': mode, 'truth': truth, 'command': ' '.join(command[1:]),
+         'exit': done.returncode, 'seconds': round(seconds, 1), 'log': log}  # fmt: skip
   if done.returncode != 0:
     lines = [x for x in done.stderr.strip().splitlines() if x]
     row['message'] = lines[-1] if lines else ''
     return row
   result = json.loads(open(os.path.join(workdir, 'estimate.json')).read())
   wind = result['estimate']['wind_speed']
-  truth = rig.RECIPES[args.recipe].wind_speed
   lo, hi = wind['interval_90']
   row.update(
-    wind=wind['value'], interval_90=[lo, hi],
+    wind=wind['value'], median=wind['median'], interval_90=[lo, hi],
     error=abs(wind['value'] - truth) / truth, holds=bool(lo <= truth <= hi),
     narrowing_90=wind['narrowing_90'], alignment=result.get('alignment'),
   )  # fmt: skip
   return row
 
 
-def table(rows: list[dict], truth: float) -> str:
+def table(rows: list[dict]) -> str:
   lines = [
-    f'wind truth {truth} m/s',
-    '| up from | exit | wind (m/s) | error | 90% interval | holds | narrower |',
-    '|---|---|---|---|---|---|---|',
-  ]
+    '| recording | up from | exit | truth | wind (m/s) | error | 90% interval | holds | narrower |',
+    '|---|---|---|---|---|---|---|---|---|',
+  ]  # fmt: skip
   for r in rows:
+    head = (
+      f'| {r.get("recording") or "-"} | {r["mode"]} | {r["exit"]} | {r["truth"]:.2f} |'
+    )
     if r['exit'] != 0:
-      lines.append(f'| {r["mode"]} | {r["exit"]} | refused: {r["message"]} | | | | |')
+      lines.append(f'{head} refused: {r["message"]} | | | | |')
       continue
     lo, hi = r['interval_90']
     lines.append(
-      f'| {r["mode"]} | 0 | {r["wind"]:.2f} | {100 * r["error"]:.1f}% | '
-      f'[{lo:.2f}, {hi:.2f}] | {"yes" if r["holds"] else "NO"} | '
-      f'x{r["narrowing_90"]:.1f} |'
+      f'{head} {r["wind"]:.2f} | {100 * r["error"]:.1f}% | [{lo:.2f}, {hi:.2f}] | '
+      f'{"yes" if r["holds"] else "NO"} | x{r["narrowing_90"]:.1f} |'
+    )
+  return '\n'.join(lines)
+
+
+def summary(rows: list[dict]) -> dict:
+  """Per mode over the recordings: how many ran, were refused, mean and
+  worst error, within 10%, intervals holding the truth."""
+  out = {}
+  for mode in dict.fromkeys(r['mode'] for r in rows):
+    ran = [r for r in rows if r['mode'] == mode and r['exit'] == 0]
+    errors = np.array([r['error'] for r in ran])
+    out[mode] = {
+      'recordings': sum(r['mode'] == mode for r in rows),
+      'refused': sum(r['mode'] == mode and r['exit'] != 0 for r in rows),
+      'mean_error': float(errors.mean()) if len(ran) else None,
+      'max_error': float(errors.max()) if len(ran) else None,
+      'within_10pct': int(np.sum(errors <= 0.10)),
+      'holds_90': sum(bool(r['holds']) for r in ran),
+    }
+  return out
+
+
+def summary_table(stats: dict) -> str:
+  lines = [
+    '| up from | recordings | refused | mean error | worst | within 10% | 90% holds |',
+    '|---|---|---|---|---|---|---|',
+  ]
+  for mode, s in stats.items():
+    ran = s['recordings'] - s['refused']
+    err = '-' if s['mean_error'] is None else f'{100 * s["mean_error"]:.1f}%'
+    worst = '-' if s['max_error'] is None else f'{100 * s["max_error"]:.1f}%'
+    lines.append(
+      f'| {mode} | {s["recordings"]} | {s["refused"]} | {err} | {worst} | '
+      f'{s["within_10pct"]}/{ran} | {s["holds_90"]}/{ran} |'
     )
   return '\n'.join(lines)
 
 
 def main(args: Args) -> None:
   modes = _modes(args.modes)
-  recipe = rig.RECIPES[args.recipe]
-  if args.smoke:
-    changed = {
-      f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)
-      if getattr(recipe, f.name) != getattr(rig.Recipe(), f.name)
-    }  # fmt: skip
-    recipe = dataclasses.replace(rig.SMOKE, **changed)
+  recs = recordings(args)
+  if args.parallel < 1:
+    raise ValueError(f'--parallel={args.parallel}: need at least 1')
   os.makedirs(args.workdir, exist_ok=True)
-  print(f'recording: {recipe.truth}, {recipe.cloth_resolution}^2 vertices', flush=True)
-  paths = rig.write(recipe, os.path.join(args.workdir, 'recording'), args.backend)
-  rows = []
-  for mode in modes:
-    print(f'== {mode}', flush=True)
-    rows.append(_estimate(args, mode, paths))
-  report = {'recipe': dataclasses.asdict(recipe), 'truth': recipe.truth,
-            'settings': dataclasses.asdict(args), 'rows': rows}  # fmt: skip
+
+  def one(named) -> list[dict]:
+    """A recording (made or found) and its estimates, one mode after another."""
+    name, recipe = named
+    where = os.path.join(args.workdir, name)
+    print(f'recording {name or "-"}: {recipe.truth}, seed {recipe.seed}, '
+          f'{recipe.cloth_resolution}^2 vertices', flush=True)  # fmt: skip
+    paths = rig.write(
+      recipe, os.path.join(where, 'recording'), args.record_backend or args.backend
+    )
+    rows = []
+    for mode in modes:
+      row = _estimate(args, mode, paths, where, recipe.wind_speed)
+      print(
+        f'== {name or "-"} {mode}: exit {row["exit"]}, {row["seconds"]} s', flush=True
+      )
+      rows.append({'recording': name, 'seed': recipe.seed, **row})
+    return rows
+
+  # recordings side by side (their simulations and estimates overlap)
+  with futures.ThreadPoolExecutor(args.parallel) as pool:
+    rows = [r for rs in pool.map(one, recs) for r in rs]
+  stats = summary(rows)
+  report = {
+    'recipe': dataclasses.asdict(recs[0][1]),
+    'recordings': [{'name': n, **r.truth, 'seed': r.seed} for n, r in recs],
+    'settings': dataclasses.asdict(args), 'summary': stats, 'rows': rows,
+  }  # fmt: skip
   out = os.path.join(args.workdir, 'windy_rig.json')
   files.write_json(out, report)
-  print(table(rows, recipe.wind_speed))
+  print(table(rows))
+  print(summary_table(stats))
   print(f'wrote {out}')
 
 

@@ -9,6 +9,8 @@ import subprocess
 import sys
 
 import jax
+import numpy as np
+import pytest
 
 from experiments.pipeline import jax_cache
 
@@ -31,9 +33,35 @@ print(json.dumps({'dir': where, 'hits': len(hits)}))
 """
 
 
-def _child(path):
+# The same through MuJoCo Warp's kernels (XLA custom calls to FFI targets that
+# the process registers when it traces): a gusty 8x8 flap's last frame.
+_WARP_CHILD = r"""
+import json, sys
+import jax, numpy as np
+import physsim
+from physsim import rollout
+from experiments.pipeline import jax_cache
+hits = []
+jax.monitoring.register_event_listener(
+  lambda name, **kw: hits.append(name) if name.endswith('cache_hits') else None
+)
+jax_cache.enable(sys.argv[1], min_compile_seconds=0.0)
+out = rollout.simulate(
+  physsim.build(physsim.square(8), 'gray_interlock'),
+  physsim.params.make(bending_scale=[1.0, 3.0], wind_speed=[2.0, 4.0],
+                      area_weight=[0.15, 0.3]),
+  frames=6, fps=20.0, warmup=0.0, wind=physsim.Wind(gust_intensity=0.2),
+  key=jax.random.key(3), backend='warp',
+  devices=[d for d in jax.devices() if d.platform == 'gpu'][:1],
+)
+print(json.dumps({'hits': len(hits), 'valid': bool(np.all(out.valid)),
+                  'last': np.asarray(out.positions)[:, -1].tolist()}))
+"""
+
+
+def _child(path, script=_CHILD):
   out = subprocess.run(
-    [sys.executable, '-c', _CHILD, path], cwd=ROOT, capture_output=True,
+    [sys.executable, '-c', script, path], cwd=ROOT, capture_output=True,
     text=True, check=True, timeout=300,
   )  # fmt: skip
   return json.loads(out.stdout.strip().splitlines()[-1])
@@ -52,6 +80,19 @@ def test_a_second_process_loads_the_first_ones_program(tmp_path):
   second = _child(cache)
   assert second['hits'] >= 1
   assert _files(cache) == written  # nothing new compiled
+
+
+@pytest.mark.gpu
+def test_a_cached_warp_program_runs_as_a_fresh_one(tmp_path):
+  """Issue 41, item 3: a second process loads the Warp simulator's programs
+  from the cache (their FFI targets registered by its own trace) and moves
+  the cloth exactly as the process that compiled them."""
+  cache = str(tmp_path / 'cache')
+  first = _child(cache, _WARP_CHILD)
+  second = _child(cache, _WARP_CHILD)
+  assert first['valid'] and second['valid']
+  assert first['hits'] == 0 and second['hits'] >= 1
+  np.testing.assert_array_equal(np.array(second['last']), np.array(first['last']))
 
 
 def test_where_the_cache_goes(tmp_path, monkeypatch):

@@ -1,0 +1,64 @@
+"""benchmarks/windy_rig.py: its recordings and its summary, without estimating."""
+
+import dataclasses
+
+import pytest
+
+from benchmarks import windy_rig
+from experiments.pipeline import rig
+
+
+def test_one_recording_per_wind_each_with_its_own_seed():
+  args = windy_rig.Args(winds='3.0,4.5', recipe='mismatched')
+  recs = windy_rig.recordings(args)
+  assert [n for n, _ in recs] == ['rec00', 'rec01']
+  assert [r.wind_speed for _, r in recs] == [3.0, 4.5]
+  assert [r.seed for _, r in recs] == [rig.MISMATCHED.seed, rig.MISMATCHED.seed + 1]
+  # everything else is the named recipe's
+  assert dataclasses.replace(recs[1][1], wind_speed=3.52, seed=11) == rig.MISMATCHED
+
+
+def test_without_winds_the_recipe_itself_in_the_workdir():
+  assert windy_rig.recordings(windy_rig.Args()) == [('', rig.Recipe())]
+
+
+def test_recipe_fields_change_the_recipe_as_numbers_of_its_types():
+  args = windy_rig.Args(recipe_fields='gust_intensity=0.2,cloth_resolution=25')
+  ((_, r),) = windy_rig.recordings(args)
+  assert r.gust_intensity == 0.2 and r.cloth_resolution == 25
+  assert isinstance(r.cloth_resolution, int)
+
+
+@pytest.mark.parametrize(
+  'fields, named',
+  [('gusts=0.2', "'gusts=0.2'"), ('cloth_resolution=2.5', "'2.5' is not a int"),
+   ('material=black_denim', "'material=black_denim'"), ('warmup=', "'warmup='")],
+)  # fmt: skip
+def test_bad_recipe_fields_are_refused_naming_the_item(fields, named):
+  with pytest.raises(ValueError, match='--recipe_fields') as e:
+    windy_rig.recordings(windy_rig.Args(recipe_fields=fields))
+  assert named in str(e.value)
+
+
+@pytest.mark.parametrize('winds', ['fast', '3,-1', ',', '3,25'])
+def test_bad_winds_are_refused(winds):
+  with pytest.raises(ValueError, match='--winds'):
+    windy_rig.recordings(windy_rig.Args(winds=winds))
+
+
+def test_the_summary_counts_by_hand():
+  rows = [
+    {'mode': 'world_up', 'exit': 0, 'error': 0.05, 'holds': True},
+    {'mode': 'world_up', 'exit': 0, 'error': 0.15, 'holds': False},
+    {'mode': 'none', 'exit': 2},
+    {'mode': 'world_up', 'exit': 0, 'error': 0.10, 'holds': True},
+  ]
+  s = windy_rig.summary(rows)
+  assert s['world_up'] == {
+    'recordings': 3, 'refused': 0, 'mean_error': pytest.approx(0.10),
+    'max_error': 0.15, 'within_10pct': 2, 'holds_90': 2,
+  }  # fmt: skip
+  assert s['none']['refused'] == 1 and s['none']['mean_error'] is None
+  text = windy_rig.summary_table(s)
+  assert '| world_up | 3 | 0 | 10.0% | 15.0% | 2/3 | 2/3 |' in text
+  assert '| none | 1 | 1 | - | - | 0/0 | 0/0 |' in text
