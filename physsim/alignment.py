@@ -224,13 +224,23 @@ class PinTrack(NamedTuple):
     pins: (2, 3) each pin's most upwind fit (camera frame).
     candidates: (K, 2, 3) every stretch's fit, the first fit first, each pair
       in the first fit's order.
+    kept: (K,) bool, the candidates that are not misfits (``MISFIT_SHARE``).
     scatter: the larger of the two pins' RMS distance from their mean over
-      the candidates, metres (0 for one candidate).
+      the kept candidates, metres (0 for one candidate).
   """
 
   pins: np.ndarray
   candidates: np.ndarray
+  kept: np.ndarray
   scatter: float
+
+
+# A stretch whose pin lands farther than this share of the pins' spacing from
+# that pin's median over the stretches has fitted another corner or a sliver
+# of cloth (a sheet seen edge-on for a moment), not the pin: it is left out of
+# the choice and of the scatter, which it would otherwise dominate (one such
+# fit, 0.74 m off, made 20 cm of scatter where the pins were within 5 cm).
+MISFIT_SHARE = 0.25
 
 
 def track_pins(
@@ -252,7 +262,8 @@ def track_pins(
   stretch of frames. ``fit_pins`` runs on ``windows`` stretches of ``frames``
   frames spread over ``depth`` (T, H, W) with ``up`` given; each pin is taken
   from the stretch that puts it most upwind (the cloth's least swept-back
-  moment), and how far the fits move (``scatter``) is the error left.
+  moment), and how far the fits move (``scatter``) is the error left. A
+  stretch that fitted something else (``MISFIT_SHARE``) is left out of both.
 
   Args:
     depth: (T, H, W) metres, 0 where not cloth.
@@ -279,15 +290,20 @@ def track_pins(
     p = fit.pins if (fit.pins[1] - fit.pins[0]) @ edge > 0 else fit.pins[::-1]
     candidates.append(p)
   c = np.asarray(candidates)
-  rms = np.sqrt(((c - c.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
+  off = np.linalg.norm(c - np.median(c, axis=0), axis=2).max(axis=1)
+  kept = off <= MISFIT_SHARE * np.linalg.norm(edge)
+  if kept.sum() < 2:  # no majority to hold to: every fit, and all their spread
+    kept = np.ones(len(c), bool)
+  good = c[kept]
+  rms = np.sqrt(((good - good.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
   # downwind: level, square to the pins' line, away from the camera (or toward)
   x = _unit(edge)
   level = _unit(_unit(up) - (_unit(up) @ x) * x)
   down = np.cross(level, x)
   if (float(down @ first.mean(axis=0)) > 0) == wind_toward_camera:
     down = -down
-  pins = np.stack([c[np.argmin(c[:, k] @ down), k] for k in range(2)])
-  return PinTrack(pins, c, float(rms.max()) if len(c) > 1 else 0.0)
+  pins = np.stack([good[np.argmin(good[:, k] @ down), k] for k in range(2)])
+  return PinTrack(pins, c, kept, float(rms.max()) if len(good) > 1 else 0.0)
 
 
 def camera_pose(

@@ -151,3 +151,37 @@ def test_track_pins_takes_each_pin_from_its_most_upwind_stretch(monkeypatch):
     depth, None, first, up, windows=3, frames=5, wind_toward_camera=True
   )
   np.testing.assert_allclose(toward.pins[0], [-0.5, 0.0, 2.76])
+
+
+def test_a_stretch_that_fitted_another_corner_is_left_out(monkeypatch):
+  """One stretch's fit lands 0.74 m from the left pin (a sliver of cloth seen
+  edge-on, as on a windy rig recording): it is neither chosen, though it is
+  the most upwind, nor counted in the scatter, which is the others' RMS
+  spread by hand; with most stretches in disagreement, all are kept."""
+  first = np.array([[-0.5, 0.0, 2.60], [0.5, 0.0, 2.5]])
+  good = [
+    np.array([[-0.5, 0.0, 2.56], [0.5, 0.0, 2.52]]),
+    np.array([[-0.5, 0.0, 2.62], [0.5, 0.0, 2.49]]),
+  ]
+  misfit = np.array([[-0.2, 0.0, 1.92], [0.5, 0.0, 2.5]])  # upwind of all
+  depth = np.zeros((20, 4, 4))
+  up = np.array([0.0, -1.0, 0.0])
+
+  def track(fits):
+    calls = iter(fits)
+    monkeypatch.setattr(
+      alignment, 'fit_pins',
+      lambda *a, **k: alignment.ClothFit(next(calls), None, None, ''),
+    )  # fmt: skip
+    return alignment.track_pins(depth, None, first, up, windows=len(fits), frames=5)
+
+  t = track([good[0], misfit, good[1]])
+  assert t.kept.tolist() == [True, True, False, True]
+  np.testing.assert_allclose(t.pins, [[-0.5, 0.0, 2.56], [0.5, 0.0, 2.49]])
+  kept = np.array([first, good[0], good[1]])
+  rms = np.sqrt(((kept - kept.mean(0)) ** 2).sum(2).mean(0)).max()
+  assert t.scatter == pytest.approx(rms, rel=1e-12) and t.scatter < 0.04
+  # Every fit with all its spread again if at most one would be kept.
+  far = [misfit + [0.0, 0.0, 0.5 * i] for i in range(3)]
+  spread = track(far)
+  assert spread.kept.all() and spread.scatter > 0.3
