@@ -59,6 +59,12 @@ print(json.dumps({'hits': len(hits), 'valid': bool(np.all(out.valid)),
 """
 
 
+# Metres: far below the Warp-against-C parity bound (tests/physsim/gpu_test.py,
+# 5e-3 m), far above float32 atomics' reordering; a stale or wrong program
+# (another model, another step) moves the cloth by centimetres.
+_WARP_RERUN_TOL = 1e-4
+
+
 def _child(path, script=_CHILD):
   out = subprocess.run(
     [sys.executable, '-c', script, path], cwd=ROOT, capture_output=True,
@@ -86,13 +92,17 @@ def test_a_second_process_loads_the_first_ones_program(tmp_path):
 def test_a_cached_warp_program_runs_as_a_fresh_one(tmp_path):
   """Issue 41, item 3: a second process loads the Warp simulator's programs
   from the cache (their FFI targets registered by its own trace) and moves
-  the cloth exactly as the process that compiled them."""
+  the cloth as the process that compiled them: to ``_WARP_RERUN_TOL``, since
+  two Warp runs differ in float32's last bits anyway (its kernels sum with
+  atomics: 1.1e-6 m apart over this flap on an H200)."""
   cache = str(tmp_path / 'cache')
   first = _child(cache, _WARP_CHILD)
   second = _child(cache, _WARP_CHILD)
   assert first['valid'] and second['valid']
   assert first['hits'] == 0 and second['hits'] >= 1
-  np.testing.assert_array_equal(np.array(second['last']), np.array(first['last']))
+  np.testing.assert_allclose(
+    np.array(second['last']), np.array(first['last']), rtol=0, atol=_WARP_RERUN_TOL
+  )
 
 
 def test_where_the_cache_goes(tmp_path, monkeypatch):

@@ -48,17 +48,40 @@ def test_bad_winds_are_refused(winds):
 
 def test_the_summary_counts_by_hand():
   rows = [
-    {'mode': 'world_up', 'exit': 0, 'error': 0.05, 'holds': True},
-    {'mode': 'world_up', 'exit': 0, 'error': 0.15, 'holds': False},
+    {
+      'mode': 'world_up',
+      'exit': 0,
+      'error': 0.05,
+      'holds': True,
+      'median': 3.1,
+      'truth': 3.0,
+    },
+    {
+      'mode': 'world_up',
+      'exit': 0,
+      'error': 0.15,
+      'holds': False,
+      'median': 5.0,
+      'truth': 4.0,
+    },
     {'mode': 'none', 'exit': 2},
-    {'mode': 'world_up', 'exit': 0, 'error': 0.10, 'holds': True},
+    {
+      'mode': 'world_up',
+      'exit': 0,
+      'error': 0.10,
+      'holds': True,
+      'median': 2.0,
+      'truth': 2.0,
+    },
   ]
   s = windy_rig.summary(rows)
   assert s['world_up'] == {
     'recordings': 3, 'refused': 0, 'mean_error': pytest.approx(0.10),
     'max_error': 0.15, 'within_10pct': 2, 'holds_90': 2,
+    'median_mean_error': pytest.approx((0.1 / 3 + 0.25 + 0) / 3),
+    'median_within_10pct': 2,
   }  # fmt: skip
   assert s['none']['refused'] == 1 and s['none']['mean_error'] is None
   text = windy_rig.summary_table(s)
-  assert '| world_up | 3 | 0 | 10.0% | 15.0% | 2/3 | 2/3 |' in text
-  assert '| none | 1 | 1 | - | - | 0/0 | 0/0 |' in text
+  assert '| world_up | 3 | 0 | 10.0% | 15.0% | 2/3 | 2/3 | 9.4% | 2/3 |' in text
+  assert '| none | 1 | 1 | - | - | 0/0 | 0/0 | - | 0/0 |' in text
