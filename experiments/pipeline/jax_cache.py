@@ -17,9 +17,10 @@ JAX writes no entry for a program with host callbacks (the C simulator's
 Programs that call foreign functions (MuJoCo Warp's kernels through XLA's FFI)
 are cached like any other: the cache stores XLA's executable, whose custom
 calls name their targets, and a later process registers those targets when it
-traces the same program, before the cached executable runs. That has not been
-tested on a GPU here; ``$PHYSNET_JAX_CACHE=off`` is the way out should a
-cached Warp program misbehave.
+traces the same program, before the cached executable runs (a GPU test,
+tests/experiments/jax_cache_test.py, checks that a second process loads the
+Warp simulator's programs and moves a cloth as the first did);
+``$PHYSNET_JAX_CACHE=off`` is the way out should a cached program misbehave.
 """
 
 from __future__ import annotations
