@@ -43,6 +43,7 @@ from physsim.cloth import (
   build,
   config_for_mesh,
   reference_rigidity,
+  scaled_edge_solref,
   stable_timestep,
 )
 from physsim.forces import Gusts, face_wind_forces, sample_gusts
@@ -119,6 +120,7 @@ __all__ = [
   'pose_from_dict',
   'pose_to_dict',
   'config_for_mesh',
+  'scaled_edge_solref',
   'reference_rigidity',
   'stable_timestep',
   'resolve_backend',
