@@ -665,14 +665,14 @@ class Objective:
 
   def __init__(self, problem: Problem):
     c, net = problem.config, problem.net
-    s, h, sc = c.simulation, c.hardware, c.scoring
+    s, hw, sc = c.simulation, c.hardware, c.scoring
     self.structure = problem.structure()
     self.cloth = cloth(s)
     self.mesh = self.cloth.mesh
     self.n_frames = problem.n_frames
     self._rollout = physsim.rollout_fn(
       self.cloth, frames=problem.n_frames, fps=s.fps, warmup=s.warmup,
-      backend=h.backend, workers=h.workers or None,
+      backend=hw.backend, workers=hw.workers or None,
     )  # fmt: skip
     self._wind = physsim.Wind(gust_intensity=s.gusts)
     self._intr = problem.intr
@@ -699,7 +699,7 @@ class Objective:
     # The worlds of a call split over every local device (MuJoCo Warp); MuJoCo
     # C runs on the host through a callback, whose process pool is the
     # parallelism.
-    on_device = physsim.resolve_backend(h.backend) != 'c'
+    on_device = physsim.resolve_backend(hw.backend) != 'c'
     self.world_mesh = physsim.devices.world_mesh() if on_device else None
     self._program = jax.jit(
       self._fused, static_argnames=('with_frames', 'with_positions')
