@@ -77,12 +77,13 @@ def main(args: Args) -> None:
   rows = []
   for name in args.settings:
     preset, overrides, kwargs = SETTINGS[name]
-    config = dataclasses.replace(
-      objective_lib.PRESETS[preset], material=args.material, backend=args.backend,
+    config = objective_lib.PRESETS[preset].replace(
+      material=args.material, backend=args.backend,
       **overrides,
     )  # fmt: skip
     rec = recording_lib.load_recording(
-      args.recording, fps=config.fps, size=net.image_size, frames=config.frames,
+      args.recording, fps=config.simulation.fps, size=net.image_size,
+      frames=config.simulation.frames,
       rgb=net.modality == 'rgb',
     )  # fmt: skip
     runs = []

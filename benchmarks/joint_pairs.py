@@ -182,8 +182,8 @@ def main(args: Args) -> None:
     if not getattr(args, name) >= low:
       raise ValueError(f'--{name}={getattr(args, name)}: need at least {low}')
   config = args.estimate
-  config = dataclasses.replace(
-    config, material=args.material,
+  config = config.replace(
+    material=args.material,
     **({'backend': args.backend} if args.backend else {}),
     **({'distance': args.distance} if args.distance else {}),
     **({'likelihood': args.likelihood} if args.likelihood else {}),
@@ -194,9 +194,9 @@ def main(args: Args) -> None:
   config.check()  # e.g. the synthetic likelihood without the shape distance
   if args.fan_winds:
     _fan_winds(args)  # a bad range refused before any work
-  net = embedding.for_distance(args.model, config.distance, args.image_size)
+  net = embedding.for_distance(args.model, config.scoring.distance, args.image_size)
   if args.seconds:  # compare the whole clip
-    config = dataclasses.replace(config, frames=round(args.seconds * config.fps))
+    config = config.replace(frames=round(args.seconds * config.simulation.fps))
   space = physsim.search_space(args.material)
   centre = space.center()
   guess = {
@@ -211,7 +211,10 @@ def main(args: Args) -> None:
     recs, winds = [], []
     for r in group:
       rec = recording_lib.load_recording(
-        r['path'], fps=config.fps, size=net.image_size, frames=config.frames
+        r['path'],
+        fps=config.simulation.fps,
+        size=net.image_size,
+        frames=config.simulation.frames,
       )
       m = posterior_lib.simulated_reading(
         'wind_speed', rec.truth, args.reading_sd, args.seed, r['seq']
@@ -293,7 +296,7 @@ def main(args: Args) -> None:
     n: float(np.mean([r['joint_covered_90'][n] for r in rows])) for n in NAMES
   }
   print(f'{len(rows)} recordings in {len(groups)} groups of {args.group}, '
-        f'{args.material}, distance {config.distance}, readings with '
+        f'{args.material}, distance {config.scoring.distance}, readings with '
         f'{100 * args.reading_sd:g}% error; mean errors')  # fmt: skip
   print('| estimate | recordings | wind | area weight | load ratio |')
   print('|---|---:|---|---|---|')

@@ -78,7 +78,7 @@ def main(args: Args) -> None:
   material, form, sharpness, grid = configs.pop()
   study = calibration.Config(
     material=material, measured_sd=args.measured_sd, seed=args.seed,
-    estimate=EstimateConfig(posterior_grid=grid),
+    estimate=EstimateConfig().replace(posterior_grid=grid),
   )  # fmt: skip
   scores = calibration.posteriors(study, runs, form, sharpness, pairs=args.pairs)
   modes = [m for m in calibration.MODES if args.pairs or not m.startswith('joint')]

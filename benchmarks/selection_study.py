@@ -156,7 +156,10 @@ def main(args: Args) -> None:
     rec_dir = physsim.dataset.sequence_dir(rec_root, material, f'{i:04d}')
     try:
       recordings[i] = recording_lib.load_recording(
-        rec_dir, fps=est_cfg.fps, size=(demo._RES, demo._RES), frames=demo._FRAMES
+        rec_dir,
+        fps=est_cfg.simulation.fps,
+        size=(demo._RES, demo._RES),
+        frames=demo._FRAMES,
       )
     except ValueError as e:  # e.g. an unseen camera pose that never sees the cloth
       skipped[i] = str(e)
@@ -169,7 +172,7 @@ def main(args: Args) -> None:
     for i, rec in recordings.items():
       out = os.path.join(wd, 'estimates', f'epoch{epoch}', f'{i:04d}')
       res = search.estimate(
-        dataclasses.replace(est_cfg, seed=i), rec, model_dir, out, progress=False
+        est_cfg.replace(seed=i), rec, model_dir, out, progress=False
       )
       value = {k: float(np.ravel(v['value'])[0]) for k, v in res['estimate'].items()}
       results.setdefault(epoch, []).append(

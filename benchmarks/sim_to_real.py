@@ -110,9 +110,9 @@ def main(args: Args) -> None:
     gen.run(cfg, root)
     rec = recording_lib.load_recording(
       physsim.dataset.sequence_dir(root, material, '0000'),
-      fps=est_cfg.fps,
+      fps=est_cfg.simulation.fps,
       size=size,
-      frames=est_cfg.frames,
+      frames=est_cfg.simulation.frames,
     )
     truth0 = truth0 or rec.truth
     if rec.truth != truth0:
@@ -120,7 +120,7 @@ def main(args: Args) -> None:
     row = {}
     for noise in (True, False):
       problem = objective_lib.make_problem(
-        dataclasses.replace(est_cfg, sensor_noise=noise), net, rec
+        est_cfg.replace(sensor_noise=noise), net, rec
       )
       u_truth = np.asarray(
         physsim.to_unit(physsim.params.make(**rec.truth), problem.space), np.float64

@@ -63,9 +63,9 @@ PRESETS = {k: Args(study=v) for k, v in calibration.PRESETS.items()}
 
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)
-  if args.study.estimate.likelihood not in bo.posterior.DISCREPANCY_LIKELIHOODS:
+  if args.study.estimate.scoring.likelihood not in bo.posterior.DISCREPANCY_LIKELIHOODS:
     raise ValueError(
-      f'--likelihood={args.study.estimate.likelihood}: the calibration re-reads '
+      f'--likelihood={args.study.estimate.scoring.likelihood}: the calibration re-reads '
       f'likelihoods of one discrepancy ({", ".join(bo.posterior.DISCREPANCY_LIKELIHOODS)})'
     )
   if args.check:
@@ -80,7 +80,7 @@ def main(args: Args) -> None:
     simulate_only=args.simulate_only,
   )  # fmt: skip
   if args.install and distributed.is_main():
-    dest = report.shipped_calibration(args.study.estimate.distance)
+    dest = report.shipped_calibration(args.study.estimate.scoring.distance)
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     files.write_atomic(dest, lambda tmp: shutil.copyfile(src, tmp))  # never half-copied
     print(f'installed as {dest}')

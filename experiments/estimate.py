@@ -166,12 +166,9 @@ def take_settings(args: Args, take: takes.Take):
     ik = dataclasses.replace(ik, world_up=take.world_up)
   config = args.search
   if take.cloth_size:
-    config = dataclasses.replace(config, cloth_size=take.cloth_size)
+    config = config.replace(cloth_size=take.cloth_size)
   if take.wind is not None:
-    measured = dataclasses.replace(
-      config.measured, wind_speed=take.wind[0], wind_speed_sd=take.wind[1]
-    )
-    config = dataclasses.replace(config, measured=measured)
+    config = config.replace(wind_speed=take.wind[0], wind_speed_sd=take.wind[1])
   config.check()
   return ik, config
 
@@ -179,9 +176,11 @@ def take_settings(args: Args, take: takes.Take):
 def _take_in(args: Args, take: takes.Take, workdir: str, frames: bool = True):
   """One recording taken in; its summary printed and its files written."""
   ik_config, config = take_settings(args, take)
-  ik = intake.take_in(take.path, ik_config, take.camera_json, config, workdir=workdir)
+  ik = intake.take_in(
+    take.path, ik_config, take.camera_json, config.simulation, workdir=workdir
+  )
   print(intake.summary(ik))
-  intake.write(ik, workdir, config, frames=frames)
+  intake.write(ik, workdir, config.simulation, frames=frames)
   return ik
 
 
@@ -190,10 +189,14 @@ def with_alignment_error(args: Args, config, intakes: list):
   (the largest of them) where ``args.alignment_sd`` and the user gave none;
   and the line that says so, or None."""
   sds = [ik.alignment_sd for ik in intakes if ik is not None and any(ik.alignment_sd)]
-  if not (args.alignment_sd and sds) or config.camera_sd_m or config.camera_sd_deg:
+  if (
+    not (args.alignment_sd and sds)
+    or config.scoring.camera_sd_m
+    or config.scoring.camera_sd_deg
+  ):
     return config, None
   m, deg = max(s[0] for s in sds), max(s[1] for s in sds)
-  config = dataclasses.replace(config, camera_sd_m=m, camera_sd_deg=deg)
+  config = config.replace(camera_sd_m=m, camera_sd_deg=deg)
   config.check()
   return config, (
     f"the posterior carries the alignment's own error: the camera placed to "
@@ -215,8 +218,8 @@ def alignment_record(intakes: list, config) -> dict | None:
     'intake_alignment_sd': [
       {'m': ik.alignment_sd[0], 'deg': ik.alignment_sd[1]} for ik in taken
     ],
-    'camera_sd_m': config.camera_sd_m,
-    'camera_sd_deg': config.camera_sd_deg,
+    'camera_sd_m': config.scoring.camera_sd_m,
+    'camera_sd_deg': config.scoring.camera_sd_deg,
     'warnings': guesses + [w for ik in taken for w in ik.warnings],
   }
 
@@ -245,7 +248,8 @@ def network(args: Args) -> setup.Network:
       a network of another fabric (unless ``allow_other_material``).
   """
   return setup.network(
-    args.model, args.search.distance, args.image_size, args.search.material,
+    args.model, args.search.scoring.distance, args.image_size,
+    args.search.simulation.material,
     allow_other_material=args.allow_other_material,
   )  # fmt: skip
 
@@ -283,7 +287,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   n = len(recorded)
   config = args.search
   print(
-    f'{config.material}: {n} recording{"s" * (n > 1)} into {args.workdir}; reading '
+    f'{config.simulation.material}: {n} recording{"s" * (n > 1)} into {args.workdir}; reading '
     'and aligning, then the first simulations compile (a minute or two on a CPU)',
     flush=True,
   )  # a line within seconds: the first step's output comes much later
@@ -318,15 +322,19 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
       if ik.up_is_guess and not args.allow_guessed_up:
         raise _guess_refused(take.path)
       intakes.append(ik)
-      recs.append(intake.to_recording(ik, own.fps, net.image_size, own.frames))
+      recs.append(
+        intake.to_recording(
+          ik, own.simulation.fps, net.image_size, own.simulation.frames
+        )
+      )
     else:
       intakes.append(None)
       recs.append(
         recording_lib.load_recording(
           take.path,
-          fps=own.fps,
+          fps=own.simulation.fps,
           size=net.image_size,
-          frames=own.frames,
+          frames=own.simulation.frames,
           rgb=net.modality == 'rgb',
         )  # fmt: skip
       )
@@ -345,7 +353,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   if n > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
     overrides = [
-      {k: getattr(c, k) for k in search.PER_RECORDING} for c in configs
+      {k: c.flat()[k] for k in search.PER_RECORDING} for c in configs
     ]  # fmt: skip
     result = search.estimate_joint(
       config, recs, args.model, args.workdir,
@@ -363,7 +371,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     if 'up is a guess' in line:
       print(f'note: {line}')
   for note in (
-    report.fan_setting_note(ratios, config.material),
+    report.fan_setting_note(ratios, config.simulation.material),
     # experiments.plan reads one recording's posterior
     report.next_recording_note(result['estimate'], configs[0], args.workdir)
     if n == 1

@@ -22,13 +22,17 @@ def from_dict(cls: type, data: dict, where: str = 'config') -> Any:
     where: name used in error messages.
 
   Returns:
-    An instance of ``cls``; missing fields take their defaults.
+    An instance of ``cls``; missing fields take their defaults. A class with
+    a ``from_dict(data)`` classmethod of its own is built by it.
 
   Raises:
     ValueError: on unknown fields or a non-dict.
   """
   if not isinstance(data, dict):
     raise ValueError(f'{where} must be a JSON object, got {type(data).__name__}.')
+  own = getattr(cls, 'from_dict', None)
+  if own is not None:  # a config that reads its own (e.g. older) forms
+    return own(data)
   hints = typing.get_type_hints(cls)
   names = {f.name for f in dataclasses.fields(cls)}
   unknown = sorted(set(data) - names)

@@ -94,7 +94,7 @@ def run(workdir: str, material: str, sequences: int, seed: int, backend: str):
   gen.run(rec_cfg, rec_root)
   rec_dir = physsim.dataset.sequence_dir(rec_root, material, '0000')
   rec = recording_lib.load_recording(
-    rec_dir, fps=est_cfg.fps, size=IMAGE_SIZE, frames=_FRAMES
+    rec_dir, fps=est_cfg.simulation.fps, size=IMAGE_SIZE, frames=_FRAMES
   )
   print('== 4/4 estimate', flush=True)
   result = search.estimate(

@@ -280,10 +280,10 @@ def _undistort(depth: np.ndarray, cam: camera_files.CameraFile) -> np.ndarray:
   return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])
 
 
-def simulated_pins(config) -> tuple[np.ndarray, physsim.Mesh]:
+def simulated_pins(sim: objective.Simulation) -> tuple[np.ndarray, physsim.Mesh]:
   """((2, 3) the simulated cloth's outer pins, left first; its rest mesh) for
-  an ``EstimateConfig``."""
-  mesh = objective.mesh(config)
+  an estimate's ``Simulation``."""
+  mesh = objective.mesh(sim)
   return outer_pins(mesh), mesh
 
 
@@ -315,13 +315,13 @@ def silhouettes(mesh, pins_world, intr, pose, degs=SWINGS_DEG) -> np.ndarray:
   return np.asarray(out)[0, 0] > 0
 
 
-def _passthrough(path: str, est) -> Intake:
+def _passthrough(path: str, sim: objective.Simulation) -> Intake:
   first = video.frame_files(os.path.join(path, 'cam0'))
   shape = cv2.imread(os.path.join(path, 'cam0', first[0]), cv2.IMREAD_UNCHANGED).shape
   rec = recording_lib.load_recording(
-    path, fps=est.fps, size=tuple(shape[:2]), frames=est.frames
+    path, fps=sim.fps, size=tuple(shape[:2]), frames=sim.frames
   )
-  pins_world, _ = simulated_pins(est)
+  pins_world, _ = simulated_pins(sim)
   pins = (
     alignment.pins_in_camera(rec.pose, pins_world) if rec.pose is not None else None
   )
@@ -333,7 +333,12 @@ def _passthrough(path: str, est) -> Intake:
 
 
 def take_in(
-  path: str, config: IntakeConfig, camera_json: str, est, *, workdir: str | None = None
+  path: str,
+  config: IntakeConfig,
+  camera_json: str,
+  sim: objective.Simulation,
+  *,
+  workdir: str | None = None,
 ) -> Intake:
   """Reads, cleans, aligns and checks a recording (module docstring).
 
@@ -341,7 +346,7 @@ def take_in(
     path: the recording (a frame folder, .npy/.npz, or a dataset sequence).
     config: the intake settings.
     camera_json: its camera file ('' for none).
-    est: the ``EstimateConfig`` (comparison rate and length, cloth).
+    sim: the estimate's ``Simulation`` (comparison rate and length, cloth).
     workdir: where a refused alignment writes its overlay, or None.
 
   Raises:
@@ -350,7 +355,7 @@ def take_in(
   """
   config.check()
   if is_sequence(path) and not camera_json:
-    return _passthrough(path, est)
+    return _passthrough(path, sim)
   bag = None
   if bags.is_bag(path):
     bag = bags.read_bag(
@@ -400,7 +405,7 @@ def take_in(
       'fps.txt beside the frames'
     )
   # The recording's frames that cover the compared clip.
-  pos = video.resample_indices(len(vid.depth), vid.fps, est.fps)[: est.frames]
+  pos = video.resample_indices(len(vid.depth), vid.fps, sim.fps)[: sim.frames]
   index = np.arange(int(math.floor(pos[-1] + 0.5 + 1e-9)) + 1)
   depth = vid.depth[index]
   h, w = depth.shape[1:]
@@ -435,7 +440,7 @@ def take_in(
   )  # fmt: skip
   if cam is None:
     return intake
-  return _align(intake, cam, config, est, bg.planes, workdir)
+  return _align(intake, cam, config, sim, bg.planes, workdir)
 
 
 def given_ups(cam: camera_files.CameraFile, config: IntakeConfig) -> list:
@@ -504,11 +509,13 @@ def _check_size(path: str, w: int, h: int, cam) -> None:
     camera_files.scaled_to(cam, w, h)
 
 
-def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> Intake:
-  pins_world, mesh = simulated_pins(est)
+def _align(
+  intake: Intake, cam, config: IntakeConfig, sim: objective.Simulation, planes, workdir
+) -> Intake:
+  pins_world, mesh = simulated_pins(sim)
   intr = intake.intrinsics
   if config.pins or cam.world == 'user' or cam.pose is None:
-    if est.garment and not config.pins:
+    if sim.garment and not config.pins:
       raise ValueError(
         'a garment cannot be found by the square-cloth fit; give --pins (the two '
         'pinned corners in the camera frame)'
@@ -538,8 +545,8 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
         f'{intake.source}: the pins are {spacing:.3f} m apart but the simulated '
         f"cloth's are {want:.3f} m; check the camera file's intrinsics, the "
         'depth_scale and --pins'
-        + ('' if est.garment else f', or give the cloth\'s side as --cloth_size '
-           f'(now {est.cloth_size:g} m)')
+        + ('' if sim.garment else f', or give the cloth\'s side as --cloth_size '
+           f'(now {sim.cloth_size:g} m)')
       )  # fmt: skip
     up_from = fit.up_from
     sd = alignment_error(fit, pins, want, intr, warnings, scatter)
@@ -568,7 +575,7 @@ def _align(intake: Intake, cam, config: IntakeConfig, est, planes, workdir) -> I
   if overlap < config.min_overlap:
     where = ''
     if workdir:
-      write(out, workdir, est, frames=False)
+      write(out, workdir, sim, frames=False)
       where = f'; see {os.path.join(workdir, OVERLAY_FILE)}'
     guess = ''
     if out.up_is_guess:
@@ -757,12 +764,14 @@ def check_workdir(workdir: str, path: str, camera_json: str, run_file: str) -> N
     )
 
 
-def write(intake: Intake, workdir: str, est, *, frames: bool = True) -> None:
+def write(
+  intake: Intake, workdir: str, sim: objective.Simulation, *, frames: bool = True
+) -> None:
   """Saves ``intake.json``, ``overlay.png`` and (``frames``) the cleaned
   frames as 16-bit mm PNGs in ``intake/``, each under its final name only
-  when complete (``est``: the ``EstimateConfig``, for the simulated cloth)."""
+  when complete (``sim``: the estimate's ``Simulation``, for the simulated cloth)."""
   os.makedirs(workdir, exist_ok=True)
-  img = overlay(intake, objective.mesh(est))
+  img = overlay(intake, objective.mesh(sim))
   files.write_atomic(
     os.path.join(workdir, OVERLAY_FILE), lambda p: dataset.imwrite(p, img)
   )

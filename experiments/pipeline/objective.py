@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Mapping
 from typing import NamedTuple
 
 import jax
@@ -61,17 +62,10 @@ LIKELIHOODS = bo.posterior.LIKELIHOODS
 
 
 @dataclasses.dataclass(frozen=True)
-class EstimateConfig:
-  """Settings of one estimate (also what a resumed run must match).
+class Simulation:
+  """What is simulated and rendered for each candidate.
 
   Attributes:
-    point: the posterior's point with 50% and 90% credible intervals (a
-      posterior search; fresh gusts and sensor noise for every simulation):
-      'median', or 'bayes', the value with the least expected error (percent
-      error; the factor for bending), which where the video says little stays
-      near the guess that errs least over the search box; or 'argmin': the
-      paper's protocol, the lowest PSD that Bayesian optimisation found
-      (common random numbers), with no calibrated interval.
     material: paper fabric name (physsim.FABRICS): the search box and the
       bending reference.
     garment: '' for the square cloth, else a physsim.GARMENTS name.
@@ -89,27 +83,30 @@ class EstimateConfig:
     gusts: RMS relative gust intensity of the simulated wind.
     cameras: training-like cameras to render from when the recording's camera
       is unknown (their embeddings are pooled).
-    q: candidates per iteration (one simulation batch).
-    n_init: initial design size (the first point is the range centre).
-    max_iter: most iterations after the initial design.
-    stop_rel_change: stopping rule: the best point (argmin), or every 5%,
-      50% and 95% posterior quantile (median), moved less than this share of
-      each range over the last stop_window iterations.
-    stop_window: iterations the stopping rule looks back.
-    min_iter: iterations before the stopping rule is checked.
-    posterior_grid: posterior grid cells per dimension (bending, wind, area
-      weight).
-    likelihood: the posterior's approximate likelihood from the
-      discrepancy, 'gibbs' or 'threshold' (BOLFI's; see bo.posterior); or,
-      with ``distance='shape'``, 'synthetic': GP emulators of the shape
-      summary's two components and the Gaussian likelihood their scatter
-      implies (bo.synthetic).
-    sharpness: the likelihood's constant, calibrated on simulations
-      (experiments/calibrate.py; docs/calibration.md): the default is the
-      value the shipped calibration chose. For 'synthetic', the exponent
-      that tempers its likelihood (1: untempered).
-    replicates: candidates per iteration that repeat the most probable cell
-      with fresh randomness (they measure the simulator's noise).
+    sensor_noise: pass candidates' rendered depth through the depth-sensor
+      model (physsim.sensor) before embedding, as the recording went through
+      a real sensor.
+  """
+
+  material: str = 'gray_interlock'
+  garment: str = ''
+  cloth_resolution: int = 25
+  cloth_size: float = 1.0
+  garment_spacing: float = 0.04
+  frames: int = 60
+  fps: float = cli.renamed(20.0, 'sim_fps')
+  warmup: float = 1.0
+  gusts: float = 0.2
+  cameras: int = 2
+  sensor_noise: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class Scoring:
+  """How a candidate's frames are scored against the recording's, and how
+  the scores are read as a likelihood.
+
+  Attributes:
     distance: the discrepancy of a candidate's frames to the recording's: the
       PSD between embedding sets ('energy' or 'centroid'); 'shape', the
       squared distance between the sheet's mean shape in the world
@@ -126,31 +123,56 @@ class EstimateConfig:
     camera_sd_deg: the same for the camera's rotation about the pins, degrees
       (1 sd per axis); the intake's camera was within 3 degrees on its test
       recording.
-    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
-    workers: threads of the C backend (0: one per core); does not change
-      results, so a resumed run may use another value.
-    sensor_noise: pass candidates' rendered depth through the depth-sensor
-      model (physsim.sensor) before embedding, as the recording went through
-      a real sensor.
-    seed: all randomness (design, gusts, sensor noise, cameras).
-    measured: an anemometer's wind or a scale's area weight, as priors.
+    likelihood: the posterior's approximate likelihood from the
+      discrepancy, 'gibbs' or 'threshold' (BOLFI's; see bo.posterior); or,
+      with ``distance='shape'``, 'synthetic': GP emulators of the shape
+      summary's two components and the Gaussian likelihood their scatter
+      implies (bo.synthetic).
+    sharpness: the likelihood's constant, calibrated on simulations
+      (experiments/calibrate.py; docs/calibration.md): the default is the
+      value the shipped calibration chose. For 'synthetic', the exponent
+      that tempers its likelihood (1: untempered).
     calibration: a calibration file (``experiments/calibrate.py``'s
       ``calibration.json``) whose tables the estimate applies where its
       settings and network match; '' for the shipped one. It only changes how
       the posterior is read, so a resumed run may use another.
   """
 
+  distance: str = cli.choice('energy', DISTANCES)
+  camera_sd_m: float = 0.0
+  camera_sd_deg: float = 0.0
+  likelihood: str = cli.choice('gibbs', LIKELIHOODS)
+  sharpness: float = 0.5
+  calibration: str = ''
+
+
+@dataclasses.dataclass(frozen=True)
+class Search:
+  """What the search reports and its budget.
+
+  Attributes:
+    point: the posterior's point with 50% and 90% credible intervals (a
+      posterior search; fresh gusts and sensor noise for every simulation):
+      'median', or 'bayes', the value with the least expected error (percent
+      error; the factor for bending), which where the video says little stays
+      near the guess that errs least over the search box; or 'argmin': the
+      paper's protocol, the lowest PSD that Bayesian optimisation found
+      (common random numbers), with no calibrated interval.
+    q: candidates per iteration (one simulation batch).
+    n_init: initial design size (the first point is the range centre).
+    max_iter: most iterations after the initial design.
+    stop_rel_change: stopping rule: the best point (argmin), or every 5%,
+      50% and 95% posterior quantile (median), moved less than this share of
+      each range over the last stop_window iterations.
+    stop_window: iterations the stopping rule looks back.
+    min_iter: iterations before the stopping rule is checked.
+    posterior_grid: posterior grid cells per dimension (bending, wind, area
+      weight).
+    replicates: candidates per iteration that repeat the most probable cell
+      with fresh randomness (they measure the simulator's noise).
+  """
+
   point: str = cli.choice('bayes', POINTS)
-  material: str = 'gray_interlock'
-  garment: str = ''
-  cloth_resolution: int = 25
-  cloth_size: float = 1.0
-  garment_spacing: float = 0.04
-  frames: int = 60
-  fps: float = cli.renamed(20.0, 'sim_fps')
-  warmup: float = 1.0
-  gusts: float = 0.2
-  cameras: int = 2
   q: int = 24
   n_init: int = 48
   max_iter: int = 3
@@ -158,18 +180,7 @@ class EstimateConfig:
   stop_window: int = 2
   min_iter: int = 2
   posterior_grid: tuple[int, ...] = (12, 64, 24)
-  likelihood: str = cli.choice('gibbs', LIKELIHOODS)
-  sharpness: float = 0.5
   replicates: int = 1
-  distance: str = cli.choice('energy', DISTANCES)
-  camera_sd_m: float = 0.0
-  camera_sd_deg: float = 0.0
-  backend: str = cli.choice('auto', BACKENDS)
-  workers: int = 0
-  sensor_noise: bool = True
-  seed: int = 0
-  measured: Measured = Measured()
-  calibration: str = ''
 
   @property
   def posterior(self) -> bool:
@@ -182,87 +193,227 @@ class EstimateConfig:
     sensor noise; a posterior needs fresh ones per simulation."""
     return self.point == 'argmin'
 
+
+@dataclasses.dataclass(frozen=True)
+class Hardware:
+  """Where the simulations run; neither changes results.
+
+  Attributes:
+    backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else
+      MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
+    workers: threads of the C backend (0: one per core); does not change
+      results, so a resumed run may use another value.
+  """
+
+  backend: str = cli.choice('auto', BACKENDS)
+  workers: int = 0
+
+
+# EstimateConfig's sections: each flat setting name belongs to one of them.
+SECTIONS = ('simulation', 'scoring', 'search', 'hardware', 'measured')
+
+
+@dataclasses.dataclass(frozen=True)
+class EstimateConfig:
+  """Settings of one estimate (also what a resumed run must match), in
+  sections; every leaf field is a flag of its own name (``cli.leaves``).
+
+  ``replace`` and ``preset`` take the flat names
+  (``config.replace(q=8, material='black_denim')``), and files hold the flat
+  form (``flat``, ``from_flat``: run.json, estimate.json, calibration files).
+
+  Attributes:
+    simulation: what is simulated and rendered (``Simulation``).
+    scoring: the discrepancy and the likelihood (``Scoring``).
+    search: the point reported and the search's budget (``Search``).
+    hardware: where simulations run (``Hardware``).
+    seed: all randomness (design, gusts, sensor noise, cameras).
+    measured: an anemometer's wind or a scale's area weight, as priors.
+  """
+
+  simulation: Simulation = Simulation()
+  scoring: Scoring = Scoring()
+  search: Search = Search()
+  hardware: Hardware = Hardware()
+  seed: int = 0
+  measured: Measured = Measured()
+
+  @property
+  def posterior(self) -> bool:
+    """A posterior search (a median or Bayes point), not the paper's argmin."""
+    return self.search.posterior
+
+  @property
+  def common_random_numbers(self) -> bool:
+    """The paper's argmin scores every candidate with the same gusts and
+    sensor noise; a posterior needs fresh ones per simulation."""
+    return self.search.common_random_numbers
+
   @classmethod
   def preset(cls, name: str, **fields) -> EstimateConfig:
     """A named preset (``PRESETS``: 'default', the paper-size posterior;
     'paper', the paper's argmin; 'demo', the demo's CPU size; 'smoke', a
-    quicker look) with ``fields`` replaced, e.g.
+    quicker look) with ``fields`` (flat names, ``replace``) replaced, e.g.
     ``EstimateConfig.preset('demo', material='black_denim')``.
 
     Raises:
-      ValueError: an unknown preset, naming the known ones.
+      ValueError: an unknown preset, naming the known ones; an unknown field.
     """
     if name not in PRESETS:
       raise ValueError(f'no estimate preset {name!r}: one of {sorted(PRESETS)}')
-    return dataclasses.replace(PRESETS[name], **fields)
+    return PRESETS[name].replace(**fields)
+
+  def replace(self, **fields) -> EstimateConfig:
+    """This config with ``fields`` replaced, by their flat names (``q=8``,
+    ``material='black_denim'``, ``wind_speed=3.0``: each goes to its section)
+    or by section (``search=Search(...)``, ``measured=Measured(...)``; a flat
+    name given with its section applies on top of it).
+
+    Raises:
+      ValueError: a name that is no setting, naming it.
+    """
+    top, parts = {}, {}
+    for name, value in fields.items():
+      if name in _TOP_FIELDS:
+        top[name] = value
+      elif name in _SECTION_OF:
+        parts.setdefault(_SECTION_OF[name], {})[name] = value
+      else:
+        raise ValueError(
+          f'EstimateConfig has no setting {name!r}: one of '
+          f'{sorted(_SECTION_OF) + sorted(_TOP_FIELDS)}'
+        )
+    for section, changed in parts.items():
+      top[section] = dataclasses.replace(
+        top.get(section, getattr(self, section)), **changed
+      )
+    return dataclasses.replace(self, **top)
+
+  def flat(self) -> dict:
+    """Every setting by its flat name (``measured`` a dict of its own): the
+    form run.json, estimate.json and calibration files hold."""
+    out = {'seed': self.seed, 'measured': dataclasses.asdict(self.measured)}
+    for section in SECTIONS:
+      if section != 'measured':
+        out.update(dataclasses.asdict(getattr(self, section)))
+    return out
+
+  @classmethod
+  def from_flat(cls, data: Mapping) -> EstimateConfig:
+    """The config of a ``flat`` dict as read back from JSON (lists as tuples).
+    Settings it lacks (a file from before they existed) take their defaults;
+    a section given as a dict of its own (``config_io.to_dict``'s nested form)
+    is read too.
+
+    Raises:
+      ValueError: a name that is no setting, or not a JSON object.
+    """
+    if not isinstance(data, Mapping):
+      raise ValueError(f'an estimate config must be a JSON object, got {data!r}')
+    fields = {}
+    for name, value in data.items():
+      if name in SECTIONS and isinstance(value, Mapping):
+        if name == 'measured':
+          unknown = sorted(set(value) - {f.name for f in dataclasses.fields(Measured)})
+          if unknown:
+            raise ValueError(f'measured has no setting {unknown}')
+          fields['measured'] = Measured(**value)
+        else:
+          fields.update(value)
+      else:
+        fields[name] = value
+    fields = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+    return cls().replace(**fields)
+
+  from_dict = from_flat  # config_io.from_dict reads a nested config with it
 
   def check(self) -> None:
     """Raises ValueError naming the first field outside its allowed values
     (every number finite first: ``cli.check_numbers``)."""
     cli.check_numbers(self)
-    if self.material not in physsim.FABRICS:
+    sim, sc, se = self.simulation, self.scoring, self.search
+    flat = self.flat()
+    if sim.material not in physsim.FABRICS:
       raise ValueError(
-        f'material {self.material!r} is not one of {sorted(physsim.FABRICS)}'
+        f'material {sim.material!r} is not one of {sorted(physsim.FABRICS)}'
       )
-    if self.garment and self.garment not in physsim.GARMENTS:
-      raise ValueError(f'garment {self.garment!r} is not one of {physsim.GARMENTS}')
+    if sim.garment and sim.garment not in physsim.GARMENTS:
+      raise ValueError(f'garment {sim.garment!r} is not one of {physsim.GARMENTS}')
     for name, allowed in (
       ('backend', BACKENDS), ('distance', DISTANCES), ('point', POINTS),
       ('likelihood', LIKELIHOODS),
     ):  # fmt: skip
-      if getattr(self, name) not in allowed:
-        raise ValueError(
-          f'{name} must be one of {allowed}, got {getattr(self, name)!r}'
-        )
-    if (
-      len(self.posterior_grid) != 3
-      or min(self.posterior_grid) < 2
-      or self.sharpness <= 0
-    ):
+      if flat[name] not in allowed:
+        raise ValueError(f'{name} must be one of {allowed}, got {flat[name]!r}')
+    if len(se.posterior_grid) != 3 or min(se.posterior_grid) < 2 or sc.sharpness <= 0:
       raise ValueError(
-        f'need a posterior_grid of 3 sizes >= 2 and sharpness > 0, got {self.posterior_grid}, '
-        f'{self.sharpness}'
+        'need a posterior_grid of 3 sizes >= 2 and sharpness > 0, got '
+        f'{se.posterior_grid}, {sc.sharpness}'
       )
-    if self.likelihood == 'synthetic' and self.distance != 'shape':
+    if sc.likelihood == 'synthetic' and sc.distance != 'shape':
       raise ValueError(
         "likelihood 'synthetic' models the shape summary: it needs "
-        f"distance 'shape', got {self.distance!r}"
+        f"distance 'shape', got {sc.distance!r}"
       )
-    if self.posterior and not 0 <= self.replicates < self.q:
-      raise ValueError(f'need 0 <= replicates < q, got {self.replicates}, {self.q}')
-    self.measured.check(physsim.search_space(self.material))
-    if self.calibration and not os.path.isfile(self.calibration):
+    if self.posterior and not 0 <= se.replicates < se.q:
+      raise ValueError(f'need 0 <= replicates < q, got {se.replicates}, {se.q}')
+    self.measured.check(physsim.search_space(sim.material))
+    if sc.calibration and not os.path.isfile(sc.calibration):
       raise ValueError(
-        f'calibration {self.calibration!r}: no such file (experiments/calibrate.py '
+        f'calibration {sc.calibration!r}: no such file (experiments/calibrate.py '
         'writes one)'
       )
     for name in ('frames', 'cameras', 'q', 'n_init', 'cloth_resolution'):
-      if getattr(self, name) < 1:
-        raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
-    if not (1 <= self.fps <= 240):
-      raise ValueError(f'fps must be in [1, 240] Hz, got {self.fps}')
-    if self.frames > 1000 or not (0 <= self.warmup <= 10):
+      if flat[name] < 1:
+        raise ValueError(f'{name} must be >= 1, got {flat[name]}')
+    if not (1 <= sim.fps <= 240):
+      raise ValueError(f'fps must be in [1, 240] Hz, got {sim.fps}')
+    if sim.frames > 1000 or not (0 <= sim.warmup <= 10):
       raise ValueError(
-        f'need frames <= 1000 and 0 <= warmup <= 10 s, got {self.frames}, {self.warmup}'
+        f'need frames <= 1000 and 0 <= warmup <= 10 s, got {sim.frames}, {sim.warmup}'
       )
-    if not (0 <= self.camera_sd_m <= 0.2 and 0 <= self.camera_sd_deg <= 20):
+    if not (0 <= sc.camera_sd_m <= 0.2 and 0 <= sc.camera_sd_deg <= 20):
       raise ValueError(
         'need 0 <= camera_sd_m <= 0.2 (metres) and 0 <= camera_sd_deg <= 20 '
-        f'(degrees), got {self.camera_sd_m}, {self.camera_sd_deg}'
+        f'(degrees), got {sc.camera_sd_m}, {sc.camera_sd_deg}'
       )
-    if not (0 <= self.gusts <= 1) or self.max_iter < 0:
+    if not (0 <= sim.gusts <= 1) or se.max_iter < 0:
       raise ValueError(
-        f'need 0 <= gusts <= 1 and max_iter >= 0, got {self.gusts}, {self.max_iter}'
+        f'need 0 <= gusts <= 1 and max_iter >= 0, got {sim.gusts}, {se.max_iter}'
       )
     for name, lo, hi in _RANGES:
-      v = getattr(self, name)
+      v = flat[name]
       if not lo <= v <= hi:
         raise ValueError(f'--{name}={v}: must be in [{lo:g}, {hi:g}]')
-    if max(self.posterior_grid) > 1000 or np.prod(self.posterior_grid) > 5e6:
+    if max(se.posterior_grid) > 1000 or np.prod(se.posterior_grid) > 5e6:
       raise ValueError(
-        f'--posterior_grid={",".join(map(str, self.posterior_grid))}: at most 1000 '
+        f'--posterior_grid={",".join(map(str, se.posterior_grid))}: at most 1000 '
         'cells per dimension and 5 million in all'
       )
+
+
+def record(config) -> dict:
+  """``dataclasses.asdict`` of a script's config, each ``EstimateConfig`` in
+  it flat (``EstimateConfig.flat``): the form its files hold."""
+  if isinstance(config, EstimateConfig):
+    return config.flat()
+  return {
+    f.name: record(v) if dataclasses.is_dataclass(v) else v
+    for f in dataclasses.fields(config)
+    for v in (getattr(config, f.name),)
+  }
+
+
+# Each flat setting name's section (EstimateConfig.replace), and the fields
+# set whole.
+_SECTION_OF = {
+  f.name: section
+  for section, kind in zip(
+    SECTIONS, (Simulation, Scoring, Search, Hardware, Measured), strict=True
+  )
+  for f in dataclasses.fields(kind)
+}
+_TOP_FIELDS = tuple(f.name for f in dataclasses.fields(EstimateConfig))
 
 
 # The other numeric fields' allowed ranges (EstimateConfig.check): beyond
@@ -278,7 +429,7 @@ _RANGES = (
 
 # The paper's protocol: Bayesian optimisation to the lowest PSD (qUCB there,
 # log-EI here), from the range centre, stopped when the best point settles.
-PAPER = EstimateConfig(
+PAPER = EstimateConfig().replace(
   point='argmin',
   q=4,
   n_init=8,
@@ -292,11 +443,11 @@ PRESETS = {
   'paper': PAPER,
   # What experiments.demo estimates with: the demo network's cloth and clip,
   # minutes on a CPU.
-  'demo': EstimateConfig(
+  'demo': EstimateConfig().replace(
     cloth_resolution=10, frames=16, warmup=0.5, q=8, n_init=16, max_iter=6
   ),
   # A quick look on a CPU: small cloth, short clip, few iterations.
-  'smoke': EstimateConfig(
+  'smoke': EstimateConfig().replace(
     cloth_resolution=10,
     frames=16,
     warmup=0.5,
@@ -308,31 +459,31 @@ PRESETS = {
 }
 
 
-def mesh(config: EstimateConfig) -> physsim.Mesh:
+def mesh(sim: Simulation) -> physsim.Mesh:
   """The rest mesh an estimate simulates: the square or the garment."""
-  if config.garment:
-    return physsim.garment(config.garment, config.garment_spacing)
-  return physsim.square(config.cloth_resolution, config.cloth_size)
+  if sim.garment:
+    return physsim.garment(sim.garment, sim.garment_spacing)
+  return physsim.square(sim.cloth_resolution, sim.cloth_size)
 
 
-def sim_config(config: EstimateConfig) -> physsim.SimConfig:
+def sim_config(sim: Simulation) -> physsim.SimConfig:
   """The simulator's settings of an estimate's mesh: the default step, or a
   shorter one that a fine mesh needs to stay stable (``stable_timestep``)."""
-  return physsim.config_for_mesh(mesh(config), config.fps)
+  return physsim.config_for_mesh(mesh(sim), sim.fps)
 
 
-def pin_centre(config: EstimateConfig) -> np.ndarray:
+def pin_centre(sim: Simulation) -> np.ndarray:
   """(3,) the midpoint of the estimate's pinned vertices: where a camera's
-  placement error turns about (``EstimateConfig.camera_sd_deg``)."""
-  m = mesh(config)
+  placement error turns about (``Scoring.camera_sd_deg``)."""
+  m = mesh(sim)
   return m.vertices[m.pinned].mean(0)
 
 
-def cloth(config: EstimateConfig) -> physsim.ClothModel:
+def cloth(sim: Simulation) -> physsim.ClothModel:
   """The compiled cloth of an estimate's mesh. Worlds name their fabric's
   bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
   model and its compiles."""
-  return physsim.build(mesh(config), 'gray_interlock', sim_config(config))
+  return physsim.build(mesh(sim), 'gray_interlock', sim_config(sim))
 
 
 class ProblemData(NamedTuple):
@@ -369,7 +520,7 @@ class Problem(NamedTuple):
     config: its settings.
     source: the recording's path (for messages).
     space: the material's search space.
-    n_frames: frames simulated (the recording's, at ``config.fps``).
+    n_frames: frames simulated (the recording's, at ``config.simulation.fps``).
     intr: camera intrinsics (the recording's or a default field of view).
     net: its embedding network.
     data: its ``ProblemData``.
@@ -387,13 +538,14 @@ class Problem(NamedTuple):
     """What the fused program is compiled for: problems with equal structure
     share one ``Objective`` and are scored in one call."""
     c, n = self.config, self.net
+    s, h = c.simulation, c.hardware
     return (
-      c.garment, c.garment_spacing if c.garment else 0.0,
-      0 if c.garment else c.cloth_resolution, 0.0 if c.garment else c.cloth_size,
-      self.n_frames, c.fps, c.warmup,
-      c.gusts, physsim.resolve_backend(c.backend), c.workers, self.intr,
-      self.data.poses.position.shape[0], c.sensor_noise, c.distance,
-      c.camera_sd_m, c.camera_sd_deg,
+      s.garment, s.garment_spacing if s.garment else 0.0,
+      0 if s.garment else s.cloth_resolution, 0.0 if s.garment else s.cloth_size,
+      self.n_frames, s.fps, s.warmup,
+      s.gusts, physsim.resolve_backend(h.backend), h.workers, self.intr,
+      self.data.poses.position.shape[0], s.sensor_noise, c.scoring.distance,
+      c.scoring.camera_sd_m, c.scoring.camera_sd_deg,
       n.modality, n.input_mode, n.clip_frames, n.architecture, n.members,
       jax.tree.structure(n.params),
     )  # fmt: skip
@@ -410,9 +562,10 @@ def make_problem(
       (size, modality, shorter than an SDN clip), naming the recording.
   """
   config.check()
-  if net.network is None and config.distance in EMBEDDING_DISTANCES:
+  sim, distance = config.simulation, config.scoring.distance
+  if net.network is None and distance in EMBEDDING_DISTANCES:
     raise ValueError(
-      f'{recording.source}: distance {config.distance!r} embeds frames with a '
+      f'{recording.source}: distance {distance!r} embeds frames with a '
       "trained network, and none was given; only 'shape' needs none (--model)"
     )
   size = tuple(net.image_size)
@@ -432,16 +585,16 @@ def make_problem(
     raise ValueError(
       f'{recording.source}: {n_frames} frames at {recording.fps} fps, shorter '
       f'than one SDN clip of {net.clip_frames} frames; use a longer recording '
-      '(and EstimateConfig.frames >= the clip)'
+      '(and --frames >= the clip)'
     )
-  shaped = config.distance in SHAPE_DISTANCES
+  shaped = distance in SHAPE_DISTANCES
   if shaped and (recording.pose is None or net.modality != 'depth'):
     raise ValueError(
-      f"{recording.source}: distance {config.distance!r} compares the sheet's "
+      f"{recording.source}: distance {distance!r} compares the sheet's "
       "shape in the world, so it needs the recording's camera pose "
       '(--camera_json) and a depth network'
     )
-  space = physsim.search_space(config.material)
+  space = physsim.search_space(sim.material)
   h, w = recording.depth.shape[1:]
   key = jax.random.key(config.seed)
   # A known field of view is used even when the pose is unknown.
@@ -450,9 +603,9 @@ def make_problem(
     poses = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32)[None], recording.pose)
   else:
     ranges = physsim.PoseRanges()
-    if not config.garment:
-      ranges = ranges.for_cloth(config.cloth_size)
-    poses = physsim.sample_poses(jax.random.fold_in(key, 1), config.cameras, ranges)
+    if not sim.garment:
+      ranges = ranges.for_cloth(sim.cloth_size)
+    poses = physsim.sample_poses(jax.random.fold_in(key, 1), sim.cameras, ranges)
   rec_points = jnp.zeros((1, 1), jnp.float32)  # no network: nothing embedded
   if net.network is not None:
     inputs = embedding.network_inputs(
@@ -470,11 +623,11 @@ def make_problem(
     if not np.all(np.isfinite(np.asarray(rec_shape))):
       raise ValueError(f'{recording.source}: no frame has a valid depth pixel')
   lo, hi, log = physsim.params.unit_map(space)
-  model = cloth(config)
+  model = cloth(sim)
   data = ProblemData(
     jnp.asarray(lo, jnp.float32), jnp.asarray(hi, jnp.float32), jnp.asarray(log),
-    jnp.float32(physsim.reference_rigidity(config.material) / model.rigidity),
-    poses, jnp.asarray(embedding.rgb_color(config.material), jnp.float32),
+    jnp.float32(physsim.reference_rigidity(sim.material) / model.rigidity),
+    poses, jnp.asarray(embedding.rgb_color(sim.material), jnp.float32),
     net.params, rec_points, rec_shape,
   )  # fmt: skip
   return Problem(config, recording.source, space, n_frames, intr, net, data)
@@ -512,21 +665,22 @@ class Objective:
 
   def __init__(self, problem: Problem):
     c, net = problem.config, problem.net
+    s, hw, sc = c.simulation, c.hardware, c.scoring
     self.structure = problem.structure()
-    self.cloth = cloth(c)
+    self.cloth = cloth(s)
     self.mesh = self.cloth.mesh
     self.n_frames = problem.n_frames
     self._rollout = physsim.rollout_fn(
-      self.cloth, frames=problem.n_frames, fps=c.fps, warmup=c.warmup,
-      backend=c.backend, workers=c.workers or None,
+      self.cloth, frames=problem.n_frames, fps=s.fps, warmup=s.warmup,
+      backend=hw.backend, workers=hw.workers or None,
     )  # fmt: skip
-    self._wind = physsim.Wind(gust_intensity=c.gusts)
+    self._wind = physsim.Wind(gust_intensity=s.gusts)
     self._intr = problem.intr
     self._net = net
-    self._sensor = c.sensor_noise and net.modality == 'depth'
-    self._distance = c.distance
-    self._camera_sd = (c.camera_sd_m, c.camera_sd_deg)
-    self._pins = pin_centre(c)
+    self._sensor = s.sensor_noise and net.modality == 'depth'
+    self._distance = sc.distance
+    self._camera_sd = (sc.camera_sd_m, sc.camera_sd_deg)
+    self._pins = pin_centre(s)
     cams, (h, w) = (
       problem.data.poses.position.shape[0],
       (problem.intr.height, problem.intr.width),
@@ -545,7 +699,7 @@ class Objective:
     # The worlds of a call split over every local device (MuJoCo Warp); MuJoCo
     # C runs on the host through a callback, whose process pool is the
     # parallelism.
-    on_device = physsim.resolve_backend(c.backend) != 'c'
+    on_device = physsim.resolve_backend(hw.backend) != 'c'
     self.world_mesh = physsim.devices.world_mesh() if on_device else None
     self._program = jax.jit(
       self._fused, static_argnames=('with_frames', 'with_positions')
@@ -694,7 +848,7 @@ class Objective:
 
 
 def camera_key(noise_key: jax.Array) -> jax.Array:
-  """The key of a candidate's camera error (``EstimateConfig.camera_sd_m``),
+  """The key of a candidate's camera error (``Scoring.camera_sd_m``),
   drawn from its sensor-noise key."""
   return jax.random.fold_in(noise_key, 7)
 

@@ -47,11 +47,13 @@ def shipped_calibration(distance: str) -> str:
 
 def calibration_file(config=None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
-  (``config.calibration``), else the one shipped for its distance, else (none
-  shipped for it) the default one, whose note then names what differs."""
-  if given := getattr(config, 'calibration', ''):
+  (``config.scoring.calibration``), else the one shipped for its distance,
+  else (none shipped for it) the default one, whose note then names what
+  differs."""
+  scoring = getattr(config, 'scoring', None)
+  if given := getattr(scoring, 'calibration', ''):
     return given
-  own = shipped_calibration(getattr(config, 'distance', ''))
+  own = shipped_calibration(getattr(scoring, 'distance', ''))
   return own if os.path.isfile(own) else CALIBRATION_FILE
 
 
@@ -204,8 +206,9 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     calibrated.setdefault('camera_sd_deg', 0.0)
   if 'cloth_resolution' in calibrated:  # files from before the size was a setting
     calibrated.setdefault('cloth_size', 1.0)
+  mine = config.flat()
   differs = [n for n in _CALIBRATED_FIELDS
-             if n in calibrated and not _same(getattr(config, n), calibrated[n])]  # fmt: skip
+             if n in calibrated and not _same(mine[n], calibrated[n])]  # fmt: skip
   mode = calibration_mode(config.measured, joint)
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
@@ -567,15 +570,16 @@ def shape_camera_warning(config, aligned: bool) -> str | None:
   """The line ``estimate`` prints when a shape discrepancy (which reads
   centimetres in the simulator's world) trusts a camera that the intake's
   alignment placed there (``aligned``) as exact (no ``camera_sd``); else None."""
+  sc = config.scoring
   if (
-    config.distance not in obj_lib.SHAPE_DISTANCES
-    or config.camera_sd_m
-    or config.camera_sd_deg
+    sc.distance not in obj_lib.SHAPE_DISTANCES
+    or sc.camera_sd_m
+    or sc.camera_sd_deg
     or not aligned
   ):
     return None
   return (
-    f'warning: --distance={config.distance} reads where the sheet hangs in the '
+    f'warning: --distance={sc.distance} reads where the sheet hangs in the '
     "simulator's world, and the intake placed your camera there by its alignment "
     '(within about 2 cm and 3 degrees on its test); with --camera_sd_m=0 '
     '--camera_sd_deg=0 the posterior trusts that placement exactly. Give its '
@@ -589,7 +593,7 @@ def synthetic_warning(config) -> str | None:
   recordings simulated with another mesh and gust level its intervals were
   too narrow; with their own (``cloth_resolution``, ``gusts``) they held
   (BENCHMARKS.md)."""
-  if config.likelihood != 'synthetic':
+  if config.scoring.likelihood != 'synthetic':
     return None
   return (
     'warning: --likelihood=synthetic trusts the simulator to scatter as your '
@@ -660,7 +664,7 @@ def next_recording_note(shared: dict, config, workdir: str) -> str | None:
     steps.append(
       'weigh the sheet and measure its sides (--area_weight=... --area_weight_sd=...)'
     )
-  if 'bending_scale' in little and config.cloth_size > 0.5:
+  if 'bending_scale' in little and config.simulation.cloth_size > 0.5:
     steps.append(
       'film a 20-30 cm swatch of it in a ~2 m/s fan from about 0.5 m and estimate '
       'both together (--protocol=FILE with its cloth_size)'

@@ -61,7 +61,7 @@ class Job(NamedTuple):
       distance alone: frames compared at the recording's loaded size).
     workdir: where its state, JSON and pictures go.
     allow_other_material: search with a network trained on other fabrics
-      than ``config.material`` (else refused, ``setup.check_material``).
+      than ``config.simulation.material`` (else refused, ``setup.check_material``).
   """
 
   config: EstimateConfig
@@ -86,40 +86,43 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
   """The search of an estimate: ``bo.PosteriorSearch`` or ``bo.Minimizer``
   (``index``: the search's number in a lockstep run, for its GP's device)."""
   device = gp_device(index) if gp_on_cpu else None
-  if config.point == 'argmin':
+  s = config.search
+  if s.point == 'argmin':
     return bo.Minimizer(BOUNDS, **minimizer_settings(config, workdir), device=device)
   pc = posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
   return bo.PosteriorSearch(
-    pc, n_init=config.n_init, n_iter=config.max_iter,
+    pc, n_init=s.n_init, n_iter=s.max_iter,
     log_prior=posterior_lib.log_prior(points, space, config.measured),
-    x0=np.zeros(3), seed=config.seed, stop_tol=2.0 * config.stop_rel_change,
-    stop_window=config.stop_window, min_iter=config.min_iter,
+    x0=np.zeros(3), seed=config.seed, stop_tol=2.0 * s.stop_rel_change,
+    stop_window=s.stop_window, min_iter=s.min_iter,
     state_path=os.path.join(workdir, POSTERIOR_STATE), device=device,
   )  # fmt: skip
 
 
 def posterior_config(config: EstimateConfig) -> bo.PosteriorConfig:
   """The ``bo.PosteriorConfig`` of an estimate."""
+  s, sc = config.search, config.scoring
   return bo.PosteriorConfig(
-    d=3, grid=tuple(config.posterior_grid), q=config.q, replicates=config.replicates,
-    likelihood=config.likelihood, sharpness=config.sharpness,
-    summaries=len(physsim.shape.SUMMARY) if config.likelihood == 'synthetic' else 1,
+    d=3, grid=tuple(s.posterior_grid), q=s.q, replicates=s.replicates,
+    likelihood=sc.likelihood, sharpness=sc.sharpness,
+    summaries=len(physsim.shape.SUMMARY) if sc.likelihood == 'synthetic' else 1,
   )  # fmt: skip
 
 
 def minimizer_settings(config: EstimateConfig, workdir: str) -> dict:
   """``bo.Minimizer`` settings of an estimate."""
+  s = config.search
   return dict(
-    n_init=config.n_init,
-    n_iter=config.max_iter,
-    q=config.q,
+    n_init=s.n_init,
+    n_iter=s.max_iter,
+    q=s.q,
     x0=np.zeros(3),  # the paper starts from the range centre
     seed=config.seed,
     acquisition='logei',
-    stop_rel_change=config.stop_rel_change,
-    stop_window=config.stop_window,
-    stop_min_iter=config.min_iter,
+    stop_rel_change=s.stop_rel_change,
+    stop_window=s.stop_window,
+    stop_min_iter=s.min_iter,
     state_path=os.path.join(workdir, 'bo_state.npz'),
   )
 
@@ -139,9 +142,7 @@ def check_run(job: Job, problem) -> None:
   d = problem.data
   runs = embedding.members(job.model_dir) if job.model_dir else []  # none: shape
   run = {
-    'config': {
-      k: v for k, v in dataclasses.asdict(config).items() if k not in _RESUMABLE_FIELDS
-    },
+    'config': {k: v for k, v in config.flat().items() if k not in _RESUMABLE_FIELDS},
     'recording_sha1': _digest(np.asarray(recording.depth, np.float32)),
     'camera': {
       'intrinsics': problem.intr.to_dict(),
@@ -373,7 +374,9 @@ def estimate_many(
             job.model_dir, nets.get(job.model_dir)
           )
         setup_lib.check_material(
-          networks[job.model_dir], job.config.material, job.allow_other_material
+          networks[job.model_dir],
+          job.config.simulation.material,
+          job.allow_other_material,
         )
         net = networks[job.model_dir].embedding
       problem = obj_lib.make_problem(job.config, net, job.recording)
@@ -464,7 +467,11 @@ def estimate_many(
     t2 = time.perf_counter()
     for s, x, sc in zip(active, asked, scores, strict=True):
       s.best.update(x, sc.psd, sc.frames)
-      told = sc.residual if jobs[s.index].config.likelihood == 'synthetic' else sc.psd
+      told = (
+        sc.residual
+        if jobs[s.index].config.scoring.likelihood == 'synthetic'
+        else sc.psd
+      )
       s.state = s.opt.tell(s.state, x, told)
     ended = [s for s in active if s.done()]
     if progress:
@@ -514,11 +521,11 @@ def write_result(
   x_best, y_best = search.argmin()
   result = {
     'recording': recording.source,
-    'material': config.material,
-    'garment': config.garment,
-    'point': config.point,
+    'material': config.simulation.material,
+    'garment': config.simulation.garment,
+    'point': config.search.point,
   }
-  if config.point == 'argmin':
+  if config.search.point == 'argmin':
     result.update(_argmin_summary(config, space, res, x_best))
   else:
     result.update(_posterior_summary(
@@ -527,7 +534,7 @@ def write_result(
       accuracy=network.accuracy if network else None, source=recording.source,
     ))  # fmt: skip
   retrieval = network.retrieval if network else None
-  material = physsim.load_material(physsim.fabric(config.material).material)
+  material = physsim.load_material(physsim.fabric(config.simulation.material).material)
   point = result['point_unit']
   bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
   result.update({
@@ -543,7 +550,7 @@ def write_result(
     'stopped_by_rule': bool(res.stopped_early),
     **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
     **{k: float(v) for k, v in timing.items()},
-    'config': dataclasses.asdict(config),
+    'config': config.flat(),
   })  # fmt: skip
   if recording.truth is not None:
     result['truth'] = recording.truth
@@ -554,8 +561,8 @@ def write_result(
   files.write_json(os.path.join(workdir, ESTIMATE_FILE), result)
   if not figures:
     return result
-  n_init = config.n_init
-  iteration = report.iterations_of(len(res.Y), n_init, config.q)
+  n_init = config.search.n_init
+  iteration = report.iterations_of(len(res.Y), n_init, config.search.q)
   report.plot_trace(
     res.X,
     discrepancies(res.Y),
@@ -612,7 +619,7 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
     res.samples, space, prior, _levels(note), _weights(note), config.measured
   )
   # The point: each parameter's (recalibrated) median or Bayes point.
-  which = 'bayes' if config.point == 'bayes' else 'median'
+  which = 'bayes' if config.search.point == 'bayes' else 'median'
   point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
   median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
   estimate = {}
@@ -631,7 +638,7 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
   if figures:
     posterior_lib.plot(
       res.samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
-      title=f'{config.material}: posterior given {_name(source) or os.path.basename(workdir)}',
+      title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
       summary=summary, point=which,
     )  # fmt: skip
   recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
@@ -639,10 +646,12 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
     'point_unit': np.ravel(median).tolist(),
     'estimate': estimate,
     'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
-    'noise_sd_log_psd': None if config.likelihood == 'synthetic' else res.noise_sd,
+    'noise_sd_log_psd': None
+    if config.scoring.likelihood == 'synthetic'
+    else res.noise_sd,
     **(
       {'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()}
-      if config.likelihood == 'synthetic'
+      if config.scoring.likelihood == 'synthetic'
       else {}
     ),
     'interval_meaning': 'central credible intervals of the posterior given the '
@@ -754,14 +763,8 @@ def joint_jobs(
     raise ValueError(f'{len(winds)} wind readings for {len(recordings)} recordings')
   configs = [config] * len(recordings)
   if winds is not None:
-    configs = [
-      dataclasses.replace(
-        config,
-        measured=dataclasses.replace(config.measured, wind_speed=v, wind_speed_sd=sd),
-      )
-      for v, sd in winds
-    ]
-    space = physsim.search_space(config.material)
+    configs = [config.replace(wind_speed=v, wind_speed_sd=sd) for v, sd in winds]
+    space = physsim.search_space(config.simulation.material)
     for c in configs:
       c.measured.check(space)
   if overrides is not None:
@@ -775,9 +778,7 @@ def joint_jobs(
           f'settings {sorted(set(o) - set(PER_RECORDING))} are shared by a joint '
           f"estimate's recordings; a recording's own are {PER_RECORDING}"
         )
-    configs = [
-      dataclasses.replace(c, **o) for c, o in zip(configs, overrides, strict=True)
-    ]
+    configs = [c.replace(**o) for c, o in zip(configs, overrides, strict=True)]
     for c in configs:
       c.check()
   return [
@@ -815,13 +816,11 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   winds = None
   if any(c.measured.wind_speed_sd > 0 for c in configs):  # readings (some may lack)
     winds = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
-  m = configs[0].measured
-  config = dataclasses.replace(  # the settings the recordings share
-    configs[0], measured=dataclasses.replace(m, wind_speed=0.0, wind_speed_sd=0.0)
-  )
+  # The settings the recordings share.
+  config = configs[0].replace(wind_speed=0.0, wind_speed_sd=0.0)
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
   combined, npz = joint_posterior(jobs, key)
-  space = physsim.search_space(config.material)
+  space = physsim.search_space(config.simulation.material)
   note = report.calibration_note(
     configs[0], joint=True, recordings=len(jobs),
     network=embedding.network_recipe(model_dir),
@@ -845,19 +844,19 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
     posterior_lib.plot(
       samples, npz[k]['prior_samples'], space, job.recording.truth,
       os.path.join(workdir, f'joint_recording_{k}.png'),
-      title=f'{config.material}: joint posterior, recording {k}',
+      title=f'{config.simulation.material}: joint posterior, recording {k}',
     )  # fmt: skip
   shared = posterior_lib.summarise(
     combined['samples'][0], space, npz[0]['prior_samples'], levels, _weights(note),
     configs[0].measured,
   )  # fmt: skip
   out = {
-    'material': config.material,
+    'material': config.simulation.material,
     'recordings': per,
     'bending_scale': shared['bending_scale'],
     'area_weight': shared['area_weight'],
     'calibration': note,
-    'config': dataclasses.asdict(config),
+    'config': config.flat(),
   }
   files.write_json(os.path.join(workdir, JOINT_FILE), out)
   return out

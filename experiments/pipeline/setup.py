@@ -141,16 +141,16 @@ def resolve(
   """
   config.check()
   net = network(
-    model_dir, config.distance, image_size, config.material,
+    model_dir, config.scoring.distance, image_size, config.simulation.material,
     allow_other_material=allow_other_material,
   )  # fmt: skip
-  mesh = obj_lib.mesh(config)
+  mesh = obj_lib.mesh(config.simulation)
   return Setup(
     config=config,
     network=net,
     mesh=mesh,
     pin_centre=mesh.vertices[mesh.pinned].mean(0),
-    space=physsim.search_space(config.material),
+    space=physsim.search_space(config.simulation.material),
     calibration=report.calibration_note(
       config,
       joint=joint,

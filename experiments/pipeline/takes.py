@@ -26,7 +26,7 @@ from typing import NamedTuple
 # What a protocol file's entry may say (the rest is the estimate's flags).
 KEYS = ('recording', 'camera_json', 'cloth_size', 'wind_speed', 'wind_speed_sd',
         'world_up')  # fmt: skip
-CLOTH_SIZE_RANGE = (0.05, 3.0)  # metres, as EstimateConfig.cloth_size
+CLOTH_SIZE_RANGE = (0.05, 3.0)  # metres, as Simulation.cloth_size
 UP_AXES = ('x', 'y', 'z', '-x', '-y', '-z')
 
 

@@ -126,9 +126,9 @@ class Config:
   network_seed: int = 0
   networks: int = 5
   estimate: EstimateConfig = cli.nested(
-    EstimateConfig(q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24)),
-    skip=('material', 'cloth_resolution', 'frames', 'warmup', 'backend', 'seed',
-          'point', 'measured'),
+    EstimateConfig().replace(q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24)),
+    skip=('simulation.material', 'simulation.cloth_resolution', 'simulation.frames',
+          'simulation.warmup', 'hardware.backend', 'seed', 'search.point', 'measured'),
   )  # fmt: skip
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
 
@@ -142,7 +142,9 @@ PRESETS = {
     sequences=8,
     batch_size=6,
     sharpness_grid=(0.25, 0.5, 1.0),
-    estimate=EstimateConfig(q=4, n_init=8, max_iter=2, posterior_grid=(6, 16, 8)),
+    estimate=EstimateConfig().replace(
+      q=4, n_init=8, max_iter=2, posterior_grid=(6, 16, 8)
+    ),
   ),
 }
 
@@ -164,7 +166,7 @@ def truths(config: Config, group: int = 2) -> physsim.Params:
 def uses_networks(config: Config) -> bool:
   """Whether the study's estimates embed frames with trained networks (every
   distance but the shape's)."""
-  return config.estimate.distance in objective_lib.EMBEDDING_DISTANCES
+  return config.estimate.scoring.distance in objective_lib.EMBEDDING_DISTANCES
 
 
 def network_seeds(config: Config) -> tuple[int, ...]:
@@ -238,9 +240,9 @@ def _configs(config: Config, point: str = 'median', network: int = 0):
   rec = dataclasses.replace(
     rec, sequences=n, batch_size=min(config.batch_size, n), seed=5000 + config.seed
   )
-  est = dataclasses.replace(
-    config.estimate, material=config.material,
-    cloth_resolution=est.cloth_resolution, frames=est.frames, warmup=est.warmup,
+  est = config.estimate.replace(
+    material=config.material, cloth_resolution=est.simulation.cloth_resolution,
+    frames=est.simulation.frames, warmup=est.simulation.warmup,
     backend=config.backend, seed=config.seed, point=point,
   )  # fmt: skip
   return data, rec, training, est
@@ -256,7 +258,7 @@ def with_reading(config: Config, est: EstimateConfig, reading: str, truth: dict,
   measured = posterior_lib.simulated_reading(
     reading, truth, config.measured_sd, config.seed, seq
   )
-  return dataclasses.replace(est, measured=measured)
+  return est.replace(measured=measured)
 
 
 def simulate_and_estimate(
@@ -303,7 +305,10 @@ def simulate_and_estimate(
     if not r['valid']:
       continue
     rec = recording_lib.load_recording(
-      index.path(r), fps=est.fps, size=demo_lib.IMAGE_SIZE, frames=est.frames
+      index.path(r),
+      fps=est.simulation.fps,
+      size=demo_lib.IMAGE_SIZE,
+      frames=est.simulation.frames,
     )
     wd = os.path.join(workdir, 'estimates', r['seq_id'])
     k = network_of(config, int(r['seq_id']))
@@ -415,7 +420,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
   (``pairs``: recordings 2k and 2k+1 share bending and area weight, and
   their joint posterior is scored too)."""
   space = physsim.search_space(config.material)
-  grid = tuple(config.estimate.posterior_grid)
+  grid = tuple(config.estimate.search.posterior_grid)
   points = bo.posterior.grid_points(grid)
   rng = np.random.default_rng([config.seed, 11, int(sharpness * 1000)])
   out = {m: [] for m in MODES}
@@ -880,18 +885,21 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'analysis': analysis,
     # the settings the searches ran with (the demo's cloth and clock), which
     # an estimate must share for these tables to apply
-    'config': {
-      **dataclasses.asdict(config),
-      'estimate': dataclasses.asdict(_configs(config)[3]),
-    },  # fmt: skip
+    'config': _record(config, _configs(config)[3]),
     'seconds': seconds,
   }
+
+
+def _record(config: Config, estimate: EstimateConfig) -> dict:
+  """The study's settings as its files hold them: ``estimate``'s flat
+  (``EstimateConfig.flat``), the form ``report.calibration_note`` matches."""
+  return {**dataclasses.asdict(config), 'estimate': estimate.flat()}
 
 
 def _networks_text(config: Config) -> str:
   """The study's networks in words, for ``calibration.json``'s setting."""
   if not uses_networks(config):
-    return f'{config.estimate.distance} distance, no network'
+    return f'{config.estimate.scoring.distance} distance, no network'
   n = config.networks
   return f'network{"s" if n > 1 else ""} of {config.sequences} training sequences' + (
     f' ({n} seeds)' if n > 1 else ''
@@ -1145,7 +1153,7 @@ def check(
   analyse_only: bool = False,
 ) -> dict:  # fmt: skip
   """Checks a calibration on recordings it never saw: ``shipped_file``, else
-  ``config.estimate.calibration``, else the one shipped for its distance.
+  ``config.estimate.scoring.calibration``, else the one shipped for its distance.
 
   Makes and estimates ``2 * config.pairs`` new recordings as the study does,
   with ``config.seed`` other than the calibration's (so the truths, recordings
@@ -1167,7 +1175,7 @@ def check(
     raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
   # the estimates apply the tables being checked
   config = dataclasses.replace(
-    config, estimate=dataclasses.replace(config.estimate, calibration=path)
+    config, estimate=config.estimate.replace(calibration=path)
   )
   shipped = recording_lib.read_json(path)
   if shipped.get('config', {}).get('seed') == config.seed:
@@ -1207,7 +1215,7 @@ def check(
     'printed': printed(runs),
     'printed_mode': mode,
     'modes': modes,
-    'config': dataclasses.asdict(config),
+    'config': _record(config, config.estimate),
     'seconds': time.time() - t0,
   }
   files.write_json(os.path.join(workdir, CHECK_FILE), out)

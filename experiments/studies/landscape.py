@@ -58,7 +58,9 @@ class Config:
     batch: candidates simulated per call.
   """
 
-  objective: est.EstimateConfig = cli.nested(est.EstimateConfig(), skip=('material',))
+  objective: est.EstimateConfig = cli.nested(
+    est.EstimateConfig(), skip=('simulation.material',)
+  )
   points_1d: int = 15
   grid: int = 9
   batch: int = 16
@@ -68,7 +70,7 @@ PRESETS = {
   'default': Config(),
   # The demo's estimate settings at a few points: about a minute on a CPU.
   'smoke': Config(
-    objective=est.EstimateConfig(cloth_resolution=10, frames=16, warmup=0.5),
+    objective=est.EstimateConfig().replace(cloth_resolution=10, frames=16, warmup=0.5),
     points_1d=5,
     grid=4,
     batch=8,
@@ -139,7 +141,7 @@ def _signature(
 ) -> str:
   return json.dumps(
     {
-      'config': dataclasses.asdict(config),
+      'config': est.record(config),
       'recording': os.path.abspath(recording.source),
       'model': os.path.abspath(model_dir) if model_dir else '',
     },
@@ -150,7 +152,7 @@ def _signature(
 def evaluate_points(problem: est.Problem, U, batch, state_path, signature):
   """(N,) PSD and (N, len(STATS)) motion stats of unit points ``U``, resumable."""
   evaluate = search.Evaluator()
-  mesh, fps = evaluate.objective(problem).mesh, problem.config.fps
+  mesh, fps = evaluate.objective(problem).mesh, problem.config.simulation.fps
   n = len(U)
   psd = np.full(n, np.nan)
   stats = np.full((n, len(STATS)), np.nan)
@@ -193,14 +195,17 @@ def run(
   """Runs (or resumes) the study; returns and writes ``landscape.json``.
   ``model_dir`` may be '' with the shape distance (frames at ``image_size``)."""
   t0 = time.time()
-  net = embedding.for_distance(model_dir, config.objective.distance, image_size)
+  net = embedding.for_distance(model_dir, config.objective.scoring.distance, image_size)
   meta = recording_lib.read_json(os.path.join(recording_dir, 'meta.json'))
-  obj_config = dataclasses.replace(
-    config.objective, material=meta.get('material', config.objective.material)
+  obj_config = config.objective.replace(
+    material=meta.get('material', config.objective.simulation.material)
   )
   config = dataclasses.replace(config, objective=obj_config)
   rec = recording_lib.load_recording(
-    recording_dir, fps=obj_config.fps, size=net.image_size, frames=obj_config.frames
+    recording_dir,
+    fps=obj_config.simulation.fps,
+    size=net.image_size,
+    frames=obj_config.simulation.frames,
   )
   if rec.truth is None:
     raise ValueError(f'{recording_dir}: no ground truth (meta.json wind_speed, ...)')
@@ -241,7 +246,7 @@ def run(
   result = {
     'recording': rec.source,
     'model': model_dir,
-    'material': obj_config.material,
+    'material': obj_config.simulation.material,
     'truth': rec.truth,
     'truth_ratio': truth_ratio,
     'psd_truth': float(psd[parts['line_0']][np.argmin(np.abs(U[parts['line_0'], 0] - u_truth[0]))]),
@@ -262,7 +267,7 @@ def run(
       **{s: ratio_r2(stats[g, j], wind, weight) for j, s in enumerate(STATS)},
     },
     'failed_simulations': int(np.sum(~np.isfinite(psd))),
-    'config': dataclasses.asdict(config),
+    'config': est.record(config),
     'seconds': time.time() - t0,
   }  # fmt: skip
   files.write_json(os.path.join(workdir, 'landscape.json'), result)

@@ -112,7 +112,9 @@ class Config:
 
   methods: tuple[str, ...] = METHODS
   shape_image_size: int = 256
-  estimate: EstimateConfig = cli.nested(EstimateConfig(), skip=('material', 'garment'))
+  estimate: EstimateConfig = cli.nested(
+    EstimateConfig(), skip=('simulation.material', 'simulation.garment')
+  )
   report_only: bool = False
   wind_reading_sd: float = 0.0
   area_weight_reading_sd: float = 0.0
@@ -163,7 +165,7 @@ def misplaced_camera(config: Config, rec: dict, recording, estimate: EstimateCon
   key = jax.random.fold_in(jax.random.key(config.reading_seed), int(rec['seq_id']))
   pose = physsim.shape.misplaced_pose(
     key, recording.pose, config.camera_error_m, config.camera_error_deg,
-    objective_lib.pin_centre(estimate),
+    objective_lib.pin_centre(estimate.simulation),
   )  # fmt: skip
   return recording._replace(pose=jax.tree.map(np.asarray, pose))
 
@@ -219,24 +221,25 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
   nets = {}
   for rec, method in jobs:
     key, model_dir = _key(rec, method), _model_dir(models, method, rec['fabric'])
-    ec = dataclasses.replace(
-      config.estimate, material=rec['fabric'], garment=rec['garment'],
+    ec = config.estimate.replace(
+      material=rec['fabric'], garment=rec['garment'],
       **({'distance': 'shape'} if method == SHAPE_METHOD else {}),
     )  # fmt: skip
     try:
       if model_dir not in nets:
         nets[model_dir] = embedding.for_distance(
-          model_dir, ec.distance, config.shape_image_size
+          model_dir, ec.scoring.distance, config.shape_image_size
         )
       net = nets[model_dir]
       recording = recording_lib.load_recording(
-        rec['path'], fps=ec.fps, size=net.image_size, frames=ec.frames,
+        rec['path'], fps=ec.simulation.fps, size=net.image_size,
+        frames=ec.simulation.frames,
         rgb=net.modality == 'rgb',
       )  # fmt: skip
       recording = misplaced_camera(config, rec, recording, ec)
       measured = simulated_measurement(config, rec, recording.truth)
       if measured != posterior_lib.Measured():
-        ec = dataclasses.replace(ec, measured=measured)
+        ec = ec.replace(measured=measured)
     except (ValueError, OSError) as e:
       results[key] = {'failed': str(e)}
       continue
@@ -620,7 +623,7 @@ def write_report(results: dict, config: Config, workdir: str) -> str:
   dataset.write_json_atomic(
     os.path.join(workdir, 'tables.json'),
     {
-      'config': dataclasses.asdict(config),
+      'config': objective_lib.record(config),
       'summary': {'/'.join(k): v for k, v in summary.items()},
       'overall': {'/'.join(k): v for k, v in table.items()},
       'estimates': {'/'.join(k): v for k, v in results.items()},

@@ -28,7 +28,7 @@ SMOKE = dataclasses.replace(
   folds=2,
   backend='c',
   sharpness_grid=(0.5, 1.0),
-  estimate=EstimateConfig(
+  estimate=EstimateConfig().replace(
     q=2, n_init=4, max_iter=1, posterior_grid=(4, 8, 4), distance='shape'
   ),
 )
@@ -38,7 +38,7 @@ def test_the_shape_distance_trains_no_network():
   assert not calibration.uses_networks(SMOKE)
   assert calibration.network_seeds(SMOKE) == ()
   with_net = dataclasses.replace(
-    SMOKE, estimate=dataclasses.replace(SMOKE.estimate, distance='energy')
+    SMOKE, estimate=SMOKE.estimate.replace(distance='energy')
   )
   assert calibration.uses_networks(with_net)
   assert calibration.network_seeds(with_net) == (0,)
@@ -76,9 +76,7 @@ def test_shape_estimates_quote_the_shape_calibration(study, tmp_path, monkeypatc
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(default))
   monkeypatch.setattr(report, 'SHAPE_CALIBRATION_FILE', str(shape_file))
   # the settings the study searched with, read at the sharpness it chose
-  searched = dataclasses.replace(
-    calibration._configs(SMOKE)[3], sharpness=out['sharpness']
-  )
+  searched = calibration._configs(SMOKE)[3].replace(sharpness=out['sharpness'])
   # None shipped for the shape yet: the default file, whose note names the distance.
   assert report.calibration_file(searched) == str(default)
   assert report.shipped_calibration('shape') == str(shape_file)
@@ -91,23 +89,21 @@ def test_shape_estimates_quote_the_shape_calibration(study, tmp_path, monkeypatc
   assert note['setting'].endswith('no network')
   assert note['n_calibration_recordings'] == 2 * SMOKE.pairs
   # An estimate that embeds keeps the default file, and one given a file uses it.
-  energy = dataclasses.replace(searched, distance='energy')
+  energy = searched.replace(distance='energy')
   assert report.calibration_file(energy) == str(default)
-  mine = dataclasses.replace(searched, calibration=str(default))
+  mine = searched.replace(calibration=str(default))
   assert report.calibration_file(mine) == str(default)
   # The shape calibration does not apply to another shape setting.
-  other = report.calibration_note(
-    dataclasses.replace(searched, sharpness=3 * out['sharpness'])
-  )
+  other = report.calibration_note(searched.replace(sharpness=3 * out['sharpness']))
   assert not other['matches'] and 'sharpness' in ' '.join(other['differs'])
 
 
 def test_the_shipped_shape_calibration_holds_for_demo_size_shape_estimates():
   config = dataclasses.replace(
     calibration.Config(),
-    estimate=dataclasses.replace(calibration.Config().estimate, distance='shape'),
+    estimate=calibration.Config().estimate.replace(distance='shape'),
   )
-  searched = dataclasses.replace(calibration._configs(config)[3], point='bayes')
+  searched = calibration._configs(config)[3].replace(point='bayes')
   assert report.calibration_file(searched) == report.SHAPE_CALIBRATION_FILE
   note = report.calibration_note(searched)
   assert note['matches'] and note['recalibrated'], note

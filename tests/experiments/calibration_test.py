@@ -62,7 +62,7 @@ def _fake_runs(
 def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
   config = calibration.Config(
     pairs=100, sharpness_grid=(0.25, C_TRUE, 4.0),
-    estimate=EstimateConfig(posterior_grid=GRID),
+    estimate=EstimateConfig().replace(posterior_grid=GRID),
   )  # fmt: skip
   runs = _fake_runs(config, str(tmp_path))
   analysis = calibration.analyse(config, runs)
@@ -100,7 +100,9 @@ def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
 def test_recalibration_repairs_a_too_sharp_likelihood_on_held_out_recordings(
   tmp_path,
 ):
-  config = calibration.Config(pairs=100, estimate=EstimateConfig(posterior_grid=GRID))
+  config = calibration.Config(
+    pairs=100, estimate=EstimateConfig().replace(posterior_grid=GRID)
+  )
   scores = calibration.posteriors(
     config, _fake_runs(config, str(tmp_path)), 'gibbs', 4.0
   )
@@ -127,7 +129,9 @@ def test_a_quantity_the_video_does_not_inform_keeps_its_nominal_levels(tmp_path)
   # Area weight left out of the likelihood: its posterior is the prior, whose
   # intervals hold truths drawn from the prior exactly as often as they say,
   # so the recalibration keeps its nominal levels (and fits the others).
-  config = calibration.Config(pairs=40, estimate=EstimateConfig(posterior_grid=GRID))
+  config = calibration.Config(
+    pairs=40, estimate=EstimateConfig().replace(posterior_grid=GRID)
+  )
   runs = _fake_runs(config, str(tmp_path), blind=(2,))
   video = calibration.posteriors(config, runs, 'gibbs', C_TRUE)['video']
   space = physsim.search_space(config.material)
@@ -151,21 +155,29 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   path = tmp_path / 'calibration.json'
   path.write_text(json.dumps(cal))
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(path))
-  same = report.calibration_note(EstimateConfig(sharpness=0.7))
+  same = report.calibration_note(EstimateConfig().replace(sharpness=0.7))
   assert 'wind 88%/48%' in report.calibration_line(same)
-  other = report.calibration_note(EstimateConfig(sharpness=1.4))
+  other = report.calibration_note(EstimateConfig().replace(sharpness=1.4))
   assert other['matches'] is False
   assert 'not for this sharpness' in report.calibration_line(other)
-  other = report.calibration_note(EstimateConfig(sharpness=0.7, likelihood='threshold'))
+  other = report.calibration_note(
+    EstimateConfig().replace(sharpness=0.7, likelihood='threshold')
+  )
   assert other['matches'] is False
   assert other['differs'] == ['likelihood']
   # A setting that changes what a score means (the mesh) also voids the quote.
   cal['config'] = {'estimate': {'cloth_resolution': 25, 'frames': 60, 'q': 24}}
   path.write_text(json.dumps(cal))
-  assert report.calibration_note(EstimateConfig(sharpness=0.7))['matches'] is True
-  other = report.calibration_note(EstimateConfig(sharpness=0.7, cloth_resolution=10))
+  assert (
+    report.calibration_note(EstimateConfig().replace(sharpness=0.7))['matches'] is True
+  )
+  other = report.calibration_note(
+    EstimateConfig().replace(sharpness=0.7, cloth_resolution=10)
+  )
   assert other['differs'] == ['cloth_resolution']
-  other = report.calibration_note(EstimateConfig(sharpness=0.7, q=8))  # the budget
+  other = report.calibration_note(
+    EstimateConfig().replace(sharpness=0.7, q=8)
+  )  # the budget
   assert other['differs'] == ['q']
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
   assert 'not measured' in report.calibration_line(report.calibration_note())
@@ -222,21 +234,25 @@ def _recalibrated_file(tmp_path, monkeypatch) -> dict:
 def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkeypatch):
   _recalibrated_file(tmp_path, monkeypatch)
   m = posterior_lib.Measured
-  note = report.calibration_note(EstimateConfig(sharpness=0.7))
+  note = report.calibration_note(EstimateConfig().replace(sharpness=0.7))
   assert note['recalibrated'] and note['mode'] == 'video'
   assert note['levels']['wind_speed'] == [0.01, 0.1, 0.4, 0.9, 0.99]
   assert 'recalibrated on 200' in report.calibration_line(note)
-  wind = EstimateConfig(sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.06))
+  wind = EstimateConfig().replace(
+    sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.06)
+  )
   assert report.calibration_note(wind)['mode'] == 'known wind'
   # A reading five times less certain than the calibrated 2% is another mode.
-  loose = EstimateConfig(sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.3))
+  loose = EstimateConfig().replace(
+    sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.3)
+  )
   note = report.calibration_note(loose)
   assert note['matches'] is False and 'uncertainty' in note['differs'][0]
   joint = report.calibration_note(
-    EstimateConfig(sharpness=0.7), joint=True, recordings=3
+    EstimateConfig().replace(sharpness=0.7), joint=True, recordings=3
   )
   assert joint['matches'] is False
-  assert report.calibration_note(EstimateConfig(sharpness=0.7), joint=True,
+  assert report.calibration_note(EstimateConfig().replace(sharpness=0.7), joint=True,
                                  recordings=2)['mode'] == 'joint pair'  # fmt: skip
   # A joint pair with a wind reading at each: its own tables, when calibrated.
   assert report.calibration_note(wind, joint=True, recordings=2)['mode'] == (
@@ -255,7 +271,7 @@ def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypa
   cal = _recalibrated_file(tmp_path, monkeypatch)
   cal['network'] = {'seeds': [0, 1], 'triplet_accuracy': [0.71, 0.88]}
   (tmp_path / 'calibration.json').write_text(json.dumps(cal))
-  config = EstimateConfig(sharpness=0.7)
+  config = EstimateConfig().replace(sharpness=0.7)
   within = report.calibration_note(config, accuracy=0.75)
   assert within['recalibrated'] and 'weaker_network' not in within
   weak = report.calibration_note(config, accuracy=0.66)
@@ -338,7 +354,9 @@ def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
   # The analysis can run apart from the searches (--analyse_only).
   with pytest.raises(ValueError, match='no finished estimates'):
     calibration.saved_runs(str(tmp_path))
-  config = calibration.Config(pairs=2, estimate=EstimateConfig(posterior_grid=GRID))
+  config = calibration.Config(
+    pairs=2, estimate=EstimateConfig().replace(posterior_grid=GRID)
+  )
   runs = _fake_runs(config, str(tmp_path / 'estimates'))
   for r in runs[:3]:  # the fourth has no estimate.json: not finished
     with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
@@ -374,7 +392,7 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
   # elsewhere: the exact likelihood's intervals hold the truth as often as
   # they say; a four-times sharper one's are caught short.
   config = calibration.Config(
-    pairs=60, seed=1, estimate=EstimateConfig(posterior_grid=GRID)
+    pairs=60, seed=1, estimate=EstimateConfig().replace(posterior_grid=GRID)
   )  # fmt: skip
   runs = _fake_runs(config, str(tmp_path), noise_seed=2)
   good = calibration.check_analysis(config, runs, _tables(C_TRUE))
@@ -413,7 +431,7 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
 
 def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   config = calibration.Config(
-    pairs=5, seed=3, estimate=EstimateConfig(posterior_grid=GRID)
+    pairs=5, seed=3, estimate=EstimateConfig().replace(posterior_grid=GRID)
   )
   shipped = tmp_path / 'calibration.json'
   shipped.write_text(json.dumps(_tables(C_TRUE, seed=3)))
@@ -531,7 +549,7 @@ def test_the_tables_apply_only_to_a_network_of_their_recipe(tmp_path, monkeypatc
 
   cal = _recalibrated_file(tmp_path, monkeypatch)
   mine = embedding.network_recipe(_fake_network(tmp_path / 'a'))
-  config = EstimateConfig(sharpness=0.7)
+  config = EstimateConfig().replace(sharpness=0.7)
   # A calibration that recorded no recipe checks none.
   assert report.calibration_note(config, network=mine)['recalibrated']
   cal['network'] = {'recipe': mine, 'seeds': [0, 1]}
@@ -592,7 +610,9 @@ def test_the_study_records_its_networks_and_refuses_mixed_recipes(tmp_path):
 
 
 def test_packed_runs_carry_what_the_analysis_reads(tmp_path):
-  config = calibration.Config(pairs=30, estimate=EstimateConfig(posterior_grid=GRID))
+  config = calibration.Config(
+    pairs=30, estimate=EstimateConfig().replace(posterior_grid=GRID)
+  )
   runs = _fake_runs(config, str(tmp_path / 'estimates'))  # 60: two packed files
   written = calibration.pack_runs(runs, str(tmp_path / 'study'))
   assert [os.path.basename(p) for p in written] == ['runs-000.npz', 'runs-001.npz']
@@ -613,11 +633,13 @@ def test_an_estimate_applies_the_calibration_file_it_is_given(tmp_path, monkeypa
   cal['recalibration']['n_calibration_recordings'] = 77
   mine.write_text(json.dumps(cal))
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
-  assert report.calibration_note(EstimateConfig(sharpness=0.7)) is None
-  note = report.calibration_note(EstimateConfig(sharpness=0.7, calibration=str(mine)))
+  assert report.calibration_note(EstimateConfig().replace(sharpness=0.7)) is None
+  note = report.calibration_note(
+    EstimateConfig().replace(sharpness=0.7, calibration=str(mine))
+  )
   assert note['recalibrated'] and note['n_calibration_recordings'] == 77
   with pytest.raises(ValueError, match='missing.json'):
-    EstimateConfig(calibration=str(tmp_path / 'missing.json')).check()
+    EstimateConfig().replace(calibration=str(tmp_path / 'missing.json')).check()
 
 
 def test_a_corrupt_packed_file_is_named(tmp_path):

@@ -12,7 +12,7 @@ from experiments.pipeline import training as train_lib
 def test_recording_differs_from_training_like_reality_and_search_matches_training():
   data, rec, training, est = demo.configs('black_denim', 8, 3, 'c')
   assert data.materials == rec.materials == ('black_denim',)
-  assert est.material == 'black_denim'
+  assert est.simulation.material == 'black_denim'
   # Real-like: a finer mesh, the sensor model, unseen poses, 24 fps, gustier
   # wind, framing checked; the same frame size.
   assert rec.cloth_resolution > data.cloth_resolution
@@ -23,7 +23,10 @@ def test_recording_differs_from_training_like_reality_and_search_matches_trainin
   assert rec.min_coverage > 0
   assert rec.resolution == data.resolution
   # The search simulates what the network was trained on.
-  assert (est.cloth_resolution, est.frames) == (data.cloth_resolution, data.frames)
+  assert (est.simulation.cloth_resolution, est.simulation.frames) == (
+    data.cloth_resolution,
+    data.frames,
+  )
   assert est.seed == 3 and rec.seed != data.seed
   assert training.fit.epochs <= train_lib.PRESETS['paper'].fit.epochs
   # On the C backend the training set comes in several batches (a bar with

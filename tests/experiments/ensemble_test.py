@@ -8,7 +8,6 @@ tiny PhySNets (different seeds, so their PSDs differ) and the hand-made one.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 
 import jax
@@ -104,7 +103,7 @@ def test_ensemble_of_one_network_twice_estimates_as_that_network(env, tmp_path):
   # an ensemble of two copies must retrace the single network's search.
   hand = write_hand_made_model(str(tmp_path / 'hand'))
   copy = write_hand_made_model(str(tmp_path / 'copy'))
-  config = dataclasses.replace(CONFIG, max_iter=1, min_iter=1)
+  config = CONFIG.replace(max_iter=1, min_iter=1)
   one = search.estimate(config, env['rec'], hand, str(tmp_path / 'one'), progress=False)
   two = search.estimate(
     config, env['rec'], f'{hand},{copy}', str(tmp_path / 'two'), progress=False

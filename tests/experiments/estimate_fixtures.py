@@ -44,7 +44,7 @@ MATERIAL = 'gray_interlock'
 TRUTH = dict(bending_scale=1.0, wind_speed=4.5, area_weight=0.17)
 # The paper's protocol (argmin, common random numbers): the truth scores ~0
 # and repeated candidates score alike, which these tests rely on.
-CONFIG = est.EstimateConfig(
+CONFIG = est.EstimateConfig().replace(
   point='argmin',
   material=MATERIAL,
   cloth_resolution=6,
@@ -170,16 +170,16 @@ def _pose() -> physsim.Pose:
 def write_recording(root: str, truth: dict, config=CONFIG, rgb: bool = False) -> str:
   """Simulates ``truth`` with the estimate's settings; writes a sequence folder
   (with colour frames ``cam0/rgb_*.png`` if ``rgb``)."""
-  mesh = physsim.square(config.cloth_resolution)
-  cloth = physsim.build(mesh, config.material)
-  space = physsim.search_space(config.material)
+  mesh = physsim.square(config.simulation.cloth_resolution)
+  cloth = physsim.build(mesh, config.simulation.material)
+  space = physsim.search_space(config.simulation.material)
   out = physsim.simulate(
     cloth,
     physsim.params.make(**truth),
-    frames=config.frames,
-    fps=config.fps,
-    warmup=config.warmup,
-    wind=physsim.Wind(gust_intensity=config.gusts),
+    frames=config.simulation.frames,
+    fps=config.simulation.fps,
+    warmup=config.simulation.warmup,
+    wind=physsim.Wind(gust_intensity=config.simulation.gusts),
     key=jax.random.fold_in(jax.random.key(config.seed), 2)[None],  # as estimate
     backend='c',
     space=space,
@@ -198,14 +198,14 @@ def write_recording(root: str, truth: dict, config=CONFIG, rgb: bool = False) ->
     cv2.imwrite(os.path.join(seq, 'cam0', f'{t:04d}.png'), frame)
   meta = dict(
     truth,
-    fps=config.fps,
+    fps=config.simulation.fps,
     intrinsics=intr.to_dict(),
     extrinsics=[physsim.pose_to_dict(pose)],
   )
   if rgb:
     colour = physsim.render_rgb8(
       jnp.asarray(out.positions), mesh.faces, intr, poses,
-      jnp.asarray([physsim.FABRIC_COLORS[config.material]]),
+      jnp.asarray([physsim.FABRIC_COLORS[config.simulation.material]]),
     )[0, 0]  # fmt: skip
     colour = np.asarray(colour)
     for t, frame in enumerate(colour):
@@ -224,5 +224,9 @@ def write_recording(root: str, truth: dict, config=CONFIG, rgb: bool = False) ->
 
 def load(seq: str, config=CONFIG, **kw) -> recording_lib.Recording:
   return recording_lib.load_recording(
-    seq, fps=config.fps, size=(SIZE, SIZE), frames=config.frames, **kw
+    seq,
+    fps=config.simulation.fps,
+    size=(SIZE, SIZE),
+    frames=config.simulation.frames,
+    **kw,
   )

@@ -8,7 +8,6 @@ made as in training, not what an untrained network recovers.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 
 import jax
@@ -37,7 +36,7 @@ pytestmark = pytest.mark.slow  # whole searches per method
 
 # The initial design only: every stage runs (simulate, render, embed, PSD, GP
 # posterior, figures) without compiling the BO proposal step.
-_SHORT = dataclasses.replace(CONFIG, max_iter=0, min_iter=0)
+_SHORT = CONFIG.replace(max_iter=0, min_iter=0)
 # Embedding clips in one batch or one by one: the same float32 program up to
 # XLA's batch-dependent summation order.
 _CLIP_TOLERANCE = 1e-5
@@ -72,7 +71,10 @@ def test_method_runs_end_to_end(env, method):
   result = search.estimate(
     _SHORT, env['rec'], env['models'][method], workdir, progress=False
   )
-  assert result['evaluations'] == _SHORT.n_init + _SHORT.q * _SHORT.max_iter
+  assert (
+    result['evaluations']
+    == _SHORT.search.n_init + _SHORT.search.q * _SHORT.search.max_iter
+  )
   assert result['failed_evaluations'] == 0
   assert np.isfinite(result['psd_best'])
   for e in result['errors']['estimate'].values():
@@ -132,7 +134,7 @@ def test_rgb_recording_input_equals_training_input(rgb_dataset):
 def test_tinted_shading_matches_shading_in_the_colour():
   # Datasets and the estimate shade in white and tint each world
   # (physsim.render_rgb8); shading directly in the colour agrees to a level.
-  mesh = physsim.square(CONFIG.cloth_resolution)
+  mesh = physsim.square(CONFIG.simulation.cloth_resolution)
   intr = physsim.Intrinsics(width=SIZE, height=SIZE)
   # A crumpled cloth, so the faces' shading differs.
   bumps = 0.05 * jax.random.normal(jax.random.key(1), mesh.vertices.shape)

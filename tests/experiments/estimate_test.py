@@ -6,7 +6,6 @@ embedding, not a trained network; see there why).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import shutil
@@ -114,7 +113,7 @@ def recovery(env):
 
 
 def _u_truth():
-  space = physsim.search_space(CONFIG.material)
+  space = physsim.search_space(CONFIG.simulation.material)
   return physsim.to_unit(physsim.params.make(**TRUTH), space)
 
 
@@ -127,13 +126,14 @@ def test_fused_objective_equals_its_stages_run_one_by_one(env):
   # worlds, render, embed, energy distance.
   u = np.stack([_u_truth(), np.zeros(3), np.array([0.5, -0.7, 0.9])])
   fused = _score(env, u)
-  space = physsim.search_space(CONFIG.material)
-  model = obj_lib.cloth(CONFIG)
+  sim = CONFIG.simulation
+  space = physsim.search_space(sim.material)
+  model = obj_lib.cloth(sim)
   out = physsim.simulate(
-    model, physsim.from_unit(u, space), frames=CONFIG.frames, fps=CONFIG.fps,
-    warmup=CONFIG.warmup, wind=physsim.Wind(gust_intensity=CONFIG.gusts),
+    model, physsim.from_unit(u, space), frames=sim.frames, fps=sim.fps,
+    warmup=sim.warmup, wind=physsim.Wind(gust_intensity=sim.gusts),
     key=jnp.stack([jax.random.fold_in(jax.random.key(CONFIG.seed), 2)] * len(u)),
-    backend='c', workers=1, material=CONFIG.material,
+    backend='c', workers=1, material=CONFIG.simulation.material,
   )  # fmt: skip
   poses = jax.tree.map(
     lambda a: jnp.repeat(a[None], len(u), 0), env['problem'].data.poses
@@ -163,7 +163,7 @@ def test_one_compile_per_shape_and_repeats_score_alike(env):
 def test_fresh_keys_draw_other_gusts(env):
   # Without common random numbers, evaluations draw their own gusts: the same
   # candidate scores differently (the simulator's noise a posterior needs).
-  config = dataclasses.replace(CONFIG, point='median')
+  config = CONFIG.replace(point='median')
   u = np.stack([_u_truth()] * 3)
   gust, noise = obj_lib.candidate_keys(config, 0, 3)
   s = env['objective'](
@@ -187,7 +187,7 @@ def test_candidates_go_through_the_sensor_model(env):
   u = _u_truth()[None]
   psd = {}
   for on in (True, False):
-    config = dataclasses.replace(CONFIG, sensor_noise=on)
+    config = CONFIG.replace(sensor_noise=on)
     problem = obj_lib.make_problem(config, env['net'], rec)
     psd[on] = _score(env, u, config, problem, EVALUATOR.objective(problem)).psd[0, 0]
   assert psd[True] < _TRUTH_PSD_TOLERANCE
@@ -209,7 +209,10 @@ def test_recovers_known_parameters(env, recovery):
   psd_centre = _score(env, np.zeros((1, 3))).psd[0, 0]
   # the first evaluation is the range centre, scored as here
   np.testing.assert_allclose(state['Y'][0], psd_centre, rtol=_REPEAT_TOLERANCE)
-  assert result['evaluations'] == CONFIG.n_init + CONFIG.q * CONFIG.max_iter
+  assert (
+    result['evaluations']
+    == CONFIG.search.n_init + CONFIG.search.q * CONFIG.search.max_iter
+  )
   assert result['failed_evaluations'] == 0
   assert result['truth'] == TRUTH
   err = result['errors']
@@ -229,14 +232,15 @@ def test_recovers_known_parameters(env, recovery):
 def test_stopping_rule_and_min_iter(env, monkeypatch):
   # A rule that holds after any second iteration (nothing moves a whole range)
   # may only stop the run at min_iter, before max_iter.
-  config = dataclasses.replace(
-    CONFIG, stop_rel_change=1.0, stop_window=1, min_iter=3, max_iter=4
-  )
+  config = CONFIG.replace(stop_rel_change=1.0, stop_window=1, min_iter=3, max_iter=4)
   workdir = os.path.join(env['root'], 'stop')
   result = _estimate(config, env['rec'], env['model'], workdir)
   assert result['stopped_by_rule']
-  assert result['iterations'] == config.min_iter < config.max_iter
-  assert result['evaluations'] == config.n_init + config.q * config.min_iter
+  assert result['iterations'] == config.search.min_iter < config.search.max_iter
+  assert (
+    result['evaluations']
+    == config.search.n_init + config.search.q * config.search.min_iter
+  )
   # Rerun on the finished workdir: nothing is evaluated again.
   counting = _CountCalls(monkeypatch)
   again = _estimate(config, env['rec'], env['model'], workdir)
@@ -252,14 +256,14 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
   _CountCalls(monkeypatch, fail_after=done)
   with pytest.raises(_Interrupted):
     _estimate(CONFIG, env['rec'], env['model'], workdir)
-  assert len(_state(workdir)['Y']) == CONFIG.n_init + CONFIG.q
+  assert len(_state(workdir)['Y']) == CONFIG.search.n_init + CONFIG.search.q
   counting = _CountCalls(monkeypatch)
   resumed = _estimate(CONFIG, env['rec'], env['model'], workdir)
   # finished batches are not redone; one more call renders the best candidate
   # if it was found before the interruption (the resumed search has not seen
   # its frames)
-  best_before = np.nanargmin(state['Y']) < CONFIG.n_init + CONFIG.q
-  assert counting.calls == 1 + CONFIG.max_iter - done + int(best_before)
+  best_before = np.nanargmin(state['Y']) < CONFIG.search.n_init + CONFIG.search.q
+  assert counting.calls == 1 + CONFIG.search.max_iter - done + int(best_before)
   np.testing.assert_array_equal(_state(workdir)['X'], state['X'])
   np.testing.assert_allclose(_state(workdir)['Y'], state['Y'], rtol=_REPEAT_TOLERANCE)
   assert resumed['estimate'] == result['estimate']
@@ -269,7 +273,7 @@ def test_resume_after_interrupt(env, recovery, monkeypatch):
 def test_montage_frames_are_kept_not_resimulated(env, tmp_path, monkeypatch):
   # The best candidate's frames come from its scoring batch: no call beyond
   # the search's own batches, and they are what a fresh call gives.
-  config = dataclasses.replace(CONFIG, max_iter=1)
+  config = CONFIG.replace(max_iter=1)
   kept = []
   real = search.write_result
   monkeypatch.setattr(
@@ -277,16 +281,16 @@ def test_montage_frames_are_kept_not_resimulated(env, tmp_path, monkeypatch):
   )
   counting = _CountCalls(monkeypatch)
   result = _estimate(config, env['rec'], env['model'], str(tmp_path))
-  assert counting.calls == 1 + config.max_iter  # the design and one iteration
+  assert counting.calls == 1 + config.search.max_iter  # the design and one iteration
   state = _state(str(tmp_path))
   x_best = state['X'][np.nanargmin(state['Y'])]
   fresh = _score(env, x_best[None], frames=True).frames[0]
   np.testing.assert_allclose(kept[0], fresh, atol=_REPEAT_TOLERANCE)
-  assert result['evaluations'] == config.n_init + config.q
+  assert result['evaluations'] == config.search.n_init + config.search.q
 
 
 def test_resume_refuses_another_run(env, recovery):
-  other = dataclasses.replace(CONFIG, gusts=0.3)
+  other = CONFIG.replace(gusts=0.3)
   full = os.path.join(env['root'], 'full')
   with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
     search.estimate(other, env['rec'], env['model'], full)
@@ -295,7 +299,7 @@ def test_resume_refuses_another_run(env, recovery):
   with pytest.raises(ValueError, match=r'run\.json.*camera'):
     search.estimate(CONFIG, env['rec']._replace(pose=moved), env['model'], full)
   # the C worker count does not change results: it may differ on resume
-  workers = dataclasses.replace(CONFIG, workers=2)
+  workers = CONFIG.replace(workers=2)
   job = search.Job(workers, env['rec'], env['model'], full)
   search.check_run(job, obj_lib.make_problem(workers, env['net'], env['rec']))
 
@@ -318,8 +322,8 @@ def _blow_up(monkeypatch, worlds):
 
 
 def test_every_candidate_blowing_up_names_the_recording(env, tmp_path, monkeypatch):
-  _blow_up(monkeypatch, range(max(CONFIG.q, CONFIG.n_init)))
-  config = dataclasses.replace(CONFIG, max_iter=1)
+  _blow_up(monkeypatch, range(max(CONFIG.search.q, CONFIG.search.n_init)))
+  config = CONFIG.replace(max_iter=1)
   with pytest.raises(ValueError, match=f'{env["seq"]}.*blew up'):
     search.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
 
@@ -328,14 +332,14 @@ def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
   env, tmp_path, monkeypatch
 ):
   _blow_up(monkeypatch, [1])
-  config = dataclasses.replace(CONFIG, max_iter=1, min_iter=1)
+  config = CONFIG.replace(max_iter=1, min_iter=1)
   workdir = str(tmp_path / 'w')
   # a fresh evaluator: its objectives are built with the patched rollout
   result = search.estimate(config, env['rec'], env['model'], workdir, progress=False)
   y = _state(workdir)['Y']
-  assert len(y) == config.n_init + config.q
+  assert len(y) == config.search.n_init + config.search.q
   failed = np.flatnonzero(np.isnan(y))
-  np.testing.assert_array_equal(failed, [1, config.n_init + 1])  # slot 1 of each
+  np.testing.assert_array_equal(failed, [1, config.search.n_init + 1])  # slot 1 of each
   assert result['failed_evaluations'] == 2
   assert np.isfinite(result['psd_best'])
 
@@ -509,9 +513,9 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
 def test_bad_config_is_refused_before_anything_is_written(env, tmp_path):
   workdir = str(tmp_path / 'w')
   for bad, match in (
-    (dataclasses.replace(CONFIG, material='denim'), 'material'),
-    (dataclasses.replace(CONFIG, fps=1e-9), 'fps'),
-    (dataclasses.replace(CONFIG, q=0), 'q must be'),
+    (CONFIG.replace(material='denim'), 'material'),
+    (CONFIG.replace(fps=1e-9), 'fps'),
+    (CONFIG.replace(q=0), 'q must be'),
   ):
     with pytest.raises(ValueError, match=match):
       search.estimate(bad, env['rec'], env['model'], workdir)
@@ -522,7 +526,7 @@ def test_fused_objective_on_mjx_matches_mujoco_c(env):
   # The same fused program with MJX (MuJoCo Warp, traced) in place of the
   # MuJoCo C callback: PSDs agree to the two simulators' parity (float32
   # MJX vs float64 forces in C; physsim's rollout test bounds positions by 5 mm).
-  config = dataclasses.replace(CONFIG, backend='mjx')
+  config = CONFIG.replace(backend='mjx')
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
   u = np.stack([_u_truth(), np.zeros(3)])
   mjx = _score(env, u, config, problem, obj_lib.Objective(problem))

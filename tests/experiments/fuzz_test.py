@@ -385,7 +385,7 @@ def bad_runs(draw, root):
     if name in ('depth_scale', 'plane_tol', 'min_overlap', 'fps'):
       base['intake'] = dataclasses.replace(intake.IntakeConfig(), **{name: value})
     else:
-      base['search'] = dataclasses.replace(_SMOKE, **{name: value})
+      base['search'] = _SMOKE.replace(**{name: value})
     names = [name]
   return dict({'search': _SMOKE}, **base), names
 

@@ -32,17 +32,17 @@ _TRUTH = dict(ef.TRUTH, wind_speed=3.0)
 @pytest.fixture(scope='module')
 def scene(tmp_path_factory):
   cfg = ef.CONFIG
-  mesh = physsim.square(cfg.cloth_resolution)
+  mesh = physsim.square(cfg.simulation.cloth_resolution)
   out = physsim.simulate(
-    physsim.build(mesh, cfg.material), physsim.params.make(**_TRUTH),
-    frames=cfg.frames, fps=cfg.fps, warmup=cfg.warmup,
-    wind=physsim.Wind(gust_intensity=cfg.gusts), key=jax.random.key(3)[None],
-    backend='c', space=physsim.search_space(cfg.material), workers=1,
+    physsim.build(mesh, cfg.simulation.material), physsim.params.make(**_TRUTH),
+    frames=cfg.simulation.frames, fps=cfg.simulation.fps, warmup=cfg.simulation.warmup,
+    wind=physsim.Wind(gust_intensity=cfg.simulation.gusts), key=jax.random.key(3)[None],
+    backend='c', space=physsim.search_space(cfg.simulation.material), workers=1,
   )  # fmt: skip
   assert out.valid.all()
   root = str(tmp_path_factory.mktemp('scene'))
   return scene_fixtures.write_scene_recording(
-    root, np.asarray(out.positions[0]), mesh.faces, cfg.fps
+    root, np.asarray(out.positions[0]), mesh.faces, cfg.simulation.fps
   )
 
 
@@ -54,7 +54,9 @@ def _args(workdir, scene, **kw):
 
 
 def test_intake_finds_the_pins_and_only_the_cloth(scene):
-  ik = intake.take_in(scene.frames, intake.IntakeConfig(), scene.camera_json, ef.CONFIG)
+  ik = intake.take_in(
+    scene.frames, intake.IntakeConfig(), scene.camera_json, ef.CONFIG.simulation
+  )
   err = np.linalg.norm(ik.pins_camera - scene.pins_camera, axis=1)
   assert err.max() < _PIN_TOL, err
   ious = [
@@ -71,7 +73,7 @@ def test_intake_finds_the_pins_and_only_the_cloth(scene):
   # frames last 0.175 s, 4 frames at the comparison's 20 fps, which take
   # recording frames 0, 2, 4, 6 (so 7 are kept).
   fast = intake.take_in(
-    scene.frames, intake.IntakeConfig(fps=40), scene.camera_json, ef.CONFIG
+    scene.frames, intake.IntakeConfig(fps=40), scene.camera_json, ef.CONFIG.simulation
   )
   assert fast.fps == 40.0 and len(fast.depth) == 7
   text = intake.summary(ik)
@@ -83,7 +85,7 @@ def test_intake_only_writes_what_the_issue_lists(scene, tmp_path):
   w = tmp_path / 'w'
   data = json.loads((w / 'intake.json').read_text())
   assert np.asarray(data['pins_camera']).shape == (2, 3)
-  assert data['fps'] == 20.0 and data['frames'] == ef.CONFIG.frames
+  assert data['fps'] == 20.0 and data['frames'] == ef.CONFIG.simulation.frames
   assert len(data['cloth_fraction']) == data['frames']
   assert all(0.01 < f < 0.5 for f in data['cloth_fraction'])
   frames = sorted(os.listdir(w / 'intake'))
@@ -179,7 +181,10 @@ def test_bad_inputs_are_refused_before_anything_runs(scene, tmp_path):
   tum = _write_frames(tmp_path / 'tum', depth, scale=5000.0)
   refused('depth_scale', recording=(tum,), workdir='tum_run')
   ok = intake.take_in(
-    tum, intake.IntakeConfig(depth_scale=0.0002), scene.camera_json, ef.CONFIG
+    tum,
+    intake.IntakeConfig(depth_scale=0.0002),
+    scene.camera_json,
+    ef.CONFIG.simulation,
   )
   assert ok.pins_camera is not None
 
@@ -191,10 +196,10 @@ def test_masks_and_depth_range_restrict_the_cloth(scene, tmp_path):
   cfg = intake.IntakeConfig(mask=str(tmp_path / 'mask.png'), min_overlap=0.0)
   with pytest.raises(ValueError, match='apart|no cloth'):
     # Half the cloth hidden: the pins cannot be as far apart as the cloth's.
-    intake.take_in(scene.frames, cfg, scene.camera_json, ef.CONFIG)
+    intake.take_in(scene.frames, cfg, scene.camera_json, ef.CONFIG.simulation)
   cut = intake.IntakeConfig(depth_range=(0.5, 1.0))
   with pytest.raises(ValueError, match='no cloth left in frame'):
-    intake.take_in(scene.frames, cut, scene.camera_json, ef.CONFIG)
+    intake.take_in(scene.frames, cut, scene.camera_json, ef.CONFIG.simulation)
 
 
 def test_a_distorted_lens_is_undone(scene, tmp_path):
@@ -218,9 +223,11 @@ def test_a_distorted_lens_is_undone(scene, tmp_path):
   path = tmp_path / 'distorted.json'
   path.write_text(json.dumps(dict(cam, distortion=dist.tolist())))
   plain = intake.take_in(
-    str(folder), intake.IntakeConfig(), scene.camera_json, ef.CONFIG
+    str(folder), intake.IntakeConfig(), scene.camera_json, ef.CONFIG.simulation
   )
-  fixed = intake.take_in(str(folder), intake.IntakeConfig(), str(path), ef.CONFIG)
+  fixed = intake.take_in(
+    str(folder), intake.IntakeConfig(), str(path), ef.CONFIG.simulation
+  )
   err = lambda ik: np.linalg.norm(ik.pins_camera - scene.pins_camera, axis=1).max()
   iou = lambda ik: min(
     np.logical_and(a, b).sum() / np.logical_or(a, b).sum()
@@ -251,15 +258,15 @@ def test_a_dataset_sequence_with_its_own_camera_file_keeps_its_pose_and_truth(tm
     meta = json.load(f)
   cam = tmp_path / 'camera.json'
   cam.write_text(json.dumps({k: meta[k] for k in ('intrinsics', 'extrinsics', 'fps')}))
-  ik = intake.take_in(seq, intake.IntakeConfig(), str(cam), ef.CONFIG)
+  ik = intake.take_in(seq, intake.IntakeConfig(), str(cam), ef.CONFIG.simulation)
   assert ik.up_from == 'camera file' and ik.truth == pytest.approx(ef.TRUTH)
   pose = physsim.pose_from_dict(meta['extrinsics'][0])
   np.testing.assert_allclose(ik.pose.position, pose.position, atol=1e-6)
   # The simulator's pins, seen from that camera, come back as the pins.
-  pins = intake.outer_pins(physsim.square(ef.CONFIG.cloth_resolution))
+  pins = intake.outer_pins(physsim.square(ef.CONFIG.simulation.cloth_resolution))
   want = (pins - np.asarray(pose.position)) @ np.asarray(pose.rotation, np.float64)
   np.testing.assert_allclose(ik.pins_camera, want, atol=1e-5)
-  passthrough = intake.take_in(seq, intake.IntakeConfig(), '', ef.CONFIG)
+  passthrough = intake.take_in(seq, intake.IntakeConfig(), '', ef.CONFIG.simulation)
   assert passthrough.passthrough and passthrough.truth == pytest.approx(ef.TRUTH)
 
 

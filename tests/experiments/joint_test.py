@@ -94,26 +94,29 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   # and the joint posterior keeps each recording's wind at its reading.
   model_dir = fx.write_hand_made_model(str(tmp_path / 'model'))
   truths = [fx.TRUTH, dict(fx.TRUTH, wind_speed=3.0)]
-  config = dataclasses.replace(objective.PRESETS['smoke'], backend='c')
+  config = objective.PRESETS['smoke'].replace(backend='c')
   recs = []
   for k, t in enumerate(truths):
     path = fx.write_recording(str(tmp_path / f'r{k}'), t)
     recs.append(
       recording_lib.load_recording(
-        path, fps=config.fps, size=(fx.SIZE, fx.SIZE), frames=config.frames
+        path,
+        fps=config.simulation.fps,
+        size=(fx.SIZE, fx.SIZE),
+        frames=config.simulation.frames,
       )
     )
   winds = [(4.4, 0.09), (3.05, 0.06)]
   with pytest.raises(ValueError, match='1 wind readings for 2 recordings'):
     search.estimate_joint(config, recs, model_dir, str(tmp_path / 'x'), winds[:1])
-  measured = dataclasses.replace(
-    config, measured=posterior_lib.Measured(wind_speed=4.0, wind_speed_sd=0.1)
+  measured = config.replace(
+    measured=posterior_lib.Measured(wind_speed=4.0, wind_speed_sd=0.1)
   )
   with pytest.raises(ValueError, match='--wind_speeds'):
     search.estimate_joint(measured, recs, model_dir, str(tmp_path / 'x'))
   workdir = str(tmp_path / 'joint')
   out = search.estimate_joint(config, recs, model_dir, workdir, winds)
-  cell = 5.0 / config.posterior_grid[1]  # the grid's wind cell, m/s
+  cell = 5.0 / config.search.posterior_grid[1]  # the grid's wind cell, m/s
   for k, (v, sd) in enumerate(winds):
     r = out['recordings'][k]
     assert r['measured_wind'] == [v, sd] and r['truth'] == truths[k]
@@ -125,7 +128,7 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
       assert hi - lo < cell + 2 * 1.645 * sd + 1e-9, (k, lo, hi)
     # the search's prior was its own reading's: highest in the reading's cell
     z = np.load(os.path.join(workdir, f'recording_{k}', search.POSTERIOR_FILE))
-    lp = z['log_prior'].reshape(config.posterior_grid)
+    lp = z['log_prior'].reshape(config.search.posterior_grid)
     centre = 1.0 + (np.argmax(lp[0, :, 0]) + 0.5) * cell
     assert abs(centre - v) <= cell / 2 + 1e-9, (k, centre)
   # the shipped calibration has no tables for readings in a joint estimate

@@ -93,7 +93,7 @@ def test_the_shape_distance_maps_without_a_network(tmp_path):
   from tests.experiments.estimate_fixtures import SIZE
 
   seq = write_recording(str(tmp_path), TRUTH)
-  shape = dataclasses.replace(CONFIG, distance='shape')
+  shape = CONFIG.replace(distance='shape')
   config = ls.Config(objective=shape, points_1d=2, grid=2, batch=8)
   result = ls.run(config, seq, '', str(tmp_path / 'land'), image_size=SIZE)
   assert result['model'] == ''

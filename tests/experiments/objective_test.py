@@ -6,8 +6,6 @@ end to end in estimate_test, estimate_methods_test and joint_test.
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import numpy as np
 import pytest
@@ -34,7 +32,7 @@ def test_keys_depend_on_the_evaluation_index_not_the_batch():
 
 
 def test_the_papers_argmin_gives_every_evaluation_one_pair():
-  crn = dataclasses.replace(SMOKE, point='argmin')  # common random numbers
+  crn = SMOKE.replace(point='argmin')  # common random numbers
   assert crn.common_random_numbers
   gust, noise = obj.candidate_keys(crn, first=5, q=3)
   assert len({tuple(k) for k in _data(gust)}) == 1
@@ -42,27 +40,31 @@ def test_the_papers_argmin_gives_every_evaluation_one_pair():
 
 
 def test_seeds_change_the_keys():
-  other = dataclasses.replace(SMOKE, seed=SMOKE.seed + 1)
+  other = SMOKE.replace(seed=SMOKE.seed + 1)
   assert not np.array_equal(
     _data(obj.candidate_keys(SMOKE, 0, 2)[0]), _data(obj.candidate_keys(other, 0, 2)[0])
   )
 
 
 def test_the_mesh_and_its_pin_centre():
-  config = dataclasses.replace(SMOKE, garment='', cloth_resolution=9)
-  m = obj.mesh(config)
+  config = SMOKE.replace(garment='', cloth_resolution=9)
+  m = obj.mesh(config.simulation)
   assert len(m.vertices) == 81
   pins = m.vertices[m.pinned]
-  np.testing.assert_allclose(obj.pin_centre(config), pins.mean(0), atol=1e-12)
+  np.testing.assert_allclose(
+    obj.pin_centre(config.simulation), pins.mean(0), atol=1e-12
+  )
   # The two pinned corners share a height: the centre is on the top edge.
-  assert obj.pin_centre(config)[2] == np.max(m.vertices[:, 2])
+  assert obj.pin_centre(config.simulation)[2] == np.max(m.vertices[:, 2])
 
 
 def test_presets_are_reachable_from_the_library():
   demo = obj.EstimateConfig.preset('demo', material='black_denim')
-  assert demo.material == 'black_denim'
-  assert demo.cloth_resolution == obj.PRESETS['demo'].cloth_resolution
-  assert obj.EstimateConfig.preset('paper').point == 'argmin'
+  assert demo.simulation.material == 'black_denim'
+  assert (
+    demo.simulation.cloth_resolution == obj.PRESETS['demo'].simulation.cloth_resolution
+  )
+  assert obj.EstimateConfig.preset('paper').search.point == 'argmin'
   with pytest.raises(
     ValueError, match=r"no estimate preset 'tiny': one of \['default'"
   ):

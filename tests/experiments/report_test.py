@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -83,15 +81,12 @@ def test_calibration_mode(wind_sd, weight_sd, joint, mode):
 
 
 def test_shape_estimates_quote_their_own_calibration():
-  class Config:
-    calibration = ''
-    distance = 'shape'
-
-  assert report.calibration_file(Config()) == report.SHAPE_CALIBRATION_FILE
-  Config.distance = 'psd'
-  assert report.calibration_file(Config()) == report.CALIBRATION_FILE
-  Config.calibration = '/elsewhere/mine.json'
-  assert report.calibration_file(Config()) == '/elsewhere/mine.json'
+  config = objective.EstimateConfig().replace(distance='shape')
+  assert report.calibration_file(config) == report.SHAPE_CALIBRATION_FILE
+  config = config.replace(distance='energy')
+  assert report.calibration_file(config) == report.CALIBRATION_FILE
+  config = config.replace(calibration='/elsewhere/mine.json')
+  assert report.calibration_file(config) == '/elsewhere/mine.json'
 
 
 def test_iterations_of_counts_the_initial_design_as_iteration_zero():
@@ -229,8 +224,8 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
   assert '--area_weight=' in line and '20-30 cm swatch' in line
   assert 'python -m experiments.plan --workdir=out/e' in line and '\n' not in line
   # a scale's reading given, and a swatch already filmed: nothing left to advise
-  weighed = dataclasses.replace(
-    config, cloth_size=0.25,
+  weighed = config.replace(
+    cloth_size=0.25,
     measured=posterior.Measured(area_weight=0.18, area_weight_sd=0.004),
   )  # fmt: skip
   assert report.next_recording_note(told, weighed, 'out/e') is None

@@ -15,7 +15,7 @@ import pytest
 from experiments.pipeline import intake, objective, rig
 from physsim import camera, dataset
 
-_CONFIG = dataclasses.replace(objective.PRESETS['smoke'], distance='shape')
+_CONFIG = objective.PRESETS['smoke'].replace(distance='shape')
 
 
 def test_the_camera_files_are_the_recipes_camera_in_the_rigs_world():
@@ -77,14 +77,20 @@ def test_the_intake_places_the_camera_from_the_rigs_up(written):
   r = rig.SMOKE
   truth = camera.look_at(r.eye, r.target)
   given = intake.take_in(
-    paths['depth'], intake.IntakeConfig(world_up='z'), paths['camera'], _CONFIG
+    paths['depth'],
+    intake.IntakeConfig(world_up='z'),
+    paths['camera'],
+    _CONFIG.simulation,
   )
   imu = intake.take_in(
-    paths['depth'], intake.IntakeConfig(), paths['camera_imu'], _CONFIG
+    paths['depth'], intake.IntakeConfig(), paths['camera_imu'], _CONFIG.simulation
   )
   # its camera misplaced, the silhouette check would refuse it: look anyway
   guessed = intake.take_in(
-    paths['depth'], intake.IntakeConfig(min_overlap=0.0), paths['camera'], _CONFIG
+    paths['depth'],
+    intake.IntakeConfig(min_overlap=0.0),
+    paths['camera'],
+    _CONFIG.simulation,
   )
   assert (given.up_from, imu.up_from) == ('world_up', 'gravity')
   for ik in (given, imu):
@@ -136,16 +142,22 @@ def test_a_swatch_is_taken_in_at_its_size_and_refused_at_the_sheets(tmp_path):
   refuses in one line naming both sizes and the flag."""
   r = _swatch()
   paths = rig.write(r, str(tmp_path / 'swatch'))
-  swatch = dataclasses.replace(_CONFIG, cloth_size=0.3)
+  swatch = _CONFIG.replace(cloth_size=0.3)
   ik = intake.take_in(
-    paths['depth'], intake.IntakeConfig(world_up='z'), paths['camera'], swatch
+    paths['depth'],
+    intake.IntakeConfig(world_up='z'),
+    paths['camera'],
+    swatch.simulation,
   )
   truth = camera.look_at(r.eye, r.target)
   off = np.linalg.norm(np.asarray(ik.pose.position) - truth.position)
   assert off < 3 * ik.alignment_sd[0] + 0.01, (off, ik.alignment_sd)
   with pytest.raises(ValueError) as e:
     intake.take_in(
-      paths['depth'], intake.IntakeConfig(world_up='z'), paths['camera'], _CONFIG
+      paths['depth'],
+      intake.IntakeConfig(world_up='z'),
+      paths['camera'],
+      _CONFIG.simulation,
     )
   msg = str(e.value)
   assert '\n' not in msg and "simulated cloth's are 1.000 m" in msg

@@ -5,7 +5,6 @@ Recordings and the hand-made embedding come from ``estimate_fixtures``.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 
 import numpy as np
@@ -26,7 +25,7 @@ pytestmark = pytest.mark.slow  # whole searches in lockstep, resumed and alone
 OTHER_TRUTH = dict(bending_scale=3.0, wind_speed=2.0, area_weight=0.22)
 # Another structure: a different gust intensity is another fused program, so
 # this job is scored in a call of its own.
-GUSTY = dataclasses.replace(CONFIG, gusts=0.3)
+GUSTY = CONFIG.replace(gusts=0.3)
 # The C backend and the renderer are deterministic per world, so a candidate
 # scores the same whatever batch it is in, up to float32 rendering.
 _REPEAT_TOLERANCE = 1e-6
@@ -80,9 +79,7 @@ def test_a_bad_job_does_not_stop_the_others(env, tmp_path):
   config, rec = env['recs'][0]
   jobs = [
     em.Job(config, rec, str(tmp_path / 'no_model'), str(tmp_path / 'bad')),
-    em.Job(
-      dataclasses.replace(config, max_iter=1), rec, env['model'], str(tmp_path / 'ok')
-    ),
+    em.Job(config.replace(max_iter=1), rec, env['model'], str(tmp_path / 'ok')),
   ]
   out = em.estimate_many(jobs, progress=False)
   assert isinstance(out[0], Exception) and 'no_model' in str(out[0])
@@ -116,7 +113,7 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
   short = str(tmp_path / 'short')
   jobs = [
     em.Job(config, rec, env['model'], str(tmp_path / 'long')),
-    em.Job(dataclasses.replace(config, max_iter=1), rec, env['model'], short),
+    em.Job(config.replace(max_iter=1), rec, env['model'], short),
   ]
   real = em.Evaluator.__call__
   seen = []
@@ -130,7 +127,7 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
   # steps: initial design (both), iteration 1 (both; the short one stops),
   # then the long one alone, with the short one's result already written
   assert seen == [(2, False), (2, False), (1, True), (1, True)]
-  assert out[1]['evaluations'] == config.n_init + config.q
+  assert out[1]['evaluations'] == config.search.n_init + config.search.q
 
 
 def test_one_structure_is_one_call(env, monkeypatch):
@@ -145,7 +142,7 @@ def test_one_structure_is_one_call(env, monkeypatch):
 
   monkeypatch.setattr(obj_lib.Objective, '__call__', call)
   em.estimate_many(_jobs(env, 'counted'), progress=False)
-  n_init, q = CONFIG.n_init, CONFIG.q
+  n_init, q = CONFIG.search.n_init, CONFIG.search.q
   # (P, q, 3) per call: P padded to a power of two (2 recordings, then 1)
   assert calls[:2] == [(2, n_init, 3), (1, n_init, 3)]
   assert calls[2:4] == [(2, q, 3), (1, q, 3)]
@@ -155,9 +152,7 @@ def test_one_structure_is_one_call(env, monkeypatch):
 # the same program (bo.batched): its candidates agree to the last bits, its
 # grid posterior and summaries to round-off.
 _BATCH_TOLERANCE = 1e-9
-POSTERIOR = dataclasses.replace(
-  CONFIG, point='median', posterior_grid=(4, 8, 4), q=4, replicates=1
-)
+POSTERIOR = CONFIG.replace(point='median', posterior_grid=(4, 8, 4), q=4, replicates=1)
 
 
 def _posterior_state(workdir):
@@ -183,7 +178,7 @@ def _assert_close(a, b, path=''):
 
 def test_a_posterior_alone_and_in_a_batch_of_three(env):
   jobs = [
-    em.Job(dataclasses.replace(POSTERIOR, gusts=config.gusts), rec, env['model'],
+    em.Job(POSTERIOR.replace(gusts=config.simulation.gusts), rec, env['model'],
            os.path.join(env['root'], f'post_many{i}'))
     for i, (config, rec) in enumerate(env['recs'])
   ]  # fmt: skip

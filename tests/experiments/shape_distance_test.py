@@ -52,7 +52,7 @@ def env(tmp_path_factory):
 
 
 def _scores(env, distance: str, u, frames: bool = False):
-  config = dataclasses.replace(CONFIG, distance=distance)
+  config = CONFIG.replace(distance=distance)
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
   gust, noise = obj_lib.candidate_keys(config, 0, len(u))
   out = obj_lib.Objective(problem)(
@@ -64,7 +64,7 @@ def _scores(env, distance: str, u, frames: bool = False):
 
 
 def test_shape_distance_is_the_summaries_squared_distance(env):
-  space = physsim.search_space(CONFIG.material)
+  space = physsim.search_space(CONFIG.simulation.material)
   truth_u = np.asarray(physsim.to_unit(physsim.params.make(**TRUTH), space))
   truth_u = truth_u.reshape(1, 3)
   far = np.array([[0.0, -0.8, 0.5]])
@@ -98,7 +98,7 @@ def test_energy_plus_shape_is_the_geometric_mean(env):
 
 def test_shape_needs_the_recordings_camera_pose(env):
   rec = env['rec']._replace(pose=None)
-  config = dataclasses.replace(CONFIG, distance='energy+shape')
+  config = CONFIG.replace(distance='energy+shape')
   with pytest.raises(ValueError, match='seq: distance .energy.shape. .*camera pose'):
     obj_lib.make_problem(config, env['net'], rec)
   obj_lib.make_problem(CONFIG, env['net'], rec)  # the PSD alone needs none
@@ -110,11 +110,11 @@ def test_a_misplaced_camera_renders_from_its_error(env):
   # key) and lifted with the given pose: the discrepancy must be that of the
   # frames rendered here from the same moved cameras, summarised by the
   # float64 reference. The errors must matter: several cm, not mm.
-  config = dataclasses.replace(
-    CONFIG, distance='shape', camera_sd_m=_CAMERA_SD_M, camera_sd_deg=_CAMERA_SD_DEG
+  config = CONFIG.replace(
+    distance='shape', camera_sd_m=_CAMERA_SD_M, camera_sd_deg=_CAMERA_SD_DEG
   )
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
-  space = physsim.search_space(CONFIG.material)
+  space = physsim.search_space(CONFIG.simulation.material)
   u = np.repeat(np.asarray(physsim.to_unit(physsim.params.make(**TRUTH), space)), 4, 0)
   gust, _ = obj_lib.candidate_keys(CONFIG, 0, 4)  # common: the recording's gusts
   noise = jax.random.split(jax.random.key(11), 4)
@@ -122,7 +122,7 @@ def test_a_misplaced_camera_renders_from_its_error(env):
     obj_lib.stack([problem.data]), u.reshape(1, 4, 3), gust[None], noise[None],
     positions=True,
   )  # fmt: skip
-  mesh = physsim.square(CONFIG.cloth_resolution)
+  mesh = physsim.square(CONFIG.simulation.cloth_resolution)
   pins = mesh.vertices[mesh.pinned].mean(0)
   rec_summary = reference_summary(env['rec'].depth, problem.intr, env['rec'].pose)
   want = []
@@ -143,7 +143,7 @@ def test_the_shape_needs_no_network(env):
   # The same candidates and keys scored with the hand-made network and with
   # none: the shape never embeds, so discrepancies and residuals are equal.
   u = np.array([[0.0, 0.0, 0.0], [0.5, -0.6, 0.7]])
-  config = dataclasses.replace(CONFIG, distance='shape')
+  config = CONFIG.replace(distance='shape')
   gust, noise = obj_lib.candidate_keys(config, 0, len(u))
   none = embedding.no_network(env['rec'].depth.shape[1:])
   assert none.network is None and none.image_size == env['net'].image_size
@@ -162,9 +162,7 @@ def test_the_shape_needs_no_network(env):
     with pytest.raises(
       ValueError, match=f"seq: distance '{re.escape(distance)}' embeds"
     ):
-      obj_lib.make_problem(
-        dataclasses.replace(CONFIG, distance=distance), none, env['rec']
-      )
+      obj_lib.make_problem(CONFIG.replace(distance=distance), none, env['rec'])
   with pytest.raises(ValueError, match=r'image size \(0, 32\)'):
     embedding.no_network((0, 32))
   # Nothing about a network is claimed: no recipe, accuracy or retrieval.
@@ -174,9 +172,7 @@ def test_the_shape_needs_no_network(env):
 
 
 def test_the_command_line_asks_for_a_network_only_where_one_is_used(env):
-  shape = estimate_cli.Args(
-    search=dataclasses.replace(CONFIG, distance='shape'), image_size=48
-  )
+  shape = estimate_cli.Args(search=CONFIG.replace(distance='shape'), image_size=48)
   assert estimate_cli.network(shape).embedding.image_size == (48, 48)
   with pytest.raises(
     ValueError, match='missing --model: --distance=energy embeds frames'
@@ -190,26 +186,27 @@ def test_the_command_line_asks_for_a_network_only_where_one_is_used(env):
 
 def test_the_synthetic_likelihood_needs_the_shape_distance():
   with pytest.raises(ValueError, match="synthetic.*distance 'shape', got 'energy'"):
-    dataclasses.replace(CONFIG, likelihood='synthetic').check()
-  dataclasses.replace(CONFIG, likelihood='synthetic', distance='shape').check()
+    CONFIG.replace(likelihood='synthetic').check()
+  CONFIG.replace(likelihood='synthetic', distance='shape').check()
 
 
 def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   # The whole estimate, told the shape summaries' residuals: the saved search
   # holds one residual pair per simulation (the objective's), its posterior
   # narrows the wind around the truth, and the result names the scatter.
-  config = dataclasses.replace(
-    obj_lib.PRESETS['smoke'], backend='c', distance='shape', likelihood='synthetic',
-    sharpness=1.0,
+  config = obj_lib.PRESETS['smoke'].replace(
+    backend='c', distance='shape', likelihood='synthetic', sharpness=1.0,
   )  # fmt: skip
-  config = dataclasses.replace(config, cloth_resolution=CONFIG.cloth_resolution,
-                               frames=CONFIG.frames, warmup=CONFIG.warmup)  # fmt: skip
+  sim = CONFIG.simulation
+  config = config.replace(
+    cloth_resolution=sim.cloth_resolution, frames=sim.frames, warmup=sim.warmup
+  )
   workdir = str(tmp_path / 'est')
   # No network ('': the shape needs none); rescored below with the hand-made one.
   out = search.estimate(config, env['rec'], '', workdir, progress=False)
   assert json.load(open(os.path.join(workdir, search.RUN_FILE)))['model_dir'] == ''
   z = np.load(os.path.join(workdir, search.POSTERIOR_STATE))
-  n = config.n_init + config.q * config.max_iter
+  n = config.search.n_init + config.search.q * config.search.max_iter
   assert z['Y'].shape == (n, 2) and np.isfinite(z['Y']).all()
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
   again = search.score(problem, z['X'][:1])  # the first simulation, rescored
@@ -227,18 +224,16 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
 def test_camera_error_out_of_range_is_refused():
   for bad in (dict(camera_sd_m=0.5), dict(camera_sd_deg=-1.0)):
     with pytest.raises(ValueError, match='camera_sd_m <= 0.2 .metres.'):
-      dataclasses.replace(CONFIG, **bad).check()
+      CONFIG.replace(**bad).check()
 
 
 def test_estimate_warns_when_a_shape_distance_trusts_an_aligned_camera():
   base = obj_lib.PRESETS['smoke']
-  shape = dataclasses.replace(base, distance='shape')
+  shape = base.replace(distance='shape')
   warn = report.shape_camera_warning
   assert 'camera_sd_m=0.02' in warn(shape, aligned=True)
-  assert 'energy+shape' in warn(
-    dataclasses.replace(shape, distance='energy+shape'), True
-  )
+  assert 'energy+shape' in warn(shape.replace(distance='energy+shape'), True)
   assert warn(shape, aligned=False) is None  # a simulated recording's exact camera
   assert warn(base, aligned=True) is None  # the PSD does not read the world's frame
-  assert warn(dataclasses.replace(shape, camera_sd_m=0.02), aligned=True) is None
-  assert warn(dataclasses.replace(shape, camera_sd_deg=3.0), aligned=True) is None
+  assert warn(shape.replace(camera_sd_m=0.02), aligned=True) is None
+  assert warn(shape.replace(camera_sd_deg=3.0), aligned=True) is None

@@ -213,9 +213,7 @@ def test_batched_runs_real_estimates(tmp_path):
   bad = dict(rec, seq_id='0001', path=str(tmp_path / 'missing'))
   from experiments.pipeline import objective
 
-  config = tables.Config(
-    estimate=dataclasses.replace(objective.PRESETS['smoke'], backend='c')
-  )
+  config = tables.Config(estimate=objective.PRESETS['smoke'].replace(backend='c'))
   out = tables._batched(
     [(rec, 'physnet_depth'), (bad, 'physnet_depth')], models, str(tmp_path / 'w'),
     config,
@@ -236,7 +234,7 @@ def test_the_shape_method_estimates_without_a_network(tmp_path):
          'path': seq}  # fmt: skip
   config = tables.Config(
     methods=('shape',), shape_image_size=fx.SIZE,
-    estimate=dataclasses.replace(objective.PRESETS['smoke'], backend='c'),
+    estimate=objective.PRESETS['smoke'].replace(backend='c'),
   )  # fmt: skip
   missing = str(tmp_path / 'no_models')
   got = tables._batched([(rec, 'shape')], missing, str(tmp_path / 'w'), config)
@@ -266,7 +264,7 @@ def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
   rec = {'set': 'fabrics', 'fabric': fx.MATERIAL, 'garment': '', 'seq_id': '0003',
          'path': seq}  # fmt: skip
   config = tables.Config(
-    estimate=dataclasses.replace(objective.PRESETS['smoke'], backend='c'),
+    estimate=objective.PRESETS['smoke'].replace(backend='c'),
     wind_reading_sd=0.02, reading_seed=5,
   )  # fmt: skip
   out = tables._batched([(rec, 'physnet_depth')], models, str(tmp_path / 'w'), config)
@@ -279,7 +277,7 @@ def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
   # than one cell of the smoke grid's wind axis plus the reading's +-1.645 sd
   # (the video alone leaves most of the 1-6 m/s range).
   lo, hi = got['estimate']['wind_speed']['interval_90']
-  cell = 5.0 / config.estimate.posterior_grid[1]
+  cell = 5.0 / config.estimate.search.posterior_grid[1]
   assert lo <= want.wind_speed <= hi
   assert hi - lo < cell + 2 * 1.645 * want.wind_speed_sd + 1e-9
   md = tables.write_report({tables._key(rec, 'physnet_depth'): got}, config,

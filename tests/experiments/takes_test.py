@@ -93,7 +93,7 @@ def test_estimate_takes_a_protocol_or_recordings_not_both(folder):
     estimate.recording_takes(estimate.Args(recording=('a',), cloth_sizes=(0.3,)))
   (take,) = estimate.recording_takes(estimate.Args(protocol=path))
   ik, config = estimate.take_settings(estimate.Args(), take._replace(cloth_size=0.3))
-  assert config.cloth_size == 0.3 and ik == estimate.Args().intake
+  assert config.simulation.cloth_size == 0.3 and ik == estimate.Args().intake
   ik, config = estimate.take_settings(
     estimate.Args(), take._replace(world_up='-y', wind=(2.0, 0.1))
   )

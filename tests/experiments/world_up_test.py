@@ -20,7 +20,7 @@ from experiments.pipeline import intake, objective
 from physsim import alignment, camera, camera_files, scene
 from tests.physsim.alignment_test import _INTR, _PINS_WORLD, _pose, _scene_depth
 
-_CONFIG = dataclasses.replace(objective.PRESETS['smoke'], cloth_resolution=10)
+_CONFIG = objective.PRESETS['smoke'].replace(cloth_resolution=10)
 _SWING = 35.0
 _ANGLE = np.deg2rad(30.0)
 # The rig's world: z up, turned 30 degrees about z and shifted (metres).
@@ -120,7 +120,7 @@ def test_the_intake_takes_up_from_the_rig_not_the_swung_cloth(recording):
 
   def take(camera_json, **kw):
     config = intake.IntakeConfig(min_overlap=0.3, **kw)
-    return intake.take_in(path, config, camera_json, _CONFIG)
+    return intake.take_in(path, config, camera_json, _CONFIG.simulation)
 
   guessed = take(plain)
   rigged = take(plain, world_up='z')
@@ -151,9 +151,9 @@ def test_the_alignment_error_follows_where_up_came_from(recording):
   path, cam, down, pose, root = recording
   plain = _camera(root, cam, 'plain')
   config = intake.IntakeConfig(min_overlap=0.3)
-  guessed = intake.take_in(path, config, plain, _CONFIG)
+  guessed = intake.take_in(path, config, plain, _CONFIG.simulation)
   rigged = intake.take_in(
-    path, dataclasses.replace(config, world_up='z'), plain, _CONFIG
+    path, dataclasses.replace(config, world_up='z'), plain, _CONFIG.simulation
   )
   assert guessed.up_is_guess and not rigged.up_is_guess
   assert guessed.alignment_sd[1] == intake.UP_SD_DEG['cloth plane'] == 20.0
@@ -166,9 +166,12 @@ def test_the_alignment_error_follows_where_up_came_from(recording):
   # The estimate carries it unless the user gave a camera error or said no.
   args = estimate.Args(recording=(path,), search=_CONFIG)
   carried, line = estimate.with_alignment_error(args, _CONFIG, [guessed, None])
-  assert (carried.camera_sd_m, carried.camera_sd_deg) == guessed.alignment_sd
+  assert (
+    carried.scoring.camera_sd_m,
+    carried.scoring.camera_sd_deg,
+  ) == guessed.alignment_sd
   assert 'alignment' in line and '20 degrees' in line
-  mine = dataclasses.replace(_CONFIG, camera_sd_m=0.05)
+  mine = _CONFIG.replace(camera_sd_m=0.05)
   assert estimate.with_alignment_error(args, mine, [guessed]) == (mine, None)
   off = dataclasses.replace(args, alignment_sd=False)
   assert estimate.with_alignment_error(off, _CONFIG, [guessed]) == (_CONFIG, None)
@@ -237,16 +240,18 @@ def test_a_guessed_up_is_refused_with_the_flags_that_fix_it(lifted, tmp_path):
   frames, cam, _, _, pose = lifted
   args = estimate.Args(
     recording=(frames,), camera_json=cam, workdir=str(tmp_path / 'w'),
-    search=dataclasses.replace(_CONFIG, distance='shape', likelihood='gibbs'),
+    search=_CONFIG.replace(distance='shape', likelihood='gibbs'),
   )  # fmt: skip
   with pytest.raises(
     ValueError, match=r'depth: up is a guess .*--world_up=AXIS.*--allow_guessed_up'
   ):
     estimate.main(args)
-  ik = intake.take_in(frames, intake.IntakeConfig(world_up='z'), cam, _CONFIG)
+  ik = intake.take_in(
+    frames, intake.IntakeConfig(world_up='z'), cam, _CONFIG.simulation
+  )
   assert ik.up_from == 'world_up' and _rotation_error_deg(ik.pose, pose) < 2.0
   np.testing.assert_allclose(ik.pose.position, pose.position, atol=0.05)
-  guessed = intake.take_in(frames, intake.IntakeConfig(), cam, _CONFIG)
+  guessed = intake.take_in(frames, intake.IntakeConfig(), cam, _CONFIG.simulation)
   assert guessed.up_is_guess
   # Issue 40's failure, now refused: the camera placed over a metre too high.
   assert np.asarray(guessed.pose.position)[2] - pose.position[2] > 1.0

@@ -6,8 +6,6 @@ and taken in as any other recording."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -23,7 +21,7 @@ from tests.physsim.alignment_test import (  # noqa: E402
   _scene_depth,
 )
 
-_CONFIG = dataclasses.replace(objective.PRESETS['smoke'], cloth_resolution=10)
+_CONFIG = objective.PRESETS['smoke'].replace(cloth_resolution=10)
 _CAM_FRAME = 'camera_depth_optical_frame'
 # The IMU's axes: turned 90 degrees about the camera's x and 20 about its z.
 _A, _B = np.deg2rad(90.0), np.deg2rad(20.0)
@@ -173,7 +171,9 @@ def test_a_ros2_bag_gives_frames_camera_and_gravity(tmp_path):
   down = np.asarray(pose.rotation, np.float64).T @ [0, 0, -1.0]
   np.testing.assert_allclose(rec.gravity, down, atol=1e-6)
   # The intake takes up from the IMU, not the swung cloth's plane.
-  ik = intake.take_in(path, intake.IntakeConfig(min_overlap=0.3), '', _CONFIG)
+  ik = intake.take_in(
+    path, intake.IntakeConfig(min_overlap=0.3), '', _CONFIG.simulation
+  )
   assert ik.up_from == 'gravity' and ik.camera_form.startswith('ROS CameraInfo')
   assert _rotation_error_deg(ik.pose, pose) < 2.0
 
@@ -207,4 +207,4 @@ def test_ambiguous_topics_are_listed_and_bad_bags_named(tmp_path):
   with pytest.raises(ValueError, match='junk.bag: not a readable ROS bag'):
     bags.read_bag(str(junk))
   with pytest.raises(ValueError, match='junk.bag: not a readable ROS bag'):
-    intake.take_in(str(junk), intake.IntakeConfig(), '', _CONFIG)
+    intake.take_in(str(junk), intake.IntakeConfig(), '', _CONFIG.simulation)

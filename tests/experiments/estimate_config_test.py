@@ -1,0 +1,182 @@
+"""EstimateConfig's sections: the same flags, flat replace, and the flat files.
+
+The config was one flat dataclass until issue 42; its command line, its
+``replace`` and ``preset`` keywords and the config that run.json, estimate.json
+and calibration files hold keep the flat names.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import types
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments import estimate
+from experiments.pipeline import cli, files, objective, search
+from experiments.pipeline.posterior import Measured
+from experiments.studies import tables
+
+# The flags of the flat EstimateConfig before the split (``--fps`` of the
+# config was always ``--sim_fps``).
+FLAT_FLAGS = [
+  'area_weight', 'area_weight_sd', 'backend', 'calibration', 'camera_sd_deg',
+  'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
+  'garment', 'garment_spacing', 'gusts', 'likelihood', 'material', 'max_iter',
+  'min_iter', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
+  'sensor_noise', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
+  'wind_speed', 'wind_speed_sd', 'workers',
+]  # fmt: skip
+# experiments.estimate's flags before the split.
+ESTIMATE_FLAGS = [
+  'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
+  'area_weight', 'area_weight_sd', 'backend', 'calibration', 'camera_json',
+  'camera_sd_deg', 'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size',
+  'cloth_sizes', 'depth_range', 'depth_scale', 'depth_topic', 'distance', 'fps',
+  'frame_glob', 'frames', 'garment', 'garment_spacing', 'gusts', 'image_size',
+  'imu_topic', 'info_topic', 'intake_only', 'likelihood', 'mask', 'material',
+  'max_iter', 'min_iter', 'min_overlap', 'model', 'n_init', 'pins', 'plane_tol',
+  'point', 'posterior_grid', 'protocol', 'q', 'recording', 'remove_planes',
+  'replicates', 'seed', 'sensor_noise', 'sharpness', 'sim_fps', 'start',
+  'stop_rel_change', 'stop_window', 'up', 'warmup', 'wind_speed', 'wind_speed_sd',
+  'wind_speed_sds', 'wind_speeds', 'wind_toward_camera', 'workdir', 'workers',
+  'world_up',
+]  # fmt: skip
+# ``dataclasses.asdict`` of the flat smoke preset: the config of the run.json
+# and estimate.json files written before the split.
+OLD_SMOKE = {
+  'point': 'bayes', 'material': 'gray_interlock', 'garment': '',
+  'cloth_resolution': 10, 'cloth_size': 1.0, 'garment_spacing': 0.04, 'frames': 16,
+  'fps': 20.0, 'warmup': 0.5, 'gusts': 0.2, 'cameras': 2, 'q': 8, 'n_init': 16,
+  'max_iter': 3, 'stop_rel_change': 0.05, 'stop_window': 2, 'min_iter': 2,
+  'posterior_grid': [8, 32, 16], 'likelihood': 'gibbs', 'sharpness': 0.5,
+  'replicates': 1, 'distance': 'energy', 'camera_sd_m': 0.0, 'camera_sd_deg': 0.0,
+  'backend': 'auto', 'workers': 0, 'sensor_noise': True, 'seed': 0,
+  'measured': {
+    'wind_speed': 0.0, 'wind_speed_sd': 0.0, 'area_weight': 0.0, 'area_weight_sd': 0.0
+  },
+  'calibration': '',
+}  # fmt: skip
+SMOKE = objective.PRESETS['smoke']
+
+
+def test_the_flags_are_the_flat_configs():
+  assert (
+    sorted(leaf.flag for leaf in cli.leaves(objective.EstimateConfig)) == FLAT_FLAGS
+  )
+  assert sorted(leaf.flag for leaf in cli.leaves(estimate.Args)) == ESTIMATE_FLAGS
+  # every flag sets its own field, and shows the preset's value
+  args = cli.parse(
+    estimate.Args, estimate.PRESETS,
+    ['x', '--preset=demo', '--q=5', '--sim_fps=12', '--material=black_denim',
+     '--wind_speed=3', '--wind_speed_sd=0.1', '--workers=2', '--sharpness=0.7'],
+  )  # fmt: skip
+  want = objective.PRESETS['demo'].replace(
+    q=5, fps=12.0, material='black_denim', wind_speed=3.0, wind_speed_sd=0.1,
+    workers=2, sharpness=0.7,
+  )  # fmt: skip
+  assert args.search == want
+
+
+def test_replace_routes_flat_names_to_their_sections():
+  c = SMOKE.replace(q=5, material='black_denim', fps=12.0, workers=2, seed=3)
+  assert (c.search.q, c.simulation.material, c.simulation.fps) == (
+    5,
+    'black_denim',
+    12.0,
+  )
+  assert (c.hardware.workers, c.seed) == (2, 3)
+  assert c.scoring == SMOKE.scoring and c.measured == SMOKE.measured
+  m = SMOKE.replace(wind_speed=3.0, wind_speed_sd=0.1).measured
+  assert m == Measured(wind_speed=3.0, wind_speed_sd=0.1)
+  # a whole section, and a flat name on top of the section given with it
+  s = SMOKE.replace(search=objective.Search(q=3), replicates=0)
+  assert s.search == objective.Search(q=3, replicates=0)
+  given = SMOKE.replace(measured=Measured(area_weight=0.2, area_weight_sd=0.01))
+  assert given.measured.area_weight == 0.2
+  assert objective.EstimateConfig.preset('demo', q=5).search.q == 5
+  assert SMOKE.replace() == SMOKE
+
+
+def test_replace_refuses_an_unknown_name():
+  with pytest.raises(ValueError, match="no setting 'qq'"):
+    SMOKE.replace(qq=3)
+  with pytest.raises(ValueError, match="no setting 'sim_fps'"):
+    SMOKE.replace(sim_fps=12.0)  # the flag's name, not the field's
+  with pytest.raises(ValueError, match="no setting 'bogus'"):
+    objective.EstimateConfig.preset('smoke', bogus=1)
+
+
+def test_the_flat_form_is_the_old_files():
+  for name, config in objective.PRESETS.items():
+    flat = json.loads(json.dumps(config.flat()))
+    assert sorted(flat) == sorted(OLD_SMOKE), name
+    assert objective.EstimateConfig.from_flat(flat) == config, name
+  assert json.loads(json.dumps(SMOKE.flat())) == OLD_SMOKE
+  assert objective.EstimateConfig.from_flat(OLD_SMOKE) == SMOKE
+  # a file from before cloth_size and the camera's error were settings
+  older = {
+    k: v for k, v in OLD_SMOKE.items()
+    if k not in ('cloth_size', 'camera_sd_m', 'camera_sd_deg')
+  }  # fmt: skip
+  assert objective.EstimateConfig.from_flat(older) == SMOKE
+  with pytest.raises(ValueError, match="no setting 'nonsense'"):
+    objective.EstimateConfig.from_flat({**OLD_SMOKE, 'nonsense': 1})
+
+
+def test_a_script_config_reads_its_nested_and_its_flat_estimate(tmp_path):
+  # files.resume compares a study's saved config: today's (nested, as
+  # dataclasses.asdict writes it) and one from before the split (flat).
+  config = tables.Config(estimate=SMOKE.replace(backend='c', q=5))
+  path = str(tmp_path / 'result.json')
+  files.write_json(path, {'config': dataclasses.asdict(config), 'done': 1})
+  assert files.resume(path, config)['done'] == 1
+  old = objective.record(config)  # what the study's files hold of it
+  assert old == {**dataclasses.asdict(config), 'estimate': config.estimate.flat()}
+  files.write_json(path, {'config': old, 'done': 2})
+  assert files.resume(path, config)['done'] == 2
+  assert files.resume(path, dataclasses.replace(config, estimate=SMOKE)) == {}
+
+
+def test_check_numbers_names_the_flag_in_every_section():
+  for name, flag in (
+    ('fps', 'sim_fps'), ('sharpness', 'sharpness'), ('stop_rel_change', 'stop_rel_change'),
+    ('wind_speed', 'wind_speed'), ('camera_sd_m', 'camera_sd_m'),
+  ):  # fmt: skip
+    with pytest.raises(ValueError, match=f'--{flag}=nan'):
+      SMOKE.replace(**{name: float('nan')}).check()
+  with pytest.raises(ValueError, match='--posterior_grid'):
+    SMOKE.replace(posterior_grid=(8, 2000, 16)).check()
+
+
+def _fake_problem():
+  """What ``search.check_run`` reads of a problem and its recording."""
+  pose = physsim.Pose(rotation=np.eye(3)[None], position=np.zeros((1, 3)))
+  problem = types.SimpleNamespace(
+    data=types.SimpleNamespace(poses=pose),
+    intr=physsim.Intrinsics(width=8, height=8),
+    net=types.SimpleNamespace(modality='depth'),
+  )
+  rec = types.SimpleNamespace(depth=np.ones((4, 8, 8), np.float32), rgb=None)
+  return problem, rec
+
+
+def test_an_old_workdirs_run_resumes(tmp_path):
+  problem, rec = _fake_problem()
+  workdir = str(tmp_path)
+  search.check_run(search.Job(SMOKE, rec, '', workdir), problem)
+  path = os.path.join(workdir, search.RUN_FILE)
+  with open(path) as f:
+    run = json.load(f)
+  resumable = ('workers', 'calibration')
+  assert run['config'] == {k: v for k, v in OLD_SMOKE.items() if k not in resumable}
+  # run.json as the flat config wrote it: the same run
+  run['config'] = {k: v for k, v in OLD_SMOKE.items() if k not in resumable}
+  files.write_json(path, run)
+  search.check_run(search.Job(SMOKE.replace(workers=3), rec, '', workdir), problem)
+  with pytest.raises(ValueError, match=r'config\.gusts'):
+    search.check_run(search.Job(SMOKE.replace(gusts=0.3), rec, '', workdir), problem)
