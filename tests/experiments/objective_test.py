@@ -10,7 +10,15 @@ import jax
 import numpy as np
 import pytest
 
+from experiments.pipeline import embedding
 from experiments.pipeline import objective as obj
+from tests.experiments.estimate_fixtures import (
+  CONFIG,
+  TRUTH,
+  load,
+  write_hand_made_model,
+  write_recording,
+)
 
 SMOKE = obj.PRESETS['smoke']
 
@@ -69,3 +77,18 @@ def test_presets_are_reachable_from_the_library():
     ValueError, match=r"no estimate preset 'tiny': one of \['default'"
   ):
     obj.EstimateConfig.preset('tiny')
+
+
+@pytest.mark.parametrize('distance', ['energy', 'shape'])
+def test_an_objective_is_built_from_each_section_of_its_config(tmp_path, distance):
+  """Objective.__init__ reads the simulation, scoring and hardware sections
+  (a wrong name there fails every estimate, and only the slow tier runs
+  one): built here without running, from a tiny recording."""
+  config = CONFIG.replace(distance=distance, backend='c', workers=1)
+  net = embedding.load_embedding(write_hand_made_model(str(tmp_path / 'model')))
+  problem = obj.make_problem(config, net, load(write_recording(str(tmp_path), TRUTH)))
+  built = obj.Objective(problem)
+  n = config.simulation.cloth_resolution
+  assert built.mesh.vertices.shape == (n * n, 3)
+  assert built.n_frames == problem.n_frames <= config.simulation.frames
+  assert built._distance == distance and built._camera_sd == (0.0, 0.0)
