@@ -2,7 +2,10 @@
 
   recording   Recording, load_recording (frames, camera, ground truth)
   embedding   a trained network as the estimate uses it; network inputs
-  objective   EstimateConfig, Problem, the fused jitted simulate-render-score
+  simulation  the settings' Simulation section and the cloth it makes (mesh, step, pins)
+  objective   EstimateConfig (in sections), Problem, the fused jitted simulate-render-score
+  intake      a user's depth video and camera file into a recording; setup: what an
+              estimate is built from, resolved once; takes: a protocol's recordings
   search      estimate / estimate_many / estimate_joint over bo's searches
   posterior   priors (measured wind or area weight), summaries, joints, figure
   report      errors, tables, trace and montage figures

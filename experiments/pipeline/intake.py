@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from experiments.pipeline import cli, files, objective
+from experiments.pipeline import cli, files, simulation
 from experiments.pipeline import recording as recording_lib
 from physsim import alignment, bags, camera_files, dataset, scene, video
 
@@ -280,10 +280,10 @@ def _undistort(depth: np.ndarray, cam: camera_files.CameraFile) -> np.ndarray:
   return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])
 
 
-def simulated_pins(sim: objective.Simulation) -> tuple[np.ndarray, physsim.Mesh]:
+def simulated_pins(sim: simulation.Simulation) -> tuple[np.ndarray, physsim.Mesh]:
   """((2, 3) the simulated cloth's outer pins, left first; its rest mesh) for
   an estimate's ``Simulation``."""
-  mesh = objective.mesh(sim)
+  mesh = simulation.mesh(sim)
   return outer_pins(mesh), mesh
 
 
@@ -315,7 +315,7 @@ def silhouettes(mesh, pins_world, intr, pose, degs=SWINGS_DEG) -> np.ndarray:
   return np.asarray(out)[0, 0] > 0
 
 
-def _passthrough(path: str, sim: objective.Simulation) -> Intake:
+def _passthrough(path: str, sim: simulation.Simulation) -> Intake:
   first = video.frame_files(os.path.join(path, 'cam0'))
   shape = cv2.imread(os.path.join(path, 'cam0', first[0]), cv2.IMREAD_UNCHANGED).shape
   rec = recording_lib.load_recording(
@@ -336,7 +336,7 @@ def take_in(
   path: str,
   config: IntakeConfig,
   camera_json: str,
-  sim: objective.Simulation,
+  sim: simulation.Simulation,
   *,
   workdir: str | None = None,
 ) -> Intake:
@@ -510,7 +510,7 @@ def _check_size(path: str, w: int, h: int, cam) -> None:
 
 
 def _align(
-  intake: Intake, cam, config: IntakeConfig, sim: objective.Simulation, planes, workdir
+  intake: Intake, cam, config: IntakeConfig, sim: simulation.Simulation, planes, workdir
 ) -> Intake:
   pins_world, mesh = simulated_pins(sim)
   intr = intake.intrinsics
@@ -765,13 +765,13 @@ def check_workdir(workdir: str, path: str, camera_json: str, run_file: str) -> N
 
 
 def write(
-  intake: Intake, workdir: str, sim: objective.Simulation, *, frames: bool = True
+  intake: Intake, workdir: str, sim: simulation.Simulation, *, frames: bool = True
 ) -> None:
   """Saves ``intake.json``, ``overlay.png`` and (``frames``) the cleaned
   frames as 16-bit mm PNGs in ``intake/``, each under its final name only
   when complete (``sim``: the estimate's ``Simulation``, for the simulated cloth)."""
   os.makedirs(workdir, exist_ok=True)
-  img = overlay(intake, objective.mesh(sim))
+  img = overlay(intake, simulation.mesh(sim))
   files.write_atomic(
     os.path.join(workdir, OVERLAY_FILE), lambda p: dataset.imwrite(p, img)
   )

@@ -51,6 +51,13 @@ from experiments.pipeline import cli, embedding
 from experiments.pipeline.posterior import Measured
 from experiments.pipeline.recording import Recording
 
+# The simulation section and its cloth, re-exported (objective.mesh, ...).
+from experiments.pipeline.simulation import Simulation as Simulation
+from experiments.pipeline.simulation import cloth as cloth
+from experiments.pipeline.simulation import mesh as mesh
+from experiments.pipeline.simulation import pin_centre as pin_centre
+from experiments.pipeline.simulation import sim_config as sim_config
+
 BACKENDS = physsim.BACKENDS
 DISTANCES = ('energy', 'centroid', 'shape', 'energy+shape')
 # Distances that compare the sheet's mean shape (physsim.shape), and those
@@ -59,46 +66,6 @@ SHAPE_DISTANCES = ('shape', 'energy+shape')
 EMBEDDING_DISTANCES = ('energy', 'centroid', 'energy+shape')
 POINTS = ('median', 'bayes', 'argmin')
 LIKELIHOODS = bo.posterior.LIKELIHOODS
-
-
-@dataclasses.dataclass(frozen=True)
-class Simulation:
-  """What is simulated and rendered for each candidate.
-
-  Attributes:
-    material: paper fabric name (physsim.FABRICS): the search box and the
-      bending reference.
-    garment: '' for the square cloth, else a physsim.GARMENTS name.
-    cloth_resolution: square cloth vertices per side.
-    cloth_size: the square cloth's side, metres (1: the paper's sheet; a
-      small swatch shows bending); the simulator's step shrinks with the
-      mesh spacing (physsim.stable_timestep).
-    garment_spacing: garment grid spacing, metres.
-    frames: most frames compared (at fps); a longer recording is cut, a
-      shorter one sets how many frames are simulated.
-    fps: frame rate of the comparison, Hz: simulations render at it and the
-      recording is resampled to it (flag ``--sim_fps``; estimate's ``--fps`` is the
-      recording's own rate).
-    warmup: simulated seconds before the first frame.
-    gusts: RMS relative gust intensity of the simulated wind.
-    cameras: training-like cameras to render from when the recording's camera
-      is unknown (their embeddings are pooled).
-    sensor_noise: pass candidates' rendered depth through the depth-sensor
-      model (physsim.sensor) before embedding, as the recording went through
-      a real sensor.
-  """
-
-  material: str = 'gray_interlock'
-  garment: str = ''
-  cloth_resolution: int = 25
-  cloth_size: float = 1.0
-  garment_spacing: float = 0.04
-  frames: int = 60
-  fps: float = cli.renamed(20.0, 'sim_fps')
-  warmup: float = 1.0
-  gusts: float = 0.2
-  cameras: int = 2
-  sensor_noise: bool = True
 
 
 @dataclasses.dataclass(frozen=True)
@@ -457,33 +424,6 @@ PRESETS = {
     posterior_grid=(8, 32, 16),
   ),
 }
-
-
-def mesh(sim: Simulation) -> physsim.Mesh:
-  """The rest mesh an estimate simulates: the square or the garment."""
-  if sim.garment:
-    return physsim.garment(sim.garment, sim.garment_spacing)
-  return physsim.square(sim.cloth_resolution, sim.cloth_size)
-
-
-def sim_config(sim: Simulation) -> physsim.SimConfig:
-  """The simulator's settings of an estimate's mesh: the default step, or a
-  shorter one that a fine mesh needs to stay stable (``stable_timestep``)."""
-  return physsim.config_for_mesh(mesh(sim), sim.fps)
-
-
-def pin_centre(sim: Simulation) -> np.ndarray:
-  """(3,) the midpoint of the estimate's pinned vertices: where a camera's
-  placement error turns about (``Scoring.camera_sd_deg``)."""
-  m = mesh(sim)
-  return m.vertices[m.pinned].mean(0)
-
-
-def cloth(sim: Simulation) -> physsim.ClothModel:
-  """The compiled cloth of an estimate's mesh. Worlds name their fabric's
-  bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
-  model and its compiles."""
-  return physsim.build(mesh(sim), 'gray_interlock', sim_config(sim))
 
 
 class ProblemData(NamedTuple):

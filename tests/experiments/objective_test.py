@@ -54,18 +54,6 @@ def test_seeds_change_the_keys():
   )
 
 
-def test_the_mesh_and_its_pin_centre():
-  config = SMOKE.replace(garment='', cloth_resolution=9)
-  m = obj.mesh(config.simulation)
-  assert len(m.vertices) == 81
-  pins = m.vertices[m.pinned]
-  np.testing.assert_allclose(
-    obj.pin_centre(config.simulation), pins.mean(0), atol=1e-12
-  )
-  # The two pinned corners share a height: the centre is on the top edge.
-  assert obj.pin_centre(config.simulation)[2] == np.max(m.vertices[:, 2])
-
-
 def test_presets_are_reachable_from_the_library():
   demo = obj.EstimateConfig.preset('demo', material='black_denim')
   assert demo.simulation.material == 'black_denim'

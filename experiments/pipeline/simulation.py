@@ -1,0 +1,88 @@
+"""What an estimate simulates: the ``Simulation`` section of its settings and
+the cloth it makes (the rest mesh, the step that mesh needs, its pins).
+
+A module of its own so that what only needs the cloth (the intake fitting a
+recording's pins to the simulated ones) does not import the objective:
+
+  from experiments.pipeline import simulation
+  sim = simulation.Simulation(cloth_size=0.2)
+  simulation.mesh(sim).vertices.shape   # (625, 3)
+
+``objective`` re-exports these names (``objective.Simulation``, ``objective.mesh``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+import physsim
+from experiments.pipeline import cli
+
+
+@dataclasses.dataclass(frozen=True)
+class Simulation:
+  """What is simulated and rendered for each candidate.
+
+  Attributes:
+    material: paper fabric name (physsim.FABRICS): the search box and the
+      bending reference.
+    garment: '' for the square cloth, else a physsim.GARMENTS name.
+    cloth_resolution: square cloth vertices per side.
+    cloth_size: the square cloth's side, metres (1: the paper's sheet; a
+      small swatch shows bending); the simulator's step shrinks with the
+      mesh spacing (physsim.stable_timestep).
+    garment_spacing: garment grid spacing, metres.
+    frames: most frames compared (at fps); a longer recording is cut, a
+      shorter one sets how many frames are simulated.
+    fps: frame rate of the comparison, Hz: simulations render at it and the
+      recording is resampled to it (flag ``--sim_fps``; estimate's ``--fps`` is the
+      recording's own rate).
+    warmup: simulated seconds before the first frame.
+    gusts: RMS relative gust intensity of the simulated wind.
+    cameras: training-like cameras to render from when the recording's camera
+      is unknown (their embeddings are pooled).
+    sensor_noise: pass candidates' rendered depth through the depth-sensor
+      model (physsim.sensor) before embedding, as the recording went through
+      a real sensor.
+  """
+
+  material: str = 'gray_interlock'
+  garment: str = ''
+  cloth_resolution: int = 25
+  cloth_size: float = 1.0
+  garment_spacing: float = 0.04
+  frames: int = 60
+  fps: float = cli.renamed(20.0, 'sim_fps')
+  warmup: float = 1.0
+  gusts: float = 0.2
+  cameras: int = 2
+  sensor_noise: bool = True
+
+
+def mesh(sim: Simulation) -> physsim.Mesh:
+  """The rest mesh an estimate simulates: the square or the garment."""
+  if sim.garment:
+    return physsim.garment(sim.garment, sim.garment_spacing)
+  return physsim.square(sim.cloth_resolution, sim.cloth_size)
+
+
+def sim_config(sim: Simulation) -> physsim.SimConfig:
+  """The simulator's settings of an estimate's mesh: the default step, or a
+  shorter one that a fine mesh needs to stay stable (``stable_timestep``)."""
+  return physsim.config_for_mesh(mesh(sim), sim.fps)
+
+
+def pin_centre(sim: Simulation) -> np.ndarray:
+  """(3,) the midpoint of the estimate's pinned vertices: where a camera's
+  placement error turns about (``Scoring.camera_sd_deg``)."""
+  m = mesh(sim)
+  return m.vertices[m.pinned].mean(0)
+
+
+def cloth(sim: Simulation) -> physsim.ClothModel:
+  """The compiled cloth of an estimate's mesh. Worlds name their fabric's
+  bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
+  model and its compiles."""
+  return physsim.build(mesh(sim), 'gray_interlock', sim_config(sim))
