@@ -107,13 +107,16 @@ def _modes(text: str) -> list[str]:
 def _changed(recipe: rig.Recipe, text: str) -> rig.Recipe:
   """``recipe`` with ``--recipe_fields``' ``field=value`` pairs, each value
   parsed as its field's number type."""
-  fields = {f.name: f for f in dataclasses.fields(recipe)}
+  numeric = sorted(
+    f.name
+    for f in dataclasses.fields(recipe)
+    if type(getattr(recipe, f.name)) in (int, float)
+  )
   out = {}
   for item in (x for x in text.split(',') if x):
     name, _, value = item.partition('=')
     kind = type(getattr(recipe, name, None))
-    if name not in fields or kind not in (int, float) or not value:
-      numeric = sorted(n for n in fields if type(getattr(recipe, n)) in (int, float))
+    if name not in numeric or not value:
       raise ValueError(
         f'--recipe_fields={text}: {item!r} is not field=number of {numeric}'
       )
@@ -244,15 +247,11 @@ def summary_table(stats: dict) -> str:
   ]
   for mode, s in stats.items():
     ran = s['recordings'] - s['refused']
-    err = '-' if s['mean_error'] is None else f'{100 * s["mean_error"]:.1f}%'
-    worst = '-' if s['max_error'] is None else f'{100 * s["max_error"]:.1f}%'
-    med = (
-      '-' if s['median_mean_error'] is None else f'{100 * s["median_mean_error"]:.1f}%'
-    )
+    pct = lambda x: '-' if x is None else f'{100 * x:.1f}%'  # noqa: E731
     lines.append(
-      f'| {mode} | {s["recordings"]} | {s["refused"]} | {err} | {worst} | '
-      f'{s["within_10pct"]}/{ran} | {s["holds_90"]}/{ran} | {med} | '
-      f'{s["median_within_10pct"]}/{ran} |'
+      f'| {mode} | {s["recordings"]} | {s["refused"]} | {pct(s["mean_error"])} | '
+      f'{pct(s["max_error"])} | {s["within_10pct"]}/{ran} | {s["holds_90"]}/{ran} | '
+      f'{pct(s["median_mean_error"])} | {s["median_within_10pct"]}/{ran} |'
     )
   return '\n'.join(lines)
 

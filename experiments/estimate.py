@@ -352,9 +352,8 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   record = alignment_record(intakes, configs[0])
   if n > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
-    overrides = [
-      {k: c.flat()[k] for k in search.PER_RECORDING} for c in configs
-    ]  # fmt: skip
+    flats = [c.flat() for c in configs]
+    overrides = [{k: f[k] for k in search.PER_RECORDING} for f in flats]
     result = search.estimate_joint(
       config, recs, args.model, args.workdir,
       winds if any(t.wind for t in recorded) else None, overrides=overrides, **kw,
