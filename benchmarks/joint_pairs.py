@@ -206,6 +206,7 @@ def main(args: Args) -> None:
   groups = _recordings(args, args.workdir, net.image_size[0])
   if not groups:
     raise ValueError('no group of recordings was kept')
+  nets = {args.model: net} if args.model else None  # restored once
   plan = []  # (group, recordings, readings, workdir, jobs)
   for group in groups:
     recs, winds = [], []
@@ -222,12 +223,10 @@ def main(args: Args) -> None:
       recs.append(rec)
       winds.append((m.wind_speed, m.wind_speed_sd))
     wd = os.path.join(args.workdir, f'pair_{group[0]["seq"] // args.group:02d}')
-    jobs = search.joint_jobs(config, recs, args.model, wd, winds)
+    jobs = search.joint_jobs(config, recs, args.model, wd, winds, nets=nets)
     plan.append((group, recs, winds, wd, jobs))
   # Every group's searches in lockstep: one simulation batch for all.
-  results = search.estimate_many(
-    [j for *_, jobs in plan for j in jobs], nets={args.model: net}
-  )
+  results = search.estimate_many([j for *_, jobs in plan for j in jobs])
   ks = range(2, args.group)  # fewer than the whole group
   rows = []
   for g, (group, recs, winds, wd, jobs) in enumerate(plan):

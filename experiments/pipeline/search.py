@@ -62,6 +62,9 @@ class Job(NamedTuple):
     workdir: where its state, JSON and pictures go.
     allow_other_material: search with a network trained on other fabrics
       than ``config.simulation.material`` (else refused, ``setup.check_material``).
+    setup: what the estimate is built from (``setup.Setup``: the network and
+      its record, the search box, the matched calibration), resolved once by
+      ``resolve_jobs``; None until then.
   """
 
   config: EstimateConfig
@@ -69,6 +72,42 @@ class Job(NamedTuple):
   model_dir: str
   workdir: str
   allow_other_material: bool = False
+  setup: setup_lib.Setup | None = None
+
+
+def resolve_jobs(
+  jobs: list[Job], nets: dict[str, embedding.EmbeddingNet] | None = None
+) -> list[Job | Exception]:
+  """Each job with its ``setup.Setup`` (a job that has one keeps it), or the
+  exception that refused it (a bad setting, no trained run at its folder, a
+  network of another fabric). Each network is restored and its record read
+  once for all the jobs (``nets``: networks the caller restored already, by
+  folder); without one (the shape distance) the frames are compared at the
+  recording's own size."""
+  nets = nets or {}
+  records: dict[str, setup_lib.Network] = {}
+  out: list[Job | Exception] = []
+  for job in jobs:
+    if job.setup is not None:
+      out.append(job)
+      continue
+    try:
+      if job.model_dir:
+        if job.model_dir not in records:
+          records[job.model_dir] = setup_lib.record(
+            job.model_dir, nets.get(job.model_dir)
+          )
+        net = records[job.model_dir]
+      else:
+        shape = job.recording.depth.shape[1:]
+        net = setup_lib.Network('', embedding.no_network(shape), None, None, None)
+      out.append(job._replace(setup=setup_lib.resolve(
+        job.config, job.model_dir, allow_other_material=job.allow_other_material,
+        network_record=net,
+      )))  # fmt: skip
+    except (ValueError, OSError) as e:
+      out.append(e)
+  return out
 
 
 def gp_device(i: int = 0):
@@ -296,6 +335,7 @@ def estimate(
   evaluator: Evaluator | None = None,
   allow_other_material: bool = False,
   nets: dict[str, embedding.EmbeddingNet] | None = None,
+  setup: setup_lib.Setup | None = None,
 ) -> dict:
   """Runs (or resumes) one estimate; returns and writes ``estimate.json``.
 
@@ -312,6 +352,8 @@ def estimate(
       estimates in one process; default a new one.
     allow_other_material: search with a network of other fabrics.
     nets: the network already restored, by ``model_dir`` (not restored again).
+    setup: ``setup.resolve(config, model_dir)`` if the caller has it (nothing
+      is read again); its settings must be ``config``'s.
 
   Returns:
     The result dict written to ``estimate.json``.
@@ -323,8 +365,13 @@ def estimate(
       recording, camera, model or config, or every candidate simulation blew
       up (naming the recording).
   """
+  if setup is not None and setup.config.flat() != config.flat():
+    raise ValueError(
+      'the setup was resolved for other settings than the estimate is given: '
+      + ', '.join(k for k, v in config.flat().items() if setup.config.flat()[k] != v)
+    )
   (out,) = estimate_many(
-    [Job(config, recording, model_dir, workdir, allow_other_material)],
+    [Job(config, recording, model_dir, workdir, allow_other_material, setup)],
     progress=progress, gp_on_cpu=gp_on_cpu, evaluator=evaluator, nets=nets,
   )  # fmt: skip
   if isinstance(out, Exception):
@@ -359,29 +406,18 @@ def estimate_many(
   """
   t_start = time.perf_counter()
   out: list[dict | Exception | None] = [None] * len(jobs)
-  nets = nets or {}
-  # Each network restored and its record read once (setup.record), and every
-  # job's fabric checked against it (setup.check_material).
-  networks: dict[str, setup_lib.Network] = {}
+  resolved = resolve_jobs(jobs, nets)
+  jobs = [j if isinstance(j, Job) else job for j, job in zip(resolved, jobs, strict=True)]
   live: list[_Search] = []
   for i, job in enumerate(jobs):
+    if isinstance(resolved[i], Exception):
+      out[i] = resolved[i]
+      continue
+    st = job.setup
     try:
-      if not job.model_dir:  # the shape distance: frames at the recording's size
-        net = embedding.no_network(job.recording.depth.shape[1:])
-      else:
-        if job.model_dir not in networks:
-          networks[job.model_dir] = setup_lib.record(
-            job.model_dir, nets.get(job.model_dir)
-          )
-        setup_lib.check_material(
-          networks[job.model_dir],
-          job.config.simulation.material,
-          job.allow_other_material,
-        )
-        net = networks[job.model_dir].embedding
-      problem = obj_lib.make_problem(job.config, net, job.recording)
+      problem = obj_lib.make_problem(st.config, st.network.embedding, job.recording)
       opt = make_searcher(
-        job.config, problem.space, job.workdir, gp_on_cpu=gp_on_cpu, index=i
+        st.config, st.space, job.workdir, gp_on_cpu=gp_on_cpu, index=i
       )
       os.makedirs(job.workdir, exist_ok=True)
       check_run(job, problem)
@@ -433,10 +469,8 @@ def estimate_many(
         recordings_in_batch=len(jobs),
       )
       out[s.index] = write_result(
-        job, s, res, frames[s.index],
-        network=networks.get(job.model_dir), figures=figures,
-        **timing,
-      )  # fmt: skip
+        job, s, res, frames[s.index], figures=figures, **timing
+      )
       if progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
@@ -495,7 +529,6 @@ def write_result(
   search: _Search,
   res,
   best_frames: np.ndarray,
-  network: setup_lib.Network | None = None,
   figures: bool = True,
   **timing,
 ) -> dict:
@@ -504,20 +537,19 @@ def write_result(
   returns the result dict.
 
   Args:
-    job: the estimate.
+    job: the estimate, its ``setup`` resolved (``resolve_jobs``): its
+      network's record (recipe, accuracy, retrieval; recorded beside the
+      estimate: a parameter near 1 is not constrained by the video) and the
+      calibration its intervals are read with.
     search: its finished search.
     res: ``search.opt.result(...)``: a ``bo.Result`` or ``bo.posterior.Result``.
     best_frames: the lowest-PSD candidate's camera-0 frames as its network saw
       them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
-    network: the network and its record (``setup.record``; None for none):
-      its recipe and accuracy choose the calibration, its retrieval is
-      recorded beside the estimate (a parameter near 1 is not constrained by
-      the video).
     figures: draw the pictures (else only the JSON and ``posterior.npz``).
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
-  config, recording, workdir = job.config, job.recording, job.workdir
-  space = search.problem.space
+  st, recording, workdir = job.setup, job.recording, job.workdir
+  config, space = st.config, st.space
   x_best, y_best = search.argmin()
   result = {
     'recording': recording.source,
@@ -526,14 +558,12 @@ def write_result(
     'point': config.search.point,
   }
   if config.search.point == 'argmin':
-    result.update(_argmin_summary(config, space, res, x_best))
+    result.update(_argmin_summary(st, res, x_best))
   else:
-    result.update(_posterior_summary(
-      config, space, res, workdir, recording.truth, figures,
-      network=network.recipe if network else None,
-      accuracy=network.accuracy if network else None, source=recording.source,
-    ))  # fmt: skip
-  retrieval = network.retrieval if network else None
+    result.update(
+      _posterior_summary(st, res, workdir, recording.truth, figures, recording.source)
+    )
+  retrieval = st.network.retrieval
   material = physsim.load_material(physsim.fabric(config.simulation.material).material)
   point = result['point_unit']
   bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
@@ -579,8 +609,9 @@ def write_result(
   return result
 
 
-def _argmin_summary(config, space, res: bo.Result, x_best) -> dict:
+def _argmin_summary(st: setup_lib.Setup, res: bo.Result, x_best) -> dict:
   """The paper's point (the best evaluation) and where the GP puts the minimum."""
+  config, space = st.config, st.space
   post = bo.minimizer_samples(res.X, res.Y, BOUNDS, jax.random.key(config.seed))
   samples = posterior_lib.physical(post.samples, space)
   best = physsim.from_unit(x_best, space)
@@ -600,13 +631,13 @@ def _name(source: str) -> str:
   return '/'.join(parts[-2:]) if parts and parts[-1].isdigit() else (parts or [''])[-1]
 
 
-def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
-                       network: dict | None = None,
-                       accuracy: float | None = None, source: str = '') -> dict:  # fmt: skip
+def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
+                       figures: bool = True, source: str = '') -> dict:  # fmt: skip
   """The posterior median as the point, credible intervals, the prior's width;
-  writes ``posterior.npz`` and ``posterior.png``. ``network``: the network's
-  recipe, which the calibration's must match for its tables to apply;
-  ``accuracy``: its held-out triplet accuracy (``report.calibration_note``)."""
+  writes ``posterior.npz`` and ``posterior.png``. The intervals are read at
+  the levels of ``st.calibration`` where it matched these settings, network
+  and mode."""
+  config, space, note = st.config, st.space, st.calibration
   key = jax.random.key(config.seed)
   pc = posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
@@ -614,7 +645,6 @@ def _posterior_summary(config, space, res, workdir: str, truth, figures=True,
   prior = posterior_lib.prior_samples(
     jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
   )
-  note = report.calibration_note(config, network=network, accuracy=accuracy)
   summary = posterior_lib.summarise(
     res.samples, space, prior, _levels(note), _weights(note), config.measured
   )
@@ -716,7 +746,7 @@ def estimate_joint(
     overrides: per recording, the settings that are its own
       (``PER_RECORDING``: its cloth's size and mesh, its camera's error), or
       None; a sheet and a swatch of one fabric share one posterior this way.
-    **kw: ``estimate_many``'s keywords.
+    **kw: ``estimate_many``'s keywords (``nets`` goes to ``joint_jobs``).
 
   Returns:
     The dict written to ``joint.json``: per recording its own estimate and its
@@ -730,8 +760,9 @@ def estimate_joint(
       failed (named).
   """
   jobs = joint_jobs(
-    config, recordings, model_dir, workdir, winds, allow_other_material, overrides
-  )
+    config, recordings, model_dir, workdir, winds, allow_other_material, overrides,
+    nets=kw.pop('nets', None),
+  )  # fmt: skip
   return combine_joint(jobs, estimate_many(jobs, **kw), workdir)
 
 
@@ -743,9 +774,17 @@ def joint_jobs(
   winds: list[tuple[float, float]] | None = None,
   allow_other_material: bool = False,
   overrides: list[dict] | None = None,
+  nets: dict[str, embedding.EmbeddingNet] | None = None,
 ) -> list[Job]:
   """The searches of one fabric's joint estimate (``estimate_joint``'s
-  arguments and checks), one per recording under ``<workdir>/recording_<k>``."""
+  arguments and checks), one per recording under ``<workdir>/recording_<k>``,
+  each with its setup resolved (``resolve_jobs``; ``nets``: networks restored
+  already, by folder).
+
+  Raises:
+    ValueError: ``estimate_joint``'s, or a recording whose setup is refused
+      (named).
+  """
   if len(recordings) < 2:
     raise ValueError(
       f'a joint estimate needs two or more recordings, got {len(recordings)}'
@@ -781,10 +820,15 @@ def joint_jobs(
     configs = [c.replace(**o) for c, o in zip(configs, overrides, strict=True)]
     for c in configs:
       c.check()
-  return [
+  jobs = [
     Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'), allow_other_material)
     for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
   ]
+  resolved = resolve_jobs(jobs, nets)
+  for job, r in zip(jobs, resolved, strict=True):
+    if isinstance(r, Exception):
+      raise ValueError(f'{job.recording.source}: {r}') from r
+  return resolved
 
 
 def joint_posterior(jobs: list[Job], key) -> tuple[dict, list]:
@@ -812,7 +856,9 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
     if isinstance(r, Exception):
       raise ValueError(f'{job.recording.source}: {r}') from r
   configs = [job.config for job in jobs]
-  model_dir = jobs[0].model_dir
+  (first,) = resolve_jobs(jobs[:1])  # the joint_jobs' own setup, kept
+  if isinstance(first, Exception):
+    raise ValueError(f'{jobs[0].recording.source}: {first}') from first
   winds = None
   if any(c.measured.wind_speed_sd > 0 for c in configs):  # readings (some may lack)
     winds = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
@@ -820,12 +866,10 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   config = configs[0].replace(wind_speed=0.0, wind_speed_sd=0.0)
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
   combined, npz = joint_posterior(jobs, key)
-  space = physsim.search_space(config.simulation.material)
-  note = report.calibration_note(
-    configs[0], joint=True, recordings=len(jobs),
-    network=embedding.network_recipe(model_dir),
-    accuracy=embedding.network_accuracy(model_dir),
-  )  # fmt: skip
+  space = first.setup.space
+  note = setup_lib.calibration(
+    configs[0], first.setup.network, joint=True, recordings=len(jobs)
+  )
   levels = _levels(note)
   per = []
   for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):

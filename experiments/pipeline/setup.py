@@ -116,6 +116,21 @@ def network(
   return out
 
 
+def calibration(
+  config: obj_lib.EstimateConfig,
+  net: Network,
+  *,
+  joint: bool = False,
+  recordings: int = 1,
+) -> dict | None:
+  """``report.calibration_note`` of these settings, this network's recipe and
+  accuracy, and the mode (a joint estimate of ``recordings`` recordings)."""
+  return report.calibration_note(
+    config, joint=joint, recordings=recordings, network=net.recipe,
+    accuracy=net.accuracy,
+  )  # fmt: skip
+
+
 def resolve(
   config: obj_lib.EstimateConfig,
   model_dir: str = '',
@@ -124,6 +139,7 @@ def resolve(
   allow_other_material: bool = False,
   joint: bool = False,
   recordings: int = 1,
+  network_record: Network | None = None,
 ) -> Setup:
   """Checks ``config`` and reads what an estimate with it is built from, once.
 
@@ -134,16 +150,22 @@ def resolve(
     allow_other_material: accept a network trained on other fabrics.
     joint, recordings: a joint estimate of that many recordings (the
       calibration's mode depends on it).
+    network_record: the network as the caller has read it already (``record``
+      or ``network``): not read again, only checked against the fabric.
 
   Raises:
     ValueError: a setting out of range (``EstimateConfig.check``) or a network
       that does not fit (``network``).
   """
   config.check()
-  net = network(
-    model_dir, config.scoring.distance, image_size, config.simulation.material,
-    allow_other_material=allow_other_material,
-  )  # fmt: skip
+  if network_record is None:
+    net = network(
+      model_dir, config.scoring.distance, image_size, config.simulation.material,
+      allow_other_material=allow_other_material,
+    )  # fmt: skip
+  else:
+    net = network_record
+    check_material(net, config.simulation.material, allow_other_material)
   mesh = obj_lib.mesh(config.simulation)
   return Setup(
     config=config,
@@ -151,11 +173,5 @@ def resolve(
     mesh=mesh,
     pin_centre=mesh.vertices[mesh.pinned].mean(0),
     space=physsim.search_space(config.simulation.material),
-    calibration=report.calibration_note(
-      config,
-      joint=joint,
-      recordings=recordings,
-      network=net.recipe,
-      accuracy=net.accuracy,
-    ),  # fmt: skip
+    calibration=calibration(config, net, joint=joint, recordings=recordings),
   )

@@ -46,3 +46,55 @@ def test_a_network_of_another_fabric_is_refused_naming_both(monkeypatch):
     setup.resolve(config, 'runs/denim')
   s = setup.resolve(config, 'runs/denim', allow_other_material=True)
   assert s.network.accuracy == 0.8 and s.network.recipe == {'training': {}}
+
+
+def _job(config, model_dir='', **kw):
+  from experiments.pipeline import recording, search
+
+  rec = recording.Recording(
+    depth=np.zeros((4, 24, 32), np.float32), fps=20.0, intrinsics=None, pose=None,
+    source='rec', truth=None,
+  )  # fmt: skip
+  return search.Job(config, rec, model_dir, '/nonexistent/workdir', **kw)
+
+
+def test_jobs_resolve_once_per_network_folder(monkeypatch):
+  # Three jobs of one network folder and one without: the network is restored
+  # and its record read once; the shape job compares at the recording's size.
+  from experiments.pipeline import search
+
+  loads = []
+  net = embedding.no_network((32, 32))._replace(materials=('gray_interlock',))
+  monkeypatch.setattr(embedding, 'load_embedding', lambda d: loads.append(d) or net)
+  monkeypatch.setattr(embedding, 'network_recipe', lambda d: {'training': {}})
+  monkeypatch.setattr(embedding, 'network_accuracy', lambda d: 0.8)
+  monkeypatch.setattr(embedding, 'network_retrieval', lambda d: None)
+  jobs = [_job(SHAPE, 'runs/gray') for _ in range(3)] + [_job(SHAPE)]
+  out = search.resolve_jobs(jobs)
+  assert loads == ['runs/gray']
+  assert all(o.setup.network.embedding is net for o in out[:3])
+  assert out[3].setup.network.embedding.image_size == (24, 32)
+  # A job that has its setup keeps it (nothing read again).
+  assert search.resolve_jobs(out)[0].setup is out[0].setup and loads == ['runs/gray']
+  # Each setup's calibration is the one resolve gives for its settings.
+  assert out[3].setup.calibration == setup.resolve(SHAPE, '', image_size=32).calibration
+
+
+def test_a_job_that_cannot_be_set_up_is_its_error_not_the_batchs(monkeypatch):
+  from experiments.pipeline import search
+
+  net = embedding.no_network((32, 32))._replace(materials=('black_denim',))
+  monkeypatch.setattr(embedding, 'load_embedding', lambda d: net)
+  for name in ('network_recipe', 'network_accuracy', 'network_retrieval'):
+    monkeypatch.setattr(embedding, name, lambda d: None)
+  out = search.resolve_jobs([_job(SHAPE, 'runs/denim'), _job(SHAPE)])
+  assert isinstance(out[0], ValueError) and 'not gray_interlock' in str(out[0])
+  assert out[1].setup is not None
+
+
+def test_an_estimate_refuses_a_setup_of_other_settings():
+  from experiments.pipeline import search
+
+  s = setup.resolve(SHAPE, '', image_size=32)
+  with pytest.raises(ValueError, match='other settings.*q'):
+    search.estimate(SHAPE.replace(q=4), _job(SHAPE).recording, '', '/nonexistent', setup=s)
