@@ -38,6 +38,7 @@ from physsim.camera import (
   world_to_camera,
 )
 from physsim.cloth import (
+  EDGE_SOLREF_SPACING,
   ClothModel,
   SimConfig,
   build,
@@ -120,6 +121,7 @@ __all__ = [
   'pose_from_dict',
   'pose_to_dict',
   'config_for_mesh',
+  'EDGE_SOLREF_SPACING',
   'scaled_edge_solref',
   'reference_rigidity',
   'stable_timestep',

@@ -75,6 +75,10 @@ class Config:
       frame of a camera, as someone filming it would frame it; a camera below
       it gets a new pose, up to ``pose_draws`` draws in all (0: off).
     pose_draws: most poses drawn per camera when ``min_coverage`` is on.
+    scaled_edges: the edges' time constant shrinks with a mesh finer than
+      ``physsim.EDGE_SOLREF_SPACING`` (``physsim.config_for_mesh``: the same
+      stretch stiffness on every mesh); off: the fixed one of datasets made
+      before (only meshes finer than that differ).
   """
 
   materials: tuple[str, ...] = tuple(physsim.FABRICS)
@@ -100,6 +104,7 @@ class Config:
   timestep: float = 0.002
   min_coverage: float = 0.0
   pose_draws: int = 8
+  scaled_edges: bool = True
 
 
 PRESETS = {
@@ -263,6 +268,8 @@ def _identity(config: Config, backend: str) -> dict:
     d.pop('min_coverage'), d.pop('pose_draws')
   if config.cloth_size == 1.0:  # ... and before the size was a setting
     d.pop('cloth_size')
+  if physsim.scaled_edge_solref(_mesh(config).shortest_edge, 1.0) == 1.0:
+    d.pop('scaled_edges')  # the same edges either way, as before the setting
   return d
 
 
@@ -470,7 +477,9 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   mesh = _mesh(config)
   # A fine mesh needs a shorter step; MuJoCo's stiffest safe constraint time
   # constant is two steps.
-  sim_config = physsim.config_for_mesh(mesh, config.fps, config.timestep)
+  sim_config = physsim.config_for_mesh(
+    mesh, config.fps, config.timestep, scaled_edges=config.scaled_edges
+  )
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size
   render = _chunked(

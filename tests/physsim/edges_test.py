@@ -19,10 +19,12 @@ _STRAIN_RATIO_TOL = 0.25
 @pytest.mark.parametrize(
   'edge, want',
   [
-    (1 / 24, 0.004),  # the estimate's 1 m sheet of 25: the reference itself
+    (0.04, 0.004),  # the reference itself: the garments' grid
+    (0.04 - 1e-16, 0.004),  # ... as a garment's mesh measures it
+    (1 / 24, 0.004),  # the estimate's 1 m sheet of 25: coarser, unchanged
     (1 / 8, 0.004),  # coarser: unchanged
-    (1 / 40, 0.004 * 24 / 40),  # the 1 m sheet of 41
-    (0.2 / 24, 0.004 * 0.2),  # a 20 cm swatch of 25
+    (1 / 40, 0.004 * 0.025 / 0.04),  # the 1 m sheet of 41
+    (0.2 / 24, 0.004 * (0.2 / 24) / 0.04),  # a 20 cm swatch of 25
   ],
 )
 def test_the_time_constant_by_hand(edge, want):
@@ -31,12 +33,15 @@ def test_the_time_constant_by_hand(edge, want):
 
 def test_scaled_edges_bring_the_step_down_to_half_the_time_constant():
   mesh = physsim.square(41, 0.2)  # spacing 5 mm: tau 0.48 ms
-  cfg = physsim.config_for_mesh(mesh, 20.0, scaled_edges=True)
-  assert cfg.edge_solref == pytest.approx(0.004 * 0.005 / (1 / 24), rel=1e-12)
+  cfg = physsim.config_for_mesh(mesh, 20.0)  # scaled: the default
+  assert cfg == physsim.config_for_mesh(mesh, 20.0, scaled_edges=True)
+  assert cfg.edge_solref == pytest.approx(0.004 * 0.005 / 0.04, rel=1e-12)
   assert cfg.edge_solref >= 2 * cfg.timestep > 0.9 * cfg.edge_solref
-  assert physsim.config_for_mesh(physsim.square(25), 20.0, scaled_edges=True) == (
-    physsim.config_for_mesh(physsim.square(25), 20.0)
-  )  # the reference mesh: nothing changes
+  # The estimate's sheet and the garments: nothing changes.
+  for coarse in (physsim.square(25), physsim.garment('tshirt', 0.04)):
+    assert physsim.config_for_mesh(coarse, 20.0, scaled_edges=False) == (
+      physsim.config_for_mesh(coarse, 20.0)
+    )
   with pytest.raises(ValueError, match='need edge and edge_solref > 0'):
     physsim.scaled_edge_solref(0.0)
 
