@@ -2,7 +2,9 @@
 
 Issue 39, item 2. A candidate recording is a piece of the fabric (the 1 m
 sheet, or a 10-30 cm swatch) pinned at its two top corners (or one) in front of
-a fan at one setting (or none), filmed by a depth camera. What the camera sees
+a fan at one setting (or none), filmed by a depth camera; or the fabric flat on
+a table with a few centimetres of it over the edge, in still air, filmed from
+the side (an overhang: the textile cantilever test). What the camera sees
 is approximated from the simulated vertices by a few statistics, each divided
 by the cloth's size (``summaries``): where the cloth hangs on average over the
 clip (its centroid out of plane and up), where its free bottom edge hangs, how
@@ -61,7 +63,7 @@ SUMMARY_FILE = 'protocol_summary.json'  # without the slopes: small enough to co
 FIGURE_FILE = 'protocol.png'
 CACHE_DIR = 'slopes'
 CHAOS_NUDGE = 1e-3  # log bending
-CACHE_VERSION = 2  # bump when what a cached slope file means changes
+CACHE_VERSION = 3  # bump when what a cached slope file means changes
 STATS = ('centroid_out', 'centroid_up', 'free_edge_out', 'free_edge_up',
          'curvature', 'motion')  # fmt: skip
 PARAMS = ('log_bending', 'log_area_weight', 'log_wind')
@@ -71,6 +73,7 @@ HFOV_DEG = 58.0
 WIDTH_PX = 640
 DEPTH_SD_1M = 0.0015  # m at 1 m, growing as z^2
 MIN_RANGE_M = 0.5
+UNUSED_SD = 1e6  # a statistic's noise that leaves it out of the information
 FILL = 0.6  # of the frame's width
 SPACE = physsim.SearchSpace(wind_speed=(0.0, 6.0))  # a recording may be windless
 
@@ -84,16 +87,23 @@ class Candidate:
     wind: the fan's mean wind, m/s (0: no fan).
     pins: 2 (the two top corners) or 1 (the top-left corner).
     resolution: vertices a side of the simulated square.
+    overhang: the square lies flat on a table and ``size`` of it overhangs the
+      edge, in still air, filmed from the side (the textile cantilever test,
+      ASTM D1388: the droop is set by the bending length
+      (D / (w g))^(1/3) over the overhang); else it hangs from its pins.
   """
 
   size: float
   wind: float
   pins: int = 2
   resolution: int = 9
+  overhang: bool = False
 
   @property
   def name(self) -> str:
     cm = round(100 * self.size)
+    if self.overhang:
+      return f'overhang_{cm}cm_r{self.resolution}'
     where = 'sheet' if self.size >= 0.5 else 'swatch'
     fan = f'{self.wind:g}ms' if self.wind > 0 else 'still'
     pin = '' if self.pins == 2 else '_1pin'
@@ -101,20 +111,23 @@ class Candidate:
 
 
 def parse(name: str) -> Candidate:
-  """The candidate a ``Candidate.name`` names (e.g. ``'swatch_20cm_2ms_r9'``)."""
+  """The candidate a ``Candidate.name`` names (e.g. ``'swatch_20cm_2ms_r9'``,
+  ``'overhang_15cm_r17'``)."""
   parts = name.split('_')
   try:
     size = float(parts[1].removesuffix('cm')) / 100
-    wind = 0.0 if parts[2] == 'still' else float(parts[2].removesuffix('ms'))
-    pins = 1 if '1pin' in parts else 2
     res = int(parts[-1].removeprefix('r'))
+    if parts[0] == 'overhang':
+      c = Candidate(size, 0.0, 2, res, overhang=True)
+    else:
+      wind = 0.0 if parts[2] == 'still' else float(parts[2].removesuffix('ms'))
+      c = Candidate(size, wind, 1 if '1pin' in parts else 2, res)
   except (IndexError, ValueError):
     raise ValueError(
       f'candidate {name!r}: need e.g. sheet_100cm_2ms_r9, swatch_20cm_still_r9, '
-      'swatch_20cm_2ms_1pin_r9'
+      'swatch_20cm_2ms_1pin_r9, overhang_15cm_r17'
     ) from None
-  c = Candidate(size, wind, pins, res)
-  if c.name != name or not (0 < size <= 2 and 0 <= wind <= 6 and res >= 3):
+  if c.name != name or not (0 < size <= 2 and 0 <= c.wind <= 6 and res >= 3):
     raise ValueError(f'candidate {name!r} is not a canonical name (or out of range)')
   return c
 
@@ -162,6 +175,10 @@ def sensor_sd(c: Candidate, clip_s: float, camera_fps: float, setup_mm: float,
   sd = sd_m / size
   curv = 4 * sz / (a**2 * np.sqrt(n / 64)) / np.sqrt(64 * t)  # 1/m
   sd[4] = np.hypot(curv * size, curvature_floor)
+  if c.overhang:
+    # A resting overhang does not move; the simulated one swings after its
+    # release from flat, which says nothing a real recording could show.
+    sd[5] = UNUSED_SD
   return sd
 
 
@@ -173,9 +190,26 @@ def timestep(c: Candidate) -> float:
   return 0.002 if h >= 0.0124 else 0.001 if h >= 0.008 else 0.0005
 
 
+def sim_config(c: Candidate, config: Config) -> physsim.SimConfig:
+  """The simulator's settings for the candidate: at most ``timestep(c)``, the
+  step and edges ``physsim.config_for_mesh`` gives its mesh."""
+  return physsim.config_for_mesh(
+    mesh(c), config.fps, timestep(c), scaled_edges=config.scaled_edges
+  )
+
+
 def mesh(c: Candidate) -> physsim.Mesh:
-  """The candidate's square, pinned at its two top corners or the top-left."""
+  """The candidate's square, pinned at its two top corners or the top-left;
+  an overhang lies flat (row 0 at the table's edge, the rows reaching out
+  along +y), its first two rows held (the table clamps the slope too)."""
   m = physsim.square(c.resolution, c.size)
+  if c.overhang:
+    v = m.vertices
+    top = v[:, 2].max()
+    flat = np.stack([v[:, 0], top - v[:, 2], np.full(len(v), top)], axis=1)
+    return dataclasses.replace(
+      m, vertices=flat, pinned=np.arange(2 * c.resolution), name=m.name + '_overhang'
+    )
   if c.pins == 1:
     m = dataclasses.replace(m, pinned=m.pinned[:1], name=m.name + '_1pin')
   return m
@@ -234,6 +268,9 @@ class Config:
     reading: relative standard error of an anemometer's or scale's reading.
     workers: MuJoCo C processes.
     seed: gust histories.
+    scaled_edges: the edges' time constant shrinks with the spacing
+      (``physsim.config_for_mesh``: the same stretch stiffness on every mesh
+      and cloth size; the default); off: the fixed one of the first study.
   """
 
   material: str = 'gray_interlock'
@@ -243,10 +280,12 @@ class Config:
     'sheet_100cm_2ms_r9', 'sheet_100cm_3.5ms_r9', 'sheet_100cm_5ms_r9',
     'sheet_100cm_still_r9', 'swatch_10cm_still_r9', 'swatch_20cm_still_r9',
     'swatch_30cm_still_r9', 'swatch_10cm_2ms_r13', 'swatch_20cm_2ms_r17',
-    'swatch_30cm_2ms_r17', 'swatch_20cm_2ms_1pin_r17',
+    'swatch_30cm_2ms_r17', 'swatch_20cm_2ms_1pin_r17', 'overhang_3cm_r9',
+    'overhang_5cm_r9', 'overhang_10cm_r9',
   )  # fmt: skip
   convergence: tuple[str, ...] = (
     'swatch_20cm_2ms_r9', 'swatch_20cm_2ms_1pin_r9', 'sheet_100cm_5ms_r17',
+    'overhang_5cm_r17',
   )  # fmt: skip
   sets: str = (
     'sheet 2 m/s=sheet_100cm_2ms;'
@@ -267,7 +306,15 @@ class Config:
     'sheet 2+3.5 + swatch 20 1 pin=sheet_100cm_2ms+sheet_100cm_3.5ms+swatch_20cm_2ms_1pin;'
     'swatches 10+20+30 2 m/s=swatch_10cm_2ms+swatch_20cm_2ms+swatch_30cm_2ms;'
     'sheet x3 + swatches=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms'
-    '+swatch_10cm_2ms+swatch_20cm_2ms+swatch_30cm_2ms'
+    '+swatch_10cm_2ms+swatch_20cm_2ms+swatch_30cm_2ms;'
+    'overhang 3=overhang_3cm;'
+    'overhang 5=overhang_5cm;'
+    'overhang 10=overhang_10cm;'
+    'overhang 3+5=overhang_3cm+overhang_5cm;'
+    'sheet 2 + overhang 5=sheet_100cm_2ms+overhang_5cm;'
+    'sheet x3 + overhang 5=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms+overhang_5cm;'
+    'sheet x3 + overhangs 3+5=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms'
+    '+overhang_3cm+overhang_5cm'
   )
   gusts: float = 0.3
   draws: int = 6
@@ -284,6 +331,7 @@ class Config:
   reading: float = 0.02
   workers: int = 1
   seed: int = 0
+  scaled_edges: bool = True
 
 
 PRESETS = {
@@ -296,6 +344,8 @@ PRESETS = {
       'swatch_20cm_2ms_r25',
       'swatch_20cm_2ms_1pin_r9',
       'sheet_100cm_5ms_r17',
+      'overhang_5cm_r17',
+      'overhang_5cm_r25',
     )
   ),
   # the end-to-end path on a CPU in well under a minute: one truth, two tiny
@@ -363,7 +413,8 @@ def simulate_candidate(c: Candidate, bending: float, area_weight: float,
   steps of each parameter and at +-``CHAOS_NUDGE`` of log bending
   (``robust_slope``), ``draws`` gusty histories at the truth."""
   m = mesh(c)
-  model = physsim.build(m, config.material, physsim.SimConfig(timestep=timestep(c)))
+  sim = sim_config(c, config)
+  model = physsim.build(m, config.material, sim)
   frames = round(config.clip * config.fps)
   common = dict(frames=frames, fps=config.fps, warmup=config.warmup, backend='c',
                 workers=config.workers, space=SPACE)  # fmt: skip
@@ -394,6 +445,13 @@ def simulate_candidate(c: Candidate, bending: float, area_weight: float,
   # the flapping scrambles by their whole scatter, whatever the step
   scramble = np.abs(nudged[1] - nudged[0])  # (m,)
   jac = robust_slope(near, far, (scramble[None] / (4 * h)).T)
+  if c.overhang:
+    # A resting overhang's shape solves D (laplacian^2) u = w g: it depends on
+    # D / w alone, so its slope in log area weight is minus its slope in log
+    # bending. The simulated strip, released from flat, still swings through
+    # the clip, and the air's drag on the swing (which does not scale with w)
+    # would show area weight that a resting strip cannot.
+    jac[:, 1] = -jac[:, 0]
   gust_cov = np.zeros((len(STATS), len(STATS)))
   gust_sd = np.zeros(len(STATS))
   if c.wind > 0 and config.draws > 0:
@@ -414,7 +472,8 @@ def simulate_candidate(c: Candidate, bending: float, area_weight: float,
   cov = gust_cov + np.diag(sensor**2)
   return {
     'candidate': c.name, 'bending': bending, 'area_weight': area_weight,
-    'wind': c.wind, 'timestep': timestep(c), 'params': list(PARAMS[:p]), 'slopes': jac.tolist(),
+    'wind': c.wind, 'timestep': sim.timestep, 'edge_solref': sim.edge_solref,
+    'params': list(PARAMS[:p]), 'slopes': jac.tolist(),
     'noise_cov': cov.tolist(), 'gust_sd': gust_sd.tolist(),
     'sensor_sd': sensor.tolist(), 'camera_distance_m': camera_distance(c.size),
     'summary': out.mean(axis=0).tolist(),
@@ -429,7 +488,8 @@ def candidate_slopes(c: Candidate, bending: float, area_weight: float,
   ``experiments.plan``, reuses it)."""
   path = os.path.join(
     cache_dir,
-    f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}_v{CACHE_VERSION}.json',
+    f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}'
+    f'{"" if config.scaled_edges else "_fixed_edges"}_v{CACHE_VERSION}.json',
   )
   if os.path.exists(path):
     with open(path) as f:
@@ -573,10 +633,12 @@ def plot(result: dict, path: str) -> None:
     for off, field, color in ((-0.2, 'bending', 'C0'), (0.2, 'area_weight', 'C1')):
       stats = np.array([geomean_range(table, s, mode, field) for s in labels])
       ax.barh(y + off, stats[:, 0], height=0.4, color=color, label=field.replace('_', ' '),
-              xerr=[stats[:, 0] - stats[:, 1], stats[:, 2] - stats[:, 0]], capsize=2)  # fmt: skip
+              xerr=np.maximum(0, [stats[:, 0] - stats[:, 1], stats[:, 2] - stats[:, 0]]),
+              capsize=2)  # fmt: skip
     ax.axvline(1, color='k', lw=0.8)
     ax.set_xscale('log')
-    ax.set_xticks([1, 1.5, 2, 3, 4, 6], ['1', '1.5', '2', '3', '4', '6'])
+    ticks = [1, 1.5, 2, 3, 4, 6, 10, 20, 40]
+    ax.set_xticks(ticks, [f'{t:g}' for t in ticks])
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_title({'video': 'video alone', 'anemometer': 'winds read to 2%',
                   'scale': 'area weight weighed to 2%'}[mode])  # fmt: skip
@@ -627,7 +689,7 @@ PLAN_CACHE_DIR = 'plan_slopes'
 PLAN_CANDIDATES = (
   'sheet_100cm_2ms_r9', 'sheet_100cm_3.5ms_r9', 'sheet_100cm_5ms_r9',
   'swatch_10cm_2ms_r13', 'swatch_20cm_2ms_r17', 'swatch_30cm_2ms_r17',
-  'swatch_20cm_still_r9',
+  'swatch_20cm_still_r9', 'overhang_3cm_r9', 'overhang_5cm_r9',
 )  # fmt: skip
 
 
@@ -713,6 +775,12 @@ def rank_candidates(draws, weights, rows_per_node: dict[str, list[dict]], nodes,
 def describe(name: str, clip: float) -> str:
   """A candidate in words a person can act on."""
   c = parse(name)
+  if c.overhang:
+    return (
+      f'the fabric flat on a table, {100 * c.size:.0f} cm of it (as wide) over '
+      f'the edge, still air, the camera {camera_distance(c.size):.2f} m away at '
+      f'the side, {clip:g} s'
+    )
   fan = f'the fan at {c.wind:g} m/s' if c.wind > 0 else 'no fan'
   pins = 'its two top corners' if c.pins == 2 else 'one top corner'
   return (
