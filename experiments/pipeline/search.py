@@ -407,7 +407,9 @@ def estimate_many(
   t_start = time.perf_counter()
   out: list[dict | Exception | None] = [None] * len(jobs)
   resolved = resolve_jobs(jobs, nets)
-  jobs = [j if isinstance(j, Job) else job for j, job in zip(resolved, jobs, strict=True)]
+  jobs = [
+    j if isinstance(j, Job) else job for j, job in zip(resolved, jobs, strict=True)
+  ]
   live: list[_Search] = []
   for i, job in enumerate(jobs):
     if isinstance(resolved[i], Exception):

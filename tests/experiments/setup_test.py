@@ -97,4 +97,6 @@ def test_an_estimate_refuses_a_setup_of_other_settings():
 
   s = setup.resolve(SHAPE, '', image_size=32)
   with pytest.raises(ValueError, match='other settings.*q'):
-    search.estimate(SHAPE.replace(q=4), _job(SHAPE).recording, '', '/nonexistent', setup=s)
+    search.estimate(
+      SHAPE.replace(q=4), _job(SHAPE).recording, '', '/nonexistent', setup=s
+    )
