@@ -1,7 +1,7 @@
 """Which recordings measure bending and area weight: the protocol study (issue 39).
 
-  python -m experiments.protocol --workdir=out/protocol                  # CPU, ~14 min
-  python -m experiments.protocol --workdir=out/protocol --preset=fine    # + a 25x25 swatch
+  python -m experiments.protocol --workdir=out/protocol --workers=16     # ~8 min on 16 cores
+  python -m experiments.protocol --workdir=out/protocol --preset=full    # + the first study's swatches
   python -m experiments.protocol --workdir=/tmp/protocol --preset=smoke  # CPU, < 1 min
   python -m experiments.protocol --workdir=out/protocol \\
       --figure=docs/figures/protocol_gray_interlock.png                  # and a copy

@@ -18,6 +18,7 @@ Public API::
 
 from physsim import (
   camera,
+  cantilever,
   dataset,
   devices,
   motion,
@@ -104,6 +105,7 @@ __all__ = [
   'apply_noise_frames',
   'build',
   'camera',
+  'cantilever',
   'dataset',
   'depth_image',
   'devices',

@@ -56,6 +56,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import physsim  # noqa: E402
 from bo import design  # noqa: E402
+from physsim import cantilever  # noqa: E402
 from experiments.pipeline import files  # noqa: E402
 
 RESULT_FILE = 'protocol.json'
@@ -199,17 +200,22 @@ def sim_config(c: Candidate, config: Config) -> physsim.SimConfig:
 
 
 def mesh(c: Candidate) -> physsim.Mesh:
-  """The candidate's square, pinned at its two top corners or the top-left;
-  an overhang lies flat (row 0 at the table's edge, the rows reaching out
-  along +y), its first two rows held (the table clamps the slope too)."""
-  m = physsim.square(c.resolution, c.size)
+  """The candidate's square, pinned at its two top corners or the top-left.
+
+  An overhang lies flat, reaching out along +y: its first two rows are held
+  (the table clamps the slope too), row 1 on the table's edge at y = 0 and
+  row 0 one spacing back on the table, so that ``size`` is the free overhang
+  on every mesh (the square's side is ``size`` plus that spacing)."""
   if c.overhang:
+    h = c.size / (c.resolution - 2)
+    m = physsim.square(c.resolution, c.size + h)
     v = m.vertices
     top = v[:, 2].max()
-    flat = np.stack([v[:, 0], top - v[:, 2], np.full(len(v), top)], axis=1)
+    flat = np.stack([v[:, 0], top - v[:, 2] - h, np.full(len(v), top)], axis=1)
     return dataclasses.replace(
       m, vertices=flat, pinned=np.arange(2 * c.resolution), name=m.name + '_overhang'
     )
+  m = physsim.square(c.resolution, c.size)
   if c.pins == 1:
     m = dataclasses.replace(m, pinned=m.pinned[:1], name=m.name + '_1pin')
   return m
@@ -225,7 +231,7 @@ def summaries(positions: np.ndarray, rest: np.ndarray, res: int, size: float):
   rest_up = rest[:, 2].mean()
   centroid = x.mean(axis=2)  # (B, T, 3)
   bottom = g[:, :, -1].mean(axis=2)  # (B, T, 3)
-  h = size / (res - 1)
+  h = float(np.linalg.norm(rest[1] - rest[0]))  # the spacing (row 0's first two)
   lap = (g[:, :, 2:, 1:-1] + g[:, :, :-2, 1:-1] + g[:, :, 1:-1, 2:] + g[:, :, 1:-1, :-2]
          - 4 * g[:, :, 1:-1, 1:-1]) / h**2  # fmt: skip
   curvature = np.linalg.norm(lap, axis=-1).mean(axis=(1, 2, 3))
@@ -278,39 +284,24 @@ class Config:
   area_weight: float = 0.0
   candidates: tuple[str, ...] = (
     'sheet_100cm_2ms_r9', 'sheet_100cm_3.5ms_r9', 'sheet_100cm_5ms_r9',
-    'sheet_100cm_still_r9', 'swatch_10cm_still_r9', 'swatch_20cm_still_r9',
-    'swatch_30cm_still_r9', 'swatch_10cm_2ms_r13', 'swatch_20cm_2ms_r17',
-    'swatch_30cm_2ms_r17', 'swatch_20cm_2ms_1pin_r17', 'overhang_3cm_r9',
-    'overhang_5cm_r9', 'overhang_10cm_r9',
+    'sheet_100cm_still_r9', 'overhang_3cm_r9', 'overhang_5cm_r9',
+    'overhang_10cm_r9', 'swatch_20cm_2ms_r17',
   )  # fmt: skip
   convergence: tuple[str, ...] = (
-    'swatch_20cm_2ms_r9', 'swatch_20cm_2ms_1pin_r9', 'sheet_100cm_5ms_r17',
-    'overhang_5cm_r17',
+    'overhang_5cm_r13', 'overhang_5cm_r17', 'swatch_20cm_2ms_r9',
   )  # fmt: skip
   sets: str = (
     'sheet 2 m/s=sheet_100cm_2ms;'
     'sheet 3.5 m/s=sheet_100cm_3.5ms;'
     'sheet 5 m/s=sheet_100cm_5ms;'
     'sheet still=sheet_100cm_still;'
-    'swatch 10 still=swatch_10cm_still;'
-    'swatch 20 still=swatch_20cm_still;'
-    'swatch 30 still=swatch_30cm_still;'
-    'swatch 10 2 m/s=swatch_10cm_2ms;'
     'swatch 20 2 m/s=swatch_20cm_2ms;'
-    'swatch 30 2 m/s=swatch_30cm_2ms;'
-    'swatch 20 1 pin=swatch_20cm_2ms_1pin;'
-    'sheet x3=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms;'
-    'sheet x3 + swatch 20=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms+swatch_20cm_2ms;'
-    'sheet 2 + swatch 20=sheet_100cm_2ms+swatch_20cm_2ms;'
-    'sheet 2 + swatch 20 1 pin=sheet_100cm_2ms+swatch_20cm_2ms_1pin;'
-    'sheet 2+3.5 + swatch 20 1 pin=sheet_100cm_2ms+sheet_100cm_3.5ms+swatch_20cm_2ms_1pin;'
-    'swatches 10+20+30 2 m/s=swatch_10cm_2ms+swatch_20cm_2ms+swatch_30cm_2ms;'
-    'sheet x3 + swatches=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms'
-    '+swatch_10cm_2ms+swatch_20cm_2ms+swatch_30cm_2ms;'
     'overhang 3=overhang_3cm;'
     'overhang 5=overhang_5cm;'
     'overhang 10=overhang_10cm;'
     'overhang 3+5=overhang_3cm+overhang_5cm;'
+    'sheet x3=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms;'
+    'sheet 2 + swatch 20=sheet_100cm_2ms+swatch_20cm_2ms;'
     'sheet 2 + overhang 5=sheet_100cm_2ms+overhang_5cm;'
     'sheet x3 + overhang 5=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms+overhang_5cm;'
     'sheet x3 + overhangs 3+5=sheet_100cm_2ms+sheet_100cm_3.5ms+sheet_100cm_5ms'
@@ -335,18 +326,33 @@ class Config:
 
 
 PRESETS = {
-  # about 14 minutes on two busy CPU cores (MuJoCo C)
+  # about 25 minutes on 16 cores (MuJoCo C, --workers=16): the overhangs' 3 cm
+  # 1.5 min, the 20 cm swatch in wind 1.8 min a truth
   'default': Config(),
-  # and the 20 cm swatch on a third mesh (25 x 25, 0.8 cm; 1 ms steps): +3 min
-  'fine': Config(
-    convergence=(
-      'swatch_20cm_2ms_r9',
+  # every candidate of the first study (10-30 cm swatches, still, one pin) as
+  # well: about 40 minutes more on 16 cores
+  'full': Config(
+    candidates=Config.candidates
+    + (
+      'swatch_10cm_still_r9',
+      'swatch_20cm_still_r9',
+      'swatch_30cm_still_r9',
+      'swatch_10cm_2ms_r13',
+      'swatch_30cm_2ms_r17',
+      'swatch_20cm_2ms_1pin_r17',
+    ),
+    convergence=Config.convergence
+    + (
       'swatch_20cm_2ms_r25',
       'swatch_20cm_2ms_1pin_r9',
       'sheet_100cm_5ms_r17',
-      'overhang_5cm_r17',
-      'overhang_5cm_r25',
-    )
+    ),
+    sets=Config.sets
+    + (
+      ';swatch 10 2 m/s=swatch_10cm_2ms;swatch 30 2 m/s=swatch_30cm_2ms;'
+      'swatch 20 still=swatch_20cm_still;swatch 20 1 pin=swatch_20cm_2ms_1pin;'
+      'swatches 10+20+30 2 m/s=swatch_10cm_2ms+swatch_20cm_2ms+swatch_30cm_2ms'
+    ),
   ),
   # the end-to-end path on a CPU in well under a minute: one truth, two tiny
   # candidates, short clips
@@ -594,6 +600,9 @@ def run(config: Config, workdir: str) -> dict:
     'material': config.material, 'area_weight': w, 'bendings': bendings,
     'priors_sd_log': prior, 'stats': list(STATS), 'table': table,
     'convergence': convergence,
+    'overhang_vs_elastica': against_elastica(
+      [r for r in slopes.values() if parse(r['candidate']).overhang], config.material
+    ),
     'camera_distance_m': {c.name: camera_distance(c.size) for c in cands},
     'slopes': [slopes[k] for k in slopes],
     'seconds': time.time() - t0,
@@ -614,6 +623,35 @@ def run(config: Config, workdir: str) -> dict:
   files.write_json(os.path.join(workdir, SUMMARY_FILE), summary)
   plot(result, os.path.join(workdir, FIGURE_FILE))
   return result
+
+
+def against_elastica(rows: list[dict], material: str) -> list[dict]:
+  """Each simulated overhang's tip against the heavy elastica of its nominal
+  rigidity D = bending x D0 (``physsim.cantilever``): both reaches over the
+  overhang, and the rigidity whose elastica reaches as far as the simulation
+  (over D). Overhangs beyond ``cantilever.MAX_RATIO`` bending lengths (hanging
+  straight down) are left out."""
+  d0 = physsim.reference_rigidity(physsim.fabric(material).material)
+  out = []
+  for r in rows:
+    size = parse(r['candidate']).size
+    c = (r['bending'] * d0 / (r['area_weight'] * cantilever.G)) ** (1 / 3)
+    if size / c > cantilever.MAX_RATIO:
+      continue
+    reach = float(r['summary'][2])
+    row = {
+      'candidate': r['candidate'], 'bending': r['bending'],
+      'bending_length_cm': float(100 * c), 'overhang_over_c': float(size / c),
+      'elastica_reach': float(cantilever.tip(size / c)[0][0]), 'simulated_reach': reach,
+    }  # fmt: skip
+    try:
+      row['rigidity_ratio'] = float(
+        (cantilever.bending_length(size, reach * size) / c) ** 3
+      )
+    except ValueError:  # beyond what the elastica's range covers
+      row['rigidity_ratio'] = None
+    out.append(row)
+  return out
 
 
 def geomean_range(table, label, mode, field):

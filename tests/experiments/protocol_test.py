@@ -10,8 +10,10 @@ import jax
 import numpy as np
 import pytest
 
+import physsim
 from experiments import protocol as script
 from experiments.studies import protocol
+from physsim import cantilever
 
 
 @pytest.mark.slow  # the study end to end: ~20 s of MuJoCo C
@@ -84,7 +86,10 @@ def test_an_overhang_lies_flat_with_its_first_two_rows_held():
   m = protocol.mesh(c)
   v = m.vertices
   np.testing.assert_allclose(v[:, 2], v[0, 2])  # flat, at the table's height
-  np.testing.assert_allclose(v[:, 1].reshape(9, 9)[:, 0], np.linspace(0, 0.05, 9))
+  # row 1 on the table's edge, row 0 a spacing back: 5 cm overhang the edge
+  np.testing.assert_allclose(
+    v[:, 1].reshape(9, 9)[:, 0], np.linspace(-0.05 / 7, 0.05, 9), atol=1e-15
+  )
   assert sorted(m.pinned) == list(range(18))  # rows 0 and 1: clamped
   # its swing after release carries no information (a resting strip is still)
   sd = protocol.sensor_sd(c, 1.5, 30.0, 2.0, 0.05)
@@ -122,3 +127,24 @@ def test_an_overhang_shows_bending_more_than_the_sheet_in_wind():
   assert signal['overhang_5cm_r9'] > 5 * signal['sheet_100cm_2ms_r9'], signal
   # the overhang droops but still reaches out from the table (not hanging)
   assert 0.1 < reach['overhang_5cm_r9'] < 0.9, reach
+
+
+def test_an_overhang_is_compared_with_the_elastica_of_its_rigidity():
+  # A made-up simulated row that reaches exactly as far as the elastica of its
+  # nominal rigidity reads a rigidity ratio of 1; one that reaches less, < 1;
+  # an overhang of more than MAX_RATIO bending lengths is left out.
+  d0 = physsim.reference_rigidity(physsim.fabric('gray_interlock').material)
+  c = (1.0 * d0 / (0.185 * cantilever.G)) ** (1 / 3)
+  reach = float(cantilever.tip(0.03 / c)[0][0])
+  rows = [
+    {'candidate': 'overhang_3cm_r9', 'bending': 1.0, 'area_weight': 0.185,
+     'summary': [0, 0, reach, 0, 0, 0]},
+    {'candidate': 'overhang_3cm_r9', 'bending': 1.0, 'area_weight': 0.185,
+     'summary': [0, 0, 0.8 * reach, 0, 0, 0]},
+    {'candidate': 'overhang_10cm_r9', 'bending': 0.3, 'area_weight': 0.185,
+     'summary': [0, 0, 0.05, 0, 0, 0]},
+  ]  # fmt: skip
+  out = protocol.against_elastica(rows, 'gray_interlock')
+  assert len(out) == 2 and out[0]['elastica_reach'] == pytest.approx(reach)
+  assert out[0]['rigidity_ratio'] == pytest.approx(1.0, rel=1e-4)
+  assert out[1]['rigidity_ratio'] < 0.9

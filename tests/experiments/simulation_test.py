@@ -30,13 +30,19 @@ def test_a_garment_is_its_own_mesh():
   np.testing.assert_array_equal(simulation.mesh(sim).vertices, want.vertices)
 
 
-def test_the_step_is_the_one_the_mesh_needs():
+def test_the_step_and_edges_are_the_ones_the_mesh_needs():
+  # A 20 cm swatch of 25 (8.3 mm): edges scaled to 4 ms x 8.3 / 40, the step
+  # at most half of that (below the bending's stable step) and a whole number
+  # of steps a frame.
   sim = simulation.Simulation(cloth_resolution=25, cloth_size=0.2)
   edge = simulation.mesh(sim).shortest_edge
-  assert simulation.sim_config(sim).timestep == physsim.stable_timestep(
-    edge, 1 / sim.fps
-  )
-  assert simulation.sim_config(simulation.Simulation()).timestep == pytest.approx(0.002)
+  cfg = simulation.sim_config(sim)
+  assert cfg.edge_solref == pytest.approx(0.004 * edge / 0.04, rel=1e-12)
+  assert cfg.timestep == physsim.stable_timestep(edge, 1 / sim.fps, cfg.edge_solref / 2)
+  assert cfg.timestep < physsim.stable_timestep(edge, 1 / sim.fps)
+  # the estimate's 1 m sheet: 2 ms steps and 4 ms edges, as always
+  sheet = simulation.sim_config(simulation.Simulation())
+  assert sheet.timestep == pytest.approx(0.002) and sheet.edge_solref == 0.004
 
 
 def test_the_objective_re_exports_it_and_the_intake_needs_no_objective():

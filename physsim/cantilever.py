@@ -1,0 +1,107 @@
+"""A strip of fabric overhanging a table's edge: the heavy elastica.
+
+The textile cantilever test (Peirce 1930; ASTM D1388) reads a fabric's bending
+from how far a strip hangs when a length L of it overhangs a table's edge. A
+strip of bending rigidity D (N m) and area weight w (kg/m^2), clamped flat at
+the edge, takes the shape of the heavy elastica: with theta(s) its angle below
+the horizontal at arc length s from the edge,
+
+  D theta''(s) = -w g (L - s) cos theta(s),   theta(0) = 0,   theta'(L) = 0,
+
+so its shape over L depends on L / c alone, c = (D / (w g))^(1/3) the bending
+length. ``tip`` solves it in float64 (RK4 from the free end, bisection on the
+tip's angle; NumPy, vectorised over ratios): the reference the simulator's
+overhang is checked against (``experiments.studies.protocol``), and, inverted
+(``bending_length``), what a measured overhang says about D.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+G = 9.81  # m/s^2
+_STEPS = 400  # RK4 steps over the overhang: relative error below 1e-9
+_BISECTIONS = 52  # on the tip's angle
+# Beyond about five bending lengths the free part hangs nearly straight down:
+# its shape hardly depends on c, and shooting from the free end loses the root
+# (its angle is within float64's reach of vertical from 5.6 on).
+MAX_RATIO = 5.0
+MIN_RATIO = 0.05
+
+
+def _shoot(ratio: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, ...]:
+  """From the free end (s = L, angle ``alpha``, no moment) back to the edge,
+  in units of c: (theta(0), reach, droop), the last two over L."""
+  h = ratio / _STEPS
+
+  def f(s, y):
+    th, dth = y[0], y[1]
+    return np.stack([dth, -(ratio - s) * np.cos(th), np.cos(th), np.sin(th)])
+
+  y = np.stack(
+    [alpha, np.zeros_like(alpha), np.zeros_like(alpha), np.zeros_like(alpha)]
+  )
+  s = ratio.copy()
+  for _ in range(_STEPS):  # backwards: step -h
+    k1 = f(s, y)
+    k2 = f(s - h / 2, y - h / 2 * k1)
+    k3 = f(s - h / 2, y - h / 2 * k2)
+    k4 = f(s - h, y - h * k3)
+    y = y - h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    s = s - h
+  # integrated backwards, x and z hold minus the integrals over [0, L]
+  return y[0], -y[2] / ratio, -y[3] / ratio
+
+
+def tip(ratio) -> tuple[np.ndarray, np.ndarray]:
+  """The free end of a strip overhanging by ``ratio`` = L / c bending lengths:
+  its horizontal reach from the edge and its drop below the table, each over
+  L (``ratio`` -> 0: reach 1, drop (L/c)^3 / 8; large: reach 0, drop 1).
+
+  Raises:
+    ValueError: a ratio that is not positive and finite.
+  """
+  ratio = np.atleast_1d(np.asarray(ratio, np.float64))
+  if not np.all(np.isfinite(ratio) & (ratio > 0) & (ratio <= MAX_RATIO)):
+    raise ValueError(
+      f'need overhangs of 0 to {MAX_RATIO:g} bending lengths, got {ratio}'
+    )
+  lo, hi = np.zeros_like(ratio), np.full_like(ratio, np.pi / 2)
+  for _ in range(_BISECTIONS):  # theta(0) rises with the tip's angle
+    mid = (lo + hi) / 2
+    above = _shoot(ratio, mid)[0] > 0
+    hi = np.where(above, mid, hi)
+    lo = np.where(above, lo, mid)
+  _, reach, droop = _shoot(ratio, (lo + hi) / 2)
+  return reach, droop
+
+
+def bending_length(overhang: float, reach: float) -> float:
+  """The bending length c (m) of a strip overhanging by ``overhang`` (m) whose
+  free end reaches ``reach`` (m) out from the edge.
+
+  Raises:
+    ValueError: a reach outside what overhangs of ``MIN_RATIO`` to
+      ``MAX_RATIO`` bending lengths give (a strip hanging straight down says
+      nothing about c; a stiff one hardly droops).
+  """
+  grid = np.geomspace(MIN_RATIO, MAX_RATIO, 240)
+  reaches = tip(grid)[0]  # falls as the ratio rises
+  if not (overhang > 0 and reaches[-1] < reach / overhang < reaches[0]):
+    raise ValueError(
+      f'a reach of {reach} m over an overhang of {overhang} m: need between '
+      f'{reaches[-1] * overhang:.3g} and {reaches[0] * overhang:.3g} m '
+      f'({MIN_RATIO:g}-{MAX_RATIO:g} bending lengths)'
+    )
+  k = int(
+    np.searchsorted(-reaches, -reach / overhang)
+  )  # reaches[k-1] > r >= reaches[k]
+  fine = np.geomspace(grid[k - 1], grid[k], 240)
+  log_ratio = np.interp(-reach / overhang, -tip(fine)[0], np.log(fine))
+  return float(overhang / np.exp(log_ratio))
+
+
+def rigidity(length: float, area_weight: float) -> float:
+  """D = w g c^3 (N m) of a bending length ``length`` (m) and an area weight
+  (kg/m^2)."""
+  return float(area_weight * G * length**3)

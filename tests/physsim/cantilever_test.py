@@ -1,0 +1,52 @@
+"""physsim.cantilever: the heavy elastica of a strip overhanging a table,
+against the small-deflection beam by hand and Peirce's cantilever relation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physsim import cantilever
+
+# Peirce's relation c = L (cos(a/2) / (8 tan a))^(1/3), a the angle from the
+# edge to the free end, is his fit to the elastica near his test's angle
+# (41.5 degrees, two bending lengths out): within a few percent there (at
+# three bending lengths it is 6% off).
+_PEIRCE_TOL = 0.03
+
+
+def test_a_short_overhang_is_the_small_deflection_beam():
+  # Euler-Bernoulli: a uniformly loaded cantilever's tip drops q L^4 / (8 D),
+  # over L: (L / c)^3 / 8, and hardly moves in.
+  reach, droop = cantilever.tip([0.1, 0.3])
+  np.testing.assert_allclose(droop, np.array([0.1, 0.3]) ** 3 / 8, rtol=1e-4)
+  np.testing.assert_allclose(reach, 1.0, atol=1e-5)
+
+
+def test_peirces_relation_at_his_angle():
+  # two bending lengths out: his 41.5 degree test; and one and three
+  ratio = np.array([1.0, 2.0, 3.0])
+  reach, droop = cantilever.tip(ratio)
+  a = np.arctan2(droop, reach)
+  peirce = (np.cos(a / 2) / (8 * np.tan(a))) ** (1 / 3)
+  np.testing.assert_allclose(peirce[:2], 1 / ratio[:2], rtol=_PEIRCE_TOL)
+  assert np.degrees(a[1]) == pytest.approx(41.5, abs=1.5)
+  # a longer overhang droops further and reaches out less
+  assert np.all(np.diff(reach) < 0) and np.all(np.diff(droop) > 0)
+
+
+def test_the_bending_length_of_a_measured_reach():
+  overhang = 0.05
+  for c in (0.012, 0.025):
+    reach = overhang * cantilever.tip(overhang / c)[0][0]
+    assert cantilever.bending_length(overhang, reach) == pytest.approx(c, rel=1e-6)
+  assert cantilever.rigidity(0.02, 0.2) == pytest.approx(0.2 * 9.81 * 0.02**3)
+
+
+def test_out_of_range_is_refused():
+  with pytest.raises(ValueError, match='bending lengths'):
+    cantilever.tip(cantilever.MAX_RATIO * 1.1)
+  with pytest.raises(ValueError, match='bending lengths'):
+    cantilever.tip(np.nan)
+  with pytest.raises(ValueError, match='reach of 0.06 m over an overhang of 0.05'):
+    cantilever.bending_length(0.05, 0.06)
