@@ -268,6 +268,8 @@ def describe(x_best, y_best, space) -> str:
 
 
 WIDTH = 100  # columns the printed table and its notes fit in
+# The Bayes point and the median further apart than this get a note.
+MEDIAN_NOTE_SHARE = 0.1
 # What the table calls each quantity (short enough for WIDTH).
 ROW_NAMES = {
   'bending_scale': 'bending (x)',
@@ -367,12 +369,32 @@ def report_table(result: dict) -> str:
     if posterior
     else "GP 90% interval: the Gaussian process's, not calibrated.",
     calibration_line(result.get('calibration')) if posterior else '',
+    median_line(result) if result.get('point') == 'bayes' else '',
     'retrieval: how well the network tells each quantity apart between held-out '
     f'simulations, 1 = chance ({_RETRIEVAL_MEANING}).'
     if retrieval
     else '',
   )
   return '\n'.join(lines)
+
+
+def median_line(result: dict, share: float = MEDIAN_NOTE_SHARE) -> str:
+  """A note naming each quantity whose Bayes point (least expected percent
+  error over the prior's whole range) is more than ``share`` from its
+  posterior median: where the posterior is wide and skewed the point leans to
+  the prior's middle, and a reader with, say, a strong fan should see both."""
+  far = []
+  for name in physsim.Params._fields:
+    e = result['estimate'][name]
+    if 'median' in e and abs(e['median'] / e['value'] - 1) > share:
+      far.append(f'{ROW_NAMES[name]} {e["median"]:.3g} (point {e["value"]:.3g})')
+  if not far:
+    return ''
+  return (
+    'posterior median where it differs from the point by more than '
+    f'{100 * share:.0f}%: ' + ', '.join(far) + '; the point leans to the '
+    "prior's middle where the posterior is wide."
+  )
 
 
 def joint_table(joint: dict) -> str:

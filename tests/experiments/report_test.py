@@ -234,3 +234,24 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
     'area_weight': {'narrowing_90': 4},
   }
   assert report.next_recording_note(narrowed, config, 'out/e') is None
+
+
+def test_a_point_far_from_the_median_gets_the_median_in_a_note():
+  # the windy rig's case: a wide right-skewed wind posterior, point 3.60 under
+  # a median of 3.99 (11% apart); bending and area weight within 10% of theirs
+  result = _result()
+  est = result['estimate']
+  est['wind_speed'] = {**_entry(3.60, 3.2, 4.4, 2.4, 4.9, 1.3), 'median': 3.99}
+  est['bending_scale'] = {**est['bending_scale'], 'median': 0.52}
+  est['area_weight'] = {**est['area_weight'], 'median': 0.25}
+  table = report.report_table(result)
+  assert 'wind (m/s) 3.99 (point 3.6)' in ' '.join(table.split())
+  assert 'bending (x) 0.52' not in table
+  assert max(map(len, table.splitlines())) <= report.WIDTH
+  # no note when every point is within 10%, nor for the posterior median point
+  est['wind_speed']['median'] = 3.7
+  assert 'posterior median where' not in report.report_table(result)
+  est['wind_speed']['median'] = 3.99
+  assert 'posterior median where' not in report.report_table(
+    {**result, 'point': 'median'}
+  )
