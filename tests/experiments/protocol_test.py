@@ -148,3 +148,31 @@ def test_an_overhang_is_compared_with_the_elastica_of_its_rigidity():
   assert len(out) == 2 and out[0]['elastica_reach'] == pytest.approx(reach)
   assert out[0]['rigidity_ratio'] == pytest.approx(1.0, rel=1e-4)
   assert out[1]['rigidity_ratio'] < 0.9
+
+
+# The simulated 9 x 9 overhang's tip may fall short of the elastica's reach by
+# this share (measured 9%: the discretised bending is softer; benchmarks/
+# overhang_mesh.py follows it down to 17 x 17).
+_ELASTICA_REACH_TOL = 0.15
+
+
+@pytest.mark.slow  # ~30 s of MuJoCo C
+def test_the_simulated_overhang_hangs_near_the_elastica_of_its_rigidity():
+  """MuJoCo C against an independent float64 reference: a 3 cm overhang at 3x
+  (1.6 bending lengths) reaches out as the heavy elastica says, within
+  ``_ELASTICA_REACH_TOL``, and further than the elastica of half its
+  rigidity would. Could fail: a wrong clamp, bending scale or mass."""
+  cand = protocol.parse('overhang_3cm_r9')
+  config = protocol.Config()
+  mesh = protocol.mesh(cand)
+  model = physsim.build(mesh, 'gray_interlock', protocol.sim_config(cand, config))
+  out = physsim.simulate(
+    model, physsim.params.make(3.0, 0.0, 0.185), frames=30, fps=20.0, warmup=1.0,
+    backend='c', workers=1, space=protocol.SPACE, key=jax.random.key(0)[None],
+  )  # fmt: skip
+  reach = protocol.summaries(out.positions, mesh.vertices, 9, 0.03)[0, 2]
+  d0 = physsim.reference_rigidity(physsim.fabric('gray_interlock').material)
+  c = (3.0 * d0 / (0.185 * cantilever.G)) ** (1 / 3)
+  want = cantilever.tip(0.03 / c)[0][0]
+  assert reach == pytest.approx(want, rel=_ELASTICA_REACH_TOL)
+  assert reach > cantilever.tip(0.03 / (c / 2 ** (1 / 3)))[0][0]
