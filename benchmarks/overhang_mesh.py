@@ -88,18 +88,13 @@ def main(args: Args) -> None:
       raise RuntimeError(f'{cand.name}: a simulation blew up')
     reach = protocol.summaries(out.positions, mesh.vertices, n, args.overhang)[:, 2]
     for b, r in zip(bendings, reach, strict=True):
-      c = (b * d0 / (args.area_weight * cantilever.G)) ** (1 / 3)
-      row = {'resolution': n, 'spacing_mm': 1000 * args.overhang / (n - 2),
-             'bending': b, 'overhang_over_c': args.overhang / c,
-             'simulated_reach': float(r), 'seconds': time.time() - t0}  # fmt: skip
-      if args.overhang / c <= cantilever.MAX_RATIO:
-        row['elastica_reach'] = float(cantilever.tip(args.overhang / c)[0][0])
-        try:
-          found = cantilever.bending_length(args.overhang, float(r) * args.overhang)
-          row['rigidity_ratio'] = float((found / c) ** 3)
-        except ValueError:
-          row['rigidity_ratio'] = None
-      rows.append(row)
+      check = protocol.elastica_check(args.overhang, b, args.area_weight, float(r), d0)
+      rows.append({
+        'resolution': n, 'spacing_mm': 1000 * args.overhang / (n - 2), 'bending': b,
+        'overhang_over_c': args.overhang
+        / (b * d0 / (args.area_weight * cantilever.G)) ** (1 / 3),
+        'simulated_reach': float(r), 'seconds': time.time() - t0, **(check or {}),
+      })  # fmt: skip
     print(f'{cand.name}: {time.time() - t0:.0f} s', flush=True)
   print(f'{args.material}, {100 * args.overhang:g} cm over the edge, area weight '
         f'{args.area_weight:g} kg/m^2')  # fmt: skip

@@ -56,8 +56,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import physsim  # noqa: E402
 from bo import design  # noqa: E402
-from physsim import cantilever  # noqa: E402
 from experiments.pipeline import files  # noqa: E402
+from physsim import cantilever  # noqa: E402
 
 RESULT_FILE = 'protocol.json'
 SUMMARY_FILE = 'protocol_summary.json'  # without the slopes: small enough to commit
@@ -625,32 +625,42 @@ def run(config: Config, workdir: str) -> dict:
   return result
 
 
+def elastica_check(
+  overhang: float, bending: float, area_weight: float, reach: float, d0: float
+) -> dict | None:
+  """A simulated overhang's tip (``reach`` over the ``overhang``) against the
+  heavy elastica of its nominal rigidity D = ``bending`` x ``d0``
+  (``physsim.cantilever``): its bending length, both reaches, and the rigidity
+  whose elastica reaches as far as the simulation, over D (None beyond the
+  elastica's range). None for an overhang of more than ``cantilever.MAX_RATIO``
+  bending lengths (hanging straight down)."""
+  c = (bending * d0 / (area_weight * cantilever.G)) ** (1 / 3)
+  if overhang / c > cantilever.MAX_RATIO:
+    return None
+  row = {
+    'bending': bending, 'bending_length_cm': float(100 * c),
+    'overhang_over_c': float(overhang / c),
+    'elastica_reach': float(cantilever.tip(overhang / c)[0][0]),
+    'simulated_reach': float(reach), 'rigidity_ratio': None,
+  }  # fmt: skip
+  try:
+    found = cantilever.bending_length(overhang, reach * overhang)
+    row['rigidity_ratio'] = float((found / c) ** 3)
+  except ValueError:  # a reach beyond what the elastica's range covers
+    pass
+  return row
+
+
 def against_elastica(rows: list[dict], material: str) -> list[dict]:
-  """Each simulated overhang's tip against the heavy elastica of its nominal
-  rigidity D = bending x D0 (``physsim.cantilever``): both reaches over the
-  overhang, and the rigidity whose elastica reaches as far as the simulation
-  (over D). Overhangs beyond ``cantilever.MAX_RATIO`` bending lengths (hanging
-  straight down) are left out."""
+  """``elastica_check`` of each simulated overhang (slope rows: its clip's mean
+  tip reach is ``summary[2]``), those within the elastica's range."""
   d0 = physsim.reference_rigidity(physsim.fabric(material).material)
   out = []
   for r in rows:
     size = parse(r['candidate']).size
-    c = (r['bending'] * d0 / (r['area_weight'] * cantilever.G)) ** (1 / 3)
-    if size / c > cantilever.MAX_RATIO:
-      continue
-    reach = float(r['summary'][2])
-    row = {
-      'candidate': r['candidate'], 'bending': r['bending'],
-      'bending_length_cm': float(100 * c), 'overhang_over_c': float(size / c),
-      'elastica_reach': float(cantilever.tip(size / c)[0][0]), 'simulated_reach': reach,
-    }  # fmt: skip
-    try:
-      row['rigidity_ratio'] = float(
-        (cantilever.bending_length(size, reach * size) / c) ** 3
-      )
-    except ValueError:  # beyond what the elastica's range covers
-      row['rigidity_ratio'] = None
-    out.append(row)
+    row = elastica_check(size, r['bending'], r['area_weight'], r['summary'][2], d0)
+    if row is not None:
+      out.append({'candidate': r['candidate'], **row})
   return out
 
 
