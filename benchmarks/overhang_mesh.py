@@ -25,7 +25,6 @@ import numpy as np
 import physsim
 from experiments.pipeline import cli, files
 from experiments.studies import protocol
-from physsim import cantilever
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,10 +68,10 @@ def main(args: Args) -> None:
   if min(resolutions) < 4 or not args.overhang > 0:
     raise ValueError('need --resolutions >= 4 and --overhang > 0')
   d0 = physsim.reference_rigidity(physsim.fabric(args.material).material)
+  config = protocol.Config(material=args.material, fps=args.fps)
   rows = []
   for n in resolutions:
     cand = protocol.Candidate(args.overhang, 0.0, 2, n, overhang=True)
-    config = protocol.Config(material=args.material, fps=args.fps)
     mesh = protocol.mesh(cand)
     model = physsim.build(mesh, args.material, protocol.sim_config(cand, config))
     t0 = time.time()
@@ -88,12 +87,10 @@ def main(args: Args) -> None:
       raise RuntimeError(f'{cand.name}: a simulation blew up')
     reach = protocol.summaries(out.positions, mesh.vertices, n, args.overhang)[:, 2]
     for b, r in zip(bendings, reach, strict=True):
-      check = protocol.elastica_check(args.overhang, b, args.area_weight, float(r), d0)
       rows.append({
-        'resolution': n, 'spacing_mm': 1000 * args.overhang / (n - 2), 'bending': b,
-        'overhang_over_c': args.overhang
-        / (b * d0 / (args.area_weight * cantilever.G)) ** (1 / 3),
-        'simulated_reach': float(r), 'seconds': time.time() - t0, **(check or {}),
+        'resolution': n, 'spacing_mm': 1000 * args.overhang / (n - 2),
+        'seconds': time.time() - t0,
+        **protocol.elastica_check(args.overhang, b, args.area_weight, float(r), d0),
       })  # fmt: skip
     print(f'{cand.name}: {time.time() - t0:.0f} s', flush=True)
   print(f'{args.material}, {100 * args.overhang:g} cm over the edge, area weight '
@@ -103,7 +100,7 @@ def main(args: Args) -> None:
   )
   print('|---:|---:|---:|---:|---:|---:|---:|')
   for r in rows:
-    e, q = r.get('elastica_reach'), r.get('rigidity_ratio')
+    e, q = r['elastica_reach'], r['rigidity_ratio']
     print(f"| {r['resolution']} | {r['spacing_mm']:.1f} | {r['bending']:g} | "
           f"{r['overhang_over_c']:.2f} | {r['simulated_reach']:.3f} | "
           f"{'-' if e is None else f'{e:.3f}'} | {'-' if q is None else f'{q:.2f}'} |")  # fmt: skip

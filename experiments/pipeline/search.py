@@ -365,11 +365,13 @@ def estimate(
       recording, camera, model or config, or every candidate simulation blew
       up (naming the recording).
   """
-  if setup is not None and setup.config.flat() != config.flat():
-    raise ValueError(
-      'the setup was resolved for other settings than the estimate is given: '
-      + ', '.join(k for k, v in config.flat().items() if setup.config.flat()[k] != v)
-    )
+  if setup is not None:
+    mine, theirs = config.flat(), setup.config.flat()
+    if mine != theirs:
+      raise ValueError(
+        'the setup was resolved for other settings than the estimate is given: '
+        + ', '.join(k for k, v in mine.items() if theirs[k] != v)
+      )
   (out,) = estimate_many(
     [Job(config, recording, model_dir, workdir, allow_other_material, setup)],
     progress=progress, gp_on_cpu=gp_on_cpu, evaluator=evaluator, nets=nets,

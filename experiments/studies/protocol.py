@@ -627,22 +627,22 @@ def run(config: Config, workdir: str) -> dict:
 
 def elastica_check(
   overhang: float, bending: float, area_weight: float, reach: float, d0: float
-) -> dict | None:
+) -> dict:
   """A simulated overhang's tip (``reach`` over the ``overhang``) against the
   heavy elastica of its nominal rigidity D = ``bending`` x ``d0``
   (``physsim.cantilever``): its bending length, both reaches, and the rigidity
-  whose elastica reaches as far as the simulation, over D (None beyond the
-  elastica's range). None for an overhang of more than ``cantilever.MAX_RATIO``
-  bending lengths (hanging straight down)."""
+  whose elastica reaches as far as the simulation, over D. The last two are
+  None for an overhang of more than ``cantilever.MAX_RATIO`` bending lengths
+  (hanging straight down), the ratio also beyond the elastica's range."""
   c = (bending * d0 / (area_weight * cantilever.G)) ** (1 / 3)
-  if overhang / c > cantilever.MAX_RATIO:
-    return None
   row = {
     'bending': bending, 'bending_length_cm': float(100 * c),
-    'overhang_over_c': float(overhang / c),
-    'elastica_reach': float(cantilever.tip(overhang / c)[0][0]),
+    'overhang_over_c': float(overhang / c), 'elastica_reach': None,
     'simulated_reach': float(reach), 'rigidity_ratio': None,
   }  # fmt: skip
+  if overhang / c > cantilever.MAX_RATIO:
+    return row
+  row['elastica_reach'] = float(cantilever.tip(overhang / c)[0][0])
   try:
     found = cantilever.bending_length(overhang, reach * overhang)
     row['rigidity_ratio'] = float((found / c) ** 3)
@@ -659,7 +659,7 @@ def against_elastica(rows: list[dict], material: str) -> list[dict]:
   for r in rows:
     size = parse(r['candidate']).size
     row = elastica_check(size, r['bending'], r['area_weight'], r['summary'][2], d0)
-    if row is not None:
+    if row['elastica_reach'] is not None:
       out.append({'candidate': r['candidate'], **row})
   return out
 
