@@ -2,6 +2,8 @@
 
   python -m experiments.calibrate --workdir=out/calibration            # GPU: 200 recordings
   python -m experiments.calibrate --workdir=/tmp/cal --preset=smoke    # CPU, minutes
+  python -m experiments.calibrate --workdir=out/cal_paper --preset=paper  # GPU: every
+      # fabric at the estimate's own size, shape distance, one lockstep
   python -m experiments.calibrate --workdir=out/calibration --install  # ship its coverage
   python -m experiments.calibrate --workdir=out/calibration --analyse_only  # no simulation
   python -m experiments.calibrate --workdir=/tmp/cal --simulate_only   # GPU; then copy
@@ -80,7 +82,9 @@ def main(args: Args) -> None:
     simulate_only=args.simulate_only,
   )  # fmt: skip
   if args.install and distributed.is_main():
-    dest = report.shipped_calibration(args.study.estimate.scoring.distance)
+    dest = report.shipped_calibration(
+      args.study.estimate.scoring.distance, args.study.size
+    )
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     files.write_atomic(dest, lambda tmp: shutil.copyfile(src, tmp))  # never half-copied
     print(f'installed as {dest}')

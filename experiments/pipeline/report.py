@@ -7,6 +7,7 @@ estimate, on one depth colour scale with frame times).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import textwrap
@@ -31,30 +32,67 @@ SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weigh
 # Coverage of the posterior's intervals measured on held-out simulated
 # recordings, shipped with the package (``experiments/calibrate.py --install``):
 # the default distance's (its networks' recipe) and the shape distance's (no
-# network).
+# network), at the demo's size; and the shape distance's at the estimate's own
+# (paper) size, every fabric.
 CALIBRATION_FILE = os.path.join(os.path.dirname(__file__), 'calibration.json')
 SHAPE_CALIBRATION_FILE = os.path.join(
   os.path.dirname(__file__), 'calibration_shape.json'
 )
+SHAPE_PAPER_CALIBRATION_FILE = os.path.join(
+  os.path.dirname(__file__), 'calibration_shape_paper.json'
+)
+SIZES = ('demo', 'paper')
 
 
-def shipped_calibration(distance: str) -> str:
-  """Where the calibration of estimates with ``distance`` is shipped (and
-  ``--install`` puts it): the shape distance's own file, every other
-  distance's the default one (whose networks it records)."""
-  return SHAPE_CALIBRATION_FILE if distance == 'shape' else CALIBRATION_FILE
+def shipped_calibration(distance: str, size: str = 'demo') -> str:
+  """Where the calibration of estimates with ``distance`` at the study's
+  ``size`` is shipped (and ``--install`` puts it): the shape distance's own
+  files, every other distance's the default one (whose networks it records;
+  its paper size ``calibration_paper.json``)."""
+  if size not in SIZES:
+    raise ValueError(f'no calibration size {size!r}: one of {SIZES}')
+  if distance == 'shape':
+    return SHAPE_CALIBRATION_FILE if size == 'demo' else SHAPE_PAPER_CALIBRATION_FILE
+  return (
+    CALIBRATION_FILE
+    if size == 'demo'
+    else CALIBRATION_FILE.replace('.json', '_paper.json')
+  )
+
+
+def shipped_calibrations(distance: str) -> list[str]:
+  """The files shipped for ``distance`` (every size), those present only."""
+  own = [shipped_calibration(distance, size) for size in SIZES]
+  return [p for p in own if os.path.isfile(p)]
 
 
 def calibration_file(config=None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
-  (``config.scoring.calibration``), else the one shipped for its distance,
+  (``config.scoring.calibration``), else of those shipped for its distance the
+  one whose settings differ from it least (none: the one its size matches),
   else (none shipped for it) the default one, whose note then names what
   differs."""
   scoring = getattr(config, 'scoring', None)
   if given := getattr(scoring, 'calibration', ''):
     return given
-  own = shipped_calibration(getattr(scoring, 'distance', ''))
-  return own if os.path.isfile(own) else CALIBRATION_FILE
+  own = shipped_calibrations(getattr(scoring, 'distance', ''))
+  if not own:
+    return CALIBRATION_FILE
+  if config is None or len(own) == 1:
+    return own[0]
+  return min(own, key=lambda p: len(_differing_fields(config, _read_calibration(p))))
+
+
+@functools.lru_cache(maxsize=16)
+def _read_cached(path: str, mtime_ns: int, size: int) -> dict:
+  with open(path) as f:
+    return json.load(f)
+
+
+def _read_calibration(path: str) -> dict:
+  """A calibration file, read once per version of it (not to be changed)."""
+  st = os.stat(path)
+  return _read_cached(path, st.st_mtime_ns, st.st_size)
 
 
 _RETRIEVAL_MEANING = (
@@ -147,6 +185,28 @@ _CALIBRATED_FIELDS = (
 )  # fmt: skip
 
 
+def _differing_fields(config, cal: dict) -> list[str]:
+  """The likelihood's settings (``_CALIBRATED_FIELDS``) in which an estimate
+  with ``config`` differs from calibration ``cal``'s searches; a study of
+  several fabrics (``'materials'``) holds for each of them."""
+  calibrated = dict(cal.get('config', {}).get('estimate', {}))
+  calibrated.update(
+    likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
+  )
+  if 'distance' in calibrated:  # files from before the camera's error was a setting
+    calibrated.setdefault('camera_sd_m', 0.0)
+    calibrated.setdefault('camera_sd_deg', 0.0)
+  if 'cloth_resolution' in calibrated:  # files from before the size was a setting
+    calibrated.setdefault('cloth_size', 1.0)
+  mine = config.flat()
+  if 'materials' in cal:
+    calibrated['material'] = (
+      mine['material'] if mine['material'] in cal['materials'] else cal['materials']
+    )
+  return [n for n in _CALIBRATED_FIELDS
+          if n in calibrated and not _same(mine[n], calibrated[n])]  # fmt: skip
+
+
 def calibration_mode(measured, joint: bool = False) -> str | None:
   """The calibration study's mode (``experiments.studies.calibration.MODES``)
   an estimate with these readings falls in: the video alone, with a measured
@@ -191,24 +251,12 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   path = calibration_file(config)
   if not os.path.isfile(path):
     return None
-  with open(path) as f:
-    cal = json.load(f)
+  cal = _read_calibration(path)
   head = {k: cal[k] for k in ('n', 'setting', 'likelihood', 'sharpness') if k in cal}
   head['networks'] = len(cal.get('network', {}).get('seeds', [0]))
   if config is None:
     return {'matches': True, **head, 'coverage': cal['coverage']}
-  calibrated = dict(cal.get('config', {}).get('estimate', {}))
-  calibrated.update(
-    likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
-  )
-  if 'distance' in calibrated:  # files from before the camera's error was a setting
-    calibrated.setdefault('camera_sd_m', 0.0)
-    calibrated.setdefault('camera_sd_deg', 0.0)
-  if 'cloth_resolution' in calibrated:  # files from before the size was a setting
-    calibrated.setdefault('cloth_size', 1.0)
-  mine = config.flat()
-  differs = [n for n in _CALIBRATED_FIELDS
-             if n in calibrated and not _same(mine[n], calibrated[n])]  # fmt: skip
+  differs = _differing_fields(config, cal)
   mode = calibration_mode(config.measured, joint)
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')

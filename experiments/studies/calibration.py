@@ -88,8 +88,18 @@ class Config:
 
   Attributes:
     material: the fabric (physsim.FABRICS).
-    pairs: pairs of held-out simulated recordings (each pair shares bending
-      and area weight; every recording's parameters are a prior draw).
+    materials: several fabrics in one study (overrides ``material``): each
+      gets ``pairs`` pairs drawn over its own search box, every recording is
+      estimated in one lockstep (one device program for all), and the
+      tables are fitted on all of them (ranks are in each posterior's own
+      CDF, so fabrics pool); the coverage is also reported per fabric.
+    size: 'demo' (the demo's cloth, clip, network and search, minutes on a
+      CPU) or 'paper' (the estimate's defaults: 25x25 cloth, 3 s clips, 120
+      simulations per estimate, recordings of the evaluation recipe at its
+      own 33x33 mesh, 256x256 frames; a GPU's work; no network: the study
+      trains demo-size networks only, so it needs ``--distance=shape``).
+    pairs: pairs of held-out simulated recordings per fabric (each pair shares
+      bending and area weight; every recording's parameters are a prior draw).
     folds: folds of pairs for the cross-fitted coverage (each fold is read
       with the sharpness and recalibration chosen on the others).
     sharpness_grid: candidate values of the likelihood's constant (the
@@ -115,6 +125,8 @@ class Config:
   """
 
   material: str = 'gray_interlock'
+  materials: tuple[str, ...] = ()
+  size: str = cli.choice('demo', ('demo', 'paper'))
   pairs: int = 100
   folds: int = 5
   sharpness_grid: tuple[float, ...] = (0.05, 0.1, 0.15, 0.25, 0.35, 0.5, 0.7, 1.0, 1.4)
@@ -135,6 +147,18 @@ class Config:
 
 PRESETS = {
   'default': Config(),
+  # The estimate's own size for every fabric (issue 41): the shape distance,
+  # the default paper-size search, recordings of the evaluation recipe; all
+  # in one lockstep on a GPU. The likelihood's constant stays the estimate's
+  # default (the tables recalibrate its intervals).
+  'paper': Config(
+    materials=tuple(physsim.FABRICS),
+    size='paper',
+    pairs=15,
+    sharpness_grid=(0.5,),
+    batch_size=32,
+    estimate=EstimateConfig().replace(distance='shape'),
+  ),
   # A few pairs on a CPU: checks the whole study end to end.
   'smoke': Config(
     pairs=3,
@@ -149,18 +173,36 @@ PRESETS = {
 }
 
 
-def truths(config: Config, group: int = 2) -> physsim.Params:
-  """(group * pairs,) parameter sets, group-major: the ``group`` recordings
-  of each fabric (a pair by default) share bending and area weight and draw
-  their own wind (one fan setting each); all uniform in the unit cube of the
-  search box (the prior). ``group=2`` gives the calibration study's pairs."""
+def study_materials(config: Config) -> tuple[str, ...]:
+  """The study's fabrics, in order (``materials``, else ``material``)."""
+  return tuple(config.materials) or (config.material,)
+
+
+def first_seq(config: Config, material: str) -> int:
+  """The study-wide number of ``material``'s first recording: fabric ``k``'s
+  recordings are ``k * 2 * pairs ...`` (pairs stay ``2j, 2j + 1``; a
+  one-fabric study numbers them as before)."""
+  return study_materials(config).index(material) * 2 * config.pairs
+
+
+def truths(
+  config: Config, group: int = 2, material: str | None = None
+) -> physsim.Params:
+  """(group * pairs,) parameter sets of ``material`` (default the study's
+  first), group-major: the ``group`` recordings of each fabric (a pair by
+  default) share bending and area weight and draw their own wind (one fan
+  setting each); all uniform in the unit cube of the fabric's search box (the
+  prior). ``group=2`` gives the calibration study's pairs."""
   if group < 2:
     raise ValueError(f'a group is two or more recordings, got {group}')
-  rng = np.random.default_rng([config.seed, 7])
+  material = material or study_materials(config)[0]
+  k = study_materials(config).index(material)
+  # the first fabric keeps the one-fabric study's stream
+  rng = np.random.default_rng([config.seed, 7] + ([k] if k else []))
   u = rng.uniform(-1.0, 1.0, size=(config.pairs, group, 3))
   u[:, 1:, 0] = u[:, :1, 0]
   u[:, 1:, 2] = u[:, :1, 2]
-  return physsim.from_unit(u.reshape(-1, 3), physsim.search_space(config.material))
+  return physsim.from_unit(u.reshape(-1, 3), physsim.search_space(material))
 
 
 def uses_networks(config: Config) -> bool:
@@ -231,21 +273,64 @@ def networks_record(config: Config, workdir: str) -> dict:
 def _configs(config: Config, point: str = 'median', network: int = 0):
   """(training set, recordings, training, estimate) configs; the first two
   and the estimate's are every network's, ``network`` picks the seeds of the
-  training set and training."""
+  training set and training. At the paper's size there is no network (the
+  first and third are None) and the estimate keeps ``config.estimate``'s
+  cloth and clock."""
+  n = 2 * config.pairs
+  mats = study_materials(config)
+  if config.size == 'paper':
+    rec = dataclasses.replace(
+      gen.PRESETS['eval'], materials=mats, sequences=n,
+      batch_size=min(config.batch_size, n * len(mats)), backend=config.backend,
+      seed=5000 + config.seed,
+    )  # fmt: skip
+    est = config.estimate.replace(
+      material=mats[0], backend=config.backend, seed=config.seed, point=point
+    )
+    return None, rec, None, est
   data, rec, training, est = demo_lib.configs(
-    config.material, config.sequences, config.seed, config.backend,
+    mats[0], config.sequences, config.seed, config.backend,
     config.network_seed + network,
   )  # fmt: skip
-  n = 2 * config.pairs
   rec = dataclasses.replace(
-    rec, sequences=n, batch_size=min(config.batch_size, n), seed=5000 + config.seed
-  )
+    rec, materials=mats, sequences=n, batch_size=min(config.batch_size, n),
+    seed=5000 + config.seed,
+  )  # fmt: skip
   est = config.estimate.replace(
-    material=config.material, cloth_resolution=est.simulation.cloth_resolution,
+    material=mats[0], cloth_resolution=est.simulation.cloth_resolution,
     frames=est.simulation.frames, warmup=est.simulation.warmup,
     backend=config.backend, seed=config.seed, point=point,
   )  # fmt: skip
   return data, rec, training, est
+
+
+def check_config(config: Config) -> None:
+  """Refuses a study that cannot run, naming the setting.
+
+  Raises:
+    ValueError: an unknown fabric, pairs below one, or a paper-size study
+      with a network distance (it trains demo-size networks only).
+  """
+  for m in study_materials(config):
+    if m not in physsim.FABRICS:
+      raise ValueError(
+        f'--materials: no fabric {m!r}: one of {sorted(physsim.FABRICS)}'
+      )
+  if len(set(study_materials(config))) != len(study_materials(config)):
+    raise ValueError(f'--materials={",".join(config.materials)}: a fabric twice')
+  if config.pairs < 1:
+    raise ValueError(f'--pairs={config.pairs}: need at least one pair')
+  if len(study_materials(config)) > 1 and uses_networks(config):
+    raise ValueError(
+      f'--materials={",".join(config.materials)} with --distance='
+      f'{config.estimate.scoring.distance}: a study with networks calibrates one '
+      'fabric (its networks are trained on it); use --material'
+    )
+  if config.size == 'paper' and uses_networks(config):
+    raise ValueError(
+      f'--size=paper with --distance={config.estimate.scoring.distance}: the study '
+      'trains demo-size networks only; use --distance=shape'
+    )
 
 
 def with_reading(config: Config, est: EstimateConfig, reading: str, truth: dict,
@@ -296,28 +381,30 @@ def simulate_and_estimate(
     files.write_json(
       os.path.join(workdir, NETWORKS_FILE), networks_record(config, workdir)
     )
-  gen.run(rec_cfg, rec_root, params={config.material: truths(config)})
+  mats = study_materials(config)
+  gen.run(rec_cfg, rec_root, params={m: truths(config, material=m) for m in mats})
   distributed.barrier('calibration: network and recordings made')
   index = physsim.dataset.open_dataset(rec_root)
-  rows = sorted(index.filter(material=config.material).rows, key=lambda r: r['seq_id'])
+  size = (rec_cfg.resolution,) * 2 if config.size == 'paper' else demo_lib.IMAGE_SIZE
   jobs, meta = [], []
-  for r in rows:
-    if not r['valid']:
-      continue
-    rec = recording_lib.load_recording(
-      index.path(r),
-      fps=est.simulation.fps,
-      size=demo_lib.IMAGE_SIZE,
-      frames=est.simulation.frames,
-    )
-    wd = os.path.join(workdir, 'estimates', r['seq_id'])
-    k = network_of(config, int(r['seq_id']))
-    # '' : no network (search.estimate_many compares depth frames directly)
-    model_dir = os.path.join(model_roots[k], config.material) if model_roots else ''
-    job_est = with_reading(config, est, reading, rec.truth, int(r['seq_id']))
-    jobs.append(search.Job(job_est, rec, model_dir, wd))
-    meta.append({'seq': int(r['seq_id']), 'truth': rec.truth, 'workdir': wd,
-                 'network': seeds[k] if seeds else None})  # fmt: skip
+  for material in mats:
+    rows = sorted(index.filter(material=material).rows, key=lambda r: r['seq_id'])
+    for r in rows:
+      if not r['valid']:
+        continue
+      rec = recording_lib.load_recording(
+        index.path(r), fps=est.simulation.fps, size=size, frames=est.simulation.frames
+      )
+      seq = first_seq(config, material) + int(r['seq_id'])
+      wd = os.path.join(workdir, 'estimates', f'{seq:04d}')
+      k = network_of(config, seq)
+      # '' : no network (search.estimate_many compares depth frames directly)
+      model_dir = os.path.join(model_roots[k], material) if model_roots else ''
+      job_est = with_reading(config, est.replace(material=material), reading,
+                             rec.truth, seq)  # fmt: skip
+      jobs.append(search.Job(job_est, rec, model_dir, wd))
+      meta.append({'seq': seq, 'material': material, 'truth': rec.truth,
+                   'workdir': wd, 'network': seeds[k] if seeds else None})  # fmt: skip
   if jax.process_count() > 1:
     mine = distributed.share(jobs)
     print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)
@@ -414,18 +501,25 @@ def _score(draws_phys: np.ndarray, prior_phys: np.ndarray, truth_row: np.ndarray
   }
 
 
+def run_material(config: Config, run: dict) -> str:
+  """A recording's fabric: its own (studies of several fabrics record it),
+  else the study's only one."""
+  return run.get('material') or study_materials(config)[0]
+
+
 def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
                n: int = 2000, pairs: bool = True) -> dict[str, list[dict]]:  # fmt: skip
   """Every recording's scores under each mode, at one likelihood setting
   (``pairs``: recordings 2k and 2k+1 share bending and area weight, and
   their joint posterior is scored too)."""
-  space = physsim.search_space(config.material)
   grid = tuple(config.estimate.search.posterior_grid)
   points = bo.posterior.grid_points(grid)
   rng = np.random.default_rng([config.seed, 11, int(sharpness * 1000)])
   out = {m: [] for m in MODES}
   by_seq = {r['seq']: r for r in runs}
   for r in runs:
+    material = run_material(config, r)
+    space = physsim.search_space(material)
     z = _saved(r)
     t = r['truth']
     row = _truth_row(t)
@@ -449,11 +543,11 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     for mode, lp in priors.items():
       post = bo.posterior.log_normalise(lp + ll)
       draws = _physical_with_ratio(_draws(rng, grid, np.asarray(post), n), space)
-      point = _prior_point(config.material, measured[mode])
+      point = _prior_point(material, measured[mode])
       score = _score(
         draws, prior_draws[mode], row, r['seq'], point, prior_draws['video']
       )
-      out[mode].append({'seq': r['seq'], 'truth': row, **score})
+      out[mode].append({'seq': r['seq'], 'material': material, 'truth': row, **score})
     mate = by_seq.get(r['seq'] ^ 1) if pairs else None  # the pair's other recording
     if mate is not None and r['seq'] % 2 == 0:
       zm = _saved(mate)
@@ -464,12 +558,12 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
       for k, (rr, samples) in enumerate(zip((r, mate), j['samples'], strict=True)):
         trow = _truth_row(rr['truth'])
         draws = _physical_with_ratio(samples, space)
-        point = _prior_point(config.material, measured['video'])
+        point = _prior_point(material, measured['video'])
         score = _score(
           draws, prior_draws['video'], trow, rr['seq'], point, prior_draws['video']
         )
-        out['joint pair'].append({'seq': rr['seq'], 'pair_member': k, 'truth': trow,
-                                  **score})  # fmt: skip
+        out['joint pair'].append({'seq': rr['seq'], 'material': material,
+                                  'pair_member': k, 'truth': trow, **score})  # fmt: skip
       # The same pair with an anemometer reading at each recording.
       readings = [measured['known wind']] + [
         posterior_lib.simulated_reading(
@@ -485,11 +579,12 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
         own_prior = _physical_with_ratio(_draws(rng, grid, lps[k], n // 4), space)
         score = _score(
           _physical_with_ratio(samples, space), own_prior, _truth_row(rr['truth']),
-          rr['seq'], _prior_point(config.material, readings[k]), prior_draws['video'],
+          rr['seq'], _prior_point(material, readings[k]), prior_draws['video'],
         )  # fmt: skip
         out['joint pair, known winds'].append(
           {
             'seq': rr['seq'],
+            'material': material,
             'pair_member': k,
             'truth': _truth_row(rr['truth']),
             **score,
@@ -516,6 +611,20 @@ def _scale(space: physsim.SearchSpace) -> dict:
     'bending_scale': np.log(b1 / b0), 'wind_speed': v1 - v0, 'area_weight': w1 - w0,
     'load_ratio': float(np.log(r_hi / r_lo)),
   }  # fmt: skip
+
+
+def _box(space: physsim.SearchSpace) -> tuple[np.ndarray, np.ndarray]:
+  """(centre, scale) of a search box in ``FIELDS`` order: the range centre
+  (the load ratio at the centre's wind and area weight) and ``_scale``."""
+  c = space.center()
+  scale = _scale(space)
+  centre = [*map(float, c), float(physsim.load_ratio(c.wind_speed, c.area_weight))]
+  return np.array(centre), np.array([scale[f] for f in FIELDS])
+
+
+@functools.lru_cache(maxsize=64)
+def _fabric_box(material: str) -> tuple[np.ndarray, np.ndarray]:
+  return _box(physsim.search_space(material))
 
 
 def recalibration(scores: list[dict]) -> np.ndarray:
@@ -547,10 +656,12 @@ def summarise(
   vals = np.stack([_at(s['qf'], s.get('levels', default)) for s in scores])
   median = vals[:, probs.index(0.5)]  # (n, fields)
   rank = np.stack([s['rank'] for s in scores])
-  centre = np.array([*map(float, space.center()),
-                     float(physsim.load_ratio(space.center().wind_speed,
-                                              space.center().area_weight))])  # fmt: skip
-  scale = _scale(space)
+  # each recording against its own fabric's box (``space``: the fabric of a
+  # score that names none)
+  own = _box(space) if space is not None else None
+  boxes = [_fabric_box(s['material']) if s.get('material') else own for s in scores]
+  centre = np.stack([b[0] for b in boxes])  # (n, fields)
+  scale = np.stack([b[1] for b in boxes])
   out = {'n': len(scores)}
   for i, f in enumerate(FIELDS):
     cell = {}
@@ -562,7 +673,7 @@ def summarise(
       hi = vals[:, probs.index(round((1 + a) / 2, 2)), i]
       cell[f'interval_{lvl}'] = float(np.mean((lo <= t) & (t <= hi)))
       cell[f'interval_score_{lvl}'] = float(
-        np.mean(bo.calibration.interval_score(tr(lo), tr(hi), tr(t), a)) / scale[f]
+        np.mean(bo.calibration.interval_score(tr(lo), tr(hi), tr(t), a) / scale[:, i])
       )
     if all('prior_rank' in s for s in scores):
       pr = np.array([s['prior_rank'][i] for s in scores])
@@ -582,11 +693,11 @@ def summarise(
         np.mean(np.exp(np.abs(np.log(median[:, i] / t))))
       )
       cell['centre_error_factor'] = float(
-        np.mean(np.exp(np.abs(np.log(centre[i] / t))))
+        np.mean(np.exp(np.abs(np.log(centre[:, i] / t))))
       )
     else:  # percent
       cell['median_error_pct'] = float(np.mean(100 * np.abs(median[:, i] - t) / t))
-      cell['centre_error_pct'] = float(np.mean(100 * np.abs(centre[i] - t) / t))
+      cell['centre_error_pct'] = float(np.mean(100 * np.abs(centre[:, i] - t) / t))
     if bayes:  # the least-error point, moved towards the prior's by the weight
       loss = _LOSS[f]
       bp = np.array(
@@ -680,6 +791,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   folds = max(2, min(config.folds, len({r['seq'] // 2 for r in runs})))
   everyone = {r['seq'] for r in runs}
   sweep, best, fold_choice, cross, never_under, by_fold = {}, {}, {}, {}, {}, {}
+  by_material = {}
   levels = [lv / 100 for lv in LEVELS]
   for form in bo.posterior.DISCREPANCY_LIKELIHOODS:
     by_c = {c: posteriors(config, runs, form, c) for c in config.sharpness_grid}
@@ -721,10 +833,15 @@ def analyse(config: Config, runs: list[dict]) -> dict:
                              space, bayes=False))
       for k in range(folds)
     ]  # fmt: skip
+    by_material[form] = {
+      m: summarise([s for s in held['video'] if s.get('material') == m], space)
+      for m in study_materials(config)
+    } if len(study_materials(config)) > 1 else {}  # fmt: skip
   return {
     'sweep': sweep, 'best_sharpness': best, 'folds': folds,
     'fold_sharpness': fold_choice, 'cross_validated': cross,
     'cross_validated_by_fold': by_fold,
+    'cross_validated_by_material': by_material,
     'sharpest_never_under_covering': never_under,
   }  # fmt: skip
 
@@ -754,6 +871,7 @@ def pack_runs(runs: list[dict], workdir: str) -> list[str]:
     saved = [_saved(r) for r in chunk]
     arrays = {
       'seq': np.array([r['seq'] for r in chunk]),
+      'material': np.array([r.get('material') or '' for r in chunk]),
       'truth': np.array([json.dumps(r['truth']) for r in chunk]),
       **{k: np.stack([np.asarray(z[k], np.float32) for z in saved]) for k in _PACKED},
     }  # fmt: skip
@@ -779,8 +897,10 @@ def packed_runs(workdir: str) -> list[dict]:
     try:
       with np.load(path) as z:
         for j, seq in enumerate(z['seq']):
+          mat = str(z['material'][j]) if 'material' in z.files else ''
           runs.append({
-            'seq': int(seq), 'truth': json.loads(str(z['truth'][j])), 'workdir': None,
+            'seq': int(seq), 'material': mat or None,
+            'truth': json.loads(str(z['truth'][j])), 'workdir': None,
             'saved': {k: np.asarray(z[k][j], np.float64) for k in _PACKED},
           })  # fmt: skip
     except (OSError, ValueError, KeyError) as e:
@@ -807,9 +927,9 @@ def saved_runs(workdir: str) -> list[dict]:
       and os.path.isfile(est)
       and os.path.isfile(os.path.join(wd, search.POSTERIOR_FILE))
     ):
-      runs.append(
-        {'seq': int(seq), 'truth': recording_lib.read_json(est)['truth'], 'workdir': wd}
-      )
+      e = recording_lib.read_json(est)
+      runs.append({'seq': int(seq), 'material': e.get('material'), 'truth': e['truth'],
+                   'workdir': wd})  # fmt: skip
   runs = runs or packed_runs(workdir)
   if not runs:
     raise ValueError(
@@ -827,6 +947,7 @@ def run(config: Config, workdir: str, analyse_only: bool = False,
   writes ``calibration.json``, ``calibration.md`` and figures."""
   if analyse_only and simulate_only:
     raise ValueError('analyse_only and simulate_only leave nothing to do')
+  check_config(config)
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
   runs = saved_runs(workdir) if analyse_only else simulate_and_estimate(config, workdir)
@@ -862,10 +983,15 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
   form, c = 'gibbs', analysis['best_sharpness']['gibbs']
   chosen = analysis['sweep'][form][c]
   held, raw = analysis['cross_validated'][form], chosen['uncalibrated']
+  mats = study_materials(config)
   return {
-    'material': config.material,
+    'material': mats[0],
+    **({'materials': list(mats)} if len(mats) > 1 else {}),
+    'size': config.size,
     'n': held['video'].get('n', 0),
-    'setting': f'{form} likelihood, sharpness {c:g}, {config.material} '
+    'setting': f'{form} likelihood, sharpness {c:g}, '
+    + (f'{len(mats)} fabrics' if len(mats) > 1 else mats[0])
+    + f', {config.size} size, '
     + _networks_text(config),
     'likelihood': form,
     'sharpness': c,
@@ -970,7 +1096,33 @@ def table(out: dict) -> str:
             + ', '.join(f'{k} {v:g}' for k, v in
                         a['sharpest_never_under_covering'].items())]  # fmt: skip
   lines += _network_lines(out.get('network'), a)
+  lines += _material_lines(a)
   return '\n'.join(lines)
+
+
+def _material_lines(analysis: dict) -> list[str]:
+  """Per fabric of a study of several: its recordings' held-out coverage
+  (video alone, read with the pooled tables of the other folds) and its
+  point's mean error beside the range centre's."""
+  by = analysis.get('cross_validated_by_material', {}).get('gibbs')
+  if not by:
+    return []
+  lines = ['', "each fabric's recordings, video alone, held out (50% / 90% hold the "
+           "truth; the point's mean error, range centre's in brackets):", '',
+           '| fabric | n | ' + ' | '.join(FIELDS) + ' |',
+           '|---' * (len(FIELDS) + 2) + '|']  # fmt: skip
+  for m, sm in by.items():
+    if not sm:
+      continue
+    cells = []
+    for f in FIELDS:
+      key = 'factor' if f == 'bending_scale' else 'pct'
+      err = sm[f].get(f'point_error_{key}', sm[f][f'median_error_{key}'])
+      cells.append(
+        f'{_pair(sm[f])}; {_err(f, err)} ({_err(f, sm[f][f"centre_error_{key}"])})'
+      )
+    lines.append(f'| {m} | {sm["n"]} | ' + ' | '.join(cells) + ' |')
+  return lines
 
 
 def _network_lines(network: dict | None, analysis: dict) -> list[str]:
@@ -1170,7 +1322,8 @@ def check(
   Raises:
     ValueError: no calibration there, or ``config.seed`` is its own.
   """
-  path = shipped_file or report.calibration_file(config.estimate)
+  check_config(config)
+  path = shipped_file or report.calibration_file(_configs(config)[3])
   if not os.path.isfile(path):
     raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
   # the estimates apply the tables being checked

@@ -75,6 +75,9 @@ def test_shape_estimates_quote_the_shape_calibration(study, tmp_path, monkeypatc
   shape_file = tmp_path / 'calibration_shape.json'
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(default))
   monkeypatch.setattr(report, 'SHAPE_CALIBRATION_FILE', str(shape_file))
+  monkeypatch.setattr(
+    report, 'SHAPE_PAPER_CALIBRATION_FILE', str(tmp_path / 'none.json')
+  )
   # the settings the study searched with, read at the sharpness it chose
   searched = calibration._configs(SMOKE)[3].replace(sharpness=out['sharpness'])
   # None shipped for the shape yet: the default file, whose note names the distance.

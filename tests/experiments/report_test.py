@@ -80,9 +80,12 @@ def test_calibration_mode(wind_sd, weight_sd, joint, mode):
   assert report.calibration_mode(Measured(), joint=joint) == mode
 
 
-def test_shape_estimates_quote_their_own_calibration():
-  config = objective.EstimateConfig().replace(distance='shape')
-  assert report.calibration_file(config) == report.SHAPE_CALIBRATION_FILE
+def test_shape_estimates_quote_their_own_calibration_at_their_size():
+  demo = objective.EstimateConfig.preset('demo', distance='shape')
+  assert report.calibration_file(demo) == report.SHAPE_CALIBRATION_FILE
+  paper = objective.EstimateConfig().replace(distance='shape')
+  assert report.calibration_file(paper) == report.SHAPE_PAPER_CALIBRATION_FILE
+  config = paper
   config = config.replace(distance='energy')
   assert report.calibration_file(config) == report.CALIBRATION_FILE
   config = config.replace(calibration='/elsewhere/mine.json')

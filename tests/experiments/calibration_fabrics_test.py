@@ -1,0 +1,184 @@
+"""The calibration study over several fabrics at the estimate's own size.
+
+Issue 41: a paper-size estimate of any fabric must quote measured coverage.
+The study then gives every fabric its own pairs drawn over its own search
+box, estimates all of them in one lockstep, pools the tables (ranks are in
+each posterior's own CDF) and reports each fabric's held-out coverage; the
+shipped file is quoted by estimates of every fabric it holds, at its size,
+while demo-size estimates keep the demo's file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments.pipeline import datasets as gen
+from experiments.pipeline import report
+from experiments.pipeline.objective import EstimateConfig
+from experiments.studies import calibration
+
+FABRICS = ('gray_interlock', 'black_denim')
+# The paper size's structure (its own recordings, the estimate's cloth and
+# clock, no network) at the smallest size that still fits a GP on a CPU.
+TINY = calibration.Config(
+  materials=FABRICS,
+  size='paper',
+  pairs=1,
+  folds=2,
+  backend='c',
+  sharpness_grid=(0.5,),
+  batch_size=4,
+  estimate=EstimateConfig().replace(
+    distance='shape', cloth_resolution=8, frames=8, warmup=0.25, q=2, n_init=4,
+    max_iter=1, posterior_grid=(4, 8, 4),
+  ),
+)  # fmt: skip
+TINY_RECORDINGS = dataclasses.replace(
+  gen.PRESETS['eval'], frames=8, cloth_resolution=10, resolution=32, timestep=1 / 240
+)
+
+
+def test_each_fabric_draws_over_its_own_box_and_the_first_keeps_its_stream():
+  one = dataclasses.replace(TINY, materials=(), material=FABRICS[0])
+  np.testing.assert_array_equal(
+    np.asarray(calibration.truths(TINY, material=FABRICS[0]).wind_speed),
+    np.asarray(calibration.truths(one).wind_speed),
+  )  # a one-fabric study's truths do not move
+  for m in FABRICS:
+    t = calibration.truths(TINY, material=m)
+    (b0, b1), (v0, v1), (w0, w1) = physsim.search_space(m).bounds()
+    assert np.all((np.asarray(t.area_weight) >= w0) & (np.asarray(t.area_weight) <= w1))
+    # pairs share bending and area weight
+    np.testing.assert_array_equal(t.area_weight[0::2], t.area_weight[1::2])
+  a = calibration.truths(TINY, material=FABRICS[0]).wind_speed
+  b = calibration.truths(TINY, material=FABRICS[1]).wind_speed
+  assert not np.allclose(np.asarray(a), np.asarray(b))
+  assert calibration.first_seq(TINY, FABRICS[1]) == 2 * TINY.pairs
+
+
+@pytest.mark.parametrize(
+  ('change', 'words'),
+  [
+    ({'materials': ('gray_interlock', 'silk')}, ("'silk'", '--materials')),
+    ({'materials': ('black_denim', 'black_denim')}, ('a fabric twice',)),
+    ({'pairs': 0}, ('--pairs=0',)),
+    ({'estimate': TINY.estimate.replace(distance='energy')}, ('--distance=energy',)),
+    ({'size': 'demo', 'estimate': TINY.estimate.replace(distance='energy')},
+     ('a study with networks calibrates one fabric',)),
+  ],
+)  # fmt: skip
+def test_a_study_that_cannot_run_is_refused_naming_the_setting(change, words):
+  with pytest.raises(ValueError) as e:
+    calibration.check_config(dataclasses.replace(TINY, **change))
+  for w in words:
+    assert w in str(e.value)
+
+
+def test_the_paper_preset_is_every_fabric_at_the_estimates_own_size():
+  p = calibration.PRESETS['paper']
+  calibration.check_config(p)
+  assert set(calibration.study_materials(p)) == set(physsim.FABRICS)
+  est = calibration._configs(p)[3]
+  default = EstimateConfig()
+  for f in ('cloth_resolution', 'frames', 'warmup', 'q', 'n_init', 'max_iter',
+            'posterior_grid', 'sharpness', 'fps', 'gusts'):  # fmt: skip
+    assert est.flat()[f] == default.flat()[f], f
+  rec = calibration._configs(p)[1]
+  assert rec.cloth_resolution == gen.PRESETS['eval'].cloth_resolution
+  assert rec.sequences == 2 * p.pairs and rec.materials == p.materials
+
+
+@pytest.fixture(scope='module')
+def study(tmp_path_factory):
+  workdir = str(tmp_path_factory.mktemp('cal_fabrics'))
+  with pytest.MonkeyPatch.context() as mp:
+    mp.setitem(gen.PRESETS, 'eval', TINY_RECORDINGS)
+    out = calibration.run(TINY, workdir)
+  return workdir, out
+
+
+@pytest.mark.slow
+def test_every_fabric_is_estimated_as_itself_and_reported(study):
+  workdir, out = study
+  assert out['materials'] == list(FABRICS) and out['size'] == 'paper'
+  assert out['n'] == 2 * TINY.pairs * len(FABRICS)
+  runs = calibration.saved_runs(workdir)
+  assert sorted(r['material'] for r in runs) == sorted(FABRICS * 2)
+  for r in runs:
+    (b0, b1), (v0, v1), (w0, w1) = physsim.search_space(r['material']).bounds()
+    assert w0 <= r['truth']['area_weight'] <= w1, r
+    with open(os.path.join(r['workdir'], 'estimate.json')) as f:
+      assert json.load(f)['material'] == r['material']
+  by = out['analysis']['cross_validated_by_material']['gibbs']
+  assert set(by) == set(FABRICS) and all(by[m]['n'] == 2 for m in FABRICS)
+  with open(os.path.join(workdir, 'calibration.md')) as f:
+    text = f.read()
+  assert "each fabric's recordings" in text and all(m in text for m in FABRICS)
+  # packed for an analysis elsewhere: the fabrics travel with the GPs
+  calibration.pack_runs(runs, workdir)
+  packed = calibration.packed_runs(workdir)
+  assert sorted(r['material'] for r in packed) == sorted(FABRICS * 2)
+
+
+@pytest.mark.slow
+def test_paper_estimates_of_its_fabrics_quote_it_and_demo_ones_do_not(
+  study, tmp_path, monkeypatch
+):
+  workdir, out = study
+  demo, paper = tmp_path / 'calibration_shape.json', tmp_path / 'shape_paper.json'
+  monkeypatch.setattr(report, 'SHAPE_CALIBRATION_FILE', str(demo))
+  monkeypatch.setattr(report, 'SHAPE_PAPER_CALIBRATION_FILE', str(paper))
+  demo_study = dataclasses.replace(
+    calibration.PRESETS['smoke'], estimate=TINY.estimate.replace(
+      q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24))
+  )  # fmt: skip
+  demo_cfg = calibration._configs(demo_study)[3]
+  demo.write_text(json.dumps({
+    'n': 1, 'setting': 'demo', 'sharpness': 0.5, 'coverage': {},
+    'config': {'estimate': demo_cfg.flat()},
+  }))  # fmt: skip
+  with open(os.path.join(workdir, calibration.RESULT_FILE)) as f:
+    paper.write_text(f.read())  # what --install --size=paper does
+  assert report.shipped_calibration('shape', 'paper') == str(paper)
+  searched = calibration._configs(TINY)[3].replace(point='bayes')
+  for m in FABRICS:
+    mine = searched.replace(material=m)
+    assert report.calibration_file(mine) == str(paper)
+    note = report.calibration_note(mine)
+    assert note['matches'] and note['recalibrated'], (m, note)
+  other = report.calibration_note(searched.replace(material='white_tablecloth'))
+  assert not other['matches'] and 'material' in other['differs'], other
+  assert report.calibration_file(demo_cfg) == str(demo)
+  with pytest.raises(ValueError, match='size'):
+    report.shipped_calibration('shape', 'poster')
+
+
+# The shipped paper-size file holds 10 recordings per fabric (70): a 90%
+# coverage measured on 70 has a binomial standard error of about 3.6 points
+# and a 50% one about 6, so the bands are the targets widened by about two of
+# them.
+PAPER_BANDS = {'interval_90': (0.82, 0.98), 'interval_50': (0.36, 0.64)}
+
+
+@pytest.mark.parametrize('material', sorted(physsim.FABRICS))
+def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_coverage(
+  material,
+):
+  config = EstimateConfig().replace(distance='shape', material=material)
+  assert report.calibration_file(config) == report.SHAPE_PAPER_CALIBRATION_FILE
+  note = report.calibration_note(config)
+  assert note['matches'] and note['recalibrated'], note  # never "indicative"
+  assert note['n_calibration_recordings'] >= 70
+  for field, cov in note['coverage'].items():  # held out from the tables
+    for level, (lo, hi) in PAPER_BANDS.items():
+      assert lo <= cov[level] <= hi, (field, level, cov)
+  # with an anemometer, and jointly with a second recording, too
+  wind = config.replace(wind_speed=3.0, wind_speed_sd=0.06)
+  assert report.calibration_note(wind)['mode'] == 'known wind'
+  assert report.calibration_note(config, joint=True, recordings=2)['matches']
