@@ -127,6 +127,24 @@ def test_every_fabric_is_estimated_as_itself_and_reported(study):
 
 
 @pytest.mark.slow
+def test_a_recording_estimated_alone_matches_itself_in_the_lockstep(study, tmp_path):
+  from benchmarks import single_vs_batched
+
+  workdir, _ = study
+  out = str(tmp_path / 'svb.json')
+  seq = f'{calibration.first_seq(TINY, FABRICS[1]):04d}'  # a black denim recording
+  single_vs_batched.main(single_vs_batched.Args(
+    workdir=workdir, image_size=TINY_RECORDINGS.resolution, seqs=(seq,), out=out,
+  ))  # fmt: skip
+  with open(out) as f:
+    (row,) = json.load(f)
+  assert row['material'] == FABRICS[1] and row['recordings_in_batch'] == 4
+  # MuJoCo C is deterministic: the same simulations, the same posterior
+  for field, alone in row['alone'].items():
+    np.testing.assert_allclose(alone, row['batched'][field], rtol=1e-9, err_msg=field)
+
+
+@pytest.mark.slow
 def test_paper_estimates_of_its_fabrics_quote_it_and_demo_ones_do_not(
   study, tmp_path, monkeypatch
 ):
