@@ -114,6 +114,29 @@ def test_grid_draws_follow_the_cell_masses():
   assert np.all(np.abs(s) <= 1.0)
 
 
+def test_cell_draws_match_the_masses_of_a_float64_reference():
+  # 18 432 cells, the default grid's count, with masses spanning 1e-6..1 and a
+  # block of cells ruled out; 200 000 draws.
+  rng = np.random.default_rng(3)
+  mass = rng.random(12 * 64 * 24) ** 6
+  mass[100:400] = 0.0
+  p = mass / mass.sum()  # float64 reference
+  with np.errstate(divide='ignore'):
+    log_p = jnp.asarray(np.log(mass) + 7.0)  # unnormalised, as log posteriors are
+  n = 200_000
+  idx = np.asarray(posterior.sample_cells(jax.random.key(1), log_p, n))
+  assert idx.min() >= 0 and idx.max() < len(p)
+  assert not np.any((idx >= 100) & (idx < 400))  # zero mass: never drawn
+  # coarse bins of ~1% mass each: counts within 5 binomial sd of n * mass
+  edges = np.searchsorted(np.cumsum(p), np.linspace(0, 1, 101)[1:-1])
+  counts = np.add.reduceat(np.bincount(idx, minlength=len(p)), np.r_[0, edges])
+  expect = n * np.add.reduceat(p, np.r_[0, edges])
+  sd = np.sqrt(expect * (1 - expect / n))
+  assert np.all(np.abs(counts - expect) <= 5 * sd + 1), np.max(
+    np.abs(counts - expect) / sd
+  )
+
+
 def _quadratic_config(**kw):
   return posterior.PosteriorConfig(d=2, grid=(10, 10), q=4, samples=500, **kw)
 

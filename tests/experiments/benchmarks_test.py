@@ -91,3 +91,12 @@ def test_a_benchmark_runs_as_a_module_and_names_a_missing_flag(tmp_path):
   assert missing.returncode == 2
   assert missing.stderr.startswith('error: missing --tables')
   assert 'Traceback' not in missing.stderr
+
+
+def test_the_latency_benchmark_needs_a_network_only_for_a_distance_that_embeds():
+  latency = _module('estimate_latency')
+  with pytest.raises(
+    ValueError, match='--settings=default embeds frames: it needs --model'
+  ):
+    latency.main(latency.Args(recording='/nowhere', settings=('default',)))
+  assert latency.SETTINGS['shape'][1] == {'distance': 'shape'}
