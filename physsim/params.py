@@ -42,12 +42,16 @@ class Params(NamedTuple):
 
 @dataclasses.dataclass(frozen=True)
 class SearchSpace:
-  """Allowed (low, high) range per field; ``log_bending`` picks the bending map."""
+  """Allowed (low, high) range per field; ``log_bending`` picks the bending map.
+  ``rigidity``: the fabric's reference bending rigidity D0 (N m) that bending
+  scale 1 stands for (``cloth.reference_rigidity``; 0: a box of no fabric), so
+  that a measured bending length can be read against bending and area weight."""
 
   bending_scale: tuple[float, float] = (0.1, 10.0)
   wind_speed: tuple[float, float] = (1.0, 6.0)
   area_weight: tuple[float, float] = (0.1, 0.37)
   log_bending: bool = True
+  rigidity: float = 0.0
 
   def bounds(self) -> np.ndarray:
     """(3, 2) physical bounds in field order."""
@@ -59,8 +63,23 @@ class SearchSpace:
 
 
 def search_space(fabric_name: str) -> SearchSpace:
-  """The paper's search space for one of its seven fabrics."""
-  return SearchSpace(area_weight=materials.fabric(fabric_name).area_weight_range)
+  """The paper's search space for one of its seven fabrics (with its
+  reference rigidity)."""
+  from physsim import cloth  # noqa: PLC0415 (cloth imports MuJoCo)
+
+  fabric = materials.fabric(fabric_name)
+  return SearchSpace(
+    area_weight=fabric.area_weight_range,
+    rigidity=float(cloth.reference_rigidity(fabric.material)),
+  )
+
+
+def bending_length(bending_scale, area_weight, rigidity: float):
+  """Peirce's bending length c = (D / (w g))^(1/3), m, of a fabric of bending
+  ``bending_scale`` x ``rigidity`` (N m) and ``area_weight`` (kg/m^2): what a
+  cantilever test measures (``physsim.cantilever``)."""
+  d = np.asarray(bending_scale, np.float64) * rigidity
+  return (d / (np.asarray(area_weight, np.float64) * GRAVITY)) ** (1.0 / 3.0)
 
 
 def load_ratio(wind_speed, area_weight):

@@ -259,7 +259,7 @@ class EstimateConfig:
   def flat(self) -> dict:
     """Every setting by its flat name (``measured`` a dict of its own): the
     form run.json, estimate.json and calibration files hold."""
-    out = {'seed': self.seed, 'measured': dataclasses.asdict(self.measured)}
+    out = {'seed': self.seed, 'measured': self.measured.to_dict()}
     for section in SECTIONS:
       if section != 'measured':
         out.update(dataclasses.asdict(getattr(self, section)))

@@ -38,16 +38,33 @@ class Measured:
     wind_speed_sd: its standard uncertainty, m/s.
     area_weight: a scale and a ruler's reading, kg/m^2.
     area_weight_sd: its standard uncertainty, kg/m^2.
+    bending_length: a cantilever test's bending length c, m (Peirce: half the
+      overhang at which a strip's tip reaches a 41.5-degree slope below the
+      table's edge; or ``physsim.cantilever.bending_length`` of an overhang
+      and its tip's reach). It reads bending and area weight together,
+      c = (bending x D0 / (w g))^(1/3) (``physsim.params.bending_length``).
+    bending_length_sd: its standard uncertainty, m.
   """
 
   wind_speed: float = 0.0
   wind_speed_sd: float = 0.0
   area_weight: float = 0.0
   area_weight_sd: float = 0.0
+  bending_length: float = 0.0
+  bending_length_sd: float = 0.0
+
+  def to_dict(self) -> dict:
+    """The readings as files hold them: a bending length only when given, so
+    that files without one (and runs to resume) stay as they were written
+    before it was a reading."""
+    out = dataclasses.asdict(self)
+    if not (self.bending_length or self.bending_length_sd):
+      del out['bending_length'], out['bending_length_sd']
+    return out
 
   def check(self, space: physsim.SearchSpace) -> None:
     """Raises ValueError on a reading without uncertainty, or far outside the box."""
-    for name in ('wind_speed', 'area_weight'):
+    for name in ('wind_speed', 'area_weight', 'bending_length'):
       v, sd = getattr(self, name), getattr(self, f'{name}_sd')
       if v == 0 and sd == 0:
         continue
@@ -56,7 +73,7 @@ class Measured:
           f'--{name}_sd={sd} was given without --{name} (the reading it is the '
           'uncertainty of)'
         )
-      lo, hi = getattr(space, name)
+      lo, hi = _reading_range(space, name)
       if not sd > 0:
         raise ValueError(
           f'--{name}={v} needs --{name}_sd > 0 (its uncertainty), got {sd}'
@@ -67,6 +84,26 @@ class Measured:
         raise ValueError(
           f'--{name}={v} +- {sd} lies outside the search range [{lo}, {hi}]'
         )
+
+
+def _reading_range(space: physsim.SearchSpace, name: str) -> tuple[float, float]:
+  """The range of reading ``name`` over the search box (a bending length's
+  from its bending and area weight ranges and the fabric's rigidity).
+
+  Raises:
+    ValueError: a bending length for a box of no fabric (its rigidity 0).
+  """
+  if name != 'bending_length':
+    return getattr(space, name)
+  if not space.rigidity > 0:
+    raise ValueError(
+      '--bending_length: the search box has no reference rigidity to read it '
+      "against (physsim.search_space gives each fabric's)"
+    )
+  (b0, b1), (w0, w1) = space.bending_scale, space.area_weight
+  lo = physsim.params.bending_length(b0, w1, space.rigidity)
+  hi = physsim.params.bending_length(b1, w0, space.rigidity)
+  return float(lo), float(hi)
 
 
 def simulated_reading(
@@ -88,7 +125,8 @@ def simulated_reading(
 
 def log_prior(points, space: physsim.SearchSpace, measured: Measured) -> np.ndarray:
   """(G,) log prior at unit-cube ``points (G, 3)``: uniform in the box (so
-  bending log-uniform), times a Gaussian for each measured quantity."""
+  bending log-uniform), times a Gaussian for each measured quantity (a
+  bending length's in the c that each point's bending and area weight give)."""
   out = np.zeros(len(points))
   phys = physsim.params.from_unit(np.clip(points, -1, 1), space)
   for i, name in enumerate(FIELDS):
@@ -97,6 +135,12 @@ def log_prior(points, space: physsim.SearchSpace, measured: Measured) -> np.ndar
     v, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
     if sd > 0:
       out += -0.5 * ((np.ravel(phys[i]) - v) / sd) ** 2
+  if measured.bending_length_sd > 0:
+    _reading_range(space, 'bending_length')  # the box knows its fabric
+    c = physsim.params.bending_length(
+      np.ravel(phys.bending_scale), np.ravel(phys.area_weight), space.rigidity
+    )
+    out += -0.5 * ((c - measured.bending_length) / measured.bending_length_sd) ** 2
   return out
 
 
@@ -120,13 +164,23 @@ def prior_points(space: physsim.SearchSpace, measured: Measured, n: int = 2001) 
     lp = log_prior(pts, space, measured)  # other fields at 0: a constant here
     nodes.append(physical(pts, space)[:, i])
     weights.append(np.exp(lp - lp.max()))
+  if measured.bending_length_sd > 0:  # bending and area weight read together
+    m = min(n, 601)
+    um = -1.0 + (2.0 * np.arange(m) + 1.0) / m
+    b, w = np.meshgrid(um, um, indexing='ij')
+    pts = np.stack([b.ravel(), np.zeros(m * m), w.ravel()], axis=1)
+    lp = log_prior(pts, space, measured).reshape(m, m)
+    joint_w = np.exp(lp - lp.max())
+    phys = physical(pts, space)
+    nodes[0], weights[0] = phys[::m, 0], joint_w.sum(axis=1)
+    nodes[2], weights[2] = phys[:m, 2], joint_w.sum(axis=0)
   out = {
     name: bo.calibration.bayes_point(
       nodes[i], 'factor' if name == 'bending_scale' else 'relative', weights=weights[i]
     )
     for i, name in enumerate(FIELDS)
   }
-  k = slice(None, None, max(1, n // 301))  # the ratio on a coarser 2-D grid
+  k = slice(None, None, max(1, len(nodes[2]) // 301))  # the ratio on a coarser grid
   v, w = np.meshgrid(nodes[1][k], nodes[2][k], indexing='ij')
   wt = np.outer(weights[1][k], weights[2][k])
   out['load_ratio'] = bo.calibration.bayes_point(

@@ -212,8 +212,11 @@ def calibration_mode(measured, joint: bool = False) -> str | None:
   an estimate with these readings falls in: the video alone, with a measured
   wind, with a measured area weight, a joint pair, or a joint pair with a wind
   reading at each recording (``measured`` is then one recording's); None
-  where none fits (both readings, or a joint estimate with an area weight)."""
+  where none fits (both readings, a joint estimate with an area weight, or a
+  bending length: no study has calibrated one)."""
   wind, weight = measured.wind_speed_sd > 0, measured.area_weight_sd > 0
+  if getattr(measured, 'bending_length_sd', 0.0) > 0:
+    return None
   if joint:
     return None if weight else 'joint pair, known winds' if wind else 'joint pair'
   if wind and weight:
@@ -261,7 +264,11 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
   elif mode is None:
-    differs.append('combination of measurements')
+    differs.append(
+      'a bending-length reading (not calibrated)'
+      if config.measured.bending_length_sd > 0
+      else 'combination of measurements'
+    )
   theirs = cal.get('network', {}).get('recipe')
   if network is not None and theirs is not None:
     d = embedding.recipe_differences(network, theirs)
@@ -734,10 +741,11 @@ def next_recording_note(shared: dict, config, workdir: str) -> str | None:
     steps.append(
       'weigh the sheet and measure its sides (--area_weight=... --area_weight_sd=...)'
     )
-  if 'bending_scale' in little and config.simulation.cloth_size > 0.5:
+  if 'bending_scale' in little and not config.measured.bending_length_sd > 0:
     steps.append(
-      'film a 20-30 cm swatch of it in a ~2 m/s fan from about 0.5 m and estimate '
-      'both together (--protocol=FILE with its cloth_size)'
+      'lay a strip of it over a table edge and measure its bending length (the '
+      'cantilever test: README, How to record; --bending_length=... '
+      '--bending_length_sd=...)'
     )
   if not steps:
     return None

@@ -22,19 +22,20 @@ from experiments.pipeline.posterior import Measured
 from experiments.studies import tables
 
 # The flags of the flat EstimateConfig before the split (``--fps`` of the
-# config was always ``--sim_fps``).
+# config was always ``--sim_fps``), with the bending-length reading added since.
 FLAT_FLAGS = [
-  'area_weight', 'area_weight_sd', 'backend', 'calibration', 'camera_sd_deg',
+  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_sd', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
   'garment', 'garment_spacing', 'gusts', 'likelihood', 'material', 'max_iter',
   'min_iter', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
   'sensor_noise', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
   'wind_speed', 'wind_speed_sd', 'workers',
 ]  # fmt: skip
-# experiments.estimate's flags before the split.
+# experiments.estimate's flags before the split (and the bending length's).
 ESTIMATE_FLAGS = [
   'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
-  'area_weight', 'area_weight_sd', 'backend', 'calibration', 'camera_json',
+  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_sd',
+  'calibration', 'camera_json',
   'camera_sd_deg', 'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size',
   'cloth_sizes', 'depth_range', 'depth_scale', 'depth_topic', 'distance', 'fps',
   'frame_glob', 'frames', 'garment', 'garment_spacing', 'gusts', 'image_size',
@@ -180,3 +181,12 @@ def test_an_old_workdirs_run_resumes(tmp_path):
   search.check_run(search.Job(SMOKE.replace(workers=3), rec, '', workdir), problem)
   with pytest.raises(ValueError, match=r'config\.gusts'):
     search.check_run(search.Job(SMOKE.replace(gusts=0.3), rec, '', workdir), problem)
+
+
+def test_a_bending_length_enters_the_files_only_when_given():
+  flat = SMOKE.flat()
+  assert 'bending_length' not in flat['measured']  # old files and runs unchanged
+  given = SMOKE.replace(bending_length=0.02, bending_length_sd=0.002)
+  read = json.loads(json.dumps(given.flat()))
+  assert read['measured']['bending_length'] == 0.02
+  assert objective.EstimateConfig.from_flat(read) == given

@@ -89,3 +89,52 @@ def test_the_picture_draws_the_intervals_the_table_prints(tmp_path, monkeypatch)
     np.ravel(marks), [3.85, 0.253], rtol=1e-9
   )  # the Bayes point
   assert fig._suptitle.get_text().endswith('rec_7')
+
+
+# ------------------------------------------------ a cantilever's bending length
+
+FABRIC = physsim.search_space('gray_interlock')  # its rigidity D0 with the box
+
+
+def test_a_bending_length_reads_bending_from_the_area_weight_by_peirces_formula():
+  # c = (b D0 / (w g))^(1/3) by hand: a fabric of bending 2 and 0.2 kg/m^2
+  b, w = 2.0, 0.2
+  c = (b * FABRIC.rigidity / (w * 9.81)) ** (1 / 3)
+  assert physsim.params.bending_length(b, w, FABRIC.rigidity) == pytest.approx(
+    c, rel=1e-12
+  )
+  # weighed to 1% and the bending length read to 2%: bending to about 6% (3 x 2%)
+  m = posterior.Measured(area_weight=w, area_weight_sd=0.002, bending_length=c,
+                         bending_length_sd=0.02 * c)  # fmt: skip
+  m.check(FABRIC)
+  points = posterior.prior_points(FABRIC, m)
+  assert points['bending_scale'] == pytest.approx(b, rel=0.03)
+  assert points['area_weight'] == pytest.approx(w, rel=0.01)
+  # on the grid: the prior's mass sits where c holds, along b / w = const
+  pts = np.stack(np.meshgrid(np.linspace(-1, 1, 41), [0.0], np.linspace(-1, 1, 41),
+                             indexing='ij'), -1).reshape(-1, 3)  # fmt: skip
+  without_scale = posterior.Measured(bending_length=c, bending_length_sd=0.02 * c)
+  lp = posterior.log_prior(pts, FABRIC, without_scale)
+  phys = posterior.physical(pts, FABRIC)
+  best = phys[lp > lp.max() - 0.5]
+  ratio = best[:, 0] / best[:, 2]  # b / w of the most probable cells
+  assert np.all(np.abs(np.log(ratio / (b / w))) < np.log(1.25)), ratio
+
+
+@pytest.mark.parametrize(
+  'reading, message',
+  [
+    (dict(bending_length=0.02), r'--bending_length=0.02 needs --bending_length_sd'),
+    (dict(bending_length=0.5, bending_length_sd=0.01), r'outside the search range'),
+    (dict(bending_length_sd=0.01), r'given without --bending_length'),
+  ],
+)
+def test_a_bad_bending_length_is_refused_naming_the_flag(reading, message):
+  with pytest.raises(ValueError, match=message):
+    posterior.Measured(**reading).check(FABRIC)
+
+
+def test_a_bending_length_needs_a_box_that_knows_its_fabric():
+  m = posterior.Measured(bending_length=0.02, bending_length_sd=0.002)
+  with pytest.raises(ValueError, match='no reference rigidity'):
+    m.check(SPACE)

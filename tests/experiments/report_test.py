@@ -224,12 +224,12 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
   told = {'bending_scale': {'narrowing_90': 1.0}, 'area_weight': {'narrowing_90': 1.1}}
   line = report.next_recording_note(told, config, 'out/e')
   assert line.startswith('next: the recording(s) told little about bending and area')
-  assert '--area_weight=' in line and '20-30 cm swatch' in line
+  assert '--area_weight=' in line and '--bending_length=' in line
   assert 'python -m experiments.plan --workdir=out/e' in line and '\n' not in line
-  # a scale's reading given, and a swatch already filmed: nothing left to advise
+  # a scale's reading and a bending length given: nothing left to advise
   weighed = config.replace(
-    cloth_size=0.25,
-    measured=posterior.Measured(area_weight=0.18, area_weight_sd=0.004),
+    measured=posterior.Measured(area_weight=0.18, area_weight_sd=0.004,
+                                bending_length=0.02, bending_length_sd=0.002),
   )  # fmt: skip
   assert report.next_recording_note(told, weighed, 'out/e') is None
   narrowed = {
