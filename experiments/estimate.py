@@ -158,6 +158,25 @@ def recording_takes(args: Args) -> list[takes.Take]:
   )
 
 
+def with_fabric_readings(args: Args) -> Args:
+  """``args`` with the fabric's readings of its protocol file (``"fabric"``:
+  area weight, bending length) as the estimate's.
+
+  Raises:
+    ValueError: a reading given both in the file and as a flag, naming both.
+  """
+  if not args.protocol:
+    return args
+  readings = takes.fabric_readings(args.protocol)
+  both = sorted(k for k in readings if getattr(args.search.measured, k) != 0.0)
+  if both:
+    raise ValueError(
+      f"--protocol={args.protocol} gives the fabric's {', '.join(both)}: give "
+      'them in the file or as flags (--' + ', --'.join(both) + '), not both'
+    )
+  return dataclasses.replace(args, search=args.search.replace(**readings))
+
+
 def take_settings(args: Args, take: takes.Take):
   """(intake settings, estimate settings) of one recording: the flags'
   with the recording's own cloth size, up axis and wind reading."""
@@ -264,6 +283,7 @@ def main(args: Args) -> None:
   ``files.locked``) for the intake and the search."""
   logging.set_verbosity(logging.WARNING)  # orbax and jax log every step at INFO
   cli.check_numbers(args)
+  args = with_fabric_readings(args)
   args.search.check()
   args.intake.check()
   recorded = recording_takes(args)  # checked before anything is read

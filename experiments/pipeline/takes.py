@@ -12,9 +12,14 @@ as a protocol file (JSON or YAML)::
      "wind_speed": 2.1, "wind_speed_sd": 0.05},
     {"recording": "swatch/depth", "camera_json": "swatch/camera.json",
      "cloth_size": 0.25, "world_up": "z"}
-  ]}
+  ],
+   "fabric": {"area_weight": 0.212, "area_weight_sd": 0.003,
+              "bending_length": 0.021, "bending_length_sd": 0.001}}
 
-Paths in the file are relative to the file's folder.
+Paths in the file are relative to the file's folder. ``"fabric"`` (optional)
+holds the readings of the fabric itself, shared by every recording: a scale's
+area weight and a cantilever test's bending length, each with its
+uncertainty (``fabric_readings``; the flags of the same names otherwise).
 """
 
 from __future__ import annotations
@@ -90,13 +95,13 @@ def _take(where: str, entry, base: str) -> Take:
   return Take(paths['recording'], paths['camera_json'], size, wind, up)
 
 
-def read(path: str) -> list[Take]:
-  """The takes of a protocol file (JSON, or YAML by its extension).
+# The fabric's own readings a protocol file may give, as (value, sd) pairs,
+# with their ranges (kg/m^2, m).
+FABRIC_KEYS = {'area_weight': (1e-3, 10.0), 'bending_length': (1e-4, 1.0)}
 
-  Raises:
-    ValueError: an unreadable file, no recordings, or an entry that is not
-      one (named by its index and key), before any recording is read.
-  """
+
+def _load(path: str):
+  """A protocol file's data (JSON, or YAML by its extension)."""
   try:
     with open(path) as f:
       text = f.read()
@@ -112,11 +117,50 @@ def read(path: str) -> list[Take]:
     raise ValueError(
       f'{path}: not a readable protocol file ({type(e).__name__})'
     ) from e
+  return data
+
+
+def read(path: str) -> list[Take]:
+  """The takes of a protocol file (JSON, or YAML by its extension).
+
+  Raises:
+    ValueError: an unreadable file, no recordings, or an entry that is not
+      one (named by its index and key), before any recording is read.
+  """
+  data = _load(path)
   entries = data.get('recordings') if isinstance(data, dict) else None
   if not isinstance(entries, list) or not entries:
     raise ValueError(f'{path}: needs "recordings": a list of one or more entries')
   base = os.path.dirname(os.path.abspath(path))
   return [_take(f'{path}: recordings[{k}]', e, base) for k, e in enumerate(entries)]
+
+
+def fabric_readings(path: str) -> dict[str, float]:
+  """The fabric's readings a protocol file gives (its ``"fabric"`` object:
+  ``area_weight``, ``bending_length``, each with its ``_sd``), as the
+  estimate's flat settings; {} where it gives none.
+
+  Raises:
+    ValueError: an unreadable file, an unknown key, a value out of range or a
+      reading without its uncertainty (or the reverse), named.
+  """
+  data = _load(path)
+  fabric = data.get('fabric', {}) if isinstance(data, dict) else {}
+  where = f'{path}: fabric'
+  if not isinstance(fabric, dict):
+    raise ValueError(f'{where}: must be an object of readings, got {fabric!r}')
+  known = [k for name in FABRIC_KEYS for k in (name, f'{name}_sd')]
+  unknown = sorted(set(fabric) - set(known))
+  if unknown:
+    raise ValueError(f'{where}: unknown keys {unknown}; known: {known}')
+  out = {}
+  for name, (lo, hi) in FABRIC_KEYS.items():
+    if (name in fabric) != (f'{name}_sd' in fabric):
+      raise ValueError(f'{where}: "{name}" and "{name}_sd" come together')
+    if name in fabric:
+      out[name] = _number(where, name, fabric[name], lo, hi)
+      out[f'{name}_sd'] = _number(where, f'{name}_sd', fabric[f'{name}_sd'], 1e-9, hi)
+  return out
 
 
 def from_flags(

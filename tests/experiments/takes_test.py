@@ -98,3 +98,42 @@ def test_estimate_takes_a_protocol_or_recordings_not_both(folder):
     estimate.Args(), take._replace(world_up='-y', wind=(2.0, 0.1))
   )
   assert ik.world_up == '-y' and config.measured.wind_speed == 2.0
+
+
+def test_a_protocol_file_gives_the_fabrics_own_readings(folder):
+  fabric = {'area_weight': 0.185, 'area_weight_sd': 0.003,
+            'bending_length': 0.016, 'bending_length_sd': 0.001}  # fmt: skip
+  path = _write(folder / 'p.json', {'recordings': [{'recording': 'sheet'}],
+                                    'fabric': fabric})  # fmt: skip
+  assert takes.fabric_readings(path) == fabric
+  args = estimate.with_fabric_readings(estimate.Args(protocol=path))
+  m = args.search.measured
+  assert (m.area_weight, m.bending_length_sd) == (0.185, 0.001)
+  args.search.check()  # gray interlock: both readings inside its box
+  # the same reading as a flag too: refused, naming both places
+  flagged = estimate.Args(protocol=path).search.replace(area_weight=0.2,
+                                                        area_weight_sd=0.01)  # fmt: skip
+  with pytest.raises(
+    ValueError, match=r"gives the fabric's area_weight.*--area_weight"
+  ):
+    estimate.with_fabric_readings(estimate.Args(protocol=path, search=flagged))
+  # none given: the flags' own
+  bare = _write(folder / 'q.json', {'recordings': [{'recording': 'sheet'}]})
+  assert takes.fabric_readings(bare) == {}
+
+
+@pytest.mark.parametrize(
+  ('fabric', 'message'),
+  [
+    ({'area_weight': 0.2}, r'"area_weight" and "area_weight_sd" come together'),
+    ({'weight': 0.2}, r"unknown keys \['weight'\]"),
+    ({'bending_length': 5.0, 'bending_length_sd': 0.1}, r'"bending_length"=5.0 must be in'),
+    ([0.2], r'must be an object of readings'),
+  ],
+)  # fmt: skip
+def test_a_bad_fabric_reading_is_refused_naming_file_and_key(folder, fabric, message):
+  path = _write(folder / 'p.json', {'recordings': [{'recording': 'sheet'}],
+                                    'fabric': fabric})  # fmt: skip
+  with pytest.raises(ValueError, match=message) as e:
+    takes.fabric_readings(path)
+  assert str(e.value).startswith(path) and '\n' not in str(e.value)
