@@ -1,6 +1,5 @@
 """Tests for experiments.tables: summaries and the markdown, on hand-made results."""
 
-import dataclasses
 import os
 
 import numpy as np
@@ -270,7 +269,7 @@ def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
   out = tables._batched([(rec, 'physnet_depth')], models, str(tmp_path / 'w'), config)
   got = out[tables._key(rec, 'physnet_depth')]
   want = posterior_lib.simulated_reading('wind_speed', fx.TRUTH, 0.02, 5, 3)
-  assert got['config']['measured'] == dataclasses.asdict(want)
+  assert got['config']['measured'] == want.to_dict()
   assert want.wind_speed != fx.TRUTH['wind_speed']
   assert want.wind_speed_sd == pytest.approx(0.02 * fx.TRUTH['wind_speed'])
   # The posterior keeps the reading: its 90% interval holds it and is narrower
