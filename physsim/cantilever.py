@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-G = 9.81  # m/s^2
+from physsim.params import GRAVITY as G  # m/s^2
+
 _STEPS = 200  # RK4 steps over the overhang: relative error below 1e-6
 _BISECTIONS = 52  # on the tip's angle
 # Beyond about five bending lengths the free part hangs nearly straight down:

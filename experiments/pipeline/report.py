@@ -41,23 +41,23 @@ SHAPE_CALIBRATION_FILE = os.path.join(
 SHAPE_PAPER_CALIBRATION_FILE = os.path.join(
   os.path.dirname(__file__), 'calibration_shape_paper.json'
 )
+PAPER_CALIBRATION_FILE = os.path.join(
+  os.path.dirname(__file__), 'calibration_paper.json'
+)  # none shipped yet: the study trains demo-size networks only
 SIZES = ('demo', 'paper')
 
 
 def shipped_calibration(distance: str, size: str = 'demo') -> str:
   """Where the calibration of estimates with ``distance`` at the study's
   ``size`` is shipped (and ``--install`` puts it): the shape distance's own
-  files, every other distance's the default one (whose networks it records;
-  its paper size ``calibration_paper.json``)."""
+  files, every other distance's the default ones (whose networks they
+  record)."""
   if size not in SIZES:
     raise ValueError(f'no calibration size {size!r}: one of {SIZES}')
-  if distance == 'shape':
-    return SHAPE_CALIBRATION_FILE if size == 'demo' else SHAPE_PAPER_CALIBRATION_FILE
-  return (
-    CALIBRATION_FILE
-    if size == 'demo'
-    else CALIBRATION_FILE.replace('.json', '_paper.json')
-  )
+  shape = distance == 'shape'
+  if size == 'demo':
+    return SHAPE_CALIBRATION_FILE if shape else CALIBRATION_FILE
+  return SHAPE_PAPER_CALIBRATION_FILE if shape else PAPER_CALIBRATION_FILE
 
 
 def shipped_calibrations(distance: str) -> list[str]:

@@ -311,16 +311,17 @@ def check_config(config: Config) -> None:
     ValueError: an unknown fabric, pairs below one, or a paper-size study
       with a network distance (it trains demo-size networks only).
   """
-  for m in study_materials(config):
+  mats = study_materials(config)
+  for m in mats:
     if m not in physsim.FABRICS:
       raise ValueError(
         f'--materials: no fabric {m!r}: one of {sorted(physsim.FABRICS)}'
       )
-  if len(set(study_materials(config))) != len(study_materials(config)):
-    raise ValueError(f'--materials={",".join(config.materials)}: a fabric twice')
+  if len(set(mats)) != len(mats):
+    raise ValueError(f'--materials={",".join(mats)}: a fabric twice')
   if config.pairs < 1:
     raise ValueError(f'--pairs={config.pairs}: need at least one pair')
-  if len(study_materials(config)) > 1 and uses_networks(config):
+  if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
       f'{config.estimate.scoring.distance}: a study with networks calibrates one '

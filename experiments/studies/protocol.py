@@ -634,7 +634,7 @@ def elastica_check(
   whose elastica reaches as far as the simulation, over D. The last two are
   None for an overhang of more than ``cantilever.MAX_RATIO`` bending lengths
   (hanging straight down), the ratio also beyond the elastica's range."""
-  c = (bending * d0 / (area_weight * cantilever.G)) ** (1 / 3)
+  c = float(physsim.params.bending_length(bending, area_weight, d0))
   row = {
     'bending': bending, 'bending_length_cm': float(100 * c),
     'overhang_over_c': float(overhang / c), 'elastica_reach': None,
