@@ -10,13 +10,20 @@
 #             (experiments.tables), a fixed ITERS iterations after the initial
 #             design so every run does the same work; G (default: every count
 #             in GPUS) picks the runs.
+#   calibrate the paper-size calibration study (experiments.calibrate
+#             --preset=paper --pairs=PAIRS --simulate_only, PAIRS default 2:
+#             14 x PAIRS recordings, every fabric): on 1 GPU, and on N GPUs as N
+#             processes of one GPU each (experiments.launch; each estimates its
+#             share of the recordings in its own lockstep), after a tiny run
+#             that fills Warp's kernel cache; SHARDED=1 runs one process over
+#             the N GPUs instead (its worlds split by jax.sharding).
 # Usage: OUT=/path bash benchmarks/gpu_scaling.sh STAGE [RUN_DIR] (OUT default
 # out/gpu_scaling, scaling_report's default, outside git; not benchmarks/results); then
 #   python -m benchmarks.scaling_report --logs=$OUT   (the table and JSON).
 # GPUS lists the device counts (default "1 N", N = every GPU). SMOKE=1 checks the
 # script on a CPU with tiny sizes (XLA's host devices stand in for GPUs).
 set -uo pipefail
-stage=${1:?stage: sweep, setup or lockstep}
+stage=${1:?stage: sweep, setup, lockstep or calibrate}
 R=${2:-/tmp/scaling_run}
 OUT=${OUT:-out/gpu_scaling}
 mkdir -p "$R" "$OUT"
@@ -32,6 +39,7 @@ WARM="--materials=$GI --sequences=2 --batch_size=2 --frames=4"
 TRAIN="--epochs=${EPOCHS:-1} --val_fraction=0.2"
 EV="--preset=eval --materials=$GI --sequences=$NREC --batch_size=$NREC"
 TAB="--methods=physnet_depth --min_iter=$ITERS --max_iter=$ITERS"
+CAL="--preset=paper --pairs=${PAIRS:-2} --simulate_only"
 if [ -n "${SMOKE:-}" ]; then
   S="--preset=smoke --backend=c"
   DS="$S --materials=$GI,black_denim --sequences=4 --batch_size=8"
@@ -39,6 +47,7 @@ if [ -n "${SMOKE:-}" ]; then
   TRAIN="--preset=smoke --epochs=1"
   EV="$S --materials=$GI --sequences=$NREC --batch_size=$NREC --resolution=32 --frames=8 --cloth_resolution=8"
   TAB="$TAB --preset=smoke --backend=c"
+  CAL="--preset=smoke --distance=shape --materials=$GI --pairs=1 --backend=c --simulate_only"
 fi
 devices() {  # the first $1 devices, as CUDA_VISIBLE_DEVICES (or XLA host devices)
   export CUDA_VISIBLE_DEVICES
@@ -78,6 +87,27 @@ case "$stage" in
       rm -rf "$R/tables_$g"
       timed "lockstep_${g}gpu" python -m experiments.tables --eval="$R/eval" \
         --models="$R/t1" --workdir="$R/tables_$g" $TAB
+    done
+    ;;
+  calibrate)
+    devices 1
+    timed calibrate_warmup python -m experiments.generate_dataset --out="$R/warm" $WARM
+    for g in ${G:-$GPUS}; do
+      rm -rf "$R/cal_$g"
+      if [ "$g" = 1 ]; then
+        devices 1
+        timed calibrate_1gpu python -m experiments.calibrate $CAL --workdir="$R/cal_1"
+      elif [ -n "${SHARDED:-}" ]; then
+        devices "$g"
+        timed "calsharded_${g}gpu" python -m experiments.calibrate $CAL --workdir="$R/cal_$g"
+      else
+        devices "$g"
+        gpp=1  # each process its own GPU (on a CPU: one host device each)
+        [ -n "${SMOKE:-}" ] && gpp=0 && export XLA_FLAGS=--xla_force_host_platform_device_count=1
+        timed "calibrate_${g}gpu" python -m experiments.launch --processes="$g" \
+          --gpus_per_process=$gpp --port=$((12355 + g)) \
+          --command="python -m experiments.calibrate $CAL --workdir=$R/cal_$g"
+      fi
     done
     ;;
   *) echo "unknown stage $stage"; exit 2 ;;

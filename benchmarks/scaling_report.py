@@ -14,8 +14,14 @@ over the one-device run of the same stage:
   compile, under a second with the warm Warp cache) and the files' writing
   apart;
 * the lockstep estimate: the seconds of its simulation steps after the first
-  (the step lines ``step k: ... (S simulations X s, search Y s)``: the first
-  step compiles the fused objective) and the searches' own time.
+  (the lines ``step k: ... (S simulations X s, search Y s)``, or
+  ``iteration k: ...`` where a process has one recording: the first
+  step compiles the fused objective) and the searches' own time;
+* the calibration study (``calibrate_<N>gpu.log``: N processes of one GPU
+  each, their lines prefixed ``[i]`` by ``experiments.launch``;
+  ``calsharded_<N>gpu.log``: one process over N GPUs): as the lockstep, each
+  process's steps summed and the slowest process taken, since they run at
+  once.
 
 Writes the rows as JSON (``--out``).
 """
@@ -47,9 +53,11 @@ PRESETS = {'default': Args()}
 
 _WALL = re.compile(r'^wall ([\d.]+) s, exit (-?\d+)$', re.M)
 _STEP = re.compile(
-  r'^step +(\d+): .*\((\d+) simulations ([\d.]+) s, search ([\d.]+) s\)$', re.M
+  r'^(?:\[(\d+)\] )?(?:step|iteration) +(\d+): .*\((\d+) simulations ([\d.]+) s, '
+  r'search ([\d.]+) s\)$',
+  re.M,
 )
-_LOG = re.compile(r'^(sweep|lockstep)_(\d+)gpu\.log$')
+_LOG = re.compile(r'^(sweep|lockstep|calibrate|calsharded)_(\d+)gpu\.log$')
 
 
 def _wall(text: str, path: str) -> tuple[float, int]:
@@ -75,24 +83,35 @@ def sweep_row(log: str, devices: int) -> dict:
   return row
 
 
-def lockstep_row(log: str, devices: int) -> dict:
-  """One lockstep run: wall, and its steps after the first (compiled)."""
+def lockstep_row(log: str, devices: int, stage: str = 'lockstep') -> dict:
+  """One lockstep run: wall, and its steps after the first (compiled); with
+  several processes (lines ``[i] step ...``), each process's sums and the
+  slowest process's seconds."""
   with open(log) as f:
     text = f.read()
   wall, rc = _wall(text, log)
-  steps = [(int(k), int(n), float(x), float(y)) for k, n, x, y in _STEP.findall(text)]
-  later = [s for s in steps if s[0] > 0]
+  by_proc: dict[str, list] = {}
+  for proc, k, n, x, y in _STEP.findall(text):
+    by_proc.setdefault(proc, []).append((int(k), int(n), float(x), float(y)))
+  steps = [s for ss in by_proc.values() for s in ss]
+  later = {p: [s for s in ss if s[0] > 0] for p, ss in by_proc.items()}
+  firsts = [s[2] for s in steps if s[0] == 0]
   return {
-    'stage': 'lockstep',
+    'stage': stage,
     'devices': devices,
+    'processes': max(len(by_proc), 1),
     'wall_s': wall,
     'exit': rc,
-    'steps': len(steps),
+    'steps': max((len(ss) for ss in by_proc.values()), default=0),
     'simulations': sum(s[1] for s in steps),
-    'first_step_s': steps[0][2] if steps else None,
-    'device_s': sum(s[2] for s in later) if later else None,
-    'search_s': sum(s[3] for s in steps),
-    'simulations_after_first': sum(s[1] for s in later),
+    'first_step_s': max(firsts) if firsts else None,
+    'device_s': max(sum(s[2] for s in ss) for ss in later.values())
+    if any(later.values())
+    else None,
+    'search_s': max(sum(s[3] for s in ss) for ss in by_proc.values())
+    if by_proc
+    else 0.0,
+    'simulations_after_first': sum(s[1] for ss in later.values() for s in ss),
   }
 
 
@@ -103,13 +122,15 @@ def rows(logs: str) -> list[dict]:
     m = _LOG.match(name)
     if not m:
       continue
-    make = sweep_row if m[1] == 'sweep' else lockstep_row
-    out.append(make(os.path.join(logs, name), int(m[2])))
+    path, devices = os.path.join(logs, name), int(m[2])
+    if m[1] == 'sweep':
+      out.append(sweep_row(path, devices))
+    else:
+      out.append(lockstep_row(path, devices, m[1]))
   out.sort(key=lambda r: (r['stage'], r['devices']))
   for r in out:
-    base = next(
-      (b for b in out if b['stage'] == r['stage'] and b['devices'] == 1), None
-    )
+    stage = 'calibrate' if r['stage'] == 'calsharded' else r['stage']
+    base = next((b for b in out if b['stage'] == stage and b['devices'] == 1), None)
     for k in ('wall_s', 'device_s'):
       if base and base.get(k) and r.get(k):
         r[k.replace('_s', '_speedup')] = base[k] / r[k]
@@ -129,7 +150,9 @@ def table(rs: list[dict]) -> str:
       other = f(r.get('write_s'), 'writing files {:.1f} s')
     else:
       other = (
-        f'{r["steps"]} steps, {r["simulations"]} simulations; first step '
+        f'{r["processes"]} process(es); '
+        * (r['stage'] != 'lockstep')
+        + f'{r["steps"]} steps, {r["simulations"]} simulations; first step '
         f'{f(r["first_step_s"], "{:.1f}")} s; searches {r["search_s"]:.1f} s'
       )
     lines.append(
@@ -143,7 +166,9 @@ def table(rs: list[dict]) -> str:
 def main(args: Args) -> None:
   rs = rows(args.logs)
   if not rs:
-    raise ValueError(f'{args.logs}: no sweep_<N>gpu.log or lockstep_<N>gpu.log')
+    raise ValueError(
+      f'{args.logs}: no sweep_, lockstep_, calibrate_ or calsharded_<N>gpu.log'
+    )
   out = args.out or os.path.join(args.logs, 'scaling.json')
   files.write_json(out, rs)
   print(table(rs))

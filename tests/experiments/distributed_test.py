@@ -140,3 +140,36 @@ def test_dataset_sweep_as_two_processes_equals_one(tmp_path, capsys):
       for root in (two, one)
     )
     np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def test_calibration_as_two_processes_estimates_as_one(tmp_path, capsys):
+  # The calibration study under the launcher (the scaling benchmark's
+  # calibrate stage): each process estimates its share of the recordings
+  # (here one each: the single-estimate path) while one process estimates
+  # both in one lockstep; the posteriors are the same (MuJoCo C, same keys).
+  env = dict(os.environ, JAX_PLATFORMS='cpu', PYTHONPATH=_ROOT)
+  flags_ = [
+    '--preset=smoke', '--distance=shape', '--materials=gray_interlock', '--pairs=1',
+    '--backend=c', '--simulate_only',
+  ]  # fmt: skip
+  runs = {}
+  for n in (2, 1):
+    workdir = tmp_path / f'p{n}'
+    command = [sys.executable, '-m', 'experiments.calibrate', f'--workdir={workdir}']
+    code = distributed.launch(command + flags_, n, port=_free_port(), env=env)
+    out = capsys.readouterr().out
+    assert code == 0, out[-3000:]
+    assert (workdir / 'packed' / 'runs-000.npz').is_file()
+    runs[n] = {
+      s: json.loads((workdir / 'estimates' / s / 'estimate.json').read_text())
+      for s in ('0000', '0001')
+    }
+  for s in ('0000', '0001'):
+    a, b = runs[2][s], runs[1][s]
+    assert a['truth'] == b['truth']
+    assert a['evaluations'] == b['evaluations']
+    for name, fields in b['estimate'].items():  # MuJoCo C, the same draws
+      for field, value in fields.items():
+        np.testing.assert_allclose(
+          a['estimate'][name][field], value, rtol=1e-6, err_msg=f'{name} {field}'
+        )

@@ -77,3 +77,36 @@ def test_an_unfinished_run_is_named(tmp_path):
   )
   with pytest.raises(ValueError, match='lockstep_2gpu.log'):
     sr.rows(str(tmp_path))
+
+
+def test_processes_run_at_once_so_the_slowest_counts(tmp_path):
+  """A calibration as two processes (launch's ``[i]`` prefixes): each
+  process's steps after the first summed, the slower process taken."""
+  one = _lockstep_log([(672, 80.0, 0.1), (336, 40.0, 1.0), (336, 38.0, 1.0)], 400.0)
+  _write(tmp_path, 'calibrate_1gpu.log', one)
+  two = [
+    '[0] step   0: 7 searches, 7 still searching (336 simulations 50.0 s, search 0.1 s)',
+    '[1] step   0: 7 searches, 7 still searching (336 simulations 55.0 s, search 0.1 s)',
+    '[1] step   1: 7 searches, 7 still searching (168 simulations 22.0 s, search 1.0 s)',
+    '[0] step   1: 7 searches, 7 still searching (168 simulations 20.0 s, search 2.0 s)',
+    '[0] step   2: 7 searches, 0 still searching (168 simulations 21.0 s, search 2.0 s)',
+    '[1] step   2: 7 searches, 0 still searching (168 simulations 23.0 s, search 1.0 s)',
+    'wall 250.0 s, exit 0',
+  ]
+  _write(tmp_path, 'calibrate_2gpu.log', '\n'.join(two) + '\n')
+  _write(tmp_path, 'calsharded_2gpu.log', one.replace('wall 400.0', 'wall 320.0'))
+  rows = {(r['stage'], r['devices']): r for r in sr.rows(str(tmp_path))}
+  base, procs = rows['calibrate', 1], rows['calibrate', 2]
+  assert base['processes'] == 1 and procs['processes'] == 2
+  assert procs['steps'] == 3 and procs['simulations'] == 1344
+  assert procs['first_step_s'] == pytest.approx(55.0, abs=_EXACT)
+  assert procs['device_s'] == pytest.approx(45.0, abs=_EXACT)  # process 1: 22 + 23
+  assert procs['search_s'] == pytest.approx(4.1, abs=1e-9)  # process 0: 0.1 + 2 + 2
+  assert procs['device_speedup'] == pytest.approx(78.0 / 45.0, abs=_EXACT)
+  assert procs['wall_speedup'] == pytest.approx(400.0 / 250.0, abs=_EXACT)
+  # one process over two GPUs is compared with the same one-GPU run
+  assert rows['calsharded', 2]['wall_speedup'] == pytest.approx(1.25, abs=_EXACT)
+  assert (
+    '| calibrate | 2 | 250.0 s | 1.60x | 45.0 s | 1.73x | 2 process(es)'
+    in sr.table(list(rows.values()))
+  )
