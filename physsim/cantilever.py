@@ -17,6 +17,8 @@ overhang is checked against (``experiments.studies.protocol``), and, inverted
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from physsim.params import GRAVITY as G  # m/s^2
@@ -77,6 +79,14 @@ def tip(ratio) -> tuple[np.ndarray, np.ndarray]:
   return reach, droop
 
 
+@functools.cache
+def _reach_table() -> tuple[np.ndarray, np.ndarray]:
+  """(ratios, reaches over L): the coarse table ``bending_length`` brackets
+  a reading in before refining (computed once: half a second)."""
+  grid = np.geomspace(MIN_RATIO, MAX_RATIO, 120)
+  return grid, tip(grid)[0]
+
+
 def bending_length(overhang: float, reach: float) -> float:
   """The bending length c (m) of a strip overhanging by ``overhang`` (m) whose
   free end reaches ``reach`` (m) out from the edge.
@@ -86,8 +96,7 @@ def bending_length(overhang: float, reach: float) -> float:
       ``MAX_RATIO`` bending lengths give (a strip hanging straight down says
       nothing about c; a stiff one hardly droops).
   """
-  grid = np.geomspace(MIN_RATIO, MAX_RATIO, 120)
-  reaches = tip(grid)[0]  # falls as the ratio rises
+  grid, reaches = _reach_table()  # reaches fall as the ratio rises
   if not (overhang > 0 and reaches[-1] < reach / overhang < reaches[0]):
     raise ValueError(
       f'a reach of {reach} m over an overhang of {overhang} m: need between '
@@ -106,3 +115,39 @@ def rigidity(length: float, area_weight: float) -> float:
   """D = w g c^3 (N m) of a bending length ``length`` (m) and an area weight
   (kg/m^2)."""
   return float(area_weight * G * length**3)
+
+
+def bending_length_sd(
+  overhang: float, reach: float, reach_sd: float, overhang_sd: float = 0.0
+) -> tuple[float, float]:
+  """(c, its standard uncertainty) in metres from a ruler's reading of an
+  overhang: ``bending_length`` of the readings, and the spread a ruler's
+  standard uncertainties on the reach and the overhang (independent) give it,
+  each by a secant over +-1 sd through the elastica (first order, but over the
+  reading's own scale rather than an infinitesimal step: at short overhangs c
+  is steep in the reach).
+
+  Raises:
+    ValueError: a negative or non-finite sd, or a reading within one sd of
+      the range ``bending_length`` takes (the reading cannot bound c there).
+  """
+  for name, v in (('reach_sd', reach_sd), ('overhang_sd', overhang_sd)):
+    if not (np.isfinite(v) and v >= 0):
+      raise ValueError(f'{name} must be finite and >= 0, got {v}')
+  c = bending_length(overhang, reach)
+  var = 0.0
+  for d_overhang, d_reach in ((overhang_sd, 0.0), (0.0, reach_sd)):
+    if not (d_overhang or d_reach):
+      continue
+    try:
+      up = bending_length(overhang + d_overhang, reach + d_reach)
+      down = bending_length(overhang - d_overhang, reach - d_reach)
+    except ValueError:
+      raise ValueError(
+        f'a reach of {reach} m over {overhang} m is within one sd '
+        f'({max(d_overhang, d_reach)} m) of a strip that hangs straight down or '
+        f'hardly droops ({MIN_RATIO:g}-{MAX_RATIO:g} bending lengths): the reading '
+        f'cannot bound the bending length'
+      ) from None
+    var += ((up - down) / 2) ** 2
+  return c, float(np.sqrt(var))

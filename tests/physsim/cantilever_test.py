@@ -50,3 +50,37 @@ def test_out_of_range_is_refused():
     cantilever.tip(np.nan)
   with pytest.raises(ValueError, match='reach of 0.06 m over an overhang of 0.05'):
     cantilever.bending_length(0.05, 0.06)
+
+
+# The secant spread against a Monte-Carlo spread of the same ruler errors:
+# 300 draws know a standard deviation to about 4%, and the secant is first
+# order (c is convex in the reach), so 15%.
+_SPREAD_TOL = 0.15
+
+
+def test_a_rulers_spread_through_the_elastica():
+  overhang, c, sd = 0.06, 0.025, 0.0015
+  reach = overhang * cantilever.tip(overhang / c)[0][0]
+  got, got_sd = cantilever.bending_length_sd(overhang, reach, sd, sd)
+  assert got == pytest.approx(c, rel=1e-6)
+  # the reference: the elastica's reach tabulated finely around the truth
+  # once, each draw's ratio read off it (independent of bending_length's
+  # bracketing)
+  ratios = np.geomspace(0.5 * overhang / c, 2.0 * overhang / c, 400)
+  reaches = cantilever.tip(ratios)[0]  # falling
+  e = np.random.default_rng(0).normal(0.0, sd, (300, 2))
+  o, r = overhang + e[:, 0], reach + e[:, 1]
+  draws = o / np.exp(np.interp(-r / o, -reaches, np.log(ratios)))
+  assert got_sd == pytest.approx(np.std(draws), rel=_SPREAD_TOL)
+  # one reading's sd alone is smaller than both together; none gives none
+  assert cantilever.bending_length_sd(overhang, reach, sd)[1] < got_sd
+  assert cantilever.bending_length_sd(overhang, reach, 0.0)[1] == 0.0
+
+
+def test_a_reading_one_sd_from_the_limits_is_refused():
+  overhang = 0.05
+  reach = overhang * cantilever.tip(cantilever.MIN_RATIO * 1.01)[0][0]  # hardly droops
+  with pytest.raises(ValueError, match='cannot bound the bending length'):
+    cantilever.bending_length_sd(overhang, reach, 0.001)
+  with pytest.raises(ValueError, match='reach_sd'):
+    cantilever.bending_length_sd(overhang, 0.03, float('nan'))
