@@ -5,7 +5,9 @@
 
 Each process runs the same program and takes its share of the independent
 jobs (``experiments.pipeline.distributed``); on a cluster, ``srun`` plays this
-launcher's part. The exit status is the first failing process's.
+launcher's part. The exit status is the first failing process's (75 when one
+stopped at a ``--time_limit`` given in the command: the others are interrupted,
+and running the same launch again resumes).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import dataclasses
 import shlex
 import sys
 
-from experiments.pipeline import cli, distributed
+from experiments.pipeline import cli, deadline, distributed
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,6 +41,11 @@ def main(args: Args) -> None:
     shlex.split(args.command), args.processes, port=args.port,
     gpus_per_process=args.gpus_per_process,
   )  # fmt: skip
+  if code == deadline.EXIT_STATUS:
+    print(
+      f'a process stopped at its --time_limit; resume with: {cli.resume_command()}',
+      file=sys.stderr,
+    )
   if code:
     sys.exit(code)
 

@@ -23,7 +23,9 @@ script's dataclass; flags given on the command line override it.
 User errors (``ValueError``, ``OSError``, a flag that does not parse, a
 numeric setting that is NaN or infinite) end the run with one line on stderr
 and exit status 2; ``--verbose`` shows the traceback instead. Ctrl-C ends it
-with one line that gives the command that resumes it (exit status 130).
+with one line that gives the command that resumes it (exit status 130), and so
+does a job's ``--time_limit`` between two of its steps (exit status 75:
+``deadline``).
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ import typing
 from collections.abc import Callable, Mapping
 
 from absl import app, flags
+
+from experiments.pipeline import deadline
 
 _REQUIRED = 'required'
 _CHOICES = 'choices'
@@ -199,6 +203,12 @@ def define_flags(
     'named settings; flags given override them', **kw,
   )  # fmt: skip
   flags.DEFINE_bool('verbose', False, 'show the traceback of an error', **kw)
+  flags.DEFINE_float(
+    'time_limit', 0.0,
+    'seconds from the start after which no new step of a long job begins (it '
+    'stops cleanly between steps, exit status 75, and resumes when run again); 0: none',
+    **kw,
+  )  # fmt: skip
   for leaf in leaves(cls):
     name, doc = leaf.flag, leaf.doc
     default = _get(first, leaf.path)
@@ -342,7 +352,11 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
     try:
       if len(argv) > 1:
         raise ValueError(f'unexpected arguments {argv[1:]} (flags are --name=value)')
+      deadline.set_limit(flags.FLAGS.time_limit, start=deadline.STARTED)
       main(from_flags(cls, presets))
+    except deadline.Reached as e:
+      print(f'{e}; resume with: {resume_command()}', file=sys.stderr)
+      sys.exit(deadline.EXIT_STATUS)
     except (ValueError, OSError) as e:
       if flags.FLAGS.verbose:
         raise

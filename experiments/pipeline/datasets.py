@@ -32,7 +32,14 @@ import numpy as np  # noqa: E402
 from absl import logging  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments.pipeline import cli, distributed, embedding, files, progress  # noqa: E402
+from experiments.pipeline import (  # noqa: E402
+  cli,
+  deadline,
+  distributed,
+  embedding,
+  files,
+  progress,
+)
 from physsim import dataset  # noqa: E402
 
 
@@ -521,6 +528,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   bar = progress.Bar(
     sum(len(jobs[b * bs : (b + 1) * bs]) for b in mine), 'simulate + render', 'seq'
   )
+  last_batch_s = 0.0  # --time_limit's forecast of the next batch
   with concurrent.futures.ThreadPoolExecutor(_WRITERS) as writers:
     for b in mine:
       chunk = jobs[b * bs : (b + 1) * bs]
@@ -534,6 +542,8 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       bar.skip(len(chunk) - len(todo))
       if not todo:
         continue
+      deadline.check(last_batch_s, f'batch {b + 1} of {n_batches}')
+      t_batch = time.perf_counter()
       # Pad the last chunk to the full batch so nothing recompiles.
       padded = chunk + [chunk[-1]] * (bs - len(chunk))
       names = [config.materials[k] for k, _ in padded]
@@ -662,6 +672,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       if not many:  # one process: the index follows every batch
         dataset.rebuild_index(workdir)
       seconds['write'] += time.perf_counter() - t0
+      last_batch_s = time.perf_counter() - t_batch
   bar.close()
   if many:  # each process's counts, for process 0's summary
     dataset.write_json_atomic(

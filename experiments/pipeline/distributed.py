@@ -141,13 +141,20 @@ def launch(
   on this machine (the launcher SLURM would otherwise be), each told its
   place by the ``JAX_*`` variables and, with ``gpus_per_process``, given its
   own GPUs (``CUDA_VISIBLE_DEVICES``). Output lines are prefixed ``[i]``.
+  A process that stops at its ``--time_limit`` (``deadline``) interrupts the
+  others, which would otherwise wait for it at their next barrier.
 
   Returns:
-    0 when every process succeeded, else the first failing exit status.
+    0 when every process succeeded, ``deadline.EXIT_STATUS`` when one
+    stopped at its time limit, else the first failing exit status.
   """
+  import signal  # noqa: PLC0415
   import subprocess  # noqa: PLC0415
   import sys  # noqa: PLC0415
   import threading  # noqa: PLC0415
+  import time  # noqa: PLC0415
+
+  from experiments.pipeline import deadline  # noqa: PLC0415
 
   if processes < 1 or not command:
     raise ValueError(f'need processes >= 1 and a command, got {processes}, {command!r}')
@@ -180,7 +187,18 @@ def launch(
   threads = [threading.Thread(target=forward, args=ip) for ip in enumerate(procs)]
   for t in threads:
     t.start()
-  codes = [p.wait() for p in procs]
+  codes: list[int | None] = [None] * len(procs)
+  while None in codes:
+    for i, p in enumerate(procs):
+      if codes[i] is None and (code := p.poll()) is not None:
+        codes[i] = code
+        if code == deadline.EXIT_STATUS:  # --time_limit: the others stop too
+          for q in procs:  # (they would wait at the next barrier for it)
+            if q.poll() is None:
+              q.send_signal(signal.SIGINT)
+    time.sleep(0.2)
   for t in threads:
     t.join()
+  if deadline.EXIT_STATUS in codes:
+    return deadline.EXIT_STATUS
   return next((c for c in codes if c), 0)

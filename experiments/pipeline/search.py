@@ -30,7 +30,7 @@ import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import embedding, files, report
+from experiments.pipeline import deadline, embedding, files, report
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import setup as setup_lib
@@ -405,6 +405,11 @@ def estimate_many(
     bad recording or model, another run in its workdir, every candidate blown
     up): one job's failure does not stop the others. Each search's files are
     written at the end of the step in which it stopped.
+
+  Raises:
+    deadline.Reached: the next step would end after the process's
+      ``--time_limit`` (``deadline``); every search's state is saved, so the
+      same call resumes.
   """
   t_start = time.perf_counter()
   out: list[dict | Exception | None] = [None] * len(jobs)
@@ -485,8 +490,11 @@ def estimate_many(
     if os.path.isfile(path):
       out[s.index] = read_json(path)
   finish([s for s in ended if out[s.index] is None])
-  step = 0
+  step, last_step_s = 0, 0.0
   while active := [s for s in live if not s.done()]:
+    # --time_limit: not a step that would end after it (the first is
+    # forecast as free: it compiles, and nothing says how long it takes)
+    deadline.check(last_step_s, f'step {step} of {len(active)} searches')
     t0 = time.perf_counter()
     got = bo.batched.ask_many(
       [s.opt for s in active], [s.state for s in active], devices=gp_devices,
@@ -525,6 +533,7 @@ def estimate_many(
       )
     finish(ended)
     step += 1
+    last_step_s = time.perf_counter() - t0
   return out
 
 

@@ -200,3 +200,39 @@ def test_a_posterior_alone_and_in_a_batch_of_three(env):
     _assert_close(alone[key], together[1][key], key)
   # each recording's posterior is its own
   assert together[0]['estimate'] != together[1]['estimate']
+
+
+def test_a_time_limit_stops_between_steps_and_the_rerun_resumes(
+  env, batched, monkeypatch
+):
+  # --time_limit: before each step the last step's duration is the forecast;
+  # a step that would end after the deadline does not start (no simulation of
+  # it is paid for), and the same call resumes to the uninterrupted result.
+  from experiments.pipeline import deadline
+
+  real = em.Evaluator.__call__
+  clock = {'t': 0.0}
+  monkeypatch.setattr(deadline.time, 'monotonic', lambda: clock['t'])
+  steps = []
+
+  def slow(self, problems, us, firsts, **kw):
+    steps.append(len(problems))
+    clock['t'] += 100.0  # each step "takes" 100 s of the budget
+    return real(self, problems, us, firsts, **kw)
+
+  monkeypatch.setattr(em.Evaluator, '__call__', slow)
+  deadline.set_limit(250.0, start=0.0)
+  try:
+    with pytest.raises(deadline.Reached, match='stopped before step 3'):
+      em.estimate_many(_jobs(env, 'limited'), progress=False)
+  finally:
+    deadline.set_limit(0.0)
+  # steps 0-2 began inside the budget (300 s on the clock); step 3 did not
+  assert len(steps) == 3
+  monkeypatch.setattr(em.Evaluator, '__call__', real)
+  resumed = em.estimate_many(_jobs(env, 'limited'), progress=False)
+  for i in range(3):
+    a = _state(os.path.join(env['root'], f'many{i}'))
+    b = _state(os.path.join(env['root'], f'limited{i}'))
+    np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
+    assert resumed[i]['estimate'] == batched[i]['estimate']
