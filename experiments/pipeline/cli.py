@@ -23,7 +23,8 @@ script's dataclass; flags given on the command line override it.
 User errors (``ValueError``, ``OSError``, a flag that does not parse, a
 numeric setting that is NaN or infinite) end the run with one line on stderr
 and exit status 2; ``--verbose`` shows the traceback instead. Ctrl-C ends it
-with one line that gives the command that resumes it (exit status 130), and so
+with one line that gives the command that resumes it (exit status 130), as
+does SIGTERM (a batch system's time limit), and so
 does a job's ``--time_limit`` between two of its steps (exit status 75:
 ``deadline``).
 """
@@ -36,6 +37,7 @@ import math
 import os
 import re
 import shlex
+import signal
 import sys
 import types
 import typing
@@ -344,6 +346,9 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
   from experiments.pipeline import distributed, jax_cache  # noqa: PLC0415 - imports jax
 
   host_devices()
+  # SIGTERM (a batch system's time limit, a launcher stopping its processes,
+  # whose SIGINT a background job ignores) ends the run as Ctrl-C does.
+  signal.signal(signal.SIGTERM, _interrupted)
   jax_cache.enable()  # a later process loads what this one compiles
   distributed.initialize()
   define_flags(cls, presets, module_name=sys.argv[0])
@@ -378,6 +383,10 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
     if e.code == 1 and _HELP_FLAGS & set(sys.argv[1:]):
       sys.exit(0)
     raise
+
+
+def _interrupted(signum, frame):
+  raise KeyboardInterrupt
 
 
 _HELP_FLAGS = {'--help', '-h', '-?', '--helpshort', '--helpfull'}

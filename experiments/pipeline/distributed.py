@@ -195,7 +195,7 @@ def launch(
         if code == deadline.EXIT_STATUS:  # --time_limit: the others stop too
           for q in procs:  # (they would wait at the next barrier for it)
             if q.poll() is None:
-              q.send_signal(signal.SIGINT)
+              q.send_signal(signal.SIGTERM)  # (a background job ignores SIGINT)
     time.sleep(0.2)
   for t in threads:
     t.join()

@@ -74,3 +74,34 @@ def test_the_launcher_stops_the_others_when_one_reaches_its_limit():
   status = distributed.launch([sys.executable, '-c', code], 2, env=dict(os.environ))
   assert status == deadline.EXIT_STATUS
   assert time.monotonic() - t0 < 30
+
+
+def test_sigterm_ends_a_script_as_ctrl_c_does():
+  # A batch system's time limit (or the launcher) sends SIGTERM: one line with
+  # the resume command and exit status 130, as Ctrl-C.
+  code = (
+    'import dataclasses, time\n'
+    'from experiments.pipeline import cli\n'
+    '@dataclasses.dataclass(frozen=True)\n'
+    'class A:\n'
+    '  """A.\n\n  Attributes:\n    n: a number.\n  """\n'
+    '  n: int = 1\n'
+    'def main(a):\n'
+    "  print('ready', flush=True)\n"
+    '  time.sleep(60)\n'
+    "cli.run(A, {'default': A()}, main)\n"
+  )
+  env = dict(os.environ, JAX_PLATFORMS='cpu', PYTHONPATH=_ROOT)
+  p = subprocess.Popen(
+    [sys.executable, '-c', code], env=env, stdout=subprocess.PIPE,
+    stderr=subprocess.PIPE, text=True,
+  )  # fmt: skip
+  try:
+    assert p.stdout.readline().strip() == 'ready'
+    p.terminate()
+    _, err = p.communicate(timeout=30)
+  finally:
+    p.kill()
+  assert p.returncode == 130, err
+  assert err.strip().splitlines()[-1].startswith('interrupted; resume with:')
+  assert 'Traceback' not in err

@@ -17,7 +17,7 @@ def test_the_reading_is_the_elastica_and_the_scale_by_hand(capsys):
   c = 0.02
   reach = 0.05 * cantilever.tip(0.05 / c)[0][0]
   args = overhang.Args(
-    overhang=0.05, reach=reach, ruler_sd=0.001, material='gray_interlock',
+    overhang=(0.05,), reach=(reach,), ruler_sd=0.001, material='gray_interlock',
     area_weight=0.2, area_weight_sd=0.004,
   )  # fmt: skip
   r = overhang.reading(args)
@@ -33,22 +33,50 @@ def test_the_reading_is_the_elastica_and_the_scale_by_hand(capsys):
   assert f'--bending_length={c:.4g}' in out and 'bending scale' in out
   # without an area weight: the bending length alone
   assert set(overhang.reading(dataclasses.replace(args, area_weight=0.0))) == {
-    'bending_length', 'bending_length_sd'
+    'bending_length', 'bending_length_sd', 'readings'
   }  # fmt: skip
 
 
 @pytest.mark.parametrize(
   'change, flag',
   [
-    ({'overhang': 0.0}, '--overhang'),
-    ({'reach': 0.06}, '--reach'),
-    ({'reach': 0.0}, '--reach'),
+    ({'overhang': (0.0,)}, '--overhang=0.0'),
+    ({'reach': (0.06,)}, '--reach=0.06'),
+    ({'reach': (0.0,)}, '--reach=0.0'),
+    ({'reach': (0.03, 0.03)}, 'one reach per overhang'),
+    ({'overhang': (), 'reach': ()}, 'at least one'),
     ({'ruler_sd': -0.001}, '--ruler_sd'),
     ({'material': 'tweed'}, '--material'),
-    ({'reach': 0.04999}, '--overhang=0.05 --reach=0.04999'),
+    ({'reach': (0.04999,)}, '--overhang=0.05 --reach=0.04999'),
   ],
 )
 def test_bad_readings_name_their_flag(change, flag):
-  args = dataclasses.replace(overhang.Args(overhang=0.05, reach=0.03), **change)
+  args = dataclasses.replace(overhang.Args(overhang=(0.05,), reach=(0.03,)), **change)
   with pytest.raises(ValueError, match=flag):
     overhang.reading(args)
+
+
+def test_several_readings_are_averaged_with_the_larger_spread():
+  # Three readings (the standard takes four: both ends, face up and down):
+  # their mean; its sd the larger of the ruler's (the readings' sds in
+  # quadrature over n) and the scatter's standard error, by hand from each
+  # reading alone.
+  reaches = (0.045, 0.043, 0.046)
+  args = overhang.Args(overhang=(0.06,) * 3, reach=reaches, ruler_sd=0.001)
+  r = overhang.reading(args)
+  alone = [cantilever.bending_length_sd(0.06, x, 0.001, 0.001) for x in reaches]
+  cs = [c for c, _ in alone]
+  assert r['readings'] == pytest.approx(cs, rel=1e-12)
+  assert r['bending_length'] == pytest.approx(sum(cs) / 3, rel=1e-12)
+  ruler = math.sqrt(sum(sd**2 for _, sd in alone)) / 3
+  mean = sum(cs) / 3
+  scatter = math.sqrt(sum((c - mean) ** 2 for c in cs) / 2) / math.sqrt(3)
+  assert scatter > ruler  # these readings scatter more than the ruler says
+  assert r['bending_length_sd'] == pytest.approx(scatter, rel=1e-9)
+  # two identical readings: the ruler's alone, a single reading's sd / sqrt(2)
+  same = overhang.reading(
+    dataclasses.replace(args, overhang=(0.06,) * 2, reach=(0.045,) * 2)
+  )
+  assert same['bending_length_sd'] == pytest.approx(
+    alone[0][1] / math.sqrt(2), rel=1e-9
+  )
