@@ -55,6 +55,17 @@ def _jobs(env, prefix):
   ]
 
 
+def _resumes_to(env, prefix, batched):
+  """Runs the jobs of ``prefix`` again (they resume) and checks that they
+  end where the uninterrupted lockstep did."""
+  resumed = em.estimate_many(_jobs(env, prefix), progress=False)
+  for i in range(3):
+    a = _state(os.path.join(env['root'], f'many{i}'))
+    b = _state(os.path.join(env['root'], f'{prefix}{i}'))
+    np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
+    assert resumed[i]['estimate'] == batched[i]['estimate']
+
+
 @pytest.fixture(scope='module')
 def batched(env):
   return em.estimate_many(_jobs(env, 'many'), progress=False)
@@ -100,12 +111,7 @@ def test_resume_after_interrupt(env, batched, monkeypatch):
   with pytest.raises(RuntimeError):
     em.estimate_many(_jobs(env, 'resumed'), progress=False)
   monkeypatch.setattr(obj_lib.Objective, '__call__', real)
-  resumed = em.estimate_many(_jobs(env, 'resumed'), progress=False)
-  for i in range(3):
-    a = _state(os.path.join(env['root'], f'many{i}'))
-    b = _state(os.path.join(env['root'], f'resumed{i}'))
-    np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
-    assert resumed[i]['estimate'] == batched[i]['estimate']
+  _resumes_to(env, 'resumed', batched)
 
 
 def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
@@ -230,9 +236,4 @@ def test_a_time_limit_stops_between_steps_and_the_rerun_resumes(
   # steps 0-2 began inside the budget (300 s on the clock); step 3 did not
   assert len(steps) == 3
   monkeypatch.setattr(em.Evaluator, '__call__', real)
-  resumed = em.estimate_many(_jobs(env, 'limited'), progress=False)
-  for i in range(3):
-    a = _state(os.path.join(env['root'], f'many{i}'))
-    b = _state(os.path.join(env['root'], f'limited{i}'))
-    np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
-    assert resumed[i]['estimate'] == batched[i]['estimate']
+  _resumes_to(env, 'limited', batched)
