@@ -100,3 +100,17 @@ def test_the_latency_benchmark_needs_a_network_only_for_a_distance_that_embeds()
   ):
     latency.main(latency.Args(recording='/nowhere', settings=('default',)))
   assert latency.SETTINGS['shape'][1] == {'distance': 'shape'}
+
+
+def test_the_bayes_point_benchmark_compares_the_same_choice(tmp_path):
+  # Both forms pick the same candidate on the benchmark's draws, and the JSON
+  # holds a row per loss and size.
+  import json
+
+  from benchmarks import bayes_point
+
+  out = tmp_path / 'bp.json'
+  bayes_point.main(dataclasses.replace(bayes_point.PRESETS['smoke'], out=str(out)))
+  rows = json.loads(out.read_text())['rows']
+  assert len(rows) == 2 and all(r['same_point'] for r in rows)
+  assert all(r['matrix_ms'] > 0 and r['prefix_sums_ms'] > 0 for r in rows)
