@@ -42,10 +42,10 @@ class Args:
 PRESETS = {'default': Args(), 'smoke': Args(samples=(512,), repeats=3)}
 
 
-def matrix_point(x, loss: str, n_candidates: int = 199) -> float:
-  """The matrix form, as ``bayes_point`` computed it before: every
-  candidate's expected error over every draw."""
-  w = np.ones_like(x)
+def matrix_costs(x, loss: str, n_candidates: int = 199, weights=None):
+  """The matrix form, as ``bayes_point`` computed it before: (the candidates,
+  each one's expected error over every draw); the tests' reference too."""
+  w = np.ones_like(x) if weights is None else np.asarray(weights, np.float64)
   order = np.argsort(x)
   cw = np.cumsum(w[order]) / w.sum()
   probs = (np.arange(n_candidates) + 0.5) / n_candidates
@@ -54,7 +54,13 @@ def matrix_point(x, loss: str, n_candidates: int = 199) -> float:
     cost = np.abs(c - x) / x @ w
   else:
     cost = np.exp(np.abs(np.log(c) - np.log(x))) @ w
-  return float(c[np.argmin(cost), 0])
+  return c[:, 0], cost
+
+
+def matrix_point(x, loss: str) -> float:
+  """The matrix form's point: its least expected error's candidate."""
+  c, cost = matrix_costs(x, loss)
+  return float(c[np.argmin(cost)])
 
 
 def _median_seconds(fn, repeats: int) -> float:
