@@ -643,6 +643,7 @@ def fit(
   progress: bool = True,
   videos: retrieval.Videos | None = None,
   devices=None,
+  after_epoch: Callable[[float], None] | None = None,
 ) -> FitResult:
   """Trains (or resumes training) a network and evaluates it after every epoch.
 
@@ -660,6 +661,9 @@ def fit(
       Needed by ``select_by='retrieval'``.
     devices: the devices a batch is split over (``data_parallel``; default
       every local device).
+    after_epoch: called with the epoch's seconds once each epoch but the last
+      is checkpointed; an exception it raises stops the fit there, and the same
+      call resumes (a script's ``--time_limit``).
 
   Returns:
     ``FitResult``.
@@ -712,7 +716,7 @@ def fit(
     # A run that already stopped early (and is called again) does nothing.
     start = total if stopped_early(history, config.patience) else int(state.step)
     log_path = os.path.join(workdir, METRICS_FILE)
-    t0 = time.perf_counter()
+    t0 = t_epoch = time.perf_counter()
     with (
       open(log_path, 'a') as log,
       progress_lib.bar(total, 'fit', initial=start, disable=not progress) as bar,
@@ -762,6 +766,9 @@ def fit(
           checkpoint.save(mngr, step + 1, state)
           if stopped_early(history, config.patience):
             break
+          if after_epoch is not None and step + 1 < total:
+            after_epoch(time.perf_counter() - t_epoch)
+          t_epoch = time.perf_counter()
   return FitResult(state, network, train_idx, test_idx, history, val_idx)
 
 

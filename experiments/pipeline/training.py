@@ -24,7 +24,7 @@ import os
 import numpy as np
 
 import model as model_lib
-from experiments.pipeline import cli
+from experiments.pipeline import cli, deadline
 from experiments.pipeline.embedding import CHANNELS, INPUTS_FILE, MODALITIES, resize_rgb
 from physsim import dataset
 from physsim import params as params_lib
@@ -332,7 +332,10 @@ def fit_run(
       f'{root}: the index lists {len(videos.video)} items of {list(materials)} '
       f'but {len(x)} were loaded (was a sequence rewritten?)'
     )
-  result = model_lib.fit(x, y, g, tc, run_dir, progress=progress, videos=videos)
+  result = model_lib.fit(
+    x, y, g, tc, run_dir, progress=progress, videos=videos,
+    after_epoch=lambda s: deadline.check(s, f'the next epoch of {run_dir}'),
+  )  # fmt: skip
   return result, model_lib.selected_eval(result.history)
 
 

@@ -197,6 +197,26 @@ class CheckpointTest(absltest.TestCase):
           part,
           progress=False,
         )
+      # A hook that stops the fit after its first epoch (a script's time
+      # limit): that epoch is checkpointed, and the same call resumes to the
+      # uninterrupted run's parameters.
+      seen = []
+
+      def stop(seconds):
+        seen.append(seconds)
+        raise KeyboardInterrupt
+
+      hooked = os.path.join(wd, 'hooked')
+      with self.assertRaises(KeyboardInterrupt):
+        model.fit(
+          images, labels, labels, _CONFIG, hooked, progress=False, after_epoch=stop
+        )
+      self.assertLen(seen, 1)
+      self.assertGreater(seen[0], 0.0)
+      again = model.fit(
+        images, labels, labels, _CONFIG, hooked, progress=False, after_epoch=stop
+      )  # the last epoch calls no hook
+      self.assertTrue(_tree_equal(again.state.params, full.state.params))
 
   def test_a_batch_split_over_devices_trains_as_on_one(self):
     # conftest gives two CPU devices: fit splits each batch of 8 over both by
