@@ -96,7 +96,7 @@ def reading(args: Args) -> dict:
     rel = math.hypot(3 * c_sd / c, args.area_weight_sd / args.area_weight)
     out.update(rigidity=d, rigidity_sd=d * rel)
     if args.material:
-      d0 = physsim.reference_rigidity(args.material)
+      d0 = physsim.search_space(args.material).rigidity  # as estimates read it
       out.update(bending_scale=d / d0, bending_scale_sd=d * rel / d0)
   return out
 
