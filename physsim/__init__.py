@@ -21,6 +21,7 @@ from physsim import (
   cantilever,
   dataset,
   devices,
+  mismatch,
   motion,
   params,
   render,
@@ -51,6 +52,7 @@ from physsim.cloth import (
 from physsim.forces import Gusts, face_wind_forces, sample_gusts
 from physsim.materials import FABRICS, Fabric, Material, fabric, load_material
 from physsim.mesh import GARMENTS, Mesh, garment, square
+from physsim.mismatch import MISMATCHES, Mismatch
 from physsim.params import (
   Params,
   SearchSpace,
@@ -85,6 +87,7 @@ __all__ = [
   'FABRICS',
   'FABRIC_COLORS',
   'GARMENTS',
+  'MISMATCHES',
   'ClothModel',
   'DepthVideo',
   'Fabric',
@@ -92,6 +95,7 @@ __all__ = [
   'Intrinsics',
   'Material',
   'Mesh',
+  'Mismatch',
   'Params',
   'Pose',
   'PoseRanges',
@@ -118,6 +122,7 @@ __all__ = [
   'load_material',
   'look_at',
   'make_depth_renderer',
+  'mismatch',
   'motion',
   'params',
   'pose_from_dict',

@@ -82,6 +82,10 @@ class Config:
       frame of a camera, as someone filming it would frame it; a camera below
       it gets a new pose, up to ``pose_draws`` draws in all (0: off).
     pose_draws: most poses drawn per camera when ``min_coverage`` is on.
+    physics: ``'own'`` (the estimator's simulator) or ``'mismatched'``
+      (``physsim.MISMATCHES``: a fan off the cloth's normal, another gust
+      spectrum, drag, damped bending, stretchier edges): recordings unlike the
+      estimator's simulator, as a real rig is, to measure coverage on.
     scaled_edges: the edges' time constant shrinks with a mesh finer than
       ``physsim.EDGE_SOLREF_SPACING`` (``physsim.config_for_mesh``: the same
       stretch stiffness on every mesh); off: the fixed one of datasets made
@@ -112,6 +116,7 @@ class Config:
   min_coverage: float = 0.0
   pose_draws: int = 8
   scaled_edges: bool = True
+  physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
 
 
 PRESETS = {
@@ -255,6 +260,10 @@ def _check_config(config: Config) -> None:
     raise ValueError(f'cloth_resolution must be >= 2, got {config.cloth_resolution}')
   if not 0.05 <= config.cloth_size <= 3.0:
     raise ValueError(f'cloth_size must be in [0.05, 3] m, got {config.cloth_size}')
+  if config.physics not in physsim.MISMATCHES:
+    raise ValueError(
+      f'physics must be one of {tuple(physsim.MISMATCHES)}, got {config.physics!r}'
+    )
   if not 0.0 <= config.min_coverage < 1.0 or config.pose_draws < 1:
     raise ValueError(
       f'need 0 <= min_coverage < 1 and pose_draws >= 1, got {config.min_coverage} '
@@ -275,6 +284,8 @@ def _identity(config: Config, backend: str) -> dict:
     d.pop('min_coverage'), d.pop('pose_draws')
   if config.cloth_size == 1.0:  # ... and before the size was a setting
     d.pop('cloth_size')
+  if config.physics == 'own':  # ... and before recordings of another physics
+    d.pop('physics')
   if physsim.scaled_edge_solref(_mesh(config).shortest_edge, 1.0) == 1.0:
     d.pop('scaled_edges')  # the same edges either way, as before the setting
   return d
@@ -484,16 +495,18 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   mesh = _mesh(config)
   # A fine mesh needs a shorter step; MuJoCo's stiffest safe constraint time
   # constant is two steps.
+  physics = physsim.MISMATCHES[config.physics]
   sim_config = physsim.config_for_mesh(
-    mesh, config.fps, config.timestep, scaled_edges=config.scaled_edges
-  )
+    mesh, config.fps, config.timestep, scaled_edges=config.scaled_edges,
+    **physics.sim_fields(),
+  )  # fmt: skip
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size
   render = _chunked(
     _renderer(mesh.faces, intrinsics, config, world_mesh),
     _render_chunk(config, bs, world_mesh.devices.size),
   )
-  wind = physsim.Wind(gust_intensity=config.gust_intensity)
+  wind = physics.wind(config.gust_intensity)
   root_key = jax.random.key(config.seed)
   # One compiled model for every material (bending is scaled per world), so
   # batches run across materials: jobs are (material index, sequence index).
@@ -641,6 +654,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
           'seed': config.seed,
           'backend': backend,
           'gust_intensity': config.gust_intensity,
+          **({'physics': config.physics} if config.physics != 'own' else {}),
           'noise': config.noise,
           **({'rgb_color': list(embedding.rgb_color(material))} if config.rgb else {}),
           'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))

@@ -115,11 +115,12 @@ class Recipe:
 
 
 # Issue 39, item 6: the simulator itself unlike the estimator's, as the world
-# is: a fan 10 degrees off the cloth's normal, another gust spectrum, drag
-# along the cloth, damped bending, stretchier edges.
+# is (``physsim.mismatch.WORLD``, the dataset sweeps' ``physics='mismatched'``).
+_WORLD = physsim.mismatch.WORLD
 MISMATCHED = Recipe(
-  fan_yaw_deg=10.0, gust_modes=16, air_drag=0.1, bending_damping=0.002,
-  edge_solref=0.008,
+  fan_yaw_deg=_WORLD.fan_yaw_deg, gust_modes=_WORLD.gust_modes,
+  air_drag=_WORLD.air_drag, bending_damping=_WORLD.bending_damping,
+  edge_solref=Recipe.edge_solref * _WORLD.edge_solref_scale,
 )  # fmt: skip
 RECIPES = {'default': Recipe(), 'mismatched': MISMATCHED}
 
@@ -155,16 +156,16 @@ def depth(recipe: Recipe, backend: str = 'c') -> np.ndarray:
   if recipe.wind_speed <= 0 or recipe.area_weight <= 0 or recipe.bending_scale <= 0:
     raise ValueError(f'the truth must be positive, got {recipe.truth}')
   mesh = physsim.square(recipe.cloth_resolution, recipe.cloth_size)
-  sim_config = physsim.config_for_mesh(
-    mesh, recipe.fps, recipe.timestep, recipe.edge_solref,
+  physics = physsim.Mismatch(
+    fan_yaw_deg=recipe.fan_yaw_deg, gust_modes=recipe.gust_modes,
     air_drag=recipe.air_drag, bending_damping=recipe.bending_damping,
+    edge_solref_scale=recipe.edge_solref / Recipe.edge_solref,
   )  # fmt: skip
+  sim_config = physsim.config_for_mesh(
+    mesh, recipe.fps, recipe.timestep, **physics.sim_fields()
+  )
   model = physsim.build(mesh, recipe.material, sim_config)
-  yaw = np.deg2rad(recipe.fan_yaw_deg)
-  wind = physsim.Wind(
-    direction=(float(np.sin(yaw)), float(np.cos(yaw)), 0.0),
-    gust_intensity=recipe.gust_intensity, gust_modes=recipe.gust_modes,
-  )  # fmt: skip
+  wind = physics.wind(recipe.gust_intensity)
   out = physsim.simulate(
     model, physsim.params.make(**recipe.truth), frames=recipe.frames,
     fps=recipe.fps, warmup=recipe.warmup, wind=wind,

@@ -86,6 +86,30 @@ def test_smoke_sweep_then_resume(tmp_path):
     gd.run(dataclasses.replace(_SMOKE, frames=5), root)
 
 
+def test_recordings_of_another_physics(tmp_path):
+  """``physics='mismatched'`` (physsim.mismatch.WORLD) draws the same
+  parameters and cameras, simulates another world (other frames), says so in
+  each sequence's meta, and is another dataset: an 'own' workdir refuses it."""
+  own_root, other_root = str(tmp_path / 'own'), str(tmp_path / 'other')
+  one = dataclasses.replace(_SMOKE, materials=('gray_interlock',), sequences=1,
+                            batch_size=1, cameras=1)  # fmt: skip
+  other = dataclasses.replace(one, physics='mismatched')
+  gd.run(one, own_root)
+  gd.run(other, other_root)
+  a, b = (dataset.open_dataset(r) for r in (own_root, other_root))
+  ra, rb = a.rows[0], b.rows[0]
+  assert (
+    ra['wind_speed'] == rb['wind_speed'] and ra['bending_scale'] == rb['bending_scale']
+  )
+  sa, sb = dataset.read_sequence(a.path(ra)), dataset.read_sequence(b.path(rb))
+  assert sa.meta['extrinsics'] == sb.meta['extrinsics']
+  assert sb.meta['physics'] == 'mismatched' and 'physics' not in sa.meta
+  both = (sa.depth > 0) & (sb.depth > 0)
+  assert np.abs(sa.depth - sb.depth)[both].max() > 1e-3  # metres: another world
+  with pytest.raises(ValueError, match='different config.*physics'):
+    gd.run(other, own_root)
+
+
 def test_invalid_world_recorded_without_frames(tmp_path, monkeypatch):
   real = physsim.simulate
 
