@@ -11,6 +11,9 @@
   python -m experiments.calibrate --workdir=out/check --check --seed=1 \
       --pairs=30 --network_seed=5 --networks=2  # the shipped tables on new
                                           # recordings and networks it never saw
+  python -m experiments.calibrate --workdir=out/check_mm --check --preset=paper \
+      --physics=mismatched --seed=1 --pairs=4 --install  # GPU: the paper tables
+      # on recordings of another physics, recorded where estimates quote it
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -24,11 +27,13 @@ how often their intervals held the truth (``calibration.check``).
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
 
 from absl import logging
 
 import bo
+import physsim
 from experiments.pipeline import cli, distributed, files, report
 from experiments.studies import calibration
 
@@ -40,7 +45,10 @@ class Args:
   Attributes:
     workdir: network, recordings, estimates and results (resumed).
     install: copy the held-out coverage into the package, where estimates
-      quote it.
+      quote it; with ``--check``, record the check (the workdir's
+      ``check.json``: made now, or by an earlier check with
+      ``--analyse_only``) in the calibration file it checked, where estimates
+      quote it beside the calibration's own coverage.
     analyse_only: analyse the estimates the workdir holds (or those packed
       in its ``packed/``), simulating nothing (e.g. searches run on a GPU
       machine, analysis elsewhere).
@@ -71,11 +79,17 @@ def main(args: Args) -> None:
       f'likelihoods of one discrepancy ({", ".join(bo.posterior.DISCREPANCY_LIKELIHOODS)})'
     )
   if args.check:
-    if args.install or args.simulate_only:
-      raise ValueError(
-        '--check fits nothing to --install and analyses what it simulates'
+    if args.simulate_only:
+      raise ValueError('--check analyses what it simulates: drop --simulate_only')
+    done = os.path.join(args.workdir, calibration.CHECK_FILE)
+    if not (args.install and args.analyse_only and os.path.isfile(done)):
+      calibration.check(args.study, args.workdir, analyse_only=args.analyse_only)
+    if args.install and distributed.is_main():
+      dest = calibration.checked_file(args.study)
+      report.record_check(
+        dest, calibration.check_record(physsim.dataset.read_json(done))
       )
-    calibration.check(args.study, args.workdir, analyse_only=args.analyse_only)
+      print(f'check recorded in {dest}')
     return
   calibration.run(
     args.study, args.workdir, analyse_only=args.analyse_only,

@@ -89,6 +89,27 @@ def _read_cached(path: str, mtime_ns: int, size: int) -> dict:
     return json.load(f)
 
 
+def record_check(path: str, check: dict) -> dict:
+  """Keeps ``check`` (``calibration.check_record``: the calibration's tables
+  on recordings they never saw) in the calibration file at ``path``, where
+  every estimate that applies those tables quotes it; a check of the same
+  physics and seed is replaced. Written whole (temporary file, then rename).
+
+  Raises:
+    ValueError: the check was of another calibration (its setting differs).
+  """
+  cal = physsim.dataset.read_json(path)
+  if check.get('setting') != cal.get('setting'):
+    raise ValueError(
+      f'{path}: the check was of {check.get("setting")!r}, this file holds '
+      f'{cal.get("setting")!r}'
+    )
+  same = lambda c: (c['physics'], c['seed']) == (check['physics'], check['seed'])
+  cal['checks'] = [c for c in cal.get('checks', []) if not same(c)] + [check]
+  files.write_json(path, cal)
+  return cal
+
+
 def _read_calibration(path: str) -> dict:
   """A calibration file, read once per version of it (not to be changed)."""
   st = os.stat(path)
@@ -299,9 +320,15 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     if accuracy is not None and calibrated_acc and accuracy < min(calibrated_acc)
     else None
   )
+  checks = [
+    {'physics': c['physics'], 'n': c['n'], 'coverage': c['coverage'][mode]}
+    for c in cal.get('checks', [])
+    if mode in c['coverage']
+  ]  # fmt: skip
   return {
     'matches': True, **head, 'mode': mode, 'recalibrated': True,
     **({'weaker_network': weaker} if weaker else {}),
+    **({'checks': checks} if checks else {}),
     'n_calibration_recordings': rec['n_calibration_recordings'],
     'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
     'weights': rec.get('weights', {}).get(mode, {}),
@@ -504,11 +531,7 @@ def calibration_line(cal: dict | None) -> str:
       f'{", ".join(cal.get("differs", ["likelihood"]))}; treat the intervals as '
       'indicative.'
     )
-  cov = cal['coverage']
-  parts = ', '.join(
-    f'{SHORT.get(k, k)} {100 * v["interval_90"]:.0f}%/{100 * v["interval_50"]:.0f}%'
-    for k, v in cov.items()
-  )
+  parts = _coverage_parts(cal['coverage'])
   if cal.get('recalibrated'):
     held = (
       'recordings of networks held out from that'
@@ -520,6 +543,11 @@ def calibration_line(cal: dict | None) -> str:
       f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}); '
       f'read so, {held} held the truth in their 90%/50% intervals: {parts}.'
     )
+    for c in cal.get('checks', []):
+      line += (
+        f' On {c["n"]} recordings of {PHYSICS_WORDS.get(c["physics"], c["physics"])}'
+        f' they held it in {_coverage_parts(c["coverage"])}.'
+      )
     if w := cal.get('weaker_network'):
       lo, hi = w['calibrated']
       line += (
@@ -531,6 +559,25 @@ def calibration_line(cal: dict | None) -> str:
   return (
     f'calibration ({cal["n"]} held-out simulated recordings, {cal["setting"]}): 90%/50% '
     f'intervals held the truth in {parts} of them.'
+  )
+
+
+# What a check's recordings were, in the estimate's calibration line.
+PHYSICS_WORDS = {
+  'own': "the estimator's own simulator",
+  'mismatched': 'another physics (fan 10 degrees off, other gusts, drag, damped '
+  'bending, softer edges)',
+}
+
+
+def _coverage_parts(cov: dict) -> str:
+  """'bending 92%/50%, wind ...': each quantity's 90%/50% coverage."""
+  order = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
+  keys = sorted(cov, key=lambda k: order.index(k) if k in order else len(order))
+  return ', '.join(
+    f'{SHORT.get(k, k)} {100 * cov[k]["interval_90"]:.0f}%/'
+    f'{100 * cov[k]["interval_50"]:.0f}%'
+    for k in keys
   )
 
 

@@ -122,6 +122,11 @@ class Config:
       prior, so the check measures the intervals an estimate given that
       reading prints, its search steered by the reading; 'none': the video
       alone.
+    physics: the recordings' physics: 'own' (the estimator's simulator) or
+      'mismatched' (``physsim.MISMATCHES``: a fan off the cloth's normal,
+      another gust spectrum, drag, damped bending, stretchier edges; the
+      estimates still simulate their own), to measure or fit the intervals
+      on recordings unlike the estimator's simulator, as a real one is.
   """
 
   material: str = 'gray_interlock'
@@ -143,6 +148,7 @@ class Config:
           'simulation.warmup', 'hardware.backend', 'seed', 'search.point', 'measured'),
   )  # fmt: skip
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
+  physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
 
 
 PRESETS = {
@@ -282,7 +288,7 @@ def _configs(config: Config, point: str = 'median', network: int = 0):
     rec = dataclasses.replace(
       gen.PRESETS['eval'], materials=mats, sequences=n,
       batch_size=min(config.batch_size, n * len(mats)), backend=config.backend,
-      seed=5000 + config.seed,
+      seed=5000 + config.seed, physics=config.physics,
     )  # fmt: skip
     est = config.estimate.replace(
       material=mats[0], backend=config.backend, seed=config.seed, point=point
@@ -294,7 +300,7 @@ def _configs(config: Config, point: str = 'median', network: int = 0):
   )  # fmt: skip
   rec = dataclasses.replace(
     rec, materials=mats, sequences=n, batch_size=min(config.batch_size, n),
-    seed=5000 + config.seed,
+    seed=5000 + config.seed, physics=config.physics,
   )  # fmt: skip
   est = config.estimate.replace(
     material=mats[0], cloth_resolution=est.simulation.cloth_resolution,
@@ -993,7 +999,8 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'setting': f'{form} likelihood, sharpness {c:g}, '
     + (f'{len(mats)} fabrics' if len(mats) > 1 else mats[0])
     + f', {config.size} size, '
-    + _networks_text(config),
+    + _networks_text(config)
+    + (f', recordings of {config.physics} physics' if config.physics != 'own' else ''),
     'likelihood': form,
     'sharpness': c,
     'coverage': _coverage_of(held['video']),
@@ -1280,13 +1287,24 @@ def printed(runs: list[dict]) -> dict:
       raise ValueError(f'{path}: no credible intervals with a truth to check')
     rows.append(e)
   note = lambda e: e.get('calibration') or {}
-  n = len(rows)
   out = {
-    'n': n,
+    **_printed_cells(rows),
     'recalibrated': sum(
       bool(note(e).get('matches') and note(e).get('recalibrated')) for e in rows
     ),
   }
+  mats = sorted({e.get('material') for e in rows} - {None})
+  if len(mats) > 1:
+    out['per_material'] = {
+      m: _printed_cells([e for e in rows if e.get('material') == m]) for m in mats
+    }
+  return out
+
+
+def _printed_cells(rows: list[dict]) -> dict:
+  """``printed``'s numbers for some estimates' ``estimate.json`` rows."""
+  n = len(rows)
+  out = {'n': n}
   for f in FIELDS:
     cell = {}
     for lv in LEVELS:
@@ -1299,6 +1317,12 @@ def printed(runs: list[dict]) -> dict:
       )
     out[f] = cell
   return out
+
+
+def checked_file(config: Config) -> str:
+  """The calibration file ``check`` checks with ``config``: the estimate's
+  own (``--calibration``), else the one shipped for its settings."""
+  return report.calibration_file(_configs(config)[3])
 
 
 def check(
@@ -1324,7 +1348,7 @@ def check(
     ValueError: no calibration there, or ``config.seed`` is its own.
   """
   check_config(config)
-  path = shipped_file or report.calibration_file(_configs(config)[3])
+  path = shipped_file or checked_file(config)
   if not os.path.isfile(path):
     raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
   # the estimates apply the tables being checked
@@ -1357,6 +1381,7 @@ def check(
   out = {
     'material': config.material,
     'seed': config.seed,
+    'physics': config.physics,
     'n': len(runs),
     'network': network,
     # the checked networks the calibration never saw (its seeds: 0 if unrecorded)
@@ -1381,6 +1406,26 @@ def check(
   )  # fmt: skip
   print(text)
   return out
+
+
+def check_record(out: dict) -> dict:
+  """What a calibration file keeps of a check (``check``'s ``out``, e.g. read
+  from its ``check.json``), for estimates to quote beside the calibration's
+  own coverage: the recordings' physics, seed and count, and per mode and
+  quantity how often the 50% and 90% intervals held the truth (those the
+  estimates printed as the video's, read from their own files)."""
+  modes = {m: _coverage_of(v) for m, v in out['modes'].items()}
+  printed_mode = out.get('printed_mode', 'video')
+  modes[printed_mode] = {
+    f: {c: out['printed'][f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS
+  }
+  return {
+    'physics': out.get('physics', 'own'),
+    'seed': out['seed'],
+    'n': out['n'],
+    'setting': out['shipped']['setting'],
+    'coverage': modes,
+  }
 
 
 def _pct_ci(cell: dict, lv: int) -> str:
@@ -1410,7 +1455,8 @@ def check_table(out: dict) -> str:
   lines = [
     f'Calibration checked: {sh["setting"]} (sharpness {sh["sharpness"]:g}, '
     f'{sh["n"]} calibration recordings) on {out["n"]} recordings it never saw '
-    f'(seed {out["seed"]}; networks {_seeds(out)}); {pr["recalibrated"]} of '
+    f'(seed {out["seed"]}; {out.get("physics", "own")} physics; networks '
+    f'{_seeds(out)}); {pr["recalibrated"]} of '
     f'{pr["n"]} estimates applied its tables. Brackets: 95% binomial intervals. '
     "The prior's own: how often the prior's central 50%/90% intervals held "
     'the same truths.',
@@ -1448,6 +1494,20 @@ def check_table(out: dict) -> str:
         f'{promised(mode, f)} | {_err(f, c["point_error_" + key])} | '
         f'{_err(f, c["centre_error_" + key])} |'
       )
+  if per := pr.get('per_material'):
+    lines += [
+      '',
+      f'{mode.capitalize()}, as printed, fabric by fabric (50% / 90% intervals '
+      'that held the truth; each pair shares bending and area weight):',
+      '',
+      '| fabric | recordings | ' + ' | '.join(FIELDS) + ' | mean error: wind |',
+      '|---|---:|' + '---|' * (len(FIELDS) + 1),
+    ]
+    for m, c in per.items():
+      lines.append(
+        f'| {m} | {c["n"]} | ' + ' | '.join(_pair(c[f]) for f in FIELDS)
+        + f' | {_err("wind_speed", c["wind_speed"]["estimate_error"])} |'
+      )  # fmt: skip
   nets = video.get('per_network', {})
   if len(nets) > 1:
     lines += [
