@@ -20,6 +20,17 @@ quadrature:
   ``log h = m + c sn``. Its shape is a plateau with light tails, so one ``c``
   can match one credible level but not every level; kept for comparison.
 
+**Model discrepancy.** Both are in units of ``sn``, the scatter the simulator's own
+randomness gives ``log d`` at one ``x``. A recording that the simulator cannot
+reproduce (a world of other physics) adds a systematic part to ``d`` at every ``x``:
+its best fit is worse and, relative to that, ``log d`` scatters less, so a
+likelihood in units of ``sn`` alone sharpens exactly when the model is wrong. The
+model error ``e`` (``PosteriorConfig.model_error``, fitted on recordings of another
+physics by the calibration study) is scatter of ``log d`` the simulator does not
+make, added in quadrature: the likelihood is read in units of ``sqrt(sn^2 + e^2)``
+(Kennedy & O'Hagan 2001's discrepancy, as a variance in the discrepancy's log). The
+GP's own noise, and so its fit and the acquisition's variance updates, keep ``sn``.
+
 Where the data do not constrain a direction, ``L`` is flat along it and the
 posterior keeps the prior's spread: the estimate says "unknown" there.
 
@@ -81,7 +92,8 @@ def grid_points(shape) -> np.ndarray:
 
 
 def log_l(f, floor, sn, form: str = 'gibbs', sharpness: float = 1.0):
-  """log L at latent log discrepancies ``f`` (see module doc)."""
+  """log L at latent log discrepancies ``f`` (see module doc); ``sn`` the
+  scatter the likelihood is in units of (``_moments`` adds the model error)."""
   if form == 'gibbs':
     return -sharpness * jnp.expm1(f - floor) / sn
   if form == 'threshold':
@@ -89,9 +101,11 @@ def log_l(f, floor, sn, form: str = 'gibbs', sharpness: float = 1.0):
   raise ValueError(f'likelihood must be one of {DISCREPANCY_LIKELIHOODS}, got {form!r}')
 
 
-def _moments(mean, var, floor, sn, form, sharpness):
+def _moments(mean, var, floor, sn, form, sharpness, model_error=0.0):
   """(log E_f[L], log E_f[L^2]) over f ~ N(mean, var), each (G,): Gauss-
-  Hermite, but BOLFI's mean in closed form, Phi((log h - mu) / sqrt(sn^2 + s^2))."""
+  Hermite, but BOLFI's mean in closed form, Phi((log h - mu) / sqrt(sn^2 + s^2)).
+  The simulator's scatter ``sn`` and the model error add in quadrature."""
+  sn = jnp.sqrt(sn**2 + model_error**2)
   var = jnp.maximum(var, 0.0)
   f = mean[:, None] + jnp.sqrt(var)[:, None] * _GH_X
   ll = log_l(f, floor, sn, form, sharpness)
@@ -120,14 +134,15 @@ class Likelihood(NamedTuple):
   floor: jax.Array
 
 
-def log_likelihood(mean, var, floor, noise_sd, *, form='gibbs', sharpness=1.0):
+def log_likelihood(mean, var, floor, noise_sd, *, form='gibbs', sharpness=1.0,
+                   model_error=0.0):  # fmt: skip
   """(G,) log E_f[L] from the GP's mean and latent variance of log
-  discrepancy per point (e.g. a saved ``Result``'s), for any likelihood;
-  float64 NumPy."""
+  discrepancy per point (e.g. a saved ``Result``'s), for any likelihood and
+  model error; float64 NumPy."""
   with jax.enable_x64(True):
     f64 = lambda a: jnp.asarray(a, jnp.float64)
     log_m1, _ = _moments(f64(mean), f64(var), f64(floor), f64(noise_sd), form,
-                         sharpness)  # fmt: skip
+                         sharpness, model_error)  # fmt: skip
     return np.asarray(log_m1)
 
 
@@ -154,14 +169,14 @@ def choose_sharpness(coverage, levels) -> float:
 
 def likelihood(
   state: gp.GPState, xq, *, form: str = 'gibbs', sharpness: float = 1.0,
-  kernel: str = 'matern52',
+  kernel: str = 'matern52', model_error: float = 0.0,
 ) -> Likelihood:  # fmt: skip
   """The likelihood at points ``xq (G, d)``, averaged over the GP; its floor
   is the lowest GP mean over ``xq`` (dense points, e.g. the grid)."""
   mean, var = gp.posterior(state, xq, kernel=kernel)
   sn = gp.noise_sd(state)
   floor = jnp.min(mean)
-  log_lik, _ = _moments(mean, var, floor, sn, form, sharpness)
+  log_lik, _ = _moments(mean, var, floor, sn, form, sharpness, model_error)
   return Likelihood(log_lik, mean, var, sn, floor)
 
 
@@ -172,7 +187,7 @@ def log_normalise(log_w):
 
 def maxvar_batch(
   state: gp.GPState, xq, log_prior, floor, q: int, *, form: str = 'gibbs',
-  sharpness: float = 1.0, kernel: str = 'matern52',
+  sharpness: float = 1.0, kernel: str = 'matern52', model_error: float = 0.0,
 ) -> jax.Array:  # fmt: skip
   """Indices into ``xq`` of a batch of ``q`` MaxVar picks (see module doc).
 
@@ -182,7 +197,7 @@ def maxvar_batch(
     log_prior: (G,) log prior density at them.
     floor: the likelihood's floor (``likelihood(...).floor``).
     q: batch size (static).
-    form, sharpness: the likelihood (as ``likelihood``).
+    form, sharpness, model_error: the likelihood (as ``likelihood``).
     kernel: kernel name.
 
   Returns:
@@ -192,7 +207,7 @@ def maxvar_batch(
   sn = gp.noise_sd(state)
 
   def log_acq(s2):
-    log_m1, log_m2 = _moments(mean, s2, floor, sn, form, sharpness)
+    log_m1, log_m2 = _moments(mean, s2, floor, sn, form, sharpness, model_error)
     # Var = E[L^2] - E[L]^2, in logs: log E[L^2] + log(1 - E[L]^2 / E[L^2]).
     gap = -jnp.expm1(jnp.minimum(2.0 * log_m1 - log_m2, 0.0))
     return 2.0 * log_prior + log_m2 + jnp.log(jnp.maximum(gap, 1e-300))
@@ -244,6 +259,9 @@ class PosteriorConfig(NamedTuple):
       discrepancies).
     sharpness: the likelihood's constant c (see module doc); for
       'synthetic' its tempering exponent (1: the likelihood as it is).
+    model_error: the model-discrepancy term (see module doc): scatter of
+      log discrepancy that the simulator's own noise does not make, added to
+      it in quadrature ('gibbs', 'threshold'); 0: the simulator is the world.
     summaries: values told per evaluation with 'synthetic' (the residual's
       length); 1 otherwise.
     kernel: GP kernel.
@@ -259,6 +277,7 @@ class PosteriorConfig(NamedTuple):
   replicates: int = 1
   likelihood: str = 'gibbs'
   sharpness: float = 1.0
+  model_error: float = 0.0
   summaries: int = 1
   kernel: str = 'matern52'
   noise_prior: tuple[float, float] = NOISE_PRIOR
@@ -334,8 +353,9 @@ def make_step(config: PosteriorConfig):
       functools.partial(_synthetic_step, config, points, n_explore, fit_kw)
     )
   lik_kw = dict(
-    form=config.likelihood, sharpness=config.sharpness, kernel=config.kernel
-  )
+    form=config.likelihood, sharpness=config.sharpness, kernel=config.kernel,
+    model_error=config.model_error,
+  )  # fmt: skip
 
   def step(x, log_d, mask, key, log_prior, init_params) -> Step:
     k_fit, k_sample, k_jit = jax.random.split(key, 3)

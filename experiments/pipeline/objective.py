@@ -99,6 +99,12 @@ class Scoring:
       (experiments/calibrate.py; docs/calibration.md): the default is the
       value the shipped calibration chose. For 'synthetic', the exponent
       that tempers its likelihood (1: untempered).
+    model_error: the likelihood's model-discrepancy term ('gibbs',
+      'threshold'; bo.posterior): scatter of the log distance that the
+      simulator's own randomness does not make (a world of other physics),
+      added to it in quadrature. 0: the simulator is taken as the world; the
+      calibration study fits it on recordings of another physics
+      (experiments/calibrate.py --physics=mismatched --model_error=...).
     calibration: a calibration file (``experiments/calibrate.py``'s
       ``calibration.json``) whose tables the estimate applies where its
       settings and network match; '' for the shipped one. It only changes how
@@ -110,6 +116,7 @@ class Scoring:
   camera_sd_deg: float = 0.0
   likelihood: str = cli.choice('gibbs', LIKELIHOODS)
   sharpness: float = 0.5
+  model_error: float = 0.0
   calibration: str = ''
 
 
@@ -322,6 +329,11 @@ class EstimateConfig:
         "likelihood 'synthetic' models the shape summary: it needs "
         f"distance 'shape', got {sc.distance!r}"
       )
+    if sc.likelihood == 'synthetic' and sc.model_error:
+      raise ValueError(
+        f"--model_error={sc.model_error}: the 'synthetic' likelihood takes the "
+        "summaries' own scatter; use 'gibbs' or 'threshold'"
+      )
     if self.posterior and not 0 <= se.replicates < se.q:
       raise ValueError(f'need 0 <= replicates < q, got {se.replicates}, {se.q}')
     self.measured.check(physsim.search_space(sim.material))
@@ -386,7 +398,7 @@ _TOP_FIELDS = tuple(f.name for f in dataclasses.fields(EstimateConfig))
 # The other numeric fields' allowed ranges (EstimateConfig.check): beyond
 # them a search is a typo (or would not fit in memory), never a setting.
 _RANGES = (
-  ('sharpness', 1e-6, 1e6), ('cloth_resolution', 2, 200), ('cloth_size', 0.05, 3.0),
+  ('sharpness', 1e-6, 1e6), ('model_error', 0.0, 100.0), ('cloth_resolution', 2, 200), ('cloth_size', 0.05, 3.0),
   ('garment_spacing', 0.005, 0.5), ('cameras', 1, 64), ('q', 1, 4096),
   ('n_init', 1, 100_000), ('max_iter', 0, 10_000), ('stop_rel_change', 0.0, 1.0),
   ('stop_window', 1, 10_000), ('min_iter', 0, 10_000), ('replicates', 0, 4096),

@@ -199,7 +199,7 @@ def covered(result: dict, truth: dict) -> dict:
 # pins the posterior down; coverage measured with other values does not carry
 # over.
 _CALIBRATED_FIELDS = (
-  'likelihood', 'sharpness', 'material', 'garment', 'cloth_resolution', 'cloth_size',
+  'likelihood', 'sharpness', 'model_error', 'material', 'garment', 'cloth_resolution', 'cloth_size',
   'frames',
   'fps', 'distance', 'camera_sd_m', 'camera_sd_deg', 'warmup', 'gusts',
   'sensor_noise', 'q', 'n_init', 'max_iter', 'posterior_grid',
@@ -219,6 +219,8 @@ def _differing_fields(config, cal: dict) -> list[str]:
     calibrated.setdefault('camera_sd_deg', 0.0)
   if 'cloth_resolution' in calibrated:  # files from before the size was a setting
     calibrated.setdefault('cloth_size', 1.0)
+  if 'sharpness' in calibrated:  # ... and before the model error was
+    calibrated.setdefault('model_error', 0.0)
   mine = config.flat()
   if 'materials' in cal:
     calibrated['material'] = (

@@ -144,7 +144,7 @@ def posterior_config(config: EstimateConfig) -> bo.PosteriorConfig:
   s, sc = config.search, config.scoring
   return bo.PosteriorConfig(
     d=3, grid=tuple(s.posterior_grid), q=s.q, replicates=s.replicates,
-    likelihood=sc.likelihood, sharpness=sc.sharpness,
+    likelihood=sc.likelihood, sharpness=sc.sharpness, model_error=sc.model_error,
     summaries=len(physsim.shape.SUMMARY) if sc.likelihood == 'synthetic' else 1,
   )  # fmt: skip
 

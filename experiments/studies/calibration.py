@@ -461,11 +461,11 @@ def _draws(rng, grid, log_post, n: int) -> np.ndarray:
   return np.clip(pts[idx] + (rng.random((n, 3)) - 0.5) * width, -1.0, 1.0)
 
 
-def _log_lik(z: dict, form: str, sharpness: float) -> np.ndarray:
+def _log_lik(z: dict, form: str, sharpness: float, model_error: float) -> np.ndarray:
   return np.asarray(
     bo.posterior.log_likelihood(
       z['gp_mean'], z['gp_var'], z['floor'], z['noise_sd'], form=form,
-      sharpness=sharpness,
+      sharpness=sharpness, model_error=model_error,
     )
   )  # fmt: skip
 
@@ -515,10 +515,14 @@ def run_material(config: Config, run: dict) -> str:
 
 
 def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
-               n: int = 2000, pairs: bool = True) -> dict[str, list[dict]]:  # fmt: skip
+               n: int = 2000, pairs: bool = True,
+               model_error: float | None = None) -> dict[str, list[dict]]:  # fmt: skip
   """Every recording's scores under each mode, at one likelihood setting
   (``pairs``: recordings 2k and 2k+1 share bending and area weight, and
-  their joint posterior is scored too)."""
+  their joint posterior is scored too). ``model_error``: the likelihood's
+  discrepancy term (None: the study's estimate's)."""
+  if model_error is None:
+    model_error = config.estimate.scoring.model_error
   grid = tuple(config.estimate.search.posterior_grid)
   points = bo.posterior.grid_points(grid)
   rng = np.random.default_rng([config.seed, 11, int(sharpness * 1000)])
@@ -530,7 +534,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     z = _saved(r)
     t = r['truth']
     row = _truth_row(t)
-    ll = _log_lik(z, form, sharpness)
+    ll = _log_lik(z, form, sharpness, model_error)
     sd = config.measured_sd
     measured = {
       'video': posterior_lib.Measured(),
@@ -559,7 +563,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     if mate is not None and r['seq'] % 2 == 0:
       zm = _saved(mate)
       j = posterior_lib.joint(
-        [ll, _log_lik(zm, form, sharpness)], grid, base,
+        [ll, _log_lik(zm, form, sharpness, model_error)], grid, base,
         jax.random.key(int(rng.integers(1 << 30))), n=n,
       )  # fmt: skip
       for k, (rr, samples) in enumerate(zip((r, mate), j['samples'], strict=True)):
@@ -579,7 +583,7 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
       ]  # fmt: skip
       lps = [priors['known wind'], posterior_lib.log_prior(points, space, readings[1])]
       jw = posterior_lib.joint(
-        [ll, _log_lik(zm, form, sharpness)], grid, lps,
+        [ll, _log_lik(zm, form, sharpness, model_error)], grid, lps,
         jax.random.key(int(rng.integers(1 << 30))), n=n,
       )  # fmt: skip
       for k, (rr, samples) in enumerate(zip((r, mate), jw['samples'], strict=True)):
@@ -997,12 +1001,14 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'size': config.size,
     'n': held['video'].get('n', 0),
     'setting': f'{form} likelihood, sharpness {c:g}, '
+    + (f'model error {e:g}, ' if (e := config.estimate.scoring.model_error) else '')
     + (f'{len(mats)} fabrics' if len(mats) > 1 else mats[0])
     + f', {config.size} size, '
     + _networks_text(config)
     + (f', recordings of {config.physics} physics' if config.physics != 'own' else ''),
     'likelihood': form,
     'sharpness': c,
+    'model_error': config.estimate.scoring.model_error,
     'coverage': _coverage_of(held['video']),
     'coverage_uncalibrated': _coverage_of(raw['video']),
     'recalibration': {
@@ -1231,7 +1237,10 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
   if not rc or tuple(rc['fields']) != FIELDS:
     raise ValueError(f'the calibration has no recalibration tables for {FIELDS}')
   space = physsim.search_space(config.material)
-  scores = posteriors(config, runs, shipped['likelihood'], float(shipped['sharpness']))
+  scores = posteriors(
+    config, runs, shipped['likelihood'], float(shipped['sharpness']),
+    model_error=float(shipped.get('model_error', 0.0)),
+  )  # fmt: skip
   out = {}
   for mode, v in scores.items():
     if mode not in rc['modes'] or not v:
@@ -1391,7 +1400,8 @@ def check(
       **{k: shipped.get(k) for k in ('setting', 'n', 'likelihood', 'sharpness')},
       'held_out': {m: _coverage_of(v) for m, v in held.items()},
     },
-    'printed': printed(runs),
+    # packed runs (an analysis elsewhere) keep no estimate.json to read
+    'printed': printed(runs) if all(r.get('workdir') for r in runs) else None,
     'printed_mode': mode,
     'modes': modes,
     'config': _record(config, config.estimate),
@@ -1416,9 +1426,11 @@ def check_record(out: dict) -> dict:
   estimates printed as the video's, read from their own files)."""
   modes = {m: _coverage_of(v) for m, v in out['modes'].items()}
   printed_mode = out.get('printed_mode', 'video')
-  modes[printed_mode] = {
-    f: {c: out['printed'][f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS
-  }
+  if out.get('printed'):
+    modes[printed_mode] = {
+      f: {c: out['printed'][f][c] for c in ('interval_50', 'interval_90')}
+      for f in FIELDS
+    }
   return {
     'physics': out.get('physics', 'own'),
     'seed': out['seed'],
@@ -1456,8 +1468,13 @@ def check_table(out: dict) -> str:
     f'Calibration checked: {sh["setting"]} (sharpness {sh["sharpness"]:g}, '
     f'{sh["n"]} calibration recordings) on {out["n"]} recordings it never saw '
     f'(seed {out["seed"]}; {out.get("physics", "own")} physics; networks '
-    f'{_seeds(out)}); {pr["recalibrated"]} of '
-    f'{pr["n"]} estimates applied its tables. Brackets: 95% binomial intervals. '
+    f'{_seeds(out)})'
+    + (
+      f'; {pr["recalibrated"]} of {pr["n"]} estimates applied its tables'
+      if pr
+      else ' (read from packed posteriors: what the estimates printed is not here)'
+    )
+    + '. Brackets: 95% binomial intervals. '
     "The prior's own: how often the prior's central 50%/90% intervals held "
     'the same truths.',
     '',
@@ -1478,7 +1495,7 @@ def check_table(out: dict) -> str:
 
   mode = out.get('printed_mode', 'video')
   video = out['modes'].get(mode, {})
-  for f in FIELDS:
+  for f in FIELDS if pr else ():
     c = pr[f]
     lines.append(
       f'| {mode}, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
@@ -1494,7 +1511,7 @@ def check_table(out: dict) -> str:
         f'{promised(mode, f)} | {_err(f, c["point_error_" + key])} | '
         f'{_err(f, c["centre_error_" + key])} |'
       )
-  if per := pr.get('per_material'):
+  if per := (pr or {}).get('per_material'):
     lines += [
       '',
       f'{mode.capitalize()}, as printed, fabric by fabric (50% / 90% intervals '

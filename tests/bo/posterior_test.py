@@ -44,6 +44,50 @@ def test_log_likelihoods_by_hand():
     posterior.log_l(f, floor, sn, 'exact', c)
 
 
+def test_the_model_error_adds_to_the_simulators_scatter_in_quadrature():
+  """By hand at a known f (no GP uncertainty): the likelihood in units of
+  sqrt(sn^2 + e^2); e = 0 is the likelihood without the term."""
+  mean = jnp.array([-2.0, -1.5, -0.4])
+  var = jnp.zeros(3)
+  floor, sn, c, e = -2.0, 0.3, 0.5, 0.4
+  for form in posterior.DISCREPANCY_LIKELIHOODS:
+    got = posterior.log_likelihood(
+      mean, var, floor, sn, form=form, sharpness=c, model_error=e
+    )
+    want = posterior.log_l(mean, floor, 0.5, form, c)  # hypot(0.3, 0.4) = 0.5
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)  # quadrature sums
+    np.testing.assert_array_equal(
+      posterior.log_likelihood(mean, var, floor, sn, form=form, sharpness=c,
+                               model_error=0.0),
+      posterior.log_likelihood(mean, var, floor, sn, form=form, sharpness=c),
+    )  # fmt: skip
+  # gibbs, by hand: -c (e^(f - m) - 1) / sqrt(sn^2 + e^2)
+  got = posterior.log_likelihood(mean, var, floor, sn, sharpness=c, model_error=e)
+  np.testing.assert_allclose(
+    got, -c * np.expm1(np.asarray(mean) - floor) / 0.5, rtol=1e-12, atol=1e-15
+  )
+
+
+def test_a_model_error_widens_the_posterior_about_the_same_place():
+  """A quadratic log distance over one axis: the grid posterior's spread
+  grows with the model error as sqrt(sn^2 + e^2) / sn does for a Gaussian
+  (its variance goes with the likelihood's unit), and its mean stays."""
+  x = jnp.linspace(-1.0, 1.0, 801)
+  floor, sn = -3.0, 0.2
+  mean = floor + jnp.log1p(20.0 * (x - 0.1) ** 2)  # d = d_min (1 + 20 (x - 0.1)^2)
+
+  def moments(e):
+    ll = posterior.log_likelihood(mean, jnp.zeros_like(x), floor, sn, model_error=e)
+    w = np.exp(ll - ll.max())
+    w /= w.sum()
+    m = float(np.sum(w * x))
+    return m, float(np.sqrt(np.sum(w * (x - m) ** 2)))
+
+  (m0, s0), (m1, s1) = moments(0.0), moments(0.15)
+  assert abs(m1 - m0) < 1e-6 and abs(m0 - 0.1) < 1e-6
+  np.testing.assert_allclose(s1 / s0, np.sqrt(np.hypot(sn, 0.15) / sn), rtol=1e-3)
+
+
 def test_averaging_over_the_gp_matches_closed_form_and_monte_carlo():
   mean = jnp.array([-1.0, 0.0, 0.8])
   var = jnp.array([0.0, 0.09, 0.4])

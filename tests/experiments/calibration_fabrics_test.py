@@ -255,3 +255,24 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
   )
   assert [c['n'] for c in note['checks']] == [12, 10]
   assert 'they held it in bending 70%/50%' in report.calibration_line(note)
+
+
+def test_tables_fitted_with_a_model_error_apply_only_with_that_error(tmp_path):
+  """A calibration fitted with the likelihood's discrepancy term: an estimate
+  without it is told its intervals are indicative, naming the setting; one
+  with it applies the tables. Files from before the term count as 0."""
+  with open(report.SHAPE_PAPER_CALIBRATION_FILE) as f:
+    cal = json.load(f)
+  cal['config']['estimate']['model_error'] = 0.5
+  path = str(tmp_path / 'cal.json')
+  with open(path, 'w') as f:
+    json.dump(cal, f)
+  config = EstimateConfig().replace(distance='shape', calibration=path)
+  note = report.calibration_note(config)
+  assert not note['matches'] and 'model_error' in note['differs']
+  assert report.calibration_note(config.replace(model_error=0.5))['matches']
+  del cal['config']['estimate']['model_error']
+  with open(path, 'w') as f:
+    json.dump(cal, f)
+  assert report.calibration_note(config)['matches']
+  assert not report.calibration_note(config.replace(model_error=0.5))['matches']

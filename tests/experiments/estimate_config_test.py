@@ -27,7 +27,7 @@ FLAT_FLAGS = [
   'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_sd', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
   'garment', 'garment_spacing', 'gusts', 'likelihood', 'material', 'max_iter',
-  'min_iter', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
+  'min_iter', 'model_error', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
   'sensor_noise', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
   'wind_speed', 'wind_speed_sd', 'workers',
 ]  # fmt: skip
@@ -40,7 +40,7 @@ ESTIMATE_FLAGS = [
   'cloth_sizes', 'depth_range', 'depth_scale', 'depth_topic', 'distance', 'fps',
   'frame_glob', 'frames', 'garment', 'garment_spacing', 'gusts', 'image_size',
   'imu_topic', 'info_topic', 'intake_only', 'likelihood', 'mask', 'material',
-  'max_iter', 'min_iter', 'min_overlap', 'model', 'n_init', 'pins', 'plane_tol',
+  'max_iter', 'min_iter', 'min_overlap', 'model', 'model_error', 'n_init', 'pins', 'plane_tol',
   'point', 'posterior_grid', 'protocol', 'q', 'recording', 'remove_planes',
   'replicates', 'seed', 'sensor_noise', 'sharpness', 'sim_fps', 'start',
   'stop_rel_change', 'stop_window', 'up', 'warmup', 'wind_speed', 'wind_speed_sd',
@@ -55,7 +55,7 @@ OLD_SMOKE = {
   'fps': 20.0, 'warmup': 0.5, 'gusts': 0.2, 'cameras': 2, 'q': 8, 'n_init': 16,
   'max_iter': 3, 'stop_rel_change': 0.05, 'stop_window': 2, 'min_iter': 2,
   'posterior_grid': [8, 32, 16], 'likelihood': 'gibbs', 'sharpness': 0.5,
-  'replicates': 1, 'distance': 'energy', 'camera_sd_m': 0.0, 'camera_sd_deg': 0.0,
+  'model_error': 0.0, 'replicates': 1, 'distance': 'energy', 'camera_sd_m': 0.0, 'camera_sd_deg': 0.0,
   'backend': 'auto', 'workers': 0, 'sensor_noise': True, 'seed': 0,
   'measured': {
     'wind_speed': 0.0, 'wind_speed_sd': 0.0, 'area_weight': 0.0, 'area_weight_sd': 0.0
@@ -190,3 +190,13 @@ def test_a_bending_length_enters_the_files_only_when_given():
   read = json.loads(json.dumps(given.flat()))
   assert read['measured']['bending_length'] == 0.02
   assert objective.EstimateConfig.from_flat(read) == given
+
+
+def test_the_model_error_reaches_the_search_and_is_checked():
+  config = objective.EstimateConfig().replace(model_error=0.3)
+  assert search.posterior_config(config).model_error == 0.3
+  for bad in (-0.1, float('nan'), float('inf')):
+    with pytest.raises(ValueError, match='model_error'):
+      config.replace(model_error=bad).check()
+  with pytest.raises(ValueError, match='synthetic'):
+    config.replace(distance='shape', likelihood='synthetic', sharpness=1.0).check()
