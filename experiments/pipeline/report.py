@@ -93,7 +93,8 @@ def record_check(path: str, check: dict) -> dict:
   """Keeps ``check`` (``calibration.check_record``: the calibration's tables
   on recordings they never saw) in the calibration file at ``path``, where
   every estimate that applies those tables quotes it; a check of the same
-  physics and seed is replaced. Written whole (temporary file, then rename).
+  physics, seed and searches (steered by the same reading) is replaced.
+  Written whole (temporary file, then rename).
 
   Raises:
     ValueError: the check was of another calibration (its setting differs).
@@ -104,7 +105,8 @@ def record_check(path: str, check: dict) -> dict:
       f'{path}: the check was of {check.get("setting")!r}, this file holds '
       f'{cal.get("setting")!r}'
     )
-  same = lambda c: (c['physics'], c['seed']) == (check['physics'], check['seed'])
+  key = lambda c: (c['physics'], c['seed'], c.get('searched', 'video'))
+  same = lambda c: key(c) == key(check)
   cal['checks'] = [c for c in cal.get('checks', []) if not same(c)] + [check]
   files.write_json(path, cal)
   return cal
@@ -322,11 +324,19 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     if accuracy is not None and calibrated_acc and accuracy < min(calibrated_acc)
     else None
   )
-  checks = [
-    {'physics': c['physics'], 'n': c['n'], 'coverage': c['coverage'][mode]}
-    for c in cal.get('checks', [])
-    if mode in c['coverage']
-  ]  # fmt: skip
+  # per physics, the check whose searches ran in this mode (steered by its
+  # reading, as this estimate's are) where there is one
+  checks = {}
+  for c in cal.get('checks', []):
+    if mode in c['coverage'] and (
+      c['physics'] not in checks or c.get('searched', 'video') == mode
+    ):
+      checks[c['physics']] = {
+        'physics': c['physics'],
+        'n': c['n'],
+        'coverage': c['coverage'][mode],
+      }
+  checks = list(checks.values())
   return {
     'matches': True, **head, 'mode': mode, 'recalibrated': True,
     **({'weaker_network': weaker} if weaker else {}),

@@ -1434,6 +1434,8 @@ def check_record(out: dict) -> dict:
   return {
     'physics': out.get('physics', 'own'),
     'seed': out['seed'],
+    # the mode whose searches were steered by a reading (else 'video')
+    'searched': printed_mode,
     'n': out['n'],
     'setting': out['shipped']['setting'],
     'coverage': modes,
