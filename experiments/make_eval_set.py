@@ -2,6 +2,7 @@
 
   python -m experiments.make_eval_set --out=data/eval
   python -m experiments.make_eval_set --out=/tmp/eval --preset=smoke
+  python -m experiments.make_eval_set --out=data/eval_mm --physics=mismatched
 
 How it differs from the training data: ``experiments.pipeline.eval_set``.
 """
@@ -26,6 +27,8 @@ class Args:
     sequences: recordings per fabric and garment (0: 3).
     resolution: image width = height, pixels (0: 256).
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
+    physics: 'own' (the estimator's simulator) or 'mismatched' (another
+      physics, ``physsim.MISMATCHES``: what a real rig is like).
   """
 
   out: str = 'data/eval'
@@ -33,6 +36,7 @@ class Args:
   sequences: int = 0
   resolution: int = 0
   backend: str = cli.choice('auto', physsim.BACKENDS)
+  physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
 
 
 PRESETS = {'default': Args(), 'smoke': Args(smoke=True, backend='c')}
@@ -43,6 +47,7 @@ def main(args: Args) -> None:
   eval_set.run(
     args.out, args.smoke, sequences=args.sequences, resolution=args.resolution,
     backend=args.backend if args.backend != 'auto' else '',
+    physics=args.physics if args.physics != 'own' else '',
   )  # fmt: skip
 
 

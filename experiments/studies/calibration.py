@@ -1271,6 +1271,10 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
   return out
 
 
+# A wind estimate this far off (percent) whose 90% interval misses the truth is
+# confidently wrong: issue 40's target is none on held-out recordings.
+CONFIDENT_MISS_PCT = 25.0
+
 # estimate.json's error keys, per field
 _ERROR_KEY = {'bending_scale': 'bending_factor', 'wind_speed': 'wind_speed_pct',
               'area_weight': 'area_weight_pct', 'load_ratio': 'load_ratio_pct'}  # fmt: skip
@@ -1302,6 +1306,18 @@ def printed(runs: list[dict]) -> dict:
       bool(note(e).get('matches') and note(e).get('recalibrated')) for e in rows
     ),
   }
+  out['confident_misses'] = [
+    {
+      'recording': e.get('recording', ''),
+      'material': e.get('material'),
+      'wind_error_pct': e['errors']['estimate']['wind_speed_pct'],
+      'interval_90': e['estimate']['wind_speed']['interval_90'],
+      'truth': e['truth']['wind_speed'],
+    }
+    for e in rows
+    if e['errors']['estimate']['wind_speed_pct'] > CONFIDENT_MISS_PCT
+    and not e['covered']['wind_speed']['interval_90']
+  ]  # fmt: skip
   mats = sorted({e.get('material') for e in rows} - {None})
   if len(mats) > 1:
     out['per_material'] = {
@@ -1513,6 +1529,19 @@ def check_table(out: dict) -> str:
         f'{promised(mode, f)} | {_err(f, c["point_error_" + key])} | '
         f'{_err(f, c["centre_error_" + key])} |'
       )
+  if pr and 'confident_misses' in pr:
+    misses = pr['confident_misses']
+    lines += [
+      '',
+      f'Wind off by more than {CONFIDENT_MISS_PCT:g}% with the truth outside its 90% '
+      f'interval, as printed: {len(misses)} of {pr["n"]}'
+      + ''.join(
+        f'; {m["material"]} ({os.path.basename(m["recording"].rstrip("/"))}): '
+        f'{m["wind_error_pct"]:.1f}% off, [{m["interval_90"][0]:.2f}, '
+        f'{m["interval_90"][1]:.2f}] against {m["truth"]:.2f} m/s'
+        for m in misses
+      ),
+    ]
   if per := (pr or {}).get('per_material'):
     lines += [
       '',

@@ -451,7 +451,9 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
               'range_centre': {'wind_speed_pct': 40.0, 'area_weight_pct': 9.0,
                                'bending_factor': 4.0, 'load_ratio_pct': 100.0}}  # fmt: skip
     est = {'truth': r['truth'], 'covered': covered, 'errors': errors,
-           'calibration': {'matches': k < 8, 'recalibrated': True}}  # fmt: skip
+           'calibration': {'matches': k < 8, 'recalibrated': True},
+           'recording': f'rec/{k:04d}', 'material': 'gray_interlock',
+           'estimate': {'wind_speed': {'interval_90': [1.0, 2.0]}}}  # fmt: skip
     with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
       json.dump(est, f)
   out = calibration.check(config, str(tmp_path / 'w'), str(shipped), analyse_only=True)
@@ -461,6 +463,9 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
     pr['wind_speed']['interval_90'] == 0.9 and pr['load_ratio']['interval_50'] == 0.4
   )
   assert pr['wind_speed']['estimate_error'] == pytest.approx(45.0)  # mean of 0..90
+  # confidently wrong: more than 25% off and outside the 90% interval (only the
+  # last: 90% off; 30-80% off held the truth)
+  assert [m['recording'] for m in pr['confident_misses']] == ['rec/0009']
   np.testing.assert_allclose(
     pr['bending_scale']['interval_90_ci'], bo.calibration.binomial_interval(9, 10)
   )
@@ -469,6 +474,17 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   assert saved['printed'] == pr and saved['n'] == 10
   text = (tmp_path / 'w' / 'check.md').read_text()
   assert '| video, as printed | wind_speed | 40% [' in text
+  assert 'interval, as printed: 1 of 10; gray_interlock (0009): 90.0% off' in text
+  # The same analysis from packed posteriors (another machine): no estimate.json
+  # to read, so nothing printed is reported, and the modes are the same.
+  calibration.pack_runs(
+    calibration.saved_runs(str(tmp_path / 'w')), str(tmp_path / 'p')
+  )
+  packed = calibration.check(
+    config, str(tmp_path / 'p'), str(shipped), analyse_only=True
+  )
+  assert packed['printed'] is None and set(packed['modes']) == set(out['modes'])
+  assert 'read from packed posteriors' in (tmp_path / 'p' / 'check.md').read_text()
   # Checked with a reading (estimates given an anemometer's): the printed
   # intervals are that mode's, and only that mode is read from the GPs (the
   # searches were steered by the reading).

@@ -31,3 +31,9 @@ def test_overrides_apply_to_every_part_and_zero_means_the_presets():
   assert {c.frames for c in parts.values()} == {12}  # the smoke preset's
   assert parts['fabrics'].materials == ('gray_interlock', 'black_denim')
   assert set(parts) == {'fabrics', 'tshirt'}
+
+
+def test_a_set_of_another_physics_for_every_part():
+  parts = eval_set.configs(smoke=True, physics='mismatched')
+  assert {c.physics for c in parts.values()} == {'mismatched'}
+  assert {c.physics for c in eval_set.configs(smoke=True).values()} == {'own'}
