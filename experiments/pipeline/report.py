@@ -201,8 +201,8 @@ def covered(result: dict, truth: dict) -> dict:
 # pins the posterior down; coverage measured with other values does not carry
 # over.
 _CALIBRATED_FIELDS = (
-  'likelihood', 'sharpness', 'model_error', 'material', 'garment', 'cloth_resolution', 'cloth_size',
-  'frames',
+  'likelihood', 'sharpness', 'model_error', 'material', 'garment', 'cloth_resolution',
+  'cloth_size', 'frames',
   'fps', 'distance', 'camera_sd_m', 'camera_sd_deg', 'warmup', 'gusts',
   'sensor_noise', 'q', 'n_init', 'max_iter', 'posterior_grid',
 )  # fmt: skip
