@@ -132,7 +132,7 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
   points = bo.posterior.grid_points(pc.grid)
   return bo.PosteriorSearch(
     pc, n_init=s.n_init, n_iter=s.max_iter,
-    log_prior=posterior_lib.log_prior(points, space, config.measured),
+    log_prior=posterior_lib.log_prior(points, space, config.measured, pc.grid),
     x0=np.zeros(3), seed=config.seed, stop_tol=2.0 * s.stop_rel_change,
     stop_window=s.stop_window, min_iter=s.min_iter,
     state_path=os.path.join(workdir, POSTERIOR_STATE), device=device,
@@ -654,12 +654,17 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   key = jax.random.key(config.seed)
   pc = posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
-  lp = posterior_lib.log_prior(points, space, config.measured)
-  prior = posterior_lib.prior_samples(
-    jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
+  lp = posterior_lib.log_prior(points, space, config.measured, pc.grid)
+  prior = posterior_lib.refine_draws(
+    posterior_lib.prior_samples(
+      jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
+    ), pc.grid, space, config.measured, config.seed + 1,
+  )  # fmt: skip
+  samples = posterior_lib.refine_draws(
+    res.samples, pc.grid, space, config.measured, config.seed
   )
   summary = posterior_lib.summarise(
-    res.samples, space, prior, _levels(note), _weights(note), config.measured
+    samples, space, prior, _levels(note), _weights(note), config.measured
   )
   # The point: each parameter's (recalibrated) median or Bayes point.
   which = 'bayes' if config.search.point == 'bayes' else 'median'
@@ -672,7 +677,7 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   files.write_atomic(
     os.path.join(workdir, POSTERIOR_FILE),
     lambda p: np.savez(
-      p, samples=res.samples, prior_samples=prior, log_post=res.log_post,
+      p, samples=samples, prior_samples=prior, log_post=res.log_post,
       log_lik=res.log_lik, log_prior=lp, grid=np.asarray(pc.grid),
       bounds=space.bounds(), gp_mean=res.mean, gp_var=res.var,
       noise_sd=res.noise_sd, floor=res.floor,
@@ -680,7 +685,7 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   )  # fmt: skip
   if figures:
     posterior_lib.plot(
-      res.samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
+      samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
       title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
       summary=summary, point=which,
     )  # fmt: skip
@@ -880,6 +885,11 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
   combined, npz = joint_posterior(jobs, key)
   space = first.setup.space
+  grid = tuple(int(g) for g in npz[0]['grid'])
+  combined['samples'] = [  # a bending length places (b, w) within their cells
+    posterior_lib.refine_draws(x, grid, space, c.measured, config.seed + k)
+    for k, (x, c) in enumerate(zip(combined['samples'], configs, strict=True))
+  ]
   note = setup_lib.calibration(
     configs[0], first.setup.network, joint=True, recordings=len(jobs)
   )

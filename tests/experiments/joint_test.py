@@ -169,9 +169,10 @@ def test_a_bending_length_and_a_scale_give_the_estimate_the_fabrics_bending(tmp_
   )  # fmt: skip
   bending = out['estimate']['bending_scale']
   lo, hi = bending['interval_90']
-  # 2% on c and 1% on w: about 6.2% on b (1 sd); the grid's bending cells are
-  # x1.47 wide at the smoke grid, so the interval is at most about two cells
-  assert lo < b < hi and hi / lo < 1.47**2 * 1.25, (lo, hi)
+  # 2% on c and 1% on w: about 6.2% on b (1 sd), a 90% interval of about
+  # x1.22, within the grid's bending cells (x1.47 at the smoke grid): the
+  # draws placed within their cells by the reading (posterior.refine_draws)
+  assert lo < b < hi and hi / lo < 1.35, (lo, hi)
   # narrowing is the video's over the prior with the readings: nothing here
   assert bending['narrowing_90'] == pytest.approx(1.0, abs=0.35)
   assert out['calibration'] is None or 'a bending-length reading (not calibrated)' in (
