@@ -32,9 +32,11 @@ MAX_RATIO = 5.0
 MIN_RATIO = 0.05
 
 
-def _shoot(ratio: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, ...]:
+def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False):
   """From the free end (s = L, angle ``alpha``, no moment) back to the edge,
-  in units of c: (theta(0), reach, droop), the last two over L."""
+  in units of c: (theta(0), reach, droop), the last two over L; with
+  ``path``, also the (steps + 1, ..., 2) centre line (reach, droop) over L
+  from the edge (s = 0) to the free end (s = L)."""
   h = ratio / _STEPS
 
   def f(s, y):
@@ -45,6 +47,7 @@ def _shoot(ratio: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, ...]:
     [alpha, np.zeros_like(alpha), np.zeros_like(alpha), np.zeros_like(alpha)]
   )
   s = ratio.copy()
+  trail = [y[2:]]
   for _ in range(_STEPS):  # backwards: step -h
     k1 = f(s, y)
     k2 = f(s - h / 2, y - h / 2 * k1)
@@ -52,8 +55,35 @@ def _shoot(ratio: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, ...]:
     k4 = f(s - h, y - h * k3)
     y = y - h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     s = s - h
-  # integrated backwards, x and z hold minus the integrals over [0, L]
-  return y[0], -y[2] / ratio, -y[3] / ratio
+    if path:
+      trail.append(y[2:])
+  # integrated backwards, x and z hold minus the integrals over [s, L]
+  out = (y[0], -y[2] / ratio, -y[3] / ratio)
+  if not path:
+    return out
+  # from the edge: int_0^s = int_0^L - int_s^L, that is y(s) - y(0)
+  xz = np.stack(trail[::-1])  # (steps + 1, 2, ...), s = 0 first
+  return (*out, np.moveaxis((xz - xz[:1]) / ratio, 1, -1))
+
+
+def _tip_angle(ratio: np.ndarray) -> np.ndarray:
+  """The free end's angle below the horizontal whose shot leaves the edge
+  flat (bisection: theta(0) rises with it).
+
+  Raises:
+    ValueError: a ratio that is not positive and finite.
+  """
+  if not np.all(np.isfinite(ratio) & (ratio > 0) & (ratio <= MAX_RATIO)):
+    raise ValueError(
+      f'need overhangs of 0 to {MAX_RATIO:g} bending lengths, got {ratio}'
+    )
+  lo, hi = np.zeros_like(ratio), np.full_like(ratio, np.pi / 2)
+  for _ in range(_BISECTIONS):
+    mid = (lo + hi) / 2
+    above = _shoot(ratio, mid)[0] > 0
+    hi = np.where(above, mid, hi)
+    lo = np.where(above, lo, mid)
+  return (lo + hi) / 2
 
 
 def tip(ratio) -> tuple[np.ndarray, np.ndarray]:
@@ -65,18 +95,22 @@ def tip(ratio) -> tuple[np.ndarray, np.ndarray]:
     ValueError: a ratio that is not positive and finite.
   """
   ratio = np.atleast_1d(np.asarray(ratio, np.float64))
-  if not np.all(np.isfinite(ratio) & (ratio > 0) & (ratio <= MAX_RATIO)):
-    raise ValueError(
-      f'need overhangs of 0 to {MAX_RATIO:g} bending lengths, got {ratio}'
-    )
-  lo, hi = np.zeros_like(ratio), np.full_like(ratio, np.pi / 2)
-  for _ in range(_BISECTIONS):  # theta(0) rises with the tip's angle
-    mid = (lo + hi) / 2
-    above = _shoot(ratio, mid)[0] > 0
-    hi = np.where(above, mid, hi)
-    lo = np.where(above, lo, mid)
-  _, reach, droop = _shoot(ratio, (lo + hi) / 2)
+  _, reach, droop = _shoot(ratio, _tip_angle(ratio))
   return reach, droop
+
+
+def shape(ratio) -> np.ndarray:
+  """The strip's centre line: (..., _STEPS + 1, 2) points (reach, drop), each
+  over L, at equal steps of arc length from the edge (0, 0) to the free end
+  (``tip``), for overhangs of ``ratio`` = L / c bending lengths (any shape).
+
+  Raises:
+    ValueError: a ratio that is not positive and finite.
+  """
+  r = np.asarray(ratio, np.float64)
+  flat = np.atleast_1d(r).ravel()
+  xz = _shoot(flat, _tip_angle(flat), path=True)[3]  # (steps + 1, R, 2)
+  return np.moveaxis(xz, 0, 1).reshape(*r.shape, _STEPS + 1, 2)
 
 
 @functools.cache

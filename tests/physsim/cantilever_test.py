@@ -84,3 +84,31 @@ def test_a_reading_one_sd_from_the_limits_is_refused():
     cantilever.bending_length_sd(overhang, reach, 0.001)
   with pytest.raises(ValueError, match='reach_sd'):
     cantilever.bending_length_sd(overhang, 0.03, float('nan'))
+
+
+def test_the_shape_of_a_short_overhang_is_the_small_deflection_beam():
+  # Euler-Bernoulli: a uniformly loaded cantilever's deflection is
+  # q x^2 (6 L^2 - 4 L x + x^2) / (24 D); over L, with xi = x / L:
+  # (L / c)^3 xi^2 (6 - 4 xi + xi^2) / 24
+  ratio = 0.2
+  line = cantilever.shape(ratio)
+  xi = line[:, 0]
+  beam = ratio**3 * xi**2 * (6 - 4 * xi + xi**2) / 24
+  np.testing.assert_allclose(line[:, 1], beam, rtol=2e-3, atol=1e-7)
+
+
+def test_the_shape_runs_from_the_edge_to_the_tip_along_its_length():
+  ratios = np.array([0.5, 2.0, 4.0])
+  line = cantilever.shape(ratios)
+  assert line.shape == (3, cantilever._STEPS + 1, 2)
+  np.testing.assert_allclose(line[:, 0], 0.0, atol=1e-15)  # at the edge
+  reach, drop = cantilever.tip(ratios)
+  np.testing.assert_allclose(line[:, -1, 0], reach, rtol=1e-9)
+  np.testing.assert_allclose(line[:, -1, 1], drop, rtol=1e-9)
+  # arc length L (the strip does not stretch); it leaves the edge flat
+  length = np.linalg.norm(np.diff(line, axis=1), axis=-1).sum(axis=1)
+  np.testing.assert_allclose(length, 1.0, rtol=1e-4)
+  # clamped flat: the first step's chord slopes about a third of the second's
+  step = np.diff(line[:, :3], axis=1)
+  slope = step[..., 1] / step[..., 0]
+  assert np.all(slope[:, 0] < 0.5 * slope[:, 1]), slope
