@@ -13,6 +13,8 @@ Public API::
 
   ds = physsim.dataset.open_dataset('data/sim')   # 16-bit mm PNG sequences
   v = physsim.load_depth_video('capture/', source_fps=24)  # real depth video
+  r = physsim.overhang_depth.read_recording('strip/', 'camera.json', 0.05)
+  r.bending_length, r.bending_length_sd          # a strip over a table's edge
   mesh = physsim.devices.world_mesh()             # worlds split over local devices
 """
 
@@ -23,10 +25,12 @@ from physsim import (
   devices,
   mismatch,
   motion,
+  overhang_depth,
   params,
   render,
   sensor,
   shape,
+  tabletop,
   video,
 )
 from physsim.camera import (
@@ -124,6 +128,7 @@ __all__ = [
   'make_depth_renderer',
   'mismatch',
   'motion',
+  'overhang_depth',
   'params',
   'pose_from_dict',
   'pose_to_dict',
@@ -147,6 +152,7 @@ __all__ = [
   'shape',
   'simulate',
   'square',
+  'tabletop',
   'to_unit',
   'video',
   'world_inputs',

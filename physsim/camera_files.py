@@ -36,6 +36,7 @@ import math
 import os
 from typing import Any, NamedTuple
 
+import cv2
 import numpy as np
 
 from physsim.camera import Intrinsics, Pose
@@ -357,3 +358,14 @@ def scaled_to(camera: CameraFile, width: int, height: int) -> CameraFile:
       f'{width} x {height} (another aspect ratio)'
     )
   return camera._replace(intrinsics=intr.resized(width, height))
+
+
+def undistort(depth: np.ndarray, cam: CameraFile) -> np.ndarray:
+  """(T, H, W) depth frames remapped to the file's camera without its lens
+  distortion (nearest pixel: every value a real measurement)."""
+  intr = cam.intrinsics
+  k = intr.matrix()
+  maps = cv2.initUndistortRectifyMap(
+    k, np.asarray(cam.distortion), None, k, (intr.width, intr.height), cv2.CV_32FC1
+  )
+  return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])

@@ -271,15 +271,6 @@ def _mask(path: str, index: np.ndarray, shape) -> np.ndarray:
   return np.stack(out)
 
 
-def _undistort(depth: np.ndarray, cam: camera_files.CameraFile) -> np.ndarray:
-  intr = cam.intrinsics
-  k = intr.matrix()
-  maps = cv2.initUndistortRectifyMap(
-    k, np.asarray(cam.distortion), None, k, (intr.width, intr.height), cv2.CV_32FC1
-  )
-  return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])
-
-
 def simulated_pins(sim: simulation.Simulation) -> tuple[np.ndarray, physsim.Mesh]:
   """((2, 3) the simulated cloth's outer pins, left first; its rest mesh) for
   an estimate's ``Simulation``."""
@@ -415,7 +406,7 @@ def take_in(
     cam = camera_files.scaled_to(cam, w, h)
     intr = cam.intrinsics
     if cam.distorted:
-      depth = _undistort(depth, cam)
+      depth = camera_files.undistort(depth, cam)
   valid = (depth > 0).reshape(len(depth), -1).mean(axis=1)
   mask = _mask(config.mask, index + config.start, (h, w)) if config.mask else None
   bg = scene.remove_background(

@@ -1,0 +1,394 @@
+"""A fabric's bending length read from a depth recording of an overhang.
+
+The cantilever test (``physsim.cantilever``) with a depth camera instead of a
+ruler: a strip lies on a table with a known length ``overhang`` of it slid
+past the edge (ruler marks on the strip), and a depth camera in front of the
+edge, a little above the table, films it hanging still. From the frames'
+per-pixel median:
+
+1. the table's top is the largest plane in view (or, where the floor is
+   larger, the plane parallel to it nearest the camera): "up" is its normal,
+   the camera's side;
+2. the front face of the top board is the largest vertical plane just under
+   the top (a line in the top's plane, found by RANSAC on the points below
+   it projected onto it): where it meets the top is the edge, the outward
+   direction its normal towards the camera;
+3. the strip is the largest connected patch of pixels below the top and in
+   front of the face (no lower than the overhang, so not the floor): each
+   of its points is a (reach out from the edge, drop below the top) pair;
+4. the heavy elastica of overhang L over bending length c, scaled by L, is
+   fitted to those pairs (each point's distance to the curve) on a grid of
+   L / c, with L within its ruler uncertainty: the posterior of c = L / (L/c).
+
+Using the whole curve rather than the tip alone keeps the reading off the
+places a depth camera sees worst: the strip's outline (where sensors drop
+pixels at depth jumps) and its free end. The fit's own spread shrinks with
+the number of pixels; what it does not see (the strip's curl and thickness,
+the angle it leaves the edge at, the camera's noise pattern) is the
+``FLOOR`` on c's relative uncertainty, fitted by ``benchmarks.overhang_depth``
+on simulated set-ups and checked there on others.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import cv2
+import numpy as np
+
+from physsim import camera_files, cantilever, video
+from physsim import scene as scene_lib
+from physsim.camera import Intrinsics
+
+PLANE_TOL = 0.005  # m: a plane's inliers (depth noise at 1 m with margin)
+BELOW_TOL = 0.004  # m: below the top / in front of the face by more than this
+PARALLEL_COS = math.cos(math.radians(5.0))  # planes this close are parallel
+VERTICAL_SIN = math.sin(math.radians(8.0))  # the face's normal off horizontal
+MIN_FACE_POINTS = 200
+MIN_STRIP_POINTS = 60
+MAX_FIT_POINTS = 800  # subsampled for the fit: its spread is floored anyway
+MAX_RESIDUAL = 0.004  # m, RMS: points further from any elastica are not a strip
+RATIOS = np.geomspace(0.2, cantilever.MAX_RATIO, 160)  # L / c fitted
+# The relative uncertainty of c that the fit cannot see (``benchmarks.
+# overhang_depth``: fitted on its calibration set-ups so that 90% intervals
+# hold c 90% of the time).
+FLOOR = 0.03
+
+
+@dataclasses.dataclass(frozen=True)
+class Reading:
+  """What a depth recording of an overhang says.
+
+  Attributes:
+    bending_length: posterior mean of c, m.
+    bending_length_sd: its standard deviation (the fit's and ``FLOOR``), m.
+    fit_sd: the fit's own part, m.
+    overhang: posterior mean of L, m (the given one, refined by the curve).
+    ratio: L / c at the best fit.
+    reach: the best fit's free end out from the edge, m.
+    drop: and below the table's top, m.
+    residual_m: RMS distance of the strip's points to the best fit, m.
+    points: the strip's pixels found.
+    face_points: the front face's.
+    camera_height_m: the camera above the table's top, m.
+    profile: (N, 2) the strip's (reach, drop) points, m (for figures).
+  """
+
+  bending_length: float
+  bending_length_sd: float
+  fit_sd: float
+  overhang: float
+  ratio: float
+  reach: float
+  drop: float
+  residual_m: float
+  points: int
+  face_points: int
+  camera_height_m: float
+  profile: np.ndarray = dataclasses.field(repr=False, compare=False)
+
+  def to_dict(self) -> dict:
+    out = dataclasses.asdict(self)
+    del out['profile']
+    return out
+
+
+def _oriented(plane: scene_lib.Plane) -> scene_lib.Plane:
+  """The plane with its normal towards the camera (the origin): offset > 0."""
+  if plane.offset < 0:
+    return scene_lib.Plane(-plane.normal, -plane.offset)
+  return plane
+
+
+def table_top(points: np.ndarray, seed: int = 0) -> tuple[scene_lib.Plane, np.ndarray]:
+  """The table's top among (N, 3) camera-frame points: the largest plane, or
+  the one parallel to it nearest the camera (the top over a larger floor).
+
+  Returns:
+    (plane with its normal towards the camera, (N,) inlier mask).
+  """
+  first, inliers = scene_lib.fit_plane(points, PLANE_TOL, seed=seed)
+  best, best_in = _oriented(first), inliers
+  rest = ~inliers
+  if rest.sum() >= 0.05 * len(points):
+    second, in2 = scene_lib.fit_plane(points[rest], PLANE_TOL, seed=seed + 1)
+    second = _oriented(second)
+    if abs(second.normal @ best.normal) > PARALLEL_COS and second.offset < best.offset:
+      mask = np.zeros(len(points), bool)
+      mask[np.flatnonzero(rest)[in2]] = True
+      best, best_in = second, mask
+  return best, best_in
+
+
+def _line_ransac(q: np.ndarray, tol: float, iters: int, rng) -> tuple[np.ndarray, ...]:
+  """The 2-D line with the most of (N, 2) points within ``tol``, refined by
+  total least squares: (a point on it, unit normal, inlier mask)."""
+  best, best_count = None, -1
+  for _ in range(iters):
+    a, b = q[rng.choice(len(q), 2, replace=False)]
+    d = b - a
+    norm = np.hypot(*d)
+    if norm < 1e-6:
+      continue
+    n = np.array([-d[1], d[0]]) / norm
+    count = int((np.abs((q - a) @ n) < tol).sum())
+    if count > best_count:
+      best, best_count = (a, n), count
+  a, n = best
+  inl = np.abs((q - a) @ n) < tol
+  for _ in range(2):
+    centre = q[inl].mean(axis=0)
+    n = np.linalg.svd(q[inl] - centre, full_matrices=False)[2][-1]
+    a = centre
+    inl = np.abs((q - a) @ n) < tol
+  return a, n, inl
+
+
+OFFSET_RANGE = (-0.001, 0.003)  # m: the seen face off the centre line
+COARSE_POINTS = 400  # the coarse grid's points; the fine grid takes them all
+
+
+def _curve_set(ratios) -> tuple[np.ndarray, np.ndarray]:
+  """The elastica's centre line over L for each of ``ratios``, (R, S, 2), and
+  its unit normals up and out of the strip (the side a camera above the
+  table and in front of its edge sees), (R, S, 2), float32."""
+  line = cantilever.shape(ratios)
+  tangent = np.gradient(line, axis=1)
+  tangent /= np.linalg.norm(tangent, axis=-1, keepdims=True)
+  normal = np.stack([tangent[..., 1], -tangent[..., 0]], axis=-1)
+  return line.astype(np.float32), normal.astype(np.float32)
+
+
+@functools.cache
+def _coarse_curves() -> tuple[np.ndarray, np.ndarray]:
+  return _curve_set(RATIOS)
+
+
+def _misfit(profile: np.ndarray, length: float, curves) -> tuple[np.ndarray, ...]:
+  """Per curve of ``curves`` (``_curve_set``'s, scaled by ``length``): the
+  sum of the points' squared signed distances (m^2) from it, positive up and
+  out (by the nearest of its points, 1/200 of L apart), once the seen face's
+  offset from the centre line (the fabric's half thickness, its curl) is
+  taken out; and that offset, within ``OFFSET_RANGE``."""
+  p = (profile / length).astype(np.float32)
+  line, normal = curves
+  d = np.empty((len(line), len(p)), np.float32)
+  rows = np.arange(len(p))
+  for i in range(len(line)):
+    diff = p[:, None, :] - line[i][None, :, :]  # (N, S, 2)
+    k = np.argmin((diff**2).sum(-1), axis=1)
+    d[i] = (diff[rows, k] * normal[i][k]).sum(-1)
+  d = d.astype(np.float64) * length
+  offset = np.clip(d.mean(axis=1), *OFFSET_RANGE)
+  return ((d - offset[:, None]) ** 2).sum(axis=1), offset
+
+
+def _lengths(overhang: float, overhang_sd: float, nodes: int) -> np.ndarray:
+  if overhang_sd <= 0:
+    return np.array([overhang])
+  ls = overhang + overhang_sd * np.linspace(-3, 3, nodes)
+  return ls[ls > 0]
+
+
+def _posterior(profile, ls, ratios, curves, overhang, overhang_sd, point_sd):
+  fits = [_misfit(profile, length, curves) for length in ls]
+  sq = np.stack([f[0] for f in fits])  # (L, R)
+  i, j = np.unravel_index(np.argmin(sq), sq.shape)
+  residual = math.sqrt(sq[i, j] / len(profile))
+  sd = point_sd or max(residual, 1e-5)
+  log_p = -0.5 * sq / sd**2
+  if overhang_sd > 0:
+    log_p += (-0.5 * ((ls - overhang) / overhang_sd) ** 2)[:, None]
+  p = np.exp(log_p - log_p.max())
+  return p / p.sum(), (i, j), residual, fits[i][1][j]
+
+
+def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
+        point_sd: float | None = None, seed: int = 0) -> dict:  # fmt: skip
+  """The elastica fitted to (N, 2) (reach, drop) points, m.
+
+  The overhang L has a Gaussian prior (``overhang`` +- ``overhang_sd``;
+  exact when the sd is 0); L / c is log-uniform over ``RATIOS``; the seen
+  face lies at an unknown offset from the centre line (fitted, within
+  ``OFFSET_RANGE``). Each point's distance to the curve is Gaussian with sd
+  ``point_sd`` (default: the RMS distance at the best fit). A coarse grid
+  (``RATIOS``, 5 lengths, ``COARSE_POINTS`` points) finds the best fit, a
+  fine one around it (81 ratios over 8 coarse steps, 9 lengths) gives the
+  posterior.
+
+  Returns:
+    dict: ``c`` and ``c_sd`` (posterior mean and sd, m), ``length`` (L's
+    mean), ``ratio``, ``reach``, ``drop``, ``offset`` and ``residual`` (the
+    best fit's), ``edge_mass`` (the coarse posterior's share in the two
+    outermost ratios at either end: the reading cannot bound c there).
+  """
+  rng = np.random.default_rng(seed)
+  few = profile
+  if len(few) > COARSE_POINTS:
+    few = profile[rng.choice(len(profile), COARSE_POINTS, replace=False)]
+  ls = _lengths(overhang, overhang_sd, 5)
+  p, (_, j), _, _ = _posterior(
+    few, ls, RATIOS, _coarse_curves(), overhang, overhang_sd, point_sd
+  )
+  edge_mass = float(p[:, :2].sum() + p[:, -2:].sum())
+  lo, hi = RATIOS[max(j - 4, 0)], RATIOS[min(j + 4, len(RATIOS) - 1)]
+  ratios = np.geomspace(lo, hi, 81)
+  ls = _lengths(overhang, overhang_sd, 9)
+  p, (i, j), residual, offset = _posterior(
+    profile, ls, ratios, _curve_set(ratios), overhang, overhang_sd, point_sd
+  )
+  c = ls[:, None] / ratios[None, :]
+  mean = float((p * c).sum())
+  reach, drop = cantilever.tip(ratios[j])
+  return {
+    'c': mean,
+    'c_sd': float(math.sqrt(max((p * (c - mean) ** 2).sum(), 0.0))),
+    'length': float((p.sum(axis=1) * ls).sum()),
+    'ratio': float(ratios[j]),
+    'reach': float(reach[0] * ls[i]),
+    'drop': float(drop[0] * ls[i]),
+    'offset': float(offset),
+    'residual': residual,
+    'edge_mass': edge_mass,
+  }
+
+
+def _edge(flat, top: scene_lib.Plane, overhang: float, rng, name: str):
+  """The table's edge under ``top``: (heights above the top, the mask of
+  points under it, the points in its plane (N, 2), (a point on the edge, its
+  outward normal towards the camera, the face's points))."""
+  height = flat @ top.normal + top.offset  # (N,) above the top, m
+  below = (height < -BELOW_TOL) & (height > -(overhang + 0.03))
+  q = flat @ scene_lib.plane_basis(top.normal).T  # in the top's plane
+  if below.sum() < MIN_FACE_POINTS:
+    raise ValueError(
+      f'{name}: nothing under the table top in view (found {int(below.sum())} '
+      "points): film the edge from in front, a little above the table's top"
+    )
+  a, n, on_face = _line_ransac(q[below], PLANE_TOL, 300, rng)
+  if on_face.sum() < MIN_FACE_POINTS:
+    raise ValueError(
+      f"{name}: no front face of the table's top found under its edge "
+      f'({int(on_face.sum())} points on the best line; need {MIN_FACE_POINTS}): '
+      "film the edge from in front, 20-40 degrees above the table's top"
+    )
+  if (0.0 - a) @ n < 0:  # the camera (the origin, projected) on its + side
+    n = -n
+  return height, below, q, (a, n, int(on_face.sum()))
+
+
+def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
+         overhang_sd: float = 0.001, seed: int = 0, name: str = 'the recording'
+         ) -> Reading:  # fmt: skip
+  """The bending length of the strip in (H, W) or (T, H, W) depth frames, m
+  (0 invalid), filmed by a camera of ``intrinsics``, with ``overhang`` (m)
+  of it past the edge (ruler sd ``overhang_sd``).
+
+  Raises:
+    ValueError: naming ``name`` and what was not found (the table, its front
+      face, a strip) or why the fit cannot bound c.
+  """
+  depth = np.asarray(depth, np.float64)
+  if depth.ndim == 3:
+    depth = scene_lib.median_frame(depth)
+  if depth.shape != (intrinsics.height, intrinsics.width):
+    raise ValueError(
+      f'{name}: frames of {depth.shape} pixels, the camera has '
+      f'{(intrinsics.height, intrinsics.width)}'
+    )
+  if not (math.isfinite(overhang) and 0 < overhang <= 0.5):
+    raise ValueError(f'--overhang={overhang}: need 0 < overhang <= 0.5 m')
+  if not (math.isfinite(overhang_sd) and 0 <= overhang_sd < overhang / 3):
+    raise ValueError(f'--overhang_sd={overhang_sd}: need 0 <= sd < overhang / 3')
+  valid = np.isfinite(depth) & (depth > 0)
+  if valid.sum() < 1000:
+    raise ValueError(
+      f'{name}: {int(valid.sum())} valid depth pixels; need a table in view'
+    )
+  pts = scene_lib.backproject(depth, intrinsics)
+  flat = pts[valid]
+  rng = np.random.default_rng(seed)
+  top, on_top = table_top(flat, seed)
+  for _ in range(2):  # the edge from the top, then the top from behind the edge
+    height, below, q, (a, n, face_points) = _edge(flat, top, overhang, rng, name)
+    out = (q - a) @ n  # (N,) out from the edge, m
+    # the top again from its points behind the edge: its RANSAC inliers
+    # include a band of the face and of the strip under the edge
+    behind = on_top & (out < -2 * PLANE_TOL) & (np.abs(height) < PLANE_TOL)
+    centre = flat[behind].mean(axis=0)
+    normal = np.linalg.svd(flat[behind] - centre, full_matrices=False)[2][-1]
+    top = _oriented(scene_lib.Plane(normal, float(-normal @ centre)))
+  height, below, q, (a, n, face_points) = _edge(flat, top, overhang, rng, name)
+  out = (q - a) @ n
+  strip = below & (out > BELOW_TOL)
+  mask = np.zeros(depth.shape, np.uint8)
+  mask[valid] = strip
+  count, labels = cv2.connectedComponents(mask, connectivity=8)
+  if count < 2:
+    raise ValueError(
+      f'{name}: no strip hanging over the edge in view (or it hardly droops: '
+      'slide more of it over)'
+    )
+  sizes = np.bincount(labels[valid][strip], minlength=count)
+  sizes[0] = 0
+  keep = labels[valid] == int(np.argmax(sizes))
+  keep &= strip
+  if keep.sum() < MIN_STRIP_POINTS:
+    raise ValueError(
+      f'{name}: {int(keep.sum())} pixels of strip over the edge; need '
+      f'{MIN_STRIP_POINTS} (move the camera nearer, or slide more over)'
+    )
+  profile = np.stack([out[keep], -height[keep]], axis=1)
+  sub = profile
+  if len(sub) > MAX_FIT_POINTS:
+    sub = profile[rng.choice(len(profile), MAX_FIT_POINTS, replace=False)]
+  f = fit(sub, overhang, overhang_sd, seed=seed)
+  if f['residual'] > MAX_RESIDUAL:
+    raise ValueError(
+      f'{name}: the points over the edge lie {1000 * f["residual"]:.1f} mm (RMS) '
+      f'from the best elastica of a {overhang} m overhang: not a strip hanging '
+      'still (is --overhang its length past the edge?)'
+    )
+  if f['edge_mass'] > 0.05:
+    raise ValueError(
+      f'{name}: the strip is {f["ratio"]:.2g} bending lengths over the edge, '
+      f'where the reading cannot bound its bending length '
+      f'({RATIOS[0]:.2g}-{RATIOS[-1]:.2g}): slide '
+      + ('more over' if f['ratio'] < 1 else 'some back')
+    )
+  total = math.hypot(f['c_sd'], FLOOR * f['c'])
+  return Reading(
+    bending_length=f['c'], bending_length_sd=total, fit_sd=f['c_sd'],
+    overhang=f['length'], ratio=f['ratio'], reach=f['reach'], drop=f['drop'],
+    residual_m=f['residual'], points=int(keep.sum()), face_points=face_points,
+    camera_height_m=float(top.offset), profile=profile,
+  )  # fmt: skip
+
+
+def read_recording(path: str, camera_file: str, overhang: float,
+                   overhang_sd: float = 0.001, depth_scale: float = 0.001,
+                   seed: int = 0) -> Reading:  # fmt: skip
+  """``read`` of a depth recording as a camera's tools write it (a folder of
+  16-bit PNG frames, an .npy/.npz or a video: ``physsim.video``) and its
+  camera file (``physsim.camera_files``; frames of another size scale it,
+  lens distortion is undone).
+
+  Raises:
+    ValueError: naming the file: unreadable, without absolute depth, or
+      what ``read`` does not find in it.
+  """
+  if not camera_file:
+    raise ValueError(f"{path}: needs its camera file (the depth camera's intrinsics)")
+  cam = camera_files.read_camera(camera_file)
+  recording = video.load_depth_video(path, fps=None, size=None, depth_scale=depth_scale)
+  if recording.normalised:
+    raise ValueError(f'{path}: frames without absolute depth (8-bit images?)')
+  depth = recording.depth
+  h, w = depth.shape[1:]
+  if (w, h) != (cam.intrinsics.width, cam.intrinsics.height):
+    cam = camera_files.scaled_to(cam, w, h)
+  if cam.distorted:
+    depth = camera_files.undistort(depth, cam)
+  return read(depth, cam.intrinsics, overhang, overhang_sd, seed=seed, name=path)

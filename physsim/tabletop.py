@@ -1,0 +1,168 @@
+"""A strip of fabric overhanging a table's edge, as a depth camera sees it.
+
+The scene of the cantilever recording (issue 39's overhang): a table (its top
+and the front face of its top board) on a floor, and a strip lying on the
+table with ``overhang`` of it past the edge, hanging as the heavy elastica of
+its bending length (``physsim.cantilever.shape``). World frame: z up, the
+table's top at ``Table.height``, its front edge along x at y = 0, the table
+behind it (y < 0). ``scene`` gives triangles for ``physsim.render`` and
+``camera`` a pose in front of the edge: what ``benchmarks.overhang_depth`` and
+the tests render and ``physsim.overhang_depth`` reads.
+
+A strip can differ from the ideal one the way a real one does: its
+cross-section curls (``curl``), it has a thickness (the camera sees its upper
+face), and it may leave the edge at an angle (``yaw_deg``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from physsim import camera as camera_lib
+from physsim import cantilever
+
+
+@dataclasses.dataclass(frozen=True)
+class Table:
+  """A table top and the floor under it.
+
+  Attributes:
+    height: the top above the floor, m.
+    thickness: the top board's, m: the front face's height below the edge.
+    width: along the edge (x), m.
+    depth: back from the edge (y < 0), m.
+  """
+
+  height: float = 0.75
+  thickness: float = 0.03
+  width: float = 0.8
+  depth: float = 0.6
+
+
+@dataclasses.dataclass(frozen=True)
+class Strip:
+  """A strip lying on the table with part of it over the edge.
+
+  Attributes:
+    overhang: its length past the edge along the strip (L), m.
+    bending_length: c = (D / (w g))^(1/3), m.
+    width: across the strip, m.
+    on_table: its length lying on the table, m.
+    thickness: m; the camera sees the upper face, half of it off the centre line.
+    curl: how far the cross-section's edges rise above its middle, m
+      (negative: they fall).
+    yaw_deg: the strip's direction from the edge's normal, degrees.
+    x: where along the edge its middle crosses it, m.
+  """
+
+  overhang: float
+  bending_length: float
+  width: float = 0.03
+  on_table: float = 0.1
+  thickness: float = 0.0
+  curl: float = 0.0
+  yaw_deg: float = 0.0
+  x: float = 0.0
+
+  def __post_init__(self):
+    for name in ('overhang', 'bending_length', 'width', 'on_table'):
+      v = getattr(self, name)
+      if not (math.isfinite(v) and v > 0):
+        raise ValueError(f'Strip.{name} must be a finite length > 0 m, got {v!r}')
+    ratio = self.overhang / self.bending_length
+    if not ratio <= cantilever.MAX_RATIO:
+      raise ValueError(
+        f'Strip: an overhang of {self.overhang} m is {ratio:.3g} bending lengths; '
+        f'the elastica is solved to {cantilever.MAX_RATIO:g}'
+      )
+
+
+def _rect(corner, a, b, na: int, nb: int) -> tuple[np.ndarray, np.ndarray]:
+  """(vertices, faces) of the parallelogram corner + [0, 1] a + [0, 1] b on
+  an na x nb grid of quads (large faces split so that none crosses far)."""
+  s, t = np.meshgrid(
+    np.linspace(0, 1, na + 1), np.linspace(0, 1, nb + 1), indexing='ij'
+  )
+  v = np.asarray(corner) + s[..., None] * np.asarray(a) + t[..., None] * np.asarray(b)
+  return v.reshape(-1, 3), _grid_faces(na + 1, nb + 1)
+
+
+def _grid_faces(rows: int, cols: int) -> np.ndarray:
+  """Two triangles per quad of a rows x cols vertex grid (row-major)."""
+  i, j = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing='ij')
+  a = (i * cols + j).ravel()
+  b, c, d = a + 1, a + cols, a + cols + 1
+  return np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, d], 1)])
+
+
+def table_mesh(table: Table, floor_to_y: float = 0.4) -> tuple[np.ndarray, np.ndarray]:
+  """(vertices, faces) of the table's top, its front face and the floor (the
+  floor from behind the table to ``floor_to_y``: keep it in front of the
+  camera)."""
+  h, w = table.height, table.width
+  parts = [
+    _rect((-w / 2, -table.depth, h), (w, 0, 0), (0, table.depth, 0), 8, 6),
+    _rect((-w / 2, 0, h - table.thickness), (w, 0, 0), (0, 0, table.thickness), 8, 1),
+    _rect((-3, -5, 0), (6, 0, 0), (0, 5 + floor_to_y, 0), 12, 12),
+  ]
+  return _join(parts)
+
+
+def _join(parts) -> tuple[np.ndarray, np.ndarray]:
+  verts, faces, n = [], [], 0
+  for v, f in parts:
+    verts.append(v)
+    faces.append(f + n)
+    n += len(v)
+  return np.concatenate(verts), np.concatenate(faces)
+
+
+def strip_mesh(strip: Strip, table: Table, rows: int = 80,
+               cols: int = 9) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+  """(vertices, faces) of the strip's upper face: ``rows`` points along its
+  hanging part (the elastica), a few on the table, ``cols`` across."""
+  line = cantilever.shape(strip.overhang / strip.bending_length) * strip.overhang
+  pick = np.unique(np.round(np.linspace(0, len(line) - 1, rows)).astype(int))
+  along, drop = line[pick, 0], line[pick, 1]
+  # the tangent's angle below the horizontal, and the upper face's normal
+  theta = np.arctan2(np.gradient(drop), np.gradient(along))
+  n_along, n_up = np.sin(theta), np.cos(theta)
+  back = np.linspace(-strip.on_table, 0.0, 6)[:-1]
+  along = np.concatenate([back, along])
+  drop = np.concatenate([np.zeros_like(back), drop])
+  n_along = np.concatenate([np.zeros_like(back), n_along])
+  n_up = np.concatenate([np.ones_like(back), n_up])
+  yaw = math.radians(strip.yaw_deg)
+  d = np.array([math.sin(yaw), math.cos(yaw), 0.0])  # out over the edge
+  e = np.array([math.cos(yaw), -math.sin(yaw), 0.0])  # across
+  t = np.linspace(-strip.width / 2, strip.width / 2, cols)
+  lift = strip.thickness / 2 + strip.curl * (2 * t / strip.width) ** 2  # (cols,)
+  root = np.array([strip.x, 0.0, table.height + strip.thickness / 2])
+  centre = root + along[:, None] * d - drop[:, None] * np.array([0, 0, 1.0])
+  normal = n_along[:, None] * d + n_up[:, None] * np.array([0, 0, 1.0])
+  v = centre[:, None] + t[None, :, None] * e + lift[None, :, None] * normal[:, None]
+  return v.reshape(-1, 3), _grid_faces(len(along), cols)
+
+
+def scene(strip: Strip, table: Table = Table(),
+          floor_to_y: float = 0.4) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+  """(vertices float32, faces int32) of the table, floor and strip."""
+  v, f = _join([table_mesh(table, floor_to_y), strip_mesh(strip, table)])
+  return v.astype(np.float32), f.astype(np.int32)
+
+
+def camera(table: Table, distance: float, elevation_deg: float, azimuth_deg: float = 0.0,
+           roll_deg: float = 0.0, x: float = 0.0,
+           below_edge: float = 0.03) -> camera_lib.Pose:  # fmt: skip
+  """A camera ``distance`` m from a point ``below_edge`` under the edge at
+  ``x``, looking at it from ``elevation_deg`` above the horizontal and
+  ``azimuth_deg`` off the edge's normal."""
+  target = np.array([x, 0.0, table.height - below_edge])
+  el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+  eye = target + distance * np.array(
+    [math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)]
+  )
+  return camera_lib.look_at(eye, target, roll_deg=roll_deg)

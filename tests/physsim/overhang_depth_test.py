@@ -1,0 +1,120 @@
+"""physsim.overhang_depth: a strip's bending length read from rendered depth
+frames of an overhang (physsim.tabletop), against the truth the scene was
+made with, the elastica's tip (physsim.cantilever) and the camera's pose."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+import physsim
+from physsim import cantilever, overhang_depth, render, sensor, tabletop
+
+INTR = physsim.Intrinsics(320, 240, 58.0, 45.0)
+TABLE = tabletop.Table()
+# A clean render: the planes and the edge are exact up to the pixels, so the
+# fit finds c to its grids' steps and the render's flat triangles (80 along
+# the strip).
+_CLEAN_TOL = 0.015
+_TIP_TOL_M = 0.001
+_HEIGHT_TOL_M = 0.002
+
+
+def _pose(distance=0.4, elevation=28.0, azimuth=10.0, x=0.0):
+  return tabletop.camera(TABLE, distance, elevation, azimuth, x=x)
+
+
+def _render(strip, pose, key=None, frames=3, table=TABLE):
+  eye_y = float(np.asarray(pose.position)[1])
+  if strip is None:
+    v, f = tabletop.table_mesh(table, floor_to_y=eye_y - 0.05)
+    v, f = v.astype(np.float32), f.astype(np.int32)
+  else:
+    v, f = tabletop.scene(strip, table, floor_to_y=eye_y - 0.05)
+  clean = np.asarray(render.depth_image(v, f, INTR, pose))
+  if key is None:
+    return clean
+  stack = jax.numpy.broadcast_to(clean, (frames, *clean.shape))
+  return np.asarray(sensor.apply_noise_frames(key, stack, INTR))
+
+
+def test_a_clean_strip_is_read_to_its_bending_length():
+  strip = tabletop.Strip(overhang=0.04, bending_length=0.02)
+  pose = _pose()
+  r = overhang_depth.read(_render(strip, pose), INTR, 0.04, 0.001)
+  assert r.bending_length == pytest.approx(0.02, rel=_CLEAN_TOL)
+  reach, drop = cantilever.tip(0.04 / 0.02)
+  assert r.reach == pytest.approx(0.04 * reach[0], abs=_TIP_TOL_M)
+  assert r.drop == pytest.approx(0.04 * drop[0], abs=_TIP_TOL_M)
+  # the camera above the table's top, from the pose it was rendered from
+  height = float(np.asarray(pose.position)[2]) - TABLE.height
+  assert r.camera_height_m == pytest.approx(height, abs=_HEIGHT_TOL_M)
+  assert r.points > 100 and r.face_points > 500
+  # its sd: the floor the fit cannot see, at least
+  assert r.bending_length_sd >= overhang_depth.FLOOR * r.bending_length
+
+
+def test_a_real_strip_under_a_noisy_camera_is_within_its_interval():
+  """Thickness, a curled cross-section, an askew strip, a Kinect-class
+  camera's noise and holes: the reading moves, within its uncertainty."""
+  strip = tabletop.Strip(
+    overhang=0.05, bending_length=0.03, width=0.04, thickness=0.001, curl=0.001,
+    yaw_deg=4.0, x=0.05,
+  )  # fmt: skip
+  pose = _pose(0.45, 32.0, -15.0, x=0.04)
+  r = overhang_depth.read(_render(strip, pose, jax.random.key(3)), INTR, 0.05, 0.001)
+  assert abs(r.bending_length - 0.03) < 2.0 * r.bending_length_sd, r
+  assert r.fit_sd < r.bending_length_sd
+  assert r.residual_m < 0.002
+
+
+def test_the_fits_spread_is_the_spread_over_noise():
+  """Points of a known elastica with independent noise: the fit's sd of c
+  against the spread of its estimates over repeated noise (Monte Carlo)."""
+  length, c, sd = 0.05, 0.025, 0.0007
+  line = cantilever.shape(length / c) * length
+  rng = np.random.default_rng(0)
+  estimates, sds = [], []
+  for _ in range(10):
+    s = rng.uniform(0.25, 1.0, 200)  # the visible part: not the root
+    i = np.round(s * (len(line) - 1)).astype(int)
+    pts = line[i] + rng.normal(0.0, sd, (200, 2))
+    f = overhang_depth.fit(pts, length, 0.0, point_sd=sd)
+    estimates.append(f['c'])
+    sds.append(f['c_sd'])
+  spread = float(np.std(estimates, ddof=1))
+  # ten draws know a standard deviation to about +-25%
+  assert 0.5 < spread / np.mean(sds) < 2.0, (spread, np.mean(sds))
+  assert abs(np.mean(estimates) - c) < 3 * spread / np.sqrt(10) + 1e-4
+
+
+def test_no_strip_no_table_and_bad_frames_are_refused_by_name():
+  pose = _pose()
+  with pytest.raises(ValueError, match='rec: no strip hanging over the edge'):
+    overhang_depth.read(_render(None, pose), INTR, 0.04, name='rec')
+  wall = np.full((INTR.height, INTR.width), 1.5)  # a blank wall
+  with pytest.raises(ValueError, match='rec: nothing under the table top'):
+    overhang_depth.read(wall, INTR, 0.04, name='rec')
+  with pytest.raises(ValueError, match=r'rec: frames of \(10, 10\) pixels'):
+    overhang_depth.read(np.ones((10, 10)), INTR, 0.04, name='rec')
+  with pytest.raises(ValueError, match='--overhang=0.0'):
+    overhang_depth.read(wall, INTR, 0.0)
+  with pytest.raises(ValueError, match='--overhang_sd=0.02'):
+    overhang_depth.read(wall, INTR, 0.04, 0.02)
+
+
+def test_a_strip_too_stiff_to_droop_is_refused():
+  # 1 cm over a 4 cm bending length hardly bends: nothing to read c from
+  strip = tabletop.Strip(overhang=0.012, bending_length=0.06)
+  with pytest.raises(ValueError, match='hardly droops: slide more of it over'):
+    overhang_depth.read(_render(strip, _pose()), INTR, 0.012, 0.001, name='rec')
+
+
+def test_a_strip_past_the_elastica_or_of_no_size_is_refused():
+  with pytest.raises(ValueError, match='bending lengths'):
+    tabletop.Strip(overhang=0.3, bending_length=0.01)
+  with pytest.raises(ValueError, match='Strip.width'):
+    dataclasses.replace(tabletop.Strip(0.04, 0.02), width=float('nan'))
