@@ -30,6 +30,7 @@ from absl import logging
 from experiments.pipeline import cli, files, intake, report, search, setup, takes
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
+from physsim import overhang_depth
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,6 +169,17 @@ def with_fabric_readings(args: Args) -> Args:
   if not args.protocol:
     return args
   readings = takes.fabric_readings(args.protocol)
+  strip = takes.fabric_overhang(args.protocol)
+  if strip is not None:  # the bending length, read once here
+    r = overhang_depth.read_recording(
+      strip.path, strip.camera_json, strip.length, strip.length_sd, strip.depth_scale
+    )
+    print(
+      f'{strip.path}: bending length {r.bending_length:.4f} m (sd '
+      f'{r.bending_length_sd:.4f}) from {r.points} strip pixels over the edge'
+    )
+    readings.update(bending_length=r.bending_length,
+                    bending_length_sd=r.bending_length_sd)  # fmt: skip
   both = sorted(k for k in readings if getattr(args.search.measured, k) != 0.0)
   if both:
     raise ValueError(

@@ -1,6 +1,8 @@
-"""A fabric's bending length from a ruler's reading of an overhang (issue 39).
+"""A fabric's bending length from an overhang: a ruler's reading or a depth recording (issue 39).
 
   python -m experiments.overhang --overhang=0.06 --reach=0.045
+  python -m experiments.overhang --overhang=0.05 --depth=strip_frames/ \
+      --camera=camera.json --figure=overhang.png   # a depth camera instead
   python -m experiments.overhang --overhang=0.06 --reach=0.045 --ruler_sd=0.002 \
       --material=gray_interlock --area_weight=0.21
   python -m experiments.overhang --overhang=0.06,0.06,0.06,0.06 \
@@ -19,18 +21,28 @@ flags put it into an estimate's prior (``--bending_length``,
 or a protocol file's ``"fabric"`` readings). With the fabric and its area
 weight it also prints the rigidity D = w g c^3 and the bending scale (D over
 the fabric's reference, what estimates report).
+
+With ``--depth`` (one recording per overhang: a folder of 16-bit PNG frames in
+mm, an .npy/.npz or a video, as estimates read them) and ``--camera`` (its
+intrinsics, an OpenCV-style JSON file) the reach is not read by hand: the
+strip's whole hanging curve is found in the frames and the elastica fitted
+to it (``physsim.overhang_depth``; film the table's edge from in front,
+0.35-0.55 m away and 20-40 degrees above the table's top, the strip and the
+front of the table's top board in view, a few still frames). ``--ruler_sd``
+is then the uncertainty of the overhang read off the strip's marks.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 
 import physsim
-from experiments.pipeline import cli
-from physsim import cantilever
+from experiments.pipeline import cli, files
+from physsim import cantilever, overhang_depth
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +60,11 @@ class Args:
     area_weight: the fabric's area weight, kg/m^2 (a kitchen scale and a
       swatch of known size); 0: D and the bending scale are not printed.
     area_weight_sd: its standard uncertainty, kg/m^2.
+    depth: depth recordings of the overhangs instead of reaches (one per
+      overhang).
+    camera: the depth camera's file (intrinsics; required with ``depth``).
+    depth_scale: metres per unit of 16-bit PNG frames.
+    figure: a PNG of what was read from the recordings ('' for none).
   """
 
   overhang: tuple[float, ...] = ()
@@ -56,6 +73,10 @@ class Args:
   material: str = ''
   area_weight: float = 0.0
   area_weight_sd: float = 0.0
+  depth: tuple[str, ...] = ()
+  camera: str = ''
+  depth_scale: float = 0.001
+  figure: str = ''
 
 
 PRESETS = {'default': Args()}
@@ -69,10 +90,14 @@ def reading(args: Args) -> dict:
   Raises:
     ValueError: naming the flag of a reading out of range.
   """
-  if not args.overhang or len(args.overhang) != len(args.reach):
+  readings = args.depth or args.reach
+  what = '--depth' if args.depth else '--reach'
+  if args.depth and args.reach:
+    raise ValueError('--depth and --reach: give one or the other')
+  if not args.overhang or len(args.overhang) != len(readings):
     raise ValueError(
-      f'--overhang={",".join(map(str, args.overhang))} --reach='
-      f'{",".join(map(str, args.reach))}: need one reach per overhang, at least one'
+      f'--overhang={",".join(map(str, args.overhang))} {what}='
+      f'{",".join(map(str, readings))}: need one {what[2:]} per overhang, at least one'
     )
   for name in ('ruler_sd', 'area_weight', 'area_weight_sd'):
     v = getattr(args, name)
@@ -82,15 +107,25 @@ def reading(args: Args) -> dict:
     raise ValueError(
       f'--material={args.material!r}: not one of {sorted(physsim.FABRICS)}'
     )
-  each = [
-    _one(o, r, args.ruler_sd) for o, r in zip(args.overhang, args.reach, strict=True)
-  ]
+  if args.depth:
+    found = [
+      _from_depth(o, path, args)
+      for o, path in zip(args.overhang, args.depth, strict=True)
+    ]
+    each = [(r.bending_length, r.bending_length_sd) for r in found]
+  else:
+    found = []
+    each = [
+      _one(o, r, args.ruler_sd) for o, r in zip(args.overhang, args.reach, strict=True)
+    ]
   cs = np.array([c for c, _ in each])
   c = float(cs.mean())
   c_sd = math.sqrt(sum(sd**2 for _, sd in each)) / len(each)  # the ruler's
   if len(each) > 1:  # or the readings' own scatter, whichever is larger
     c_sd = max(c_sd, float(cs.std(ddof=1)) / math.sqrt(len(each)))
   out = {'bending_length': c, 'bending_length_sd': c_sd, 'readings': cs.tolist()}
+  if found:
+    out['depth_readings'] = found
   if args.area_weight > 0:
     d = cantilever.rigidity(c, args.area_weight)
     rel = math.hypot(3 * c_sd / c, args.area_weight_sd / args.area_weight)
@@ -99,6 +134,15 @@ def reading(args: Args) -> dict:
       d0 = physsim.search_space(args.material).rigidity  # as estimates read it
       out.update(bending_scale=d / d0, bending_scale_sd=d * rel / d0)
   return out
+
+
+def _from_depth(overhang: float, path: str, args: Args) -> overhang_depth.Reading:
+  """One depth recording's reading, refusals naming the file or flag."""
+  if not args.camera:
+    raise ValueError(f"--depth={path}: needs --camera (the depth camera's file)")
+  return overhang_depth.read_recording(
+    path, args.camera, overhang, args.ruler_sd, args.depth_scale
+  )
 
 
 def _one(overhang: float, reach: float, ruler_sd: float) -> tuple[float, float]:
@@ -120,8 +164,18 @@ def main(args: Args) -> None:
   r = reading(args)
   c, sd = r['bending_length'], r['bending_length_sd']
   n = len(r['readings'])
+  if args.depth:
+    for path, d in zip(args.depth, r['depth_readings'], strict=True):
+      print(
+        f'{path}: {d.points} strip pixels, the elastica of {d.overhang:.4f} m over '
+        f'{d.ratio:.2f} bending lengths fits them to {1000 * d.residual_m:.2f} mm '
+        f'(RMS): reach {d.reach:.4f} m, drop {d.drop:.4f} m'
+      )
+    if args.figure:
+      plot(args.depth, r['depth_readings'], args.figure)
+  first = f'{args.reach[0]} m out' if args.reach else f'as {args.depth[0]} shows it'
   what = (
-    f'{args.overhang[0]} m over the edge reaching {args.reach[0]} m out'
+    f'{args.overhang[0]} m over the edge reaching {first}'
     if n == 1
     else f'the mean of {n} readings ({", ".join(f"{x:.4f}" for x in r["readings"])} m)'
   )
@@ -139,6 +193,34 @@ def main(args: Args) -> None:
     f'(or a protocol file\'s "fabric": {{"bending_length": {c:.4g}, '
     f'"bending_length_sd": {sd:.2g}}})'
   )
+
+
+def plot(paths, readings, path: str) -> None:
+  """Each recording's strip pixels and the fitted elastica, side view."""
+  import matplotlib
+
+  matplotlib.use('Agg')
+  import matplotlib.pyplot as plt
+
+  fig, axes = plt.subplots(
+    1, len(readings), figsize=(4.5 * len(readings), 4), squeeze=False
+  )
+  for ax, name, d in zip(axes[0], paths, readings, strict=True):
+    p = d.profile[:: max(1, len(d.profile) // 3000)]
+    ax.plot(100 * p[:, 0], -100 * p[:, 1], '.', ms=1.5, alpha=0.4, label='strip pixels')
+    line = cantilever.shape(d.ratio) * d.overhang
+    ax.plot(100 * line[:, 0], -100 * line[:, 1], 'r-',
+            label=f'elastica, c = {100 * d.bending_length:.2f} cm')  # fmt: skip
+    ax.axhline(0, color='0.6', lw=0.8)
+    ax.axvline(0, color='0.6', lw=0.8)
+    ax.set_aspect('equal')
+    ax.set_xlabel('out from the edge (cm)')
+    ax.set_ylabel('height above the table (cm)')
+    ax.set_title(os.path.basename(os.path.normpath(name)), fontsize=9)
+    ax.legend(fontsize=7, loc='lower left')
+  fig.tight_layout()
+  files.savefig(fig, path, dpi=110)
+  plt.close(fig)
 
 
 if __name__ == '__main__':

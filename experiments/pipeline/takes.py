@@ -19,7 +19,13 @@ as a protocol file (JSON or YAML)::
 Paths in the file are relative to the file's folder. ``"fabric"`` (optional)
 holds the readings of the fabric itself, shared by every recording: a scale's
 area weight and a cantilever test's bending length, each with its
-uncertainty (``fabric_readings``; the flags of the same names otherwise).
+uncertainty (``fabric_readings``; the flags of the same names otherwise); or,
+instead of the bending length, a depth recording of the strip over a
+table's edge that gives it (``fabric_overhang``)::
+
+  "fabric": {"overhang": {"recording": "strip/depth",
+                          "camera_json": "strip/camera.json",
+                          "length": 0.05, "length_sd": 0.001}}
 """
 
 from __future__ import annotations
@@ -149,7 +155,7 @@ def fabric_readings(path: str) -> dict[str, float]:
   where = f'{path}: fabric'
   if not isinstance(fabric, dict):
     raise ValueError(f'{where}: must be an object of readings, got {fabric!r}')
-  known = [k for name in FABRIC_KEYS for k in (name, f'{name}_sd')]
+  known = [k for name in FABRIC_KEYS for k in (name, f'{name}_sd')] + ['overhang']
   unknown = sorted(set(fabric) - set(known))
   if unknown:
     raise ValueError(f'{where}: unknown keys {unknown}; known: {known}')
@@ -161,6 +167,67 @@ def fabric_readings(path: str) -> dict[str, float]:
       out[name] = _number(where, name, fabric[name], lo, hi)
       out[f'{name}_sd'] = _number(where, f'{name}_sd', fabric[f'{name}_sd'], 1e-9, hi)
   return out
+
+
+OVERHANG_KEYS = ('recording', 'camera_json', 'length', 'length_sd', 'depth_scale')
+
+
+class Overhang(NamedTuple):
+  """A depth recording of the fabric's strip over a table's edge.
+
+  Attributes:
+    path: the recording.
+    camera_json: its camera file.
+    length: the strip's length past the edge, m.
+    length_sd: its standard uncertainty, m (the strip's ruler marks).
+    depth_scale: metres per unit of its 16-bit PNG frames.
+  """
+
+  path: str
+  camera_json: str
+  length: float
+  length_sd: float = 0.001
+  depth_scale: float = 0.001
+
+
+def fabric_overhang(path: str) -> Overhang | None:
+  """The overhang recording a protocol file's ``"fabric"`` gives, its paths
+  relative to the file's folder; None where it gives none.
+
+  Raises:
+    ValueError: a missing file, an unknown key or a value out of range, named;
+      a bending length given beside it.
+  """
+  data = _load(path)
+  fabric = data.get('fabric', {}) if isinstance(data, dict) else {}
+  if not isinstance(fabric, dict) or 'overhang' not in fabric:
+    return None
+  where = f'{path}: fabric: overhang'
+  entry = fabric['overhang']
+  if 'bending_length' in fabric:
+    raise ValueError(f'{where}: give it or "bending_length", not both')
+  if not isinstance(entry, dict):
+    raise ValueError(f'{where}: must be an object with "recording", got {entry!r}')
+  unknown = sorted(set(entry) - set(OVERHANG_KEYS))
+  if unknown:
+    raise ValueError(f'{where}: unknown keys {unknown}; known: {list(OVERHANG_KEYS)}')
+  base = os.path.dirname(os.path.abspath(path))
+  paths = {}
+  for key in ('recording', 'camera_json'):
+    value = entry.get(key)
+    if not isinstance(value, str) or not value:
+      raise ValueError(f'{where}: "{key}" must be a path, got {value!r}')
+    paths[key] = os.path.join(base, value)
+    if not os.path.exists(paths[key]):
+      raise ValueError(f'{where}: "{key}" {paths[key]}: no such file or folder')
+  if 'length' not in entry:
+    raise ValueError(f'{where}: needs "length", the strip past the edge, m')
+  return Overhang(
+    paths['recording'], paths['camera_json'],
+    _number(where, 'length', entry['length'], 1e-3, 0.5),
+    _number(where, 'length_sd', entry.get('length_sd', 0.001), 0.0, 0.05),
+    _number(where, 'depth_scale', entry.get('depth_scale', 0.001), 1e-6, 1.0),
+  )  # fmt: skip
 
 
 def from_flags(

@@ -11,6 +11,7 @@ import pytest
 import physsim
 from experiments import overhang
 from physsim import cantilever
+from tests.experiments import overhang_fixtures
 
 
 def test_the_reading_is_the_elastica_and_the_scale_by_hand(capsys):
@@ -80,3 +81,36 @@ def test_several_readings_are_averaged_with_the_larger_spread():
   assert same['bending_length_sd'] == pytest.approx(
     alone[0][1] / math.sqrt(2), rel=1e-9
   )
+
+
+def test_a_depth_recording_instead_of_a_ruler(tmp_path, capsys):
+  frames, cam = overhang_fixtures.write_overhang_recording(str(tmp_path))
+  args = overhang.Args(
+    overhang=(0.04,), depth=(frames,), camera=cam, material='gray_interlock',
+    area_weight=0.2, area_weight_sd=0.004, figure=str(tmp_path / 'fit.png'),
+  )  # fmt: skip
+  r = overhang.reading(args)
+  # mm-rounded frames of a clean render: c within the reader's clean tolerance
+  assert r['bending_length'] == pytest.approx(0.02, rel=0.02)
+  assert r['bending_length_sd'] >= 0.02 * 0.02
+  overhang.main(args)
+  out = capsys.readouterr().out
+  assert 'strip pixels' in out and '--bending_length=' in out and 'bending scale' in out
+  assert (tmp_path / 'fit.png').stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+  'change, flag',
+  [
+    ({'camera': ''}, 'needs --camera'),
+    ({'reach': (0.03,)}, '--depth and --reach'),
+    ({'depth': ('a', 'b')}, 'one depth per overhang'),
+  ],
+)
+def test_bad_depth_readings_name_their_flag(change, flag, tmp_path):
+  args = dataclasses.replace(
+    overhang.Args(overhang=(0.04,), depth=(str(tmp_path / 'none'),), camera='c.json'),
+    **change,
+  )
+  with pytest.raises(ValueError, match=flag):
+    overhang.reading(args)

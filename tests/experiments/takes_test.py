@@ -11,6 +11,7 @@ import pytest
 
 from experiments import estimate
 from experiments.pipeline import takes
+from tests.experiments import overhang_fixtures
 
 
 @pytest.fixture
@@ -120,6 +121,32 @@ def test_a_protocol_file_gives_the_fabrics_own_readings(folder):
   # none given: the flags' own
   bare = _write(folder / 'q.json', {'recordings': [{'recording': 'sheet'}]})
   assert takes.fabric_readings(bare) == {}
+
+
+def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
+  """The fabric's strip filmed over a table's edge, named in the file: read
+  once, at the edge, into the estimate's bending length."""
+  overhang_fixtures.write_overhang_recording(str(folder), 0.02, 0.04)
+  strip = {'recording': 'strip', 'camera_json': 'strip_camera.json', 'length': 0.04}
+  path = _write(folder / 'p.json', {'recordings': [{'recording': 'sheet'}],
+                                    'fabric': {'overhang': strip}})  # fmt: skip
+  spec = takes.fabric_overhang(path)
+  assert spec.path == str(folder / 'strip') and spec.length_sd == 0.001
+  m = estimate.with_fabric_readings(estimate.Args(protocol=path)).search.measured
+  assert m.bending_length == pytest.approx(0.02, rel=0.02)
+  assert m.bending_length_sd >= 0.02 * 0.02
+  # the overhang beside a bending length, a missing file, a bad key
+  for fabric, message in (
+    ({'overhang': strip, 'bending_length': 0.02, 'bending_length_sd': 0.001},
+     'not both'),
+    ({'overhang': {**strip, 'recording': 'nowhere'}}, 'no such file'),
+    ({'overhang': {**strip, 'reach': 0.03}}, r"unknown keys \['reach'\]"),
+    ({'overhang': {k: v for k, v in strip.items() if k != 'length'}}, 'needs "length"'),
+  ):  # fmt: skip
+    bad = _write(folder / 'b.json', {'recordings': [{'recording': 'sheet'}],
+                                     'fabric': fabric})  # fmt: skip
+    with pytest.raises(ValueError, match=message):
+      takes.fabric_overhang(bad)
 
 
 @pytest.mark.parametrize(
