@@ -24,6 +24,8 @@ size:
   python -m benchmarks.joint_pairs --model=out/table1/physnet_depth/simulation/gray_interlock \\
       --workdir=/tmp/pairs --pairs=6 [--group=3]
   python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_shape --pairs=6
+  python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_mm --pairs=16 \
+      --group=3 --fan_winds=1,3.5 --physics=mismatched   # another physics's recordings
 """
 
 from __future__ import annotations
@@ -70,6 +72,8 @@ class Args:
     seconds: each recording's length, s (0: the recipe's; >= 0).
     fan_winds: lo,hi m/s: draw each recording's wind here (empty: the search
       box).
+    physics: the recordings' physics: 'own' (the estimator's simulator) or
+      'mismatched' (``physsim.mismatch.WORLD``; the estimates keep their own).
     estimate: the preset's estimate settings (no flags of their own).
   """
 
@@ -90,6 +94,7 @@ class Args:
   smoke: bool = False
   seconds: float = 0.0
   fan_winds: tuple[str, ...] = ()
+  physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
   estimate: objective.EstimateConfig = cli.nested(
     objective.EstimateConfig(), skip=_ESTIMATE_FIELDS
   )
@@ -99,7 +104,7 @@ PRESETS = {k: Args(estimate=v) for k, v in objective.PRESETS.items()}
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'image_size', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
               'distance', 'likelihood', 'sharpness', 'gusts', 'cloth_resolution', 'backend',
-              'seconds', 'fan_winds')  # fmt: skip
+              'seconds', 'fan_winds', 'physics')  # fmt: skip
 _LOWER = {'image_size': 16, 'group': 2, 'sharpness': 0.0, 'gusts': 0.0,
           'cloth_resolution': 0, 'seconds': 0.0}  # fmt: skip
 
@@ -121,7 +126,7 @@ def _recordings(args: Args, workdir: str, size: int) -> list[list[dict]]:
   cfg = datasets.PRESETS['smoke' if args.smoke else 'eval']
   cfg = dataclasses.replace(
     cfg, materials=(args.material,), sequences=n, resolution=size,
-    batch_size=min(n, 64), seed=6000 + args.seed,
+    batch_size=min(n, 64), seed=6000 + args.seed, physics=args.physics,
     **({'backend': args.backend} if args.backend else {}),
   )  # fmt: skip
   if args.seconds:  # a longer (or shorter) clip of the same scenes

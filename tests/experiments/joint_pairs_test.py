@@ -35,7 +35,7 @@ def joint_run(tmp_path_factory):
   args = (  # no --model: the shape distance needs no network
     f'--image_size={fx.SIZE}', f'--workdir={root / "work"}', '--smoke', '--backend=c',
     '--preset=smoke', '--pairs=1', '--group=2', '--distance=shape',
-    '--gusts=0.3', '--cloth_resolution=8', '--fan_winds=2,3',
+    '--gusts=0.3', '--cloth_resolution=8', '--fan_winds=2,3', '--physics=mismatched',
   )  # fmt: skip
   proc = _run(*args)
   assert proc.returncode == 0, proc.stderr[-3000:]
@@ -51,6 +51,10 @@ def test_errors_are_their_points_and_the_flags_are_recorded(joint_run):
   assert out['flags']['distance'] == 'shape'
   assert out['flags']['model'] == '' and out['flags']['image_size'] == fx.SIZE
   assert out['flags']['fan_winds'] == ['2', '3']
+  assert out['flags']['physics'] == 'mismatched'
+  metas = list((joint_run[1].parent / 'recordings').rglob('meta.json'))
+  assert metas  # the recordings say which physics made them
+  assert all(json.loads(m.read_text())['physics'] == 'mismatched' for m in metas)
   rows = out['rows']
   assert len(rows) == 2
   for r in rows:
