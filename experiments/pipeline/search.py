@@ -43,7 +43,7 @@ POSTERIOR_FILE = 'posterior.npz'  # draws and the grid posterior/likelihood
 POSTERIOR_STATE = 'posterior_state.npz'
 BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
 # Config fields that do not change what an estimate computes.
-_RESUMABLE_FIELDS = ('workers', 'calibration')
+_RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias')  # how it is read, not searched
 
 
 # The settings a joint estimate's recordings may each have their own of; the
@@ -855,9 +855,11 @@ def joint_posterior(jobs: list[Job], key) -> tuple[dict, list]:
   each kept; returns it and the loaded ``posterior.npz`` files."""
   npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
   grid = tuple(int(g) for g in npz[0]['grid'])
+  config = jobs[0].config
   combined = posterior_lib.joint(
     [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
-    n=len(npz[0]['samples']),
+    n=len(npz[0]['samples']), shared_bias_sd=config.scoring.shared_bias,
+    area_weight_range=physsim.search_space(config.simulation.material).area_weight,
   )  # fmt: skip
   return combined, npz
 

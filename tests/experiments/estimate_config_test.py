@@ -22,13 +22,14 @@ from experiments.pipeline.posterior import Measured
 from experiments.studies import tables
 
 # The flags of the flat EstimateConfig before the split (``--fps`` of the
-# config was always ``--sim_fps``), with the bending-length reading added since.
+# config was always ``--sim_fps``), with the bending-length reading and the
+# joint's shared discrepancy added since.
 FLAT_FLAGS = [
   'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_sd', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
   'garment', 'garment_spacing', 'gusts', 'likelihood', 'material', 'max_iter',
   'min_iter', 'model_error', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
-  'sensor_noise', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
+  'sensor_noise', 'shared_bias', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
   'wind_speed', 'wind_speed_sd', 'workers',
 ]  # fmt: skip
 # experiments.estimate's flags before the split (and the bending length's).
@@ -42,7 +43,7 @@ ESTIMATE_FLAGS = [
   'imu_topic', 'info_topic', 'intake_only', 'likelihood', 'mask', 'material',
   'max_iter', 'min_iter', 'min_overlap', 'model', 'model_error', 'n_init', 'pins', 'plane_tol',
   'point', 'posterior_grid', 'protocol', 'q', 'recording', 'remove_planes',
-  'replicates', 'seed', 'sensor_noise', 'sharpness', 'sim_fps', 'start',
+  'replicates', 'seed', 'sensor_noise', 'shared_bias', 'sharpness', 'sim_fps', 'start',
   'stop_rel_change', 'stop_window', 'up', 'warmup', 'wind_speed', 'wind_speed_sd',
   'wind_speed_sds', 'wind_speeds', 'wind_toward_camera', 'workdir', 'workers',
   'world_up',

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 import pytest
 
@@ -185,3 +186,31 @@ def test_a_bending_length_needs_a_box_that_knows_its_fabric():
   m = posterior.Measured(bending_length=0.02, bending_length_sd=0.002)
   with pytest.raises(ValueError, match='no reference rigidity'):
     m.check(SPACE)
+
+
+# 20,000 draws know a standard deviation to about 1%; the grid's 200 w cells
+# and the 9 Gauss-Hermite nodes add less.
+_SD_TOL = 0.05
+
+
+@pytest.mark.parametrize('shared', [0.0, 0.05])
+def test_a_shared_discrepancy_keeps_the_joint_area_weight_from_narrowing(shared):
+  """Three recordings, each with Gaussian evidence of sd s about one area
+  weight: independent, their joint has sd s / sqrt(3); with a discrepancy
+  common to all, of sd d in log area weight, the joint is about the
+  convolution, sqrt(s^2 / 3 + (d w)^2), by hand."""
+  lo, hi = 0.1, 0.3
+  grid = (1, 1, 200)
+  w = lo + (np.arange(200) + 0.5) / 200 * (hi - lo)
+  w0, s = 0.2, 0.01
+  ll = [-0.5 * ((w - w0) / s) ** 2 for _ in range(3)]
+  prior = np.zeros(200)
+  out = posterior.joint(ll, grid, prior, jax.random.key(0), n=20_000,
+                        shared_bias_sd=shared, area_weight_range=(lo, hi))  # fmt: skip
+  draws = lo + (out['samples'][0][:, 2] + 1) / 2 * (hi - lo)
+  want = np.sqrt(s**2 / 3 + (shared * w0) ** 2)
+  assert np.std(draws) == pytest.approx(want, rel=_SD_TOL)
+  assert np.mean(draws) == pytest.approx(w0, abs=0.002)
+  if shared:
+    with pytest.raises(ValueError, match='area weight range'):
+      posterior.joint(ll, grid, prior, jax.random.key(0), n=10, shared_bias_sd=shared)
