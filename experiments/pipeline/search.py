@@ -42,8 +42,9 @@ ESTIMATE_FILE = 'estimate.json'
 POSTERIOR_FILE = 'posterior.npz'  # draws and the grid posterior/likelihood
 POSTERIOR_STATE = 'posterior_state.npz'
 BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
-# Config fields that do not change what an estimate computes.
-_RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias')  # how it is read, not searched
+# Config fields that do not change what an estimate searches (the shared
+# discrepancy: only how the joint reads the searches).
+_RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias')  # fmt: skip
 
 
 # The settings a joint estimate's recordings may each have their own of; the
