@@ -1,0 +1,378 @@
+"""A fabric's bending read from depth recordings of an overhang, and the
+protocol set it completes: measured on set-ups the reader was not fitted to.
+
+Issue 39: the 1 m sheet in a fan measures the wind and, with an anemometer,
+the area weight, but not the bending; a strip over a table's edge measures
+the bending length c = (D / (w g))^(1/3). Here each set-up is a world the
+reader (``physsim.overhang_depth``) does not know: a fabric and truth drawn
+from its search box, a strip 2.5-5 cm wide, 0.3-1.5 mm thick, its
+cross-section curled by -1 to 1.5 mm, leaving the edge up to 5 degrees
+askew, slid 0.8-1.3 times Peirce's two bending lengths over a table 0.7-0.8 m
+high with a 1.8-4 cm top board, the length the user reads off the strip off
+by a ruler's 1 mm; a Kinect-class camera (640 x 480, 58 degrees,
+``physsim.sensor``'s noise, holes at depth jumps, dropouts) 0.35-0.55 m away,
+20-40 degrees above the table, up to 25 degrees to the side, rolled up to 5,
+five frames. The strip hangs as the heavy elastica (the physics of a real
+strip; the estimator's own cloth simulator is not used, and its strip is
+softer than its nominal D: BENCHMARKS.md, ``benchmarks.overhang_mesh``).
+
+Two seeds: ``--seed=0`` sets the reader's ``FLOOR`` (the smallest relative
+uncertainty of c at which its 90% intervals hold c 90% of the time; the
+script prints it) and ``--seed=1`` checks it. With ``--packed`` (the runs of
+a calibration check, ``experiments.calibrate --check``, e.g. the 56
+recordings of the mismatched physics) each of its sheet recordings gets an
+overhang recording of its own fabric and truth, and the sheet's posterior
+(its saved GP, the shipped likelihood) with a 2% anemometer reading and the
+overhang's bending length gives the protocol set's joint estimate: bending,
+area weight and wind against the truth, and how often the intervals hold.
+
+  python -m benchmarks.overhang_depth --seed=0 --sets=40 --out=$OUT/od_seed0
+  python -m benchmarks.overhang_depth --seed=1 \
+      --packed=out/chk_mm_packed/packed --out=$OUT/od_seed1
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import json
+import math
+import os
+import time
+
+import jax
+import matplotlib
+import numpy as np
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+
+import bo  # noqa: E402
+import physsim  # noqa: E402
+from experiments.pipeline import cli, files  # noqa: E402
+from experiments.pipeline import posterior as posterior_lib  # noqa: E402
+from physsim import cantilever, overhang_depth, render, sensor, tabletop  # noqa: E402
+
+INTRINSICS = physsim.Intrinsics(640, 480, 58.0, 45.0)
+FRAMES = 5
+RULER_SD = 0.001  # m: the overhang read off the strip's marks
+WIND_SD = 0.02  # relative: the anemometer's
+LEVELS = (0.5, 0.9)
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The set-ups and what to combine them with.
+
+  Attributes:
+    seed: of the set-ups (0 fits the floor, others check it).
+    sets: set-ups without ``packed`` (with it: one per packed recording).
+    packed: a folder of packed runs (``runs-*.npz``) of sheet recordings.
+    floor: the reader's relative floor on c's sd (0: its ``FLOOR``).
+    grid: the posterior grid (bending, wind, area weight) of the packed runs.
+    likelihood: the packed runs' likelihood form.
+    sharpness: and its sharpness (the shipped paper-size table's).
+    out: output folder (JSON, PNG).
+  """
+
+  seed: int = 0
+  sets: int = 40
+  packed: str = ''
+  floor: float = 0.0
+  grid: tuple[int, ...] = (12, 64, 24)
+  likelihood: str = 'gibbs'
+  sharpness: float = 0.5
+  out: str = 'out/overhang_depth'
+
+
+PRESETS = {'default': Args()}
+
+
+def draw_setup(rng: np.random.Generator, c: float) -> dict:
+  """A world's set-up for a strip of bending length ``c`` (m)."""
+  true_l = max(0.015, 2 * c * rng.uniform(0.8, 1.3))
+  told_l = round(true_l * 200) / 200  # read off the strip's 5 mm marks
+  true_l = told_l + rng.normal(0, RULER_SD)
+  true_l = min(true_l, 0.98 * cantilever.MAX_RATIO * c)
+  return {
+    'strip': dict(
+      overhang=float(true_l), bending_length=float(c),
+      width=float(rng.uniform(0.025, 0.05)),
+      thickness=float(rng.uniform(0.0003, 0.0015)),
+      curl=float(rng.uniform(-0.001, 0.0015)),
+      yaw_deg=float(rng.uniform(-5, 5)), x=float(rng.uniform(-0.1, 0.1)),
+    ),
+    'table': dict(height=float(rng.uniform(0.7, 0.8)),
+                  thickness=float(rng.uniform(0.018, 0.04))),
+    'camera': dict(distance=float(rng.uniform(0.35, 0.55)),
+                   elevation_deg=float(rng.uniform(20, 40)),
+                   azimuth_deg=float(rng.uniform(-25, 25)),
+                   roll_deg=float(rng.uniform(-5, 5))),
+    'aim': float(rng.uniform(-0.03, 0.03)),
+    'told_overhang': float(told_l),
+  }  # fmt: skip
+
+
+def render_setup(setup: dict, key) -> np.ndarray:
+  """(FRAMES, H, W) noisy depth frames of a set-up."""
+  strip = tabletop.Strip(**setup['strip'])
+  table = tabletop.Table(**setup['table'])
+  cam = setup['camera']
+  pose = tabletop.camera(table, cam['distance'], cam['elevation_deg'],
+                         cam['azimuth_deg'], cam['roll_deg'],
+                         x=strip.x + setup['aim'])  # fmt: skip
+  eye_y = float(np.asarray(pose.position)[1])
+  v, f = tabletop.scene(strip, table, floor_to_y=eye_y - 0.05)
+  clean = render.depth_image(v, f, INTRINSICS, pose)
+  frames = jax.numpy.broadcast_to(clean, (FRAMES, *clean.shape))
+  return np.asarray(sensor.apply_noise_frames(key, frames, INTRINSICS))
+
+
+def read_setup(setup: dict, key, floor: float) -> dict:
+  """The reader's c on a set-up, with its z-score at ``floor``."""
+  depth = render_setup(setup, key)
+  c = setup['strip']['bending_length']
+  row = {'c': c, 'setup': setup}
+  try:
+    r = overhang_depth.read(depth, INTRINSICS, setup['told_overhang'], RULER_SD)
+  except ValueError as e:
+    return {**row, 'refused': str(e)}
+  sd = math.hypot(r.fit_sd, floor * r.bending_length)
+  return {
+    **row, 'read': r.to_dict(), 'c_hat': r.bending_length, 'sd': sd,
+    'error': r.bending_length / c - 1.0, 'z': (r.bending_length - c) / sd,
+    'profile': r.profile[:: max(1, len(r.profile) // 1500)],
+  }  # fmt: skip
+
+
+def fitted_floor(rows: list[dict], level: float = 0.9) -> float:
+  """The smallest floor at which ``level`` of the rows' central intervals
+  (Gaussian, fit sd and floor) hold c."""
+  k = 1.6448536269514722 if level == 0.9 else None
+  ok = [r for r in rows if 'c_hat' in r]
+  for floor in np.arange(0.0, 0.2001, 0.0025):
+    held = np.mean([
+      abs(r['c_hat'] - r['c']) <= k * math.hypot(r['read']['fit_sd'], floor * r['c_hat'])
+      for r in ok
+    ])  # fmt: skip
+    if held >= level:
+      return float(floor)
+  return float('nan')
+
+
+def packed_runs(folder: str) -> list[dict]:
+  """Sheet recordings of a calibration check's packed runs: truth, fabric and
+  the saved GP on the posterior grid."""
+  out = []
+  for path in sorted(glob.glob(os.path.join(folder, 'runs-*.npz'))):
+    with np.load(path) as z:
+      for j, seq in enumerate(z['seq']):
+        out.append({
+          'seq': int(seq), 'material': str(z['material'][j]),
+          'truth': json.loads(str(z['truth'][j])),
+          **{k: np.asarray(z[k][j], np.float64)
+             for k in ('gp_mean', 'gp_var', 'floor', 'noise_sd')},
+        })  # fmt: skip
+  if not out:
+    raise ValueError(f'--packed={folder}: no runs-*.npz there')
+  return out
+
+
+def joint_estimate(run: dict, reading: dict, args: Args, seed: int) -> dict:
+  """The protocol set's posterior: the sheet's likelihood with the wind read
+  to 2% and the overhang's bending length; errors and intervals per field."""
+  space = physsim.search_space(run['material'])
+  truth = run['truth']
+  grid = tuple(args.grid)
+  pts = np.asarray(bo.posterior.grid_points(grid))
+  rng = np.random.default_rng([seed, run['seq']])
+  wind = truth['wind_speed'] * (1 + WIND_SD * rng.standard_normal())
+  modes = {
+    'sheet, anemometer': posterior_lib.Measured(
+      wind_speed=wind, wind_speed_sd=WIND_SD * truth['wind_speed']
+    ),
+  }
+  if 'c_hat' in reading:
+    modes['sheet, anemometer, overhang'] = dataclasses.replace(
+      modes['sheet, anemometer'], bending_length=reading['c_hat'],
+      bending_length_sd=reading['sd'],
+    )  # fmt: skip
+  ll = np.asarray(
+    bo.posterior.log_likelihood(
+      run['gp_mean'], run['gp_var'], run['floor'], run['noise_sd'],
+      form=args.likelihood, sharpness=args.sharpness,
+    )
+  )  # fmt: skip
+  prior_box = posterior_lib.physical(rng.uniform(-1, 1, (4000, 3)), space)
+  out = {}
+  for mode, m in modes.items():
+    lp = posterior_lib.log_prior(pts, space, m, grid)
+    post = np.asarray(bo.posterior.log_normalise(lp + ll))
+    p = np.exp(post - post.max())
+    idx = rng.choice(len(pts), 4000, p=p / p.sum())
+    draws = pts[idx] + (rng.random((4000, 3)) - 0.5) * 2.0 / np.array(grid)
+    draws = posterior_lib.refine_draws(draws, grid, space, m, seed=run['seq'])
+    phys = posterior_lib.physical(draws, space)
+    row = {}
+    for i, f in enumerate(posterior_lib.FIELDS):
+      x, t = phys[:, i], truth[f]
+      med = float(np.median(x))
+      lo90, hi90 = np.quantile(x, [0.05, 0.95])
+      lo50, hi50 = np.quantile(x, [0.25, 0.75])
+      pl, ph = np.quantile(prior_box[:, i], [0.05, 0.95])
+      log = f == 'bending_scale'
+      width = math.log(hi90 / lo90) if log else hi90 - lo90
+      prior_width = math.log(ph / pl) if log else ph - pl
+      row[f] = {
+        'median': med, 'interval_90': [float(lo90), float(hi90)],
+        'error': (math.exp(abs(math.log(med / t))) if log else abs(med / t - 1)),
+        'held_90': bool(lo90 <= t <= hi90), 'held_50': bool(lo50 <= t <= hi50),
+        'narrowing_90': prior_width / max(width, 1e-12),
+      }  # fmt: skip
+    out[mode] = row
+  return out
+
+
+def summary(rows: list[dict], sets: list[dict]) -> dict:
+  ok = [r for r in rows if 'c_hat' in r]
+  err = np.array([r['error'] for r in ok])
+  z = np.array([r['z'] for r in ok])
+  out = {
+    'setups': len(rows),
+    'refused': len(rows) - len(ok),
+    'c_mean_abs_error': float(np.mean(np.abs(err))) if len(ok) else None,
+    'c_median_abs_error': float(np.median(np.abs(err))) if len(ok) else None,
+    'c_bias': float(np.mean(err)) if len(ok) else None,
+    'c_held_90': float(np.mean(np.abs(z) <= 1.6449)) if len(ok) else None,
+    'c_held_50': float(np.mean(np.abs(z) <= 0.6745)) if len(ok) else None,
+    'fitted_floor': fitted_floor(rows) if len(ok) else None,
+  }
+  if sets:
+    for mode in sets[0]['joint']:
+      m = [s['joint'][mode] for s in sets if mode in s['joint']]
+      out[mode] = {
+        'sets': len(m),
+        'bending_median_factor': float(np.median([x['bending_scale']['error'] for x in m])),
+        'bending_narrowing_90_median': float(
+          np.median([x['bending_scale']['narrowing_90'] for x in m])
+        ),
+        'area_weight_mean_pct': 100 * float(np.mean([x['area_weight']['error'] for x in m])),
+        'wind_mean_pct': 100 * float(np.mean([x['wind_speed']['error'] for x in m])),
+        **{
+          f'{f}_held_{lv}': float(np.mean([x[f][f'held_{lv}'] for x in m]))
+          for f in posterior_lib.FIELDS for lv in (90, 50)
+        },
+      }  # fmt: skip
+  return out
+
+
+def plot(rows: list[dict], example: dict | None, path: str) -> None:
+  ok = [r for r in rows if 'c_hat' in r]
+  fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
+  if example is not None:
+    prof = np.asarray(example['profile'])
+    ax[0].plot(100 * prof[:, 0], -100 * prof[:, 1], '.', ms=1.5, alpha=0.4,
+               label='strip pixels (five frames, median)')  # fmt: skip
+    r = example['read']
+    line = cantilever.shape(r['ratio']) * r['overhang']
+    ax[0].plot(100 * line[:, 0], -100 * line[:, 1], 'r-', lw=1.5,
+               label=f'fitted elastica, c = {100 * r["bending_length"]:.2f} cm')  # fmt: skip
+    true = cantilever.shape(example['setup']['strip']['overhang'] / example['c'])
+    true = true * example['setup']['strip']['overhang']
+    ax[0].plot(100 * true[:, 0], -100 * true[:, 1], 'k--', lw=1,
+               label=f'truth, c = {100 * example["c"]:.2f} cm')  # fmt: skip
+    ax[0].axhline(0, color='0.6', lw=0.8)
+    ax[0].axvline(0, color='0.6', lw=0.8)
+    ax[0].set_aspect('equal')
+    ax[0].set_xlabel('out from the edge (cm)')
+    ax[0].set_ylabel('height above the table (cm)')
+    ax[0].legend(fontsize=7, loc='lower left')
+    ax[0].set_title('one set-up: what the reader sees and fits', fontsize=9)
+  c = np.array([r['c'] for r in ok])
+  e = np.array([r['error'] for r in ok])
+  sd = np.array([r['sd'] / r['c_hat'] for r in ok])
+  ax[1].errorbar(100 * c, 100 * e, yerr=100 * 1.6449 * sd, fmt='o', ms=3, lw=0.8)
+  ax[1].axhline(0, color='k', lw=0.8)
+  ax[1].set_xlabel('true bending length c (cm)')
+  ax[1].set_ylabel('error of c (%), with its 90% interval')
+  ax[1].set_title(f'{len(ok)} set-ups the reader was not fitted to', fontsize=9)
+  fig.tight_layout()
+  files.savefig(fig, path, dpi=110)
+  plt.close(fig)
+
+
+def main(args: Args) -> None:
+  floor = args.floor or overhang_depth.FLOOR
+  rng = np.random.default_rng([args.seed, 39])
+  key = jax.random.key(args.seed)
+  runs = packed_runs(args.packed) if args.packed else []
+  n = len(runs) or args.sets
+  rows, sets = [], []
+  example = None
+  os.makedirs(args.out, exist_ok=True)
+  t0 = time.time()
+  for i in range(n):
+    if runs:
+      t = runs[i]['truth']
+      space = physsim.search_space(runs[i]['material'])
+      b, w = t['bending_scale'], t['area_weight']
+    else:
+      material = sorted(physsim.FABRICS)[i % len(physsim.FABRICS)]
+      space = physsim.search_space(material)
+      u = rng.uniform(-1, 1, 3)
+      p = physsim.params.from_unit(u, space)
+      b, w = float(p.bending_scale), float(p.area_weight)
+    c = float(physsim.params.bending_length(b, w, space.rigidity))
+    setup = draw_setup(rng, c)
+    row = read_setup(setup, jax.random.fold_in(key, i), floor)
+    rows.append(row)
+    if example is None and 'c_hat' in row:
+      example = row
+    if runs:
+      sets.append({'seq': runs[i]['seq'], 'material': runs[i]['material'],
+                   'joint': joint_estimate(runs[i], row, args, args.seed)})  # fmt: skip
+    msg = (
+      row.get('refused')
+      or f'c {100 * c:.2f} cm, error {100 * row["error"]:+.1f}%, z {row["z"]:+.2f}'
+    )
+    print(f'[{i + 1}/{n}] {time.time() - t0:.0f} s: {msg}', flush=True)
+  plot(rows, example, os.path.join(args.out, 'overhang_depth.png'))
+  for r in rows:
+    r.pop('profile', None)
+  out = {
+    'args': dataclasses.asdict(args), 'floor': floor,
+    'summary': summary(rows, sets), 'rows': rows, 'sets': sets,
+  }  # fmt: skip
+  files.write_json(os.path.join(args.out, 'overhang_depth.json'), out)
+  print(table(out))
+
+
+def table(out: dict) -> str:
+  s = out['summary']
+  lines = [
+    '| set-ups | refused | c mean error | median | bias | 90% held | 50% held | floor | floor fitted here |',
+    '|---|---|---|---|---|---|---|---|---|',
+    f'| {s["setups"]} | {s["refused"]} | {100 * s["c_mean_abs_error"]:.1f}% | '
+    f'{100 * s["c_median_abs_error"]:.1f}% | {100 * s["c_bias"]:+.1f}% | '
+    f'{100 * s["c_held_90"]:.0f}% | {100 * s["c_held_50"]:.0f}% | '
+    f'{100 * out["floor"]:.1f}% | {100 * s["fitted_floor"]:.2f}% |',
+  ]
+  for mode in ('sheet, anemometer', 'sheet, anemometer, overhang'):
+    if mode not in s:
+      continue
+    m = s[mode]
+    lines += [
+      '',
+      f'{mode} ({m["sets"]} sets): bending median factor x{m["bending_median_factor"]:.3f}, '
+      f'its 90% interval x{m["bending_narrowing_90_median"]:.1f} narrower than the prior\'s '
+      f'(median); area weight {m["area_weight_mean_pct"]:.1f}%, wind {m["wind_mean_pct"]:.1f}%',
+      '  held 90% / 50%: ' + ', '.join(
+        f'{f} {100 * m[f"{f}_held_90"]:.0f}% / {100 * m[f"{f}_held_50"]:.0f}%'
+        for f in posterior_lib.FIELDS
+      ),
+    ]  # fmt: skip
+  return '\n'.join(lines)
+
+
+if __name__ == '__main__':
+  cli.run(Args, PRESETS, main)

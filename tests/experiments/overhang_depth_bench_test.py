@@ -1,0 +1,44 @@
+"""benchmarks/overhang_depth.py: the floor it fits, by hand, and the protocol
+set's joint estimate on a sheet whose video says nothing (a flat likelihood):
+the overhang's bending length and the anemometer alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import physsim
+from benchmarks import overhang_depth as bench
+
+
+def test_the_fitted_floor_is_the_smallest_holding_nine_in_ten():
+  # ten readings off by 1..10% with no fit spread: a 90% interval of
+  # +-1.645 f c_hat holds nine of them once 1.645 f 1.09 >= 0.09
+  rows = [
+    {'c': 1.0, 'c_hat': 1.0 + e / 100, 'read': {'fit_sd': 0.0}} for e in range(1, 11)
+  ]
+  f = bench.fitted_floor(rows)
+  want = 0.09 / (1.6448536269514722 * 1.09)
+  assert want <= f * 1.01 < want + 0.0026  # the 0.25% steps it tries
+
+
+def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
+  material = 'gray_interlock'
+  space = physsim.search_space(material)
+  b, w, v = 2.0, 0.19, 3.0
+  c = float(physsim.params.bending_length(b, w, space.rigidity))
+  g = int(np.prod(bench.Args().grid))
+  run = {
+    'seq': 0, 'material': material,
+    'truth': {'bending_scale': b, 'area_weight': w, 'wind_speed': v},
+    'gp_mean': np.zeros(g), 'gp_var': np.full(g, 1e-4), 'floor': 0.0, 'noise_sd': 1.0,
+  }  # fmt: skip
+  reading = {'c_hat': c, 'sd': 0.03 * c}
+  out = bench.joint_estimate(run, reading, bench.Args(), seed=0)
+  alone, both = out['sheet, anemometer'], out['sheet, anemometer, overhang']
+  assert alone['bending_scale']['narrowing_90'] == pytest.approx(1.0, abs=0.2)
+  # w unknown over its box (0.15-0.22) and c to 3%: b = w g c^3 / D0 to
+  # about sqrt(11%^2 + 9%^2): a 90% interval of about x1.4 in a box of x100
+  assert both['bending_scale']['narrowing_90'] > 8
+  assert both['bending_scale']['held_90'] and both['bending_scale']['error'] < 1.15
+  assert both['wind_speed']['held_90'] and both['wind_speed']['error'] < 0.06
