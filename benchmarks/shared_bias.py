@@ -7,13 +7,15 @@ another physics (``physsim.mismatch.WORLD``); its joint posterior multiplies
 the recordings' evidence as if their errors were independent, and where the
 simulator differs from the world the same way in every recording, the joint
 area weight narrows onto a shifted value. This script re-reads those groups'
-saved likelihoods (``out/pack_jp.py``'s fields: each recording's log
-likelihood and log prior on the posterior grid) and recombines each group with
+saved likelihoods (each recording's log likelihood and log prior on the
+posterior grid, packed from a ``joint_pairs`` workdir by ``--pack``, small
+enough to bring back from a GPU machine) and recombines each group with
 a shared discrepancy of sd ``s`` in log area weight
 (``posterior.joint(shared_bias_sd=s)``) for each ``s`` of ``--sds``; the first
 ``--calibrate`` runs choose the smallest ``s`` whose raw 90% intervals hold
 the area weight in at least 90% of their groups, and the others check it.
 
+  python -m benchmarks.shared_bias --pack=/tmp/jmm --out=$OUT/jmm7_fields.npz
   python -m benchmarks.shared_bias \
       --runs=out/jmm/joint_pairs.json,out/jmm/joint_pairs8.json \
       --fields=out/jmm/jmm7_fields.npz,out/jmm/jmm8_fields.npz --calibrate=1 \
@@ -23,8 +25,10 @@ the area weight in at least 90% of their groups, and the others check it.
 from __future__ import annotations
 
 import dataclasses
+import glob
 import json
 import math
+import os
 
 import jax
 import numpy as np
@@ -44,7 +48,9 @@ class Args:
     calibrate: how many of the first runs choose the sd (the rest check it).
     sds: shared discrepancies tried, sd of log area weight.
     draws: posterior draws per group.
-    out: JSON path.
+    pack: a ``joint_pairs`` workdir: only pack its recordings' likelihoods
+      into ``out`` (.npz) and stop.
+    out: JSON path (with ``pack``: the .npz).
   """
 
   runs: tuple[str, ...] = ()
@@ -52,10 +58,36 @@ class Args:
   calibrate: int = 1
   sds: tuple[float, ...] = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12, 0.15)
   draws: int = 4000
+  pack: str = ''
   out: str = 'out/benchmarks/shared_bias.json'
 
 
 PRESETS = {'default': Args()}
+
+
+def pack(workdir: str, out: str) -> int:
+  """Writes each recording's log likelihood and log prior (float32) of a
+  ``joint_pairs`` workdir (``pair_<g>/recording_<k>/posterior.npz``, recording
+  seq = g x group + k) to ``out``; returns how many."""
+  with open(os.path.join(workdir, 'joint_pairs.json')) as f:
+    size = int(json.load(f)['flags']['group'])
+  seqs, ll, lp, grid = [], [], [], None
+  for path in sorted(
+    glob.glob(os.path.join(workdir, 'pair_*', 'recording_*', 'posterior.npz'))
+  ):
+    g = int(path.split('pair_')[1].split(os.sep)[0])
+    k = int(path.split('recording_')[1].split(os.sep)[0])
+    with np.load(path) as z:
+      seqs.append(g * size + k)
+      ll.append(z['log_lik'].astype(np.float32))
+      lp.append(z['log_prior'].astype(np.float32))
+      grid = z['grid']
+  if not seqs:
+    raise ValueError(f'--pack={workdir}: no pair_*/recording_*/posterior.npz there')
+  files.write_atomic(out, lambda p: np.savez_compressed(
+    p, seq=np.array(seqs), log_lik=np.stack(ll), log_prior=np.stack(lp), grid=grid
+  ))  # fmt: skip
+  return len(seqs)
 
 
 def groups_of(run_path: str, fields_path: str) -> list[dict]:
@@ -116,6 +148,9 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def main(args: Args) -> None:
+  if args.pack:
+    print(f'packed {pack(args.pack, args.out)} recordings into {args.out}')
+    return
   if not args.runs or len(args.runs) != len(args.fields):
     raise ValueError(
       '--runs and --fields: one packed fields file per run, at least one'
