@@ -115,7 +115,9 @@ class Scoring:
       recordings do not average it away. Fitted on groups of three gentle fan
       settings recorded under another physics (``benchmarks.shared_bias``:
       at 0 their joint 90% intervals held the area weight in 10 of 16 groups).
-      Only the joint of several recordings reads it.
+      Only a joint that no shipped table covers reads it (a joint of two
+      recordings at calibrated settings was calibrated, and checked on
+      another physics, without it).
   """
 
   distance: str = cli.choice('energy', DISTANCES)

@@ -288,10 +288,6 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   mode = calibration_mode(config.measured, joint)
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
-  if joint and config.scoring.shared_bias:
-    differs.append(
-      f'a shared discrepancy of {config.scoring.shared_bias:g} in the joint (calibrated: 0)'
-    )
   elif mode is None:
     differs.append(
       'a bending-length reading (not calibrated)'
