@@ -825,9 +825,10 @@ def describe(name: str, clip: float) -> str:
   c = parse(name)
   if c.overhang:
     return (
-      f'the fabric flat on a table, {100 * c.size:.0f} cm of it (as wide) over '
-      f'the edge, still air, the camera {camera_distance(c.size):.2f} m away at '
-      f'the side, {clip:g} s'
+      f'the fabric flat on a table, {100 * c.size:.0f} cm of it over the edge, '
+      f'still air, the camera {camera_distance(c.size):.2f} m in front of the edge '
+      '20-40 degrees above the table, a few still frames (python -m '
+      'experiments.overhang --depth reads it)'
     )
   fan = f'the fan at {c.wind:g} m/s' if c.wind > 0 else 'no fan'
   pins = 'its two top corners' if c.pins == 2 else 'one top corner'

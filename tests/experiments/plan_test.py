@@ -81,3 +81,9 @@ def test_plan_end_to_end_with_the_simulator(tmp_path, capsys):
   assert ranked['sheet_100cm_2ms_r5']['eig_nats'] > 0.1
   out = capsys.readouterr().out
   assert 'Next recording: a 100 cm square' in out
+
+
+def test_an_overhang_is_described_as_the_depth_reader_wants_it_filmed():
+  words = protocol.describe('overhang_3cm_r9', 2.0)
+  assert '3 cm of it over the edge' in words and 'in front of the edge' in words
+  assert 'experiments.overhang --depth' in words
