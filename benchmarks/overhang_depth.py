@@ -15,6 +15,10 @@ by a ruler's 1 mm; a Kinect-class camera (640 x 480, 58 degrees,
 five frames. The strip hangs as the heavy elastica (the physics of a real
 strip; the estimator's own cloth simulator is not used, and its strip is
 softer than its nominal D: BENCHMARKS.md, ``benchmarks.overhang_mesh``).
+``--renderer=mujoco`` renders the frames with MuJoCo's own OpenGL renderer
+(EGL, offscreen; square pixels, 45 degrees vertical) instead of the
+project's ray-caster, the table a box: the reader must not lean on the
+ray-caster's conventions.
 
 Two seeds: ``--seed=0`` sets the reader's ``FLOOR`` (the smallest relative
 uncertainty of c at which its 90% intervals hold c 90% of the time; the
@@ -29,6 +33,8 @@ area weight and wind against the truth, and how often the intervals hold.
   python -m benchmarks.overhang_depth --seed=0 --sets=40 --out=$OUT/od_seed0
   python -m benchmarks.overhang_depth --seed=1 \
       --packed=out/chk_mm_packed/packed --out=$OUT/od_seed1
+  MUJOCO_GL=egl python -m benchmarks.overhang_depth --seed=1 --renderer=mujoco \
+      --packed=out/chk_mm_packed/packed --out=$OUT/od_seed1_mujoco
 """
 
 from __future__ import annotations
@@ -72,6 +78,7 @@ class Args:
     grid: the posterior grid (bending, wind, area weight) of the packed runs.
     likelihood: the packed runs' likelihood form.
     sharpness: and its sharpness (the shipped paper-size table's).
+    renderer: 'raycaster' (``physsim.render``) or 'mujoco' (MuJoCo's OpenGL).
     out: output folder (JSON, PNG).
   """
 
@@ -82,6 +89,7 @@ class Args:
   grid: tuple[int, ...] = (12, 64, 24)
   likelihood: str = 'gibbs'
   sharpness: float = 0.5
+  renderer: str = cli.choice('raycaster', ('raycaster', 'mujoco'))
   out: str = 'out/overhang_depth'
 
 
@@ -113,7 +121,33 @@ def draw_setup(rng: np.random.Generator, c: float) -> dict:
   }  # fmt: skip
 
 
-def render_setup(setup: dict, key) -> np.ndarray:
+MJ_FOVY = 45.0
+_MJ_F = 0.5 * 480 / math.tan(math.radians(MJ_FOVY / 2))
+MJ_INTRINSICS = physsim.Intrinsics.from_pinhole(640, 480, _MJ_F, _MJ_F, 319.5, 239.5)
+
+
+def intrinsics(renderer: str) -> physsim.Intrinsics:
+  return MJ_INTRINSICS if renderer == 'mujoco' else INTRINSICS
+
+
+def _mujoco_depth(strip, table, pose) -> np.ndarray:
+  """A clean depth frame by MuJoCo's OpenGL renderer (MUJOCO_GL=egl)."""
+  import mujoco  # noqa: PLC0415 - only this renderer needs it here
+
+  model = mujoco.MjModel.from_xml_string(tabletop.mjcf(strip, pose, table, MJ_FOVY))
+  data = mujoco.MjData(model)
+  mujoco.mj_forward(model, data)
+  r = mujoco.Renderer(model, MJ_INTRINSICS.height, MJ_INTRINSICS.width)
+  try:
+    r.enable_depth_rendering()
+    r.update_scene(data, camera='cam')
+    depth = np.asarray(r.render(), np.float64)
+  finally:
+    r.close()
+  return np.where(depth < 25.0, depth, 0.0).astype(np.float32)
+
+
+def render_setup(setup: dict, key, renderer: str = 'raycaster') -> np.ndarray:
   """(FRAMES, H, W) noisy depth frames of a set-up."""
   strip = tabletop.Strip(**setup['strip'])
   table = tabletop.Table(**setup['table'])
@@ -121,20 +155,26 @@ def render_setup(setup: dict, key) -> np.ndarray:
   pose = tabletop.camera(table, cam['distance'], cam['elevation_deg'],
                          cam['azimuth_deg'], cam['roll_deg'],
                          x=strip.x + setup['aim'])  # fmt: skip
-  eye_y = float(np.asarray(pose.position)[1])
-  v, f = tabletop.scene(strip, table, floor_to_y=eye_y - 0.05)
-  clean = render.depth_image(v, f, INTRINSICS, pose)
+  intr = intrinsics(renderer)
+  if renderer == 'mujoco':
+    clean = jax.numpy.asarray(_mujoco_depth(strip, table, pose))
+  else:
+    eye_y = float(np.asarray(pose.position)[1])
+    v, f = tabletop.scene(strip, table, floor_to_y=eye_y - 0.05)
+    clean = render.depth_image(v, f, intr, pose)
   frames = jax.numpy.broadcast_to(clean, (FRAMES, *clean.shape))
-  return np.asarray(sensor.apply_noise_frames(key, frames, INTRINSICS))
+  return np.asarray(sensor.apply_noise_frames(key, frames, intr))
 
 
-def read_setup(setup: dict, key, floor: float) -> dict:
+def read_setup(setup: dict, key, floor: float, renderer: str = 'raycaster') -> dict:
   """The reader's c on a set-up, with its z-score at ``floor``."""
-  depth = render_setup(setup, key)
+  depth = render_setup(setup, key, renderer)
   c = setup['strip']['bending_length']
   row = {'c': c, 'setup': setup}
   try:
-    r = overhang_depth.read(depth, INTRINSICS, setup['told_overhang'], RULER_SD)
+    r = overhang_depth.read(
+      depth, intrinsics(renderer), setup['told_overhang'], RULER_SD
+    )
   except ValueError as e:
     return {**row, 'refused': str(e)}
   sd = math.hypot(r.fit_sd, floor * r.bending_length)
@@ -324,7 +364,7 @@ def main(args: Args) -> None:
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
     setup = draw_setup(rng, c)
-    row = read_setup(setup, jax.random.fold_in(key, i), floor)
+    row = read_setup(setup, jax.random.fold_in(key, i), floor, args.renderer)
     rows.append(row)
     if example is None and 'c_hat' in row:
       example = row

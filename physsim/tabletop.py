@@ -166,3 +166,35 @@ def camera(table: Table, distance: float, elevation_deg: float, azimuth_deg: flo
     [math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)]
   )
   return camera_lib.look_at(eye, target, roll_deg=roll_deg)
+
+
+def mjcf(strip: Strip, pose: camera_lib.Pose, table: Table = Table(),
+         fovy_deg: float = 45.0) -> str:  # fmt: skip
+  """The same scene for MuJoCo's own OpenGL renderer (an independent check of
+  the ray-caster's): the table's top a box, the floor a box, the strip's
+  upper face a two-sided mesh, and a camera ``cam`` at ``pose`` (OpenCV axes)
+  with a vertical field of view of ``fovy_deg``."""
+  v, f = strip_mesh(strip, table)
+  faces = np.concatenate([f, f[:, ::-1]])
+  r = np.asarray(pose.rotation, np.float64)
+  xyaxes = np.concatenate([r[:, 0], -r[:, 1]])  # MuJoCo's camera: y up
+
+  def fmt(a):
+    return ' '.join(f'{x:.9g}' for x in np.ravel(a))
+
+  h, t = table.height, table.thickness
+  return f"""
+<mujoco>
+  <visual><map znear="0.01" zfar="30"/></visual>
+  <asset>
+    <mesh name="strip" vertex="{fmt(v)}" face="{fmt(faces)}" inertia="shell"/>
+  </asset>
+  <worldbody>
+    <geom name="strip" type="mesh" mesh="strip" contype="0" conaffinity="0"/>
+    <geom name="top" type="box" size="{table.width / 2} {table.depth / 2} {t / 2}"
+      pos="0 {-table.depth / 2} {h - t / 2}" contype="0" conaffinity="0"/>
+    <geom name="floor" type="box" size="4 4 0.05" pos="0 0 -0.05" contype="0"
+      conaffinity="0"/>
+    <camera name="cam" pos="{fmt(pose.position)}" xyaxes="{fmt(xyaxes)}" fovy="{fovy_deg}"/>
+  </worldbody>
+</mujoco>"""

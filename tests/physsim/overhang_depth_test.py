@@ -118,3 +118,33 @@ def test_a_strip_past_the_elastica_or_of_no_size_is_refused():
     tabletop.Strip(overhang=0.3, bending_length=0.01)
   with pytest.raises(ValueError, match='Strip.width'):
     dataclasses.replace(tabletop.Strip(0.04, 0.02), width=float('nan'))
+
+
+def test_a_strip_rendered_by_mujocos_own_renderer_is_read_too():
+  """MuJoCo's OpenGL renderer (the table a box, square pixels), not the
+  project's ray-caster: the reading does not lean on its conventions."""
+  import math
+
+  import mujoco
+
+  from tests import mujoco_gl
+
+  strip = tabletop.Strip(overhang=0.04, bending_length=0.02, thickness=0.001)
+  pose = _pose()
+  model = mujoco.MjModel.from_xml_string(tabletop.mjcf(strip, pose, TABLE, 45.0))
+  data = mujoco.MjData(model)
+  mujoco.mj_forward(model, data)
+  renderer = mujoco_gl.offscreen_renderer(model, 240, 320)
+  try:
+    renderer.enable_depth_rendering()
+    renderer.update_scene(data, camera='cam')
+    depth = np.asarray(renderer.render(), np.float64)
+  finally:
+    renderer.close()
+  depth = np.where(depth < 25.0, depth, 0.0)
+  f = 120 / math.tan(math.radians(22.5))
+  intr = physsim.Intrinsics.from_pinhole(320, 240, f, f, 159.5, 119.5)
+  r = overhang_depth.read(depth, intr, 0.04, 0.001)
+  assert r.bending_length == pytest.approx(0.02, rel=2 * _CLEAN_TOL)
+  height = float(np.asarray(pose.position)[2]) - TABLE.height
+  assert r.camera_height_m == pytest.approx(height, abs=_HEIGHT_TOL_M)
