@@ -18,11 +18,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
+import cv2
 import numpy as np
 
 from physsim import camera as camera_lib
-from physsim import cantilever
+from physsim import cantilever, dataset, render, sensor
+
+# write_recording's default camera: a depth camera's 58 x 45 degrees at 320 x 240
+RECORDING_CAMERA = camera_lib.Intrinsics(320, 240)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,3 +203,32 @@ def mjcf(strip: Strip, pose: camera_lib.Pose, table: Table = Table(),
     <camera name="cam" pos="{fmt(pose.position)}" xyaxes="{fmt(xyaxes)}" fovy="{fovy_deg}"/>
   </worldbody>
 </mujoco>"""
+
+
+def write_recording(root: str, strip: Strip, table: Table = Table(),
+                    pose: camera_lib.Pose | None = None,
+                    intrinsics: camera_lib.Intrinsics = RECORDING_CAMERA,
+                    frames: int = 3, key=None) -> tuple[str, str]:  # fmt: skip
+  """A recording of the scene as a depth camera's tools write it: ``frames``
+  16-bit PNG frames in mm (the ray-caster's; with ``key``, the sensor
+  model's noise on each) under ``<root>/strip`` and the camera's OpenCV-style
+  JSON ``<root>/strip_camera.json``; the camera ``pose`` (default: 0.4 m in
+  front of the edge, 28 degrees up, 10 to the side). Returns both paths."""
+  pose = pose if pose is not None else camera(table, 0.4, 28.0, 10.0, x=strip.x)
+  v, f = scene(strip, table, floor_to_y=float(np.asarray(pose.position)[1]) - 0.05)
+  clean = np.asarray(render.depth_image(v, f, intrinsics, pose))
+  stack = np.broadcast_to(clean, (frames, *clean.shape))
+  if key is not None:
+    stack = np.asarray(sensor.apply_noise_frames(key, stack, intrinsics))
+  folder = os.path.join(root, 'strip')
+  os.makedirs(folder)
+  for k, mm in enumerate(dataset.depth_to_mm(stack)):
+    if not cv2.imwrite(os.path.join(folder, f'{k:04d}.png'), mm):
+      raise OSError(f'{folder}: could not write frame {k}')
+  cam = os.path.join(root, 'strip_camera.json')
+  i = intrinsics
+  dataset.write_json_atomic(
+    cam, {'width': i.width, 'height': i.height, 'fx': i.fx, 'fy': i.fy,
+          'cx': i.cx, 'cy': i.cy},
+  )  # fmt: skip
+  return folder, cam

@@ -290,7 +290,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
   elif mode is None:
     differs.append(
-      'a bending-length reading (not calibrated)'
+      'bending-length reading (not calibrated)'
       if config.measured.bending_length_sd > 0
       else 'combination of measurements'
     )

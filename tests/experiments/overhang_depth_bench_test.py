@@ -42,3 +42,28 @@ def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
   assert both['bending_scale']['narrowing_90'] > 8
   assert both['bending_scale']['held_90'] and both['bending_scale']['error'] < 1.15
   assert both['wind_speed']['held_90'] and both['wind_speed']['error'] < 0.06
+
+
+def test_a_protocol_set_is_written_for_a_sheet_recording(tmp_path):
+  """benchmarks/protocol_set.py: the sheet's truth gives the strip's, and the
+  protocol file names both, the estimate's edge reading the strip back."""
+  import json
+
+  from benchmarks import protocol_set
+  from experiments.pipeline import takes
+  from physsim import overhang_depth
+
+  seq = tmp_path / 'seq'
+  seq.mkdir()
+  truth = {'bending_scale': 1.3, 'area_weight': 0.19, 'wind_speed': 2.5}
+  (seq / 'meta.json').write_text(json.dumps(truth))
+  out = tmp_path / 'set'
+  protocol_set.main(protocol_set.Args(sequence=str(seq), out=str(out)))
+  path = str(out / 'protocol.json')
+  (take,) = takes.read(path)
+  assert take.path == str(seq) and abs(take.wind[0] / 2.5 - 1) < 0.1
+  strip = takes.fabric_overhang(path)
+  space = physsim.search_space('gray_interlock')
+  c = float(physsim.params.bending_length(1.3, 0.19, space.rigidity))
+  r = overhang_depth.read_recording(strip.path, strip.camera_json, strip.length)
+  assert r.bending_length == pytest.approx(c, rel=0.03)
