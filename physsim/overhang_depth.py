@@ -317,6 +317,11 @@ def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
     # the top again from its points behind the edge: its RANSAC inliers
     # include a band of the face and of the strip under the edge
     behind = on_top & (out < -2 * PLANE_TOL) & (np.abs(height) < PLANE_TOL)
+    if behind.sum() < MIN_FACE_POINTS:
+      raise ValueError(
+        f"{name}: {int(behind.sum())} points of the table's top behind its edge; "
+        'film the edge with the table top in the upper part of the frame'
+      )
     centre = flat[behind].mean(axis=0)
     normal = np.linalg.svd(flat[behind] - centre, full_matrices=False)[2][-1]
     top = _oriented(scene_lib.Plane(normal, float(-normal @ centre)))
