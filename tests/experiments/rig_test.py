@@ -12,6 +12,7 @@ import os
 import numpy as np
 import pytest
 
+import physsim
 from experiments.pipeline import intake, objective, rig
 from physsim import camera, dataset
 
@@ -192,22 +193,33 @@ def test_a_swatch_is_estimated_at_its_size_from_the_command_line(tmp_path):
 @pytest.mark.slow
 def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_path):
   """Issue 39, item 3, at a tiny mesh: the sheet (a 2% anemometer) and a 30 cm
-  swatch (no reading), each with its own camera file and up axis, estimated
-  jointly from a protocol file; each recording's search simulates its own
-  cloth, and joint.json holds the shared bending and area weight."""
+  swatch (no reading), each with its own camera file and up axis, and the
+  fabric's strip over a table's edge (a depth recording of its overhang),
+  estimated jointly from a protocol file; each recording's search simulates
+  its own cloth, the strip's bending length enters the prior, and joint.json
+  holds the shared bending and area weight."""
   import subprocess  # noqa: PLC0415
   import sys  # noqa: PLC0415
+
+  from physsim import tabletop  # noqa: PLC0415
 
   sheet = rig.write(rig.SMOKE, str(tmp_path / 'sheet'))
   r = _swatch(seed=12)
   swatch = rig.write(r, str(tmp_path / 'swatch'))
+  truth = rig.SMOKE
+  space = physsim.search_space(truth.material)
+  c = float(physsim.params.bending_length(truth.bending_scale, truth.area_weight,
+                                          space.rigidity))  # fmt: skip
+  length = round(2 * c * 200) / 200
+  tabletop.write_recording(str(tmp_path), tabletop.Strip(length, c))
   protocol = tmp_path / 'protocol.json'
   protocol.write_text(json.dumps({'recordings': [
     {'recording': 'sheet/depth', 'camera_json': 'sheet/camera.json',
      'world_up': 'z', 'wind_speed': 3.52 * 1.01, 'wind_speed_sd': 0.07},
     {'recording': 'swatch/depth', 'camera_json': 'swatch/camera_imu.json',
      'cloth_size': 0.3},
-  ]}))  # fmt: skip
+  ], 'fabric': {'overhang': {'recording': 'strip', 'camera_json': 'strip_camera.json',
+                             'length': length}}}))  # fmt: skip
   assert os.path.isdir(sheet['depth']) and os.path.isdir(swatch['depth'])
   done = subprocess.run(
     [sys.executable, '-m', 'experiments.estimate', '--preset=smoke',
@@ -230,6 +242,12 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   for name in ('bending_scale', 'area_weight'):
     lo, hi = joint[name]['interval_90']
     assert 0 < lo < hi, (name, lo, hi)
+  # the strip read at the edge: bending about its truth, far inside the box
+  # (x100): c to ~3%, the area weight over its box (+-19%) at this tiny size
+  assert 'bending length' in done.stdout and 'strip pixels' in done.stdout
+  lo, hi = joint['bending_scale']['interval_90']
+  assert lo < truth.bending_scale < hi and hi / lo < 3, (lo, hi)
+  assert own[0]['config']['measured']['bending_length'] == pytest.approx(c, rel=0.05)
 
 
 def test_the_mismatched_recipe_changes_the_physics_and_stays_a_cloth():
