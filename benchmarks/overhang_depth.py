@@ -44,6 +44,7 @@ import glob
 import json
 import math
 import os
+import statistics
 import time
 
 import jax
@@ -57,7 +58,7 @@ import bo  # noqa: E402
 import physsim  # noqa: E402
 from experiments.pipeline import cli, files  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
-from physsim import cantilever, overhang_depth, render, sensor, tabletop  # noqa: E402
+from physsim import cantilever, overhang_depth, sensor, tabletop  # noqa: E402
 
 INTRINSICS = physsim.Intrinsics(640, 480, 58.0, 45.0)
 FRAMES = 5
@@ -156,12 +157,9 @@ def render_setup(setup: dict, key, renderer: str = 'raycaster') -> np.ndarray:
                          cam['azimuth_deg'], cam['roll_deg'],
                          x=strip.x + setup['aim'])  # fmt: skip
   intr = intrinsics(renderer)
-  if renderer == 'mujoco':
-    clean = jax.numpy.asarray(_mujoco_depth(strip, table, pose))
-  else:
-    eye_y = float(np.asarray(pose.position)[1])
-    v, f = tabletop.scene(strip, table, floor_to_y=eye_y - 0.05)
-    clean = render.depth_image(v, f, intr, pose)
+  if renderer == 'raycaster':
+    return tabletop.depth_frames(strip, pose, table, intr, FRAMES, key)
+  clean = _mujoco_depth(strip, table, pose)
   frames = jax.numpy.broadcast_to(clean, (FRAMES, *clean.shape))
   return np.asarray(sensor.apply_noise_frames(key, frames, intr))
 
@@ -188,7 +186,7 @@ def read_setup(setup: dict, key, floor: float, renderer: str = 'raycaster') -> d
 def fitted_floor(rows: list[dict], level: float = 0.9) -> float:
   """The smallest floor at which ``level`` of the rows' central intervals
   (Gaussian, fit sd and floor) hold c."""
-  k = 1.6448536269514722 if level == 0.9 else None
+  k = statistics.NormalDist().inv_cdf((1 + level) / 2)
   ok = [r for r in rows if 'c_hat' in r]
   for floor in np.arange(0.0, 0.2001, 0.0025):
     held = np.mean([

@@ -205,6 +205,25 @@ def mjcf(strip: Strip, pose: camera_lib.Pose, table: Table = Table(),
 </mujoco>"""
 
 
+def depth_frames(strip: Strip | None, pose: camera_lib.Pose, table: Table = Table(),
+                 intrinsics: camera_lib.Intrinsics = RECORDING_CAMERA,
+                 frames: int = 1, key=None) -> np.ndarray:  # fmt: skip
+  """(frames, H, W) depth of the scene (the table alone for ``strip`` None)
+  by the ray-caster from ``pose``, metres, 0 where nothing is hit; with
+  ``key``, each frame with the sensor model's own noise, else all alike."""
+  floor_to_y = float(np.asarray(pose.position)[1]) - 0.05  # in front of the camera
+  if strip is None:
+    v, f = table_mesh(table, floor_to_y)
+    v, f = v.astype(np.float32), f.astype(np.int32)
+  else:
+    v, f = scene(strip, table, floor_to_y)
+  clean = render.depth_image(v, f, intrinsics, pose)
+  stack = np.broadcast_to(np.asarray(clean), (frames, *clean.shape))
+  if key is not None:
+    stack = np.asarray(sensor.apply_noise_frames(key, stack, intrinsics))
+  return stack
+
+
 def write_recording(root: str, strip: Strip, table: Table = Table(),
                     pose: camera_lib.Pose | None = None,
                     intrinsics: camera_lib.Intrinsics = RECORDING_CAMERA,
@@ -215,16 +234,14 @@ def write_recording(root: str, strip: Strip, table: Table = Table(),
   JSON ``<root>/strip_camera.json``; the camera ``pose`` (default: 0.4 m in
   front of the edge, 28 degrees up, 10 to the side). Returns both paths."""
   pose = pose if pose is not None else camera(table, 0.4, 28.0, 10.0, x=strip.x)
-  v, f = scene(strip, table, floor_to_y=float(np.asarray(pose.position)[1]) - 0.05)
-  clean = np.asarray(render.depth_image(v, f, intrinsics, pose))
-  stack = np.broadcast_to(clean, (frames, *clean.shape))
-  if key is not None:
-    stack = np.asarray(sensor.apply_noise_frames(key, stack, intrinsics))
+  stack = depth_frames(strip, pose, table, intrinsics, frames, key)
   folder = os.path.join(root, 'strip')
-  os.makedirs(folder)
+  partial = folder + '.partial'  # renamed once every frame is written
+  os.makedirs(partial)
   for k, mm in enumerate(dataset.depth_to_mm(stack)):
-    if not cv2.imwrite(os.path.join(folder, f'{k:04d}.png'), mm):
-      raise OSError(f'{folder}: could not write frame {k}')
+    if not cv2.imwrite(os.path.join(partial, f'{k:04d}.png'), mm):
+      raise OSError(f'{partial}: could not write frame {k}')
+  os.rename(partial, folder)
   cam = os.path.join(root, 'strip_camera.json')
   i = intrinsics
   dataset.write_json_atomic(

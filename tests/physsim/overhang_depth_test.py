@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import physsim
-from physsim import cantilever, overhang_depth, render, sensor, tabletop
+from physsim import cantilever, overhang_depth, tabletop
 
 INTR = physsim.Intrinsics(320, 240, 58.0, 45.0)
 TABLE = tabletop.Table()
@@ -28,17 +28,9 @@ def _pose(distance=0.4, elevation=28.0, azimuth=10.0, x=0.0):
 
 
 def _render(strip, pose, key=None, frames=3, table=TABLE):
-  eye_y = float(np.asarray(pose.position)[1])
-  if strip is None:
-    v, f = tabletop.table_mesh(table, floor_to_y=eye_y - 0.05)
-    v, f = v.astype(np.float32), f.astype(np.int32)
-  else:
-    v, f = tabletop.scene(strip, table, floor_to_y=eye_y - 0.05)
-  clean = np.asarray(render.depth_image(v, f, INTR, pose))
-  if key is None:
-    return clean
-  stack = jax.numpy.broadcast_to(clean, (frames, *clean.shape))
-  return np.asarray(sensor.apply_noise_frames(key, stack, INTR))
+  """One clean frame, or ``frames`` noisy ones with ``key``."""
+  d = tabletop.depth_frames(strip, pose, table, INTR, frames, key)
+  return d if key is not None else d[0]
 
 
 def test_a_clean_strip_is_read_to_its_bending_length():
