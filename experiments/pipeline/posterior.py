@@ -107,20 +107,33 @@ def _reading_range(space: physsim.SearchSpace, name: str) -> tuple[float, float]
 
 
 def simulated_reading(
-  name: str, truth: dict, rel_sd: float, seed: int, seq: int
-) -> Measured:
+  name: str, truth: dict, rel_sd: float, seed: int, seq: int,
+  space: physsim.SearchSpace | None = None,
+) -> Measured:  # fmt: skip
   """A simulated instrument's reading of ``name`` ('wind_speed': an
-  anemometer; 'area_weight': a scale and a ruler) for a recording with known
-  ``truth``: the truth times ``1 + rel_sd * z``, ``z`` standard normal drawn
-  from ``(seed, seq)`` alone, so recording ``seq`` gets the same reading in
-  every study that uses the same seed (the calibration's post-hoc modes and a
-  search run with the reading as its prior). Its uncertainty is ``rel_sd``
-  times the truth."""
-  if name not in FIELDS[1:]:
-    raise ValueError(f'no instrument reads {name!r}: one of {FIELDS[1:]}')
-  rng = np.random.default_rng([seed, 13, seq, FIELDS.index(name)])
-  v = truth[name] * (1.0 + rel_sd * rng.standard_normal())
-  return Measured(**{name: v, f'{name}_sd': rel_sd * truth[name]})
+  anemometer; 'area_weight': a scale and a ruler; 'bending_length': an
+  overhang, Peirce's c of the truth's bending and area weight against
+  ``space``'s rigidity) for a recording with known ``truth``: the truth times
+  ``1 + rel_sd * z``, ``z`` standard normal drawn from ``(seed, seq)`` alone,
+  so recording ``seq`` gets the same reading in every study that uses the
+  same seed (the calibration's post-hoc modes and a search run with the
+  reading as its prior). Its uncertainty is ``rel_sd`` times the truth."""
+  names = (*FIELDS[1:], 'bending_length')
+  if name not in names:
+    raise ValueError(f'no instrument reads {name!r}: one of {names}')
+  if name == 'bending_length':
+    _reading_range(space, name)  # the box knows its fabric's rigidity
+    value = float(
+      physsim.params.bending_length(
+        truth['bending_scale'], truth['area_weight'], space.rigidity
+      )
+    )  # fmt: skip
+  else:
+    value = truth[name]
+  stream = FIELDS.index(name) if name in FIELDS else len(FIELDS)
+  rng = np.random.default_rng([seed, 13, seq, stream])
+  v = value * (1.0 + rel_sd * rng.standard_normal())
+  return Measured(**{name: v, f'{name}_sd': rel_sd * value})
 
 
 SUB_CELLS = (32, 4)  # a bending length's term averaged over (bending, area weight)
@@ -172,12 +185,18 @@ def log_prior(points, space: physsim.SearchSpace, measured: Measured,
       )
     else:
       offsets = _cell_offsets(grid)
-      sub = np.clip(np.asarray(points)[:, None, :] + offsets[None], -1.0, 1.0)
+      # the term is the same for every wind: once per (bending, area weight)
+      bw, which = np.unique(
+        np.asarray(points, np.float64)[:, [0, 2]], axis=0, return_inverse=True
+      )
+      centres = np.stack([bw[:, 0], np.zeros(len(bw)), bw[:, 1]], axis=1)
+      sub = np.clip(centres[:, None, :] + offsets[None], -1.0, 1.0)
       p = physsim.params.from_unit(sub.reshape(-1, 3), space)
       term = _length_term(p.bending_scale, p.area_weight, space, measured)
-      out += np.asarray(logsumexp(term.reshape(len(points), -1), axis=1)) - np.log(
-        len(offsets)
-      )
+      term = term.reshape(len(bw), -1)
+      top = term.max(axis=1)  # NumPy: the cells' count varies, nothing to compile
+      cell = top + np.log(np.exp(term - top[:, None]).sum(axis=1))
+      out += cell[np.ravel(which)] - np.log(len(offsets))
   return out
 
 
@@ -201,27 +220,33 @@ def refine_draws(samples_unit, grid, space: physsim.SearchSpace, measured: Measu
     return x
   g = np.asarray(grid, np.float64)
   cell = np.clip(np.floor((x + 1.0) / 2.0 * g), 0, g - 1)
-  centre = -1.0 + (2.0 * cell + 1.0) / g
-  offsets = _cell_offsets(grid, sub)
+  # The term depends on bending and area weight alone: one row of sub-points
+  # per (bending, area weight) cell the draws fell in, not one per draw.
+  cells, which = np.unique(cell[:, [0, 2]], axis=0, return_inverse=True)
+  which = np.ravel(which)
+  centre = -1.0 + (2.0 * cells + 1.0) / g[[0, 2]]
+  offsets = _cell_offsets(grid, sub)[:, [0, 2]]
+  pts = np.clip(centre[:, None, :] + offsets[None], -1.0, 1.0)  # (U, K, 2)
+  flat = pts.reshape(-1, 2)
+  p = physsim.params.from_unit(
+    np.stack([flat[:, 0], np.zeros(len(flat)), flat[:, 1]], axis=1), space
+  )
+  term = _length_term(p.bending_scale, p.area_weight, space, measured)
+  term = term.reshape(len(cells), -1)
+  cdf = np.cumsum(np.exp(term - term.max(axis=1, keepdims=True)), axis=1)
+  width = 2.0 / g
   rng = np.random.default_rng([seed, 29])
-  for start in range(0, len(x), 4096):  # memory: S x K sub-points
+  for start in range(0, len(x), 4096):  # the same draws whatever the chunking
     part = slice(start, start + 4096)
-    pts = np.clip(centre[part, None, :] + offsets[None], -1.0, 1.0)
-    pts[..., 1] = x[part, None, 1]  # the wind where it was drawn
-    p = physsim.params.from_unit(pts.reshape(-1, 3), space)
-    term = _length_term(p.bending_scale, p.area_weight, space, measured)
-    term = term.reshape(len(pts), -1)
-    prob = np.exp(term - term.max(axis=1, keepdims=True))
-    cdf = np.cumsum(prob, axis=1)
-    u = rng.random(len(pts)) * cdf[:, -1]
-    k = np.minimum((cdf < u[:, None]).sum(axis=1), cdf.shape[1] - 1)
-    width = 2.0 / g
-    jitter = (rng.random((len(pts), 2)) - 0.5) * np.array(
+    mine = cdf[which[part]]
+    u = rng.random(len(mine)) * mine[:, -1]
+    k = np.minimum((mine < u[:, None]).sum(axis=1), mine.shape[1] - 1)
+    jitter = (rng.random((len(mine), 2)) - 0.5) * np.array(
       [width[0] / sub[0], width[2] / sub[1]]
     )
-    chosen = pts[np.arange(len(pts)), k]
+    chosen = pts[which[part], k]
     x[part, 0] = chosen[:, 0] + jitter[:, 0]
-    x[part, 2] = chosen[:, 2] + jitter[:, 1]
+    x[part, 2] = chosen[:, 1] + jitter[:, 1]
   return np.clip(x, -1.0, 1.0)
 
 
