@@ -235,18 +235,34 @@ def _differing_fields(config, cal: dict) -> list[str]:
 def calibration_mode(measured, joint: bool = False) -> str | None:
   """The calibration study's mode (``experiments.studies.calibration.MODES``)
   an estimate with these readings falls in: the video alone, with a measured
-  wind, with a measured area weight, a joint pair, or a joint pair with a wind
+  wind, with a measured area weight, with a bending length read from an
+  overhang (and a measured wind), a joint pair, or a joint pair with a wind
   reading at each recording (``measured`` is then one recording's); None
-  where none fits (both readings, a joint estimate with an area weight, or a
-  bending length: no study has calibrated one)."""
+  where none fits (an area weight with another reading, a joint estimate with
+  an area weight or a bending length)."""
   wind, weight = measured.wind_speed_sd > 0, measured.area_weight_sd > 0
-  if getattr(measured, 'bending_length_sd', 0.0) > 0:
-    return None
+  length = getattr(measured, 'bending_length_sd', 0.0) > 0
   if joint:
-    return None if weight else 'joint pair, known winds' if wind else 'joint pair'
-  if wind and weight:
+    return (
+      None if weight or length else 'joint pair, known winds' if wind else 'joint pair'
+    )
+  if weight and (wind or length):
     return None
+  if length:
+    return 'known wind, bending length' if wind else 'bending length'
   return 'known wind' if wind else 'known area weight' if weight else 'video'
+
+
+def _readings_of(mode: str | None) -> tuple[str, ...]:
+  """The readings a calibration mode's estimates were given (their
+  uncertainty must be within a factor of two of the calibrated one)."""
+  return {
+    'known wind': ('wind_speed',),
+    'known area weight': ('area_weight',),
+    'joint pair, known winds': ('wind_speed',),
+    'bending length': ('bending_length',),
+    'known wind, bending length': ('wind_speed', 'bending_length'),
+  }.get(mode, ())
 
 
 def _same(mine, theirs) -> bool:
@@ -290,8 +306,8 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
   elif mode is None:
     differs.append(
-      'bending-length reading (not calibrated)'
-      if config.measured.bending_length_sd > 0
+      'bending-length reading in a joint estimate (not calibrated)'
+      if config.measured.bending_length_sd > 0 and joint
       else 'combination of measurements'
     )
   theirs = cal.get('network', {}).get('recipe')
@@ -302,14 +318,13 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   rec = cal.get('recalibration')
   if rec and mode is not None and mode not in rec['modes']:
     differs.append(f'{mode} (not in this calibration)')
-  if rec and mode in ('known wind', 'known area weight', 'joint pair, known winds'):
-    name = 'area_weight' if mode == 'known area weight' else 'wind_speed'
+  for name in _readings_of(mode) if rec else ():
     value, sd = getattr(config.measured, name), getattr(config.measured, f'{name}_sd')
-    ratio = (sd / value) / rec['measured_sd']
-    if not 0.5 <= ratio <= 2.0:
+    calibrated = rec.get('length_sd' if name == 'bending_length' else 'measured_sd')
+    if calibrated is None or not 0.5 <= (sd / value) / calibrated <= 2.0:
       differs.append(
         f'{name} reading uncertainty ({100 * sd / value:.1f}%; calibrated: '
-        f'{100 * rec["measured_sd"]:.0f}%)'
+        + (f'{100 * calibrated:.0f}%)' if calibrated else 'none)')
       )
   if differs:
     return {'matches': False, 'differs': differs, **head}
@@ -342,6 +357,11 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     **({'weaker_network': weaker} if weaker else {}),
     **({'checks': checks} if checks else {}),
     'n_calibration_recordings': rec['n_calibration_recordings'],
+    # the readings its recordings were given, simulated to this relative error
+    'readings': {
+      name: rec['length_sd' if name == 'bending_length' else 'measured_sd']
+      for name in _readings_of(mode)
+    },
     'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
     'weights': rec.get('weights', {}).get(mode, {}),
     'coverage': {
@@ -552,8 +572,12 @@ def calibration_line(cal: dict | None) -> str:
     )
     line = (
       f'calibration ({cal["mode"]}): intervals read at levels recalibrated on '
-      f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}); '
-      f'read so, {held} held the truth in their 90%/50% intervals: {parts}.'
+      f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}'
+      + ''.join(
+        f'; {name.replace("_", " ")} read to {100 * sd:.0f}%'
+        for name, sd in cal.get('readings', {}).items()
+      )
+      + f'); read so, {held} held the truth in their 90%/50% intervals: {parts}.'
     )
     for c in cal.get('checks', []):
       line += (

@@ -76,8 +76,11 @@ FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
 MODE_OF_READING = {'none': 'video', 'wind_speed': 'known wind',
                    'area_weight': 'known area weight'}  # fmt: skip
 LEVELS = (50, 90)
+# The modes with a bending length read from an overhang (issue 39's protocol:
+# the sheet with the strip, and with an anemometer too).
+LENGTH_MODES = ('bending length', 'known wind, bending length')
 MODES = ('video', 'known wind', 'known area weight', 'joint pair',
-         'joint pair, known winds')  # fmt: skip
+         'joint pair, known winds', *LENGTH_MODES)  # fmt: skip
 RESULT_FILE = 'calibration.json'
 CHECK_FILE = 'check.json'
 
@@ -105,6 +108,9 @@ class Config:
     sharpness_grid: candidate values of the likelihood's constant (the
       searches run with the estimate's sharpness).
     measured_sd: relative standard error of a measured wind or area weight.
+    length_sd: relative standard error of a bending length read from an
+      overhang (``LENGTH_MODES``; 0.04: the depth reader's median printed
+      error on the overhang benchmark's held-out set-ups).
     sequences: training simulations of the network (the demo's recipe).
     batch_size: recordings simulated per batch when making them.
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
@@ -136,6 +142,7 @@ class Config:
   folds: int = 5
   sharpness_grid: tuple[float, ...] = (0.05, 0.1, 0.15, 0.25, 0.35, 0.5, 0.7, 1.0, 1.4)
   measured_sd: float = 0.02
+  length_sd: float = 0.04
   sequences: int = 24
   batch_size: int = 64
   backend: str = cli.choice('auto', physsim.BACKENDS)
@@ -314,8 +321,9 @@ def check_config(config: Config) -> None:
   """Refuses a study that cannot run, naming the setting.
 
   Raises:
-    ValueError: an unknown fabric, pairs below one, or a paper-size study
-      with a network distance (it trains demo-size networks only).
+    ValueError: an unknown fabric, pairs below one, a reading's relative
+      error outside (0, 0.5], or a paper-size study with a network distance
+      (it trains demo-size networks only).
   """
   mats = study_materials(config)
   for m in mats:
@@ -327,6 +335,10 @@ def check_config(config: Config) -> None:
     raise ValueError(f'--materials={",".join(mats)}: a fabric twice')
   if config.pairs < 1:
     raise ValueError(f'--pairs={config.pairs}: need at least one pair')
+  for name in ('measured_sd', 'length_sd'):
+    v = getattr(config, name)
+    if not 0.0 < v <= 0.5:
+      raise ValueError(f'--{name}={v}: a relative reading error in (0, 0.5]')
   if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
@@ -559,6 +571,21 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
         draws, prior_draws[mode], row, r['seq'], point, prior_draws['video']
       )
       out[mode].append({'seq': r['seq'], 'material': material, 'truth': row, **score})
+    rng_length = np.random.default_rng(
+      [config.seed, 19, r['seq'], int(sharpness * 1000)]
+    )
+    for mode, (m, lp, prior_phys) in _length_priors(
+      config, material, r['seq'], t, n // 4
+    ).items():
+      post = np.asarray(bo.posterior.log_normalise(lp + ll))
+      unit = posterior_lib.refine_draws(
+        _draws(rng_length, grid, post, n), grid, space, m, seed=r['seq']
+      )
+      score = _score(
+        _physical_with_ratio(unit, space), prior_phys, row, r['seq'],
+        _prior_point(material, m), prior_draws['video'],
+      )  # fmt: skip
+      out[mode].append({'seq': r['seq'], 'material': material, 'truth': row, **score})
     mate = by_seq.get(r['seq'] ^ 1) if pairs else None  # the pair's other recording
     if mate is not None and r['seq'] % 2 == 0:
       zm = _saved(mate)
@@ -602,6 +629,51 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
           }
         )
   return out
+
+
+def _length_priors(config: Config, material: str, seq: int, truth: dict,
+                   n: int) -> dict:  # fmt: skip
+  """For ``LENGTH_MODES``, recording ``seq``'s simulated readings (the
+  overhang's bending length to ``config.length_sd``, the anemometer's wind to
+  ``measured_sd``, as the other modes draw it), their log priors on the
+  posterior grid (the length's averaged over each cell, as an estimate forms
+  it) and ``n`` of the prior's draws placed within their cells
+  (``posterior.refine_draws``): ``{mode: (measured, log_prior, draws)}``,
+  made once per recording whatever the likelihood setting."""
+  key = (config.seed, config.measured_sd, config.length_sd,
+         tuple(config.estimate.search.posterior_grid), material, seq, n,
+         tuple(sorted(truth.items())))  # fmt: skip
+  if key not in _LENGTH_CACHE:
+    space = physsim.search_space(material)
+    grid = tuple(config.estimate.search.posterior_grid)
+    points = bo.posterior.grid_points(grid)
+    length = posterior_lib.simulated_reading(
+      'bending_length', truth, config.length_sd, config.seed, seq, space
+    )
+    wind = posterior_lib.simulated_reading(
+      'wind_speed', truth, config.measured_sd, config.seed, seq
+    )
+    readings = {
+      'bending length': length,
+      'known wind, bending length': dataclasses.replace(
+        length, wind_speed=wind.wind_speed, wind_speed_sd=wind.wind_speed_sd
+      ),
+    }
+    rng = np.random.default_rng([config.seed, 23, seq])
+    out = {}
+    for mode, m in readings.items():
+      lp = posterior_lib.log_prior(points, space, m, grid)
+      unit = posterior_lib.refine_draws(
+        _draws(rng, grid, lp, n), grid, space, m, seed=seq + 1
+      )
+      out[mode] = (m, lp, _physical_with_ratio(unit, space))
+    if len(_LENGTH_CACHE) > 4096:
+      _LENGTH_CACHE.clear()
+    _LENGTH_CACHE[key] = out
+  return _LENGTH_CACHE[key]
+
+
+_LENGTH_CACHE: dict = {}
 
 
 def _at(qf: np.ndarray, cdf_levels: np.ndarray) -> np.ndarray:
@@ -1018,6 +1090,7 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
       'weights': chosen['weights'],
       'n_calibration_recordings': raw['video'].get('n', 0),
       'measured_sd': config.measured_sd,
+      'length_sd': config.length_sd,
     },
     'held_out': held,
     'held_out_uncalibrated': raw,

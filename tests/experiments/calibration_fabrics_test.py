@@ -204,6 +204,26 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
   wind = config.replace(wind_speed=3.0, wind_speed_sd=0.06)
   assert report.calibration_note(wind)['mode'] == 'known wind'
   assert report.calibration_note(config, joint=True, recordings=2)['matches']
+  # the protocol set (issue 39): with an overhang's bending length read to 4%
+  # (the depth reader's median), with and without the anemometer
+  space = physsim.search_space(material)
+  c = float(
+    physsim.params.bending_length(1.0, np.mean(space.area_weight), space.rigidity)
+  )
+  for readings, mode in (
+    (config, 'bending length'),
+    (wind, 'known wind, bending length'),
+  ):
+    strip = readings.replace(bending_length=c, bending_length_sd=0.04 * c)
+    note = report.calibration_note(strip)
+    assert note['matches'] and note['recalibrated'] and note['mode'] == mode, note
+    for field, cov in note['coverage'].items():
+      for level, (lo, hi) in PAPER_BANDS.items():
+        assert lo <= cov[level] <= hi, (mode, field, level, cov)
+  loose = wind.replace(bending_length=c, bending_length_sd=0.12 * c)
+  assert (
+    'bending_length reading uncertainty' in report.calibration_note(loose)['differs'][0]
+  )
 
 
 def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so():

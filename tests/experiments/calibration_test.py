@@ -199,6 +199,15 @@ def test_calibration_modes_follow_what_was_measured():
     report.calibration_mode(m(area_weight=0.2, area_weight_sd=0.004), joint=True)
     is None
   )
+  strip = m(bending_length=0.03, bending_length_sd=0.0012)
+  assert report.calibration_mode(strip) == 'bending length'
+  assert report.calibration_mode(dataclasses.replace(strip, wind_speed=3.0,
+                                                     wind_speed_sd=0.06)) == (
+    'known wind, bending length'
+  )  # fmt: skip
+  assert report.calibration_mode(strip, joint=True) is None
+  scale = dataclasses.replace(strip, area_weight=0.2, area_weight_sd=0.004)
+  assert report.calibration_mode(scale) is None
 
 
 def test_a_group_of_recordings_shares_bending_and_area_weight_not_wind():

@@ -177,6 +177,7 @@ def test_a_bending_length_and_a_scale_give_the_estimate_the_fabrics_bending(tmp_
   assert lo < b < hi and hi / lo < 1.35, (lo, hi)
   # narrowing is the video's over the prior with the readings: nothing here
   assert bending['narrowing_90'] == pytest.approx(1.0, abs=0.35)
-  assert out['calibration'] is None or 'bending-length reading (not calibrated)' in (
+  # a bending length with a scale's area weight: no calibration mode has both
+  assert out['calibration'] is None or 'combination of measurements' in (
     out['calibration'].get('differs', [])
   )
