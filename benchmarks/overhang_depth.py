@@ -56,7 +56,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, files  # noqa: E402
+from experiments.pipeline import cli, files, report  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from physsim import cantilever, overhang_depth, sensor, tabletop  # noqa: E402
 
@@ -80,6 +80,12 @@ class Args:
     likelihood: the packed runs' likelihood form.
     sharpness: and its sharpness (the shipped paper-size table's).
     renderer: 'raycaster' (``physsim.render``) or 'mujoco' (MuJoCo's OpenGL).
+    calibration: the calibration file whose tables the protocol sets are also
+      read with, as an estimate prints them ('': the shipped paper-size
+      shape calibration).
+    readings: an earlier run's ``overhang_depth.json`` whose set-ups and
+      readings to reuse (same seed and packed runs), rendering nothing: the
+      protocol sets re-read, e.g. with new calibration tables.
     out: output folder (JSON, PNG).
   """
 
@@ -91,6 +97,8 @@ class Args:
   likelihood: str = 'gibbs'
   sharpness: float = 0.5
   renderer: str = cli.choice('raycaster', ('raycaster', 'mujoco'))
+  calibration: str = ''
+  readings: str = ''
   out: str = 'out/overhang_depth'
 
 
@@ -216,9 +224,44 @@ def packed_runs(folder: str) -> list[dict]:
   return out
 
 
-def joint_estimate(run: dict, reading: dict, args: Args, seed: int) -> dict:
+# The calibration mode of each of the benchmark's protocol sets
+# (``experiments.studies.calibration.MODES``).
+MODE_OF_SET = {'sheet, anemometer': 'known wind',
+               'sheet, anemometer, overhang': 'known wind, bending length'}  # fmt: skip
+
+
+def shipped_tables(path: str) -> dict:
+  """``{set: (levels, weights)}`` of a calibration file's tables for the
+  benchmark's protocol sets (a set its file has no table for is left out)."""
+  cal = physsim.dataset.read_json(path)
+  rec = cal.get('recalibration') or {}
+  out = {}
+  for name, mode in MODE_OF_SET.items():
+    if mode in rec.get('modes', {}):
+      levels = np.asarray(rec['modes'][mode])
+      out[name] = (
+        {f: levels[:, i] for i, f in enumerate(rec['fields'])},
+        rec.get('weights', {}).get(mode, {}),
+      )
+  return out
+
+
+def _grid_draws(rng, pts, grid, log_p, space, measured, seed: int, n: int = 4000):
+  """Unit draws from a grid density, placed within their cells by a bending
+  length's reading (as an estimate draws them)."""
+  p = np.exp(log_p - log_p.max())
+  idx = rng.choice(len(pts), n, p=p / p.sum())
+  x = pts[idx] + (rng.random((n, 3)) - 0.5) * 2.0 / np.array(grid)
+  return posterior_lib.refine_draws(x, grid, space, measured, seed=seed)
+
+
+def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
+                   tables: dict | None = None) -> dict:  # fmt: skip
   """The protocol set's posterior: the sheet's likelihood with the wind read
-  to 2% and the overhang's bending length; errors and intervals per field."""
+  to 2% and the overhang's bending length; per field the point, intervals
+  and errors, read at the nominal levels ('raw') and, where ``tables`` (see
+  ``shipped_tables``) has the set's mode, as an estimate prints them: at the
+  calibration's levels, its point the weighted Bayes point ('printed')."""
   space = physsim.search_space(run['material'])
   truth = run['truth']
   grid = tuple(args.grid)
@@ -241,33 +284,38 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int) -> dict:
       form=args.likelihood, sharpness=args.sharpness,
     )
   )  # fmt: skip
-  prior_box = posterior_lib.physical(rng.uniform(-1, 1, (4000, 3)), space)
+  box = posterior_lib.summarise(rng.uniform(-1, 1, (4000, 3)), space,
+                                rng.uniform(-1, 1, (4000, 3)))  # fmt: skip
   out = {}
   for mode, m in modes.items():
     lp = posterior_lib.log_prior(pts, space, m, grid)
     post = np.asarray(bo.posterior.log_normalise(lp + ll))
-    p = np.exp(post - post.max())
-    idx = rng.choice(len(pts), 4000, p=p / p.sum())
-    draws = pts[idx] + (rng.random((4000, 3)) - 0.5) * 2.0 / np.array(grid)
-    draws = posterior_lib.refine_draws(draws, grid, space, m, seed=run['seq'])
-    phys = posterior_lib.physical(draws, space)
-    row = {}
-    for i, f in enumerate(posterior_lib.FIELDS):
-      x, t = phys[:, i], truth[f]
-      med = float(np.median(x))
-      lo90, hi90 = np.quantile(x, [0.05, 0.95])
-      lo50, hi50 = np.quantile(x, [0.25, 0.75])
-      pl, ph = np.quantile(prior_box[:, i], [0.05, 0.95])
-      log = f == 'bending_scale'
-      width = math.log(hi90 / lo90) if log else hi90 - lo90
-      prior_width = math.log(ph / pl) if log else ph - pl
-      row[f] = {
-        'median': med, 'interval_90': [float(lo90), float(hi90)],
-        'error': (math.exp(abs(math.log(med / t))) if log else abs(med / t - 1)),
-        'held_90': bool(lo90 <= t <= hi90), 'held_50': bool(lo50 <= t <= hi50),
-        'narrowing_90': prior_width / max(width, 1e-12),
-      }  # fmt: skip
-    out[mode] = row
+    draws = _grid_draws(rng, pts, grid, post, space, m, run['seq'])
+    prior = _grid_draws(rng, pts, grid, lp, space, m, run['seq'] + 1)
+    readings = {'raw': posterior_lib.summarise(draws, space, prior, measured=m)}
+    if tables and mode in tables:
+      levels, weights = tables[mode]
+      readings['printed'] = posterior_lib.summarise(
+        draws, space, prior, levels, weights, m
+      )
+    out[mode] = {}
+    for how, summ in readings.items():
+      row = {}
+      for f in posterior_lib.FIELDS:
+        s, t = summ[f], truth[f]
+        point = s['median'] if how == 'raw' else s['bayes']
+        (lo90, hi90), (lo50, hi50) = s['interval_90'], s['interval_50']
+        log = f == 'bending_scale'
+        width = math.log(hi90 / lo90) if log else hi90 - lo90
+        pl, ph = box[f]['interval_90']
+        prior_width = math.log(ph / pl) if log else ph - pl
+        row[f] = {
+          'point': point, 'interval_90': [lo90, hi90],
+          'error': (math.exp(abs(math.log(point / t))) if log else abs(point / t - 1)),
+          'held_90': bool(lo90 <= t <= hi90), 'held_50': bool(lo50 <= t <= hi50),
+          'narrowing_90': prior_width / max(width, 1e-12),
+        }  # fmt: skip
+      out[mode][how] = row
   return out
 
 
@@ -285,10 +333,12 @@ def summary(rows: list[dict], sets: list[dict]) -> dict:
     'c_held_50': float(np.mean(np.abs(z) <= 0.6745)) if len(ok) else None,
     'fitted_floor': fitted_floor(rows) if len(ok) else None,
   }
-  if sets:
-    for mode in sets[0]['joint']:
-      m = [s['joint'][mode] for s in sets if mode in s['joint']]
-      out[mode] = {
+  for mode in sets[0]['joint'] if sets else ():
+    for how in ('raw', 'printed'):
+      m = [s['joint'][mode][how] for s in sets if how in s['joint'].get(mode, {})]
+      if not m:
+        continue
+      out[f'{mode} ({how})'] = {
         'sets': len(m),
         'bending_median_factor': float(np.median([x['bending_scale']['error'] for x in m])),
         'bending_narrowing_90_median': float(
@@ -339,12 +389,36 @@ def plot(rows: list[dict], example: dict | None, path: str) -> None:
   plt.close(fig)
 
 
+def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
+  """The set-ups and readings of an earlier run (``--readings``).
+
+  Raises:
+    ValueError: its seed, renderer or number of set-ups differs.
+  """
+  old = physsim.dataset.read_json(path)
+  for name in ('seed', 'renderer'):
+    theirs = old['args'].get(name, getattr(Args(), name))  # older runs: the default
+    if theirs != getattr(args, name):
+      raise ValueError(
+        f'--readings={path}: made with --{name}={theirs}, not {getattr(args, name)}'
+      )
+  if len(old['rows']) != n:
+    raise ValueError(f'--readings={path}: {len(old["rows"])} set-ups, not {n}')
+  return old['rows']
+
+
 def main(args: Args) -> None:
   floor = args.floor or overhang_depth.FLOOR
   rng = np.random.default_rng([args.seed, 39])
   key = jax.random.key(args.seed)
+  if args.readings and not args.packed:
+    raise ValueError('--readings re-reads protocol sets: give --packed too')
   runs = packed_runs(args.packed) if args.packed else []
   n = len(runs) or args.sets
+  earlier = earlier_rows(args.readings, args, n) if args.readings else None
+  tables = shipped_tables(
+    args.calibration or report.shipped_calibration('shape', 'paper')
+  ) if runs else {}  # fmt: skip
   rows, sets = [], []
   example = None
   os.makedirs(args.out, exist_ok=True)
@@ -361,14 +435,19 @@ def main(args: Args) -> None:
       p = physsim.params.from_unit(u, space)
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
-    setup = draw_setup(rng, c)
-    row = read_setup(setup, jax.random.fold_in(key, i), floor, args.renderer)
+    if earlier is not None:
+      row = earlier[i]
+      if not math.isclose(row['c'], c, rel_tol=1e-9):
+        raise ValueError(f'--readings={args.readings}: set-up {i} is of another truth')
+    else:
+      setup = draw_setup(rng, c)
+      row = read_setup(setup, jax.random.fold_in(key, i), floor, args.renderer)
     rows.append(row)
-    if example is None and 'c_hat' in row:
+    if example is None and 'c_hat' in row and 'profile' in row:
       example = row
     if runs:
       sets.append({'seq': runs[i]['seq'], 'material': runs[i]['material'],
-                   'joint': joint_estimate(runs[i], row, args, args.seed)})  # fmt: skip
+                   'joint': joint_estimate(runs[i], row, args, args.seed, tables)})  # fmt: skip
     msg = (
       row.get('refused')
       or f'c {100 * c:.2f} cm, error {100 * row["error"]:+.1f}%, z {row["z"]:+.2f}'
@@ -395,9 +474,7 @@ def table(out: dict) -> str:
     f'{100 * s["c_held_90"]:.0f}% | {100 * s["c_held_50"]:.0f}% | '
     f'{100 * out["floor"]:.1f}% | {100 * s["fitted_floor"]:.2f}% |',
   ]
-  for mode in ('sheet, anemometer', 'sheet, anemometer, overhang'):
-    if mode not in s:
-      continue
+  for mode in [k for k in s if k.startswith('sheet')]:
     m = s[mode]
     lines += [
       '',
