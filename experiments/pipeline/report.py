@@ -813,25 +813,29 @@ def next_recording_note(shared: dict, config, workdir: str) -> str | None:
   ``estimate`` entries, or a joint estimate's shared ones): what to record or
   measure next by the protocol study's bound (docs/protocol.md), and the
   command that ranks candidates with the simulator from this posterior."""
+  # narrowing is the video's over the prior with the readings: a parameter a
+  # reading measured (the strip's bending length, a scale's area weight) is
+  # not left at the prior however little the video added
+  measured = {'bending_scale': config.measured.bending_length_sd > 0,
+              'area_weight': config.measured.area_weight_sd > 0}  # fmt: skip
   little = [
     name for name in ('bending_scale', 'area_weight')
     if shared.get(name, {}).get('narrowing_90', np.inf) < LITTLE_NARROWING
+    and not measured[name]
   ]  # fmt: skip
   if not little:
     return None
   steps = []
-  if 'area_weight' in little and not config.measured.area_weight_sd > 0:
+  if 'area_weight' in little:
     steps.append(
       'weigh the sheet and measure its sides (--area_weight=... --area_weight_sd=...)'
     )
-  if 'bending_scale' in little and not config.measured.bending_length_sd > 0:
+  if 'bending_scale' in little:
     steps.append(
       'lay a strip of it over a table edge and measure its bending length (the '
       'cantilever test: README, How to record; --bending_length=... '
       '--bending_length_sd=...)'
     )
-  if not steps:
-    return None
   told = ' and '.join(n.replace('_scale', '').replace('_', ' ') for n in little)
   return (
     f'next: the recording(s) told little about {told}; ' + '; '.join(steps) + '. '

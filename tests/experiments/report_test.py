@@ -232,6 +232,13 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
                                 bending_length=0.02, bending_length_sd=0.002),
   )  # fmt: skip
   assert report.next_recording_note(told, weighed, 'out/e') is None
+  # the strip measured bending (the video adding nothing to it): area weight only
+  strip = config.replace(
+    measured=posterior.Measured(bending_length=0.02, bending_length_sd=0.002)
+  )
+  line = report.next_recording_note(told, strip, 'out/e')
+  assert line.startswith('next: the recording(s) told little about area weight;'), line
+  assert '--area_weight=' in line and '--bending_length=' not in line
   narrowed = {
     'bending_scale': {'narrowing_90': 3.0},
     'area_weight': {'narrowing_90': 4},
