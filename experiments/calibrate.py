@@ -5,6 +5,7 @@
   python -m experiments.calibrate --workdir=out/cal_paper --preset=paper  # GPU: every
       # fabric at the estimate's own size, shape distance, one lockstep
   python -m experiments.calibrate --workdir=out/calibration --install  # ship its coverage
+      # (the shipped file's checks are kept where their modes' tables did not change)
   python -m experiments.calibrate --workdir=out/calibration --analyse_only  # no simulation
   python -m experiments.calibrate --workdir=/tmp/cal --simulate_only   # GPU; then copy
       # /tmp/cal/packed/ to out/calibration/packed/ and --analyse_only there
@@ -45,7 +46,8 @@ class Args:
   Attributes:
     workdir: network, recordings, estimates and results (resumed).
     install: copy the held-out coverage into the package, where estimates
-      quote it; with ``--check``, record the check (the workdir's
+      quote it (the checks the file held are kept where the tables of every
+      mode they checked are unchanged, else dropped and named); with ``--check``, record the check (the workdir's
       ``check.json``: made now, or by an earlier check with
       ``--analyse_only``) in the calibration file it checked, where estimates
       quote it beside the calibration's own coverage.
@@ -100,8 +102,23 @@ def main(args: Args) -> None:
       args.study.estimate.scoring.distance, args.study.size
     )
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
-    files.write_atomic(dest, lambda tmp: shutil.copyfile(src, tmp))  # never half-copied
+    new = physsim.dataset.read_json(src)
+    old = physsim.dataset.read_json(dest) if os.path.isfile(dest) else {}
+    keep, drop = report.still_valid_checks(old, new)
+    if keep:  # checks of tables this refit left as they were
+      new['checks'] = keep
+      files.write_json(dest, new)
+    else:
+      files.write_atomic(dest, lambda tmp: shutil.copyfile(src, tmp))  # never half-copied
     print(f'installed as {dest}')
+    for c in keep:
+      print(f'  kept the check on {c["n"]} recordings of {c["physics"]} physics '
+            f'(seed {c["seed"]}, searched {c.get("searched", "video")}): its tables '
+            'are unchanged')  # fmt: skip
+    for c in drop:
+      print(f'  dropped the check on {c["n"]} recordings of {c["physics"]} physics '
+            f'(seed {c["seed"]}, searched {c.get("searched", "video")}): its tables '
+            'changed; check them again (--check ... --install)')  # fmt: skip
 
 
 if __name__ == '__main__':

@@ -89,6 +89,30 @@ def _read_cached(path: str, mtime_ns: int, size: int) -> dict:
     return json.load(f)
 
 
+def still_valid_checks(old: dict, new: dict) -> tuple[list[dict], list[dict]]:
+  """The checks of calibration ``old`` that hold for ``new`` too (same
+  setting and likelihood, and for every mode a check covers the same tables:
+  CDF levels and weights), and those that do not: a refit that only adds
+  modes keeps its checks, one that moves any table must be checked again."""
+  same_setting = all(
+    old.get(k) == new.get(k) for k in ('setting', 'likelihood', 'sharpness')
+  )
+  rec_old, rec_new = old.get('recalibration') or {}, new.get('recalibration') or {}
+
+  def tables(rec, mode):
+    return (rec.get('modes', {}).get(mode), rec.get('weights', {}).get(mode))
+
+  keep, drop = [], []
+  for c in old.get('checks', []):
+    ok = same_setting and all(
+      tables(rec_old, m) is not None
+      and tables(rec_old, m) == tables(rec_new, m)
+      for m in c.get('coverage', {})
+    )
+    (keep if ok else drop).append(c)
+  return keep, drop
+
+
 def record_check(path: str, check: dict) -> dict:
   """Keeps ``check`` (``calibration.check_record``: the calibration's tables
   on recordings they never saw) in the calibration file at ``path``, where

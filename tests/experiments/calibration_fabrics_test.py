@@ -284,6 +284,37 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
   assert 'they held it in bending 70%/50%' in report.calibration_line(note)
 
 
+def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypatch):
+  """``calibrate --install``: a refit that adds a mode keeps the shipped
+  file's checks; one that moves a checked mode's table drops that check."""
+  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  video_check = next(c for c in shipped['checks'] if c['searched'] == 'video')
+  wind_check = next(c for c in shipped['checks'] if c['searched'] == 'known wind')
+  refit = {k: v for k, v in shipped.items() if k != 'checks'}
+  keep, drop = report.still_valid_checks(shipped, refit)
+  assert keep == shipped['checks'] and drop == []
+  moved = json.loads(json.dumps(refit))
+  moved['recalibration']['modes']['joint pair'][1][0] += 0.01  # a table the video check read
+  keep, drop = report.still_valid_checks(shipped, moved)
+  assert keep == [wind_check] and drop == [video_check]
+  other = {**refit, 'sharpness': 0.7}
+  assert report.still_valid_checks(shipped, other)[0] == []
+  # the command: the refit's file installed with the checks it kept
+  from experiments import calibrate
+
+  workdir, dest = tmp_path / 'w', tmp_path / 'shipped.json'
+  workdir.mkdir()
+  (workdir / calibration.RESULT_FILE).write_text(json.dumps(moved))
+  dest.write_text(json.dumps(shipped))
+  monkeypatch.setattr(report, 'shipped_calibration', lambda *a: str(dest))
+  monkeypatch.setattr(calibration, 'run', lambda *a, **k: {})
+  calibrate.main(calibrate.Args(workdir=str(workdir), install=True, analyse_only=True,
+                                study=calibration.PRESETS['paper']))  # fmt: skip
+  installed = json.load(open(dest))
+  assert installed['checks'] == [wind_check]
+  assert installed['recalibration'] == moved['recalibration']
+
+
 def test_tables_fitted_with_a_model_error_apply_only_with_that_error(tmp_path):
   """A calibration fitted with the likelihood's discrepancy term: an estimate
   without it is told its intervals are indicative, naming the setting; one
