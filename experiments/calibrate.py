@@ -109,7 +109,9 @@ def main(args: Args) -> None:
       new['checks'] = keep
       files.write_json(dest, new)
     else:
-      files.write_atomic(dest, lambda tmp: shutil.copyfile(src, tmp))  # never half-copied
+      files.write_atomic(
+        dest, lambda tmp: shutil.copyfile(src, tmp)
+      )  # never half-copied
     print(f'installed as {dest}')
     for c in keep:
       print(f'  kept the check on {c["n"]} recordings of {c["physics"]} physics '

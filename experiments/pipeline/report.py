@@ -105,8 +105,7 @@ def still_valid_checks(old: dict, new: dict) -> tuple[list[dict], list[dict]]:
   keep, drop = [], []
   for c in old.get('checks', []):
     ok = same_setting and all(
-      tables(rec_old, m) is not None
-      and tables(rec_old, m) == tables(rec_new, m)
+      tables(rec_old, m) is not None and tables(rec_old, m) == tables(rec_new, m)
       for m in c.get('coverage', {})
     )
     (keep if ok else drop).append(c)

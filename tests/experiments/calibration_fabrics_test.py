@@ -294,7 +294,9 @@ def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypa
   keep, drop = report.still_valid_checks(shipped, refit)
   assert keep == shipped['checks'] and drop == []
   moved = json.loads(json.dumps(refit))
-  moved['recalibration']['modes']['joint pair'][1][0] += 0.01  # a table the video check read
+  moved['recalibration']['modes']['joint pair'][1][0] += (
+    0.01  # a table the video check read
+  )
   keep, drop = report.still_valid_checks(shipped, moved)
   assert keep == [wind_check] and drop == [video_check]
   other = {**refit, 'sharpness': 0.7}
