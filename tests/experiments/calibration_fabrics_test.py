@@ -68,6 +68,8 @@ def test_each_fabric_draws_over_its_own_box_and_the_first_keeps_its_stream():
     ({'materials': ('gray_interlock', 'silk')}, ("'silk'", '--materials')),
     ({'materials': ('black_denim', 'black_denim')}, ('a fabric twice',)),
     ({'pairs': 0}, ('--pairs=0',)),
+    ({'length_sd': 0.0}, ('--length_sd=0.0', '(0, 0.5]')),
+    ({'measured_sd': 0.9}, ('--measured_sd=0.9',)),
     ({'estimate': TINY.estimate.replace(distance='energy')}, ('--distance=energy',)),
     ({'size': 'demo', 'estimate': TINY.estimate.replace(distance='energy')},
      ('a study with networks calibrates one fabric',)),
