@@ -166,6 +166,21 @@ def _coarse_curves() -> tuple[np.ndarray, np.ndarray]:
   return _curve_set(RATIOS)
 
 
+FINE_SPAN = 4  # coarse steps either side of the coarse best fit
+FINE_RATIOS = 81
+
+
+@functools.cache
+def _fine_grid(j: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+  """The fine ratios around coarse ratio ``j`` and their curves: one set per
+  coarse ratio, made once per process (the elastica's shooting is the slow
+  part of a reading)."""
+  lo = RATIOS[max(j - FINE_SPAN, 0)]
+  hi = RATIOS[min(j + FINE_SPAN, len(RATIOS) - 1)]
+  ratios = np.geomspace(lo, hi, FINE_RATIOS)
+  return ratios, _curve_set(ratios)
+
+
 def _misfit(profile: np.ndarray, length: float, curves) -> tuple[np.ndarray, ...]:
   """Per curve of ``curves`` (``_curve_set``'s, scaled by ``length``): the
   sum of the points' squared signed distances (m^2) from it, positive up and
@@ -175,11 +190,12 @@ def _misfit(profile: np.ndarray, length: float, curves) -> tuple[np.ndarray, ...
   p = (profile / length).astype(np.float32)
   line, normal = curves
   d = np.empty((len(line), len(p)), np.float32)
-  rows = np.arange(len(p))
+  sq = (line**2).sum(-1)  # (R, S)
   for i in range(len(line)):
-    diff = p[:, None, :] - line[i][None, :, :]  # (N, S, 2)
-    k = np.argmin((diff**2).sum(-1), axis=1)
-    d[i] = (diff[rows, k] * normal[i][k]).sum(-1)
+    # nearest sample: |l|^2 - 2 p.l orders them as |p - l|^2 does (one product,
+    # no (N, S, 2) temporary)
+    k = np.argmin(sq[i][None, :] - 2.0 * (p @ line[i].T), axis=1)
+    d[i] = ((p - line[i][k]) * normal[i][k]).sum(-1)
   d = d.astype(np.float64) * length
   offset = np.clip(d.mean(axis=1), *OFFSET_RANGE)
   return ((d - offset[:, None]) ** 2).sum(axis=1), offset
@@ -233,11 +249,10 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
     few, ls, RATIOS, _coarse_curves(), overhang, overhang_sd, point_sd
   )
   edge_mass = float(p[:, :2].sum() + p[:, -2:].sum())
-  lo, hi = RATIOS[max(j - 4, 0)], RATIOS[min(j + 4, len(RATIOS) - 1)]
-  ratios = np.geomspace(lo, hi, 81)
+  ratios, curves = _fine_grid(int(j))
   ls = _lengths(overhang, overhang_sd, 9)
   p, (i, j), residual, offset = _posterior(
-    profile, ls, ratios, _curve_set(ratios), overhang, overhang_sd, point_sd
+    profile, ls, ratios, curves, overhang, overhang_sd, point_sd
   )
   c = ls[:, None] / ratios[None, :]
   mean = float((p * c).sum())
