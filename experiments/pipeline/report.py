@@ -502,7 +502,9 @@ def report_table(result: dict) -> str:
     'shape measures best.',
     f'point: {point.get(result.get("point"), "the best simulation (not calibrated)")}; '
     "narrower: the prior's 90% width over the interval's (x1.0: the recording "
-    "told nothing about it, the interval is the prior's)."
+    "told nothing about it, the interval is the prior's)"
+    + _readings_in_prior(result)
+    + '.'
     if posterior
     else "GP 90% interval: the Gaussian process's, not calibrated.",
     calibration_line(result.get('calibration')) if posterior else '',
@@ -513,6 +515,23 @@ def report_table(result: dict) -> str:
     else '',
   )
   return '\n'.join(lines)
+
+
+# The readings an estimate's prior can hold, as its table's note names them.
+_READING_WORDS = {'wind_speed': 'the wind reading', 'area_weight': 'the weighed area weight',
+                  'bending_length': "the strip's bending length"}  # fmt: skip
+
+
+def _readings_in_prior(result: dict) -> str:
+  """'; the prior holds ...' for the readings an estimate was given (its
+  narrowing is then the recording's over them), else ''."""
+  measured = (result.get('config') or {}).get('measured') or {}
+  given = [w for k, w in _READING_WORDS.items() if measured.get(f'{k}_sd', 0) > 0]
+  if not given:
+    return ''
+  return (
+    '; the prior holds ' + ' and '.join(given) + ': narrower is what the video added'
+  )
 
 
 def median_line(result: dict, share: float = MEDIAN_NOTE_SHARE) -> str:

@@ -153,6 +153,15 @@ def test_the_table_fits_the_terminal_and_prints_what_the_result_holds():
   assert 'x2.00' in bending  # the range centre (1) against a true 2
   assert 'least expected error' in table  # the note says what the point is
   assert 'calibration (known wind)' in table
+  assert 'the prior holds' not in table  # no reading in this result's config
+  # with a wind reading and a strip's bending length: the prior holds them
+  measured = {'wind_speed': 4.1, 'wind_speed_sd': 0.08, 'bending_length': 0.02,
+              'bending_length_sd': 0.0008, 'area_weight': 0.0, 'area_weight_sd': 0.0}  # fmt: skip
+  read = ' '.join(report.report_table(_result(config={'measured': measured})).split())
+  assert (
+    "the prior holds the wind reading and the strip's bending length: narrower is "
+    'what the video added'
+  ) in read
 
 
 def test_the_argmin_table_and_no_truth():
