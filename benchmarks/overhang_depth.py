@@ -389,6 +389,43 @@ def plot(rows: list[dict], example: dict | None, path: str) -> None:
   plt.close(fig)
 
 
+def plot_sets(sets: list[dict], path: str) -> None:
+  """The protocol sets as printed (else raw): per set the truth against the
+  point and its 90% interval, bending (log) and area weight, with the sheet
+  and anemometer alone beside the sheet, anemometer and overhang; an interval
+  that misses the truth in red."""
+  modes = ('sheet, anemometer', 'sheet, anemometer, overhang')
+  fig, ax = plt.subplots(1, 3, figsize=(13, 4.2))
+  panels = [(ax[0], modes[0], 'bending_scale'), (ax[1], modes[1], 'bending_scale'),
+            (ax[2], modes[1], 'area_weight')]  # fmt: skip
+  for a, mode, f in panels:
+    mine = [s for s in sets if mode in s['joint']]
+    rows = [s['joint'][mode] for s in mine]
+    how = 'printed' if rows and 'printed' in rows[0] else 'raw'
+    truth = np.array([s['truth'][f] for s in mine])
+    point = np.array([r[how][f]['point'] for r in rows])
+    lo, hi = (np.array([r[how][f]['interval_90'][k] for r in rows]) for k in (0, 1))
+    held = np.array([r[how][f]['held_90'] for r in rows])
+    for mask, colour in ((held, 'C0'), (~held, 'C3')):
+      a.errorbar(truth[mask], point[mask],
+                 yerr=[point[mask] - lo[mask], hi[mask] - point[mask]],
+                 fmt='o', ms=3, lw=0.7, color=colour)  # fmt: skip
+    span = [min(truth.min(), lo.min()), max(truth.max(), hi.max())]
+    a.plot(span, span, 'k--', lw=0.8)
+    if f == 'bending_scale':
+      a.set_xscale('log')
+      a.set_yscale('log')
+    name = (
+      'bending (x its reference)' if f == 'bending_scale' else 'area weight (kg/m^2)'
+    )
+    a.set_xlabel(f'true {name}')
+    a.set_ylabel(f'point and 90% interval ({how})')
+    a.set_title(f'{mode}: {int(held.sum())} of {len(held)} intervals hold', fontsize=9)
+  fig.tight_layout()
+  files.savefig(fig, path, dpi=100)
+  plt.close(fig)
+
+
 def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
   """The set-ups and readings of an earlier run (``--readings``).
 
@@ -447,6 +484,7 @@ def main(args: Args) -> None:
       example = row
     if runs:
       sets.append({'seq': runs[i]['seq'], 'material': runs[i]['material'],
+                   'truth': runs[i]['truth'],
                    'joint': joint_estimate(runs[i], row, args, args.seed, tables)})  # fmt: skip
     msg = (
       row.get('refused')
@@ -454,6 +492,8 @@ def main(args: Args) -> None:
     )
     print(f'[{i + 1}/{n}] {time.time() - t0:.0f} s: {msg}', flush=True)
   plot(rows, example, os.path.join(args.out, 'overhang_depth.png'))
+  if sets:
+    plot_sets(sets, os.path.join(args.out, 'protocol_sets.png'))
   for r in rows:
     r.pop('profile', None)
   out = {

@@ -49,6 +49,21 @@ def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
     assert both['wind_speed']['held_90'] and both['wind_speed']['error'] < 0.06
 
 
+def test_the_protocol_sets_figure_is_written(tmp_path):
+  cell = lambda t, held: {'point': t * 1.1, 'interval_90': [t * 0.9, t * 1.3],
+                          'held_90': held}  # fmt: skip
+  sets = []
+  for k, t in enumerate((0.5, 2.0)):
+    truth = {'bending_scale': t, 'area_weight': 0.2, 'wind_speed': 2.0}
+    row = {f: cell(v, k == 0) for f, v in truth.items()}
+    sets.append({'truth': truth, 'joint': {
+      'sheet, anemometer': {'raw': row}, 'sheet, anemometer, overhang': {'raw': row},
+    }})  # fmt: skip
+  path = tmp_path / 'sets.png'
+  bench.plot_sets(sets, str(path))
+  assert path.stat().st_size > 10_000
+
+
 def test_a_protocol_set_is_written_for_a_sheet_recording(tmp_path):
   """benchmarks/protocol_set.py: the sheet's truth gives the strip's, and the
   protocol file names both, the estimate's edge reading the strip back."""
