@@ -667,7 +667,7 @@ def _length_priors(config: Config, material: str, seq: int, truth: dict,
         _draws(rng, grid, lp, n), grid, space, m, seed=seq + 1
       )
       out[mode] = (m, lp, _physical_with_ratio(unit, space))
-    if len(_LENGTH_CACHE) > 4096:
+    if len(_LENGTH_CACHE) > 1024:  # about 0.3 MB each
       _LENGTH_CACHE.clear()
     _LENGTH_CACHE[key] = out
   return _LENGTH_CACHE[key]
