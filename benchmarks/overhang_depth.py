@@ -58,7 +58,7 @@ import bo  # noqa: E402
 import physsim  # noqa: E402
 from experiments.pipeline import cli, files, report  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
-from physsim import cantilever, overhang_depth, sensor, tabletop  # noqa: E402
+from physsim import cantilever, gl_depth, overhang_depth, sensor, tabletop  # noqa: E402
 
 INTRINSICS = physsim.Intrinsics(640, 480, 58.0, 45.0)
 FRAMES = 5
@@ -144,16 +144,8 @@ def _mujoco_depth(strip, table, pose) -> np.ndarray:
   import mujoco  # noqa: PLC0415 - only this renderer needs it here
 
   model = mujoco.MjModel.from_xml_string(tabletop.mjcf(strip, pose, table, MJ_FOVY))
-  data = mujoco.MjData(model)
-  mujoco.mj_forward(model, data)
   r = mujoco.Renderer(model, MJ_INTRINSICS.height, MJ_INTRINSICS.width)
-  try:
-    r.enable_depth_rendering()
-    r.update_scene(data, camera='cam')
-    depth = np.asarray(r.render(), np.float64)
-  finally:
-    r.close()
-  return np.where(depth < 25.0, depth, 0.0).astype(np.float32)
+  return gl_depth.mujoco_depth(model, r, far=25.0).astype(np.float32)
 
 
 def render_setup(setup: dict, key, renderer: str = 'raycaster') -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import physsim
-from physsim import cantilever, overhang_depth, tabletop
+from physsim import cantilever, gl_depth, overhang_depth, tabletop
 
 INTR = physsim.Intrinsics(320, 240, 58.0, 45.0)
 TABLE = tabletop.Table()
@@ -124,16 +124,8 @@ def test_a_strip_rendered_by_mujocos_own_renderer_is_read_too():
   strip = tabletop.Strip(overhang=0.04, bending_length=0.02, thickness=0.001)
   pose = _pose()
   model = mujoco.MjModel.from_xml_string(tabletop.mjcf(strip, pose, TABLE, 45.0))
-  data = mujoco.MjData(model)
-  mujoco.mj_forward(model, data)
   renderer = mujoco_gl.offscreen_renderer(model, 240, 320)
-  try:
-    renderer.enable_depth_rendering()
-    renderer.update_scene(data, camera='cam')
-    depth = np.asarray(renderer.render(), np.float64)
-  finally:
-    renderer.close()
-  depth = np.where(depth < 25.0, depth, 0.0)
+  depth = gl_depth.mujoco_depth(model, renderer, far=25.0)
   f = 120 / math.tan(math.radians(22.5))
   intr = physsim.Intrinsics.from_pinhole(320, 240, f, f, 159.5, 119.5)
   r = overhang_depth.read(depth, intr, 0.04, 0.001)

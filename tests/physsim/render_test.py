@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from physsim import camera, mesh, render
+from physsim import camera, gl_depth, mesh, render
 from tests import mujoco_gl
 
 _DEPTH_TOL = 2e-5  # metres: float32 projection and 1/z interpolation at ~2 m
@@ -220,16 +220,8 @@ def test_depth_matches_mujoco_opengl_renderer():
   v[:, 1] = 0.3 * (1.5 - z) ** 2 + 0.08 * np.sin(5 * x) * (1.5 - z)  # swung, rippled
   pose = camera.look_at([0.5, -1.9, 1.25], [0.0, 0.15, 1.0], roll_deg=4.0)
   model = mujoco.MjModel.from_xml_string(_mjcf(v, m.faces, pose, fov))
-  data = mujoco.MjData(model)
-  mujoco.mj_forward(model, data)
   renderer = mujoco_gl.offscreen_renderer(model, size, size)
-  try:
-    renderer.enable_depth_rendering()
-    renderer.update_scene(data, camera='cam')
-    ref = np.asarray(renderer.render(), np.float64)
-  finally:
-    renderer.close()
-  ref = np.where(ref < 0.9 * 20.0, ref, 0.0)  # the far plane is background
+  ref = gl_depth.mujoco_depth(model, renderer, far=0.9 * 20.0)  # far plane: background
   ours = np.asarray(_depth(v, m.faces, intr, pose))
   valid = (ref > 0) & (ours > 0)
   interior = valid.copy()
