@@ -574,9 +574,10 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     rng_length = np.random.default_rng(
       [config.seed, 19, r['seq'], int(sharpness * 1000)]
     )
-    for mode, (m, lp, prior_phys) in _length_priors(
-      config, material, r['seq'], t, n // 4
-    ).items():
+    length_priors = _length_priors(
+      config, material, r['seq'], tuple(sorted(t.items())), n // 4
+    )
+    for mode, (m, lp, prior_phys) in length_priors.items():
       post = np.asarray(bo.posterior.log_normalise(lp + ll))
       unit = posterior_lib.refine_draws(
         _draws(rng_length, grid, post, n), grid, space, m, seed=r['seq']
@@ -631,7 +632,8 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
   return out
 
 
-def _length_priors(config: Config, material: str, seq: int, truth: dict,
+@functools.lru_cache(maxsize=1024)  # about 0.3 MB a recording
+def _length_priors(config: Config, material: str, seq: int, truth: tuple,
                    n: int) -> dict:  # fmt: skip
   """For ``LENGTH_MODES``, recording ``seq``'s simulated readings (the
   overhang's bending length to ``config.length_sd``, the anemometer's wind to
@@ -639,41 +641,33 @@ def _length_priors(config: Config, material: str, seq: int, truth: dict,
   posterior grid (the length's averaged over each cell, as an estimate forms
   it) and ``n`` of the prior's draws placed within their cells
   (``posterior.refine_draws``): ``{mode: (measured, log_prior, draws)}``,
-  made once per recording whatever the likelihood setting."""
-  key = (config.seed, config.measured_sd, config.length_sd,
-         tuple(config.estimate.search.posterior_grid), material, seq, n,
-         tuple(sorted(truth.items())))  # fmt: skip
-  if key not in _LENGTH_CACHE:
-    space = physsim.search_space(material)
-    grid = tuple(config.estimate.search.posterior_grid)
-    points = bo.posterior.grid_points(grid)
-    length = posterior_lib.simulated_reading(
-      'bending_length', truth, config.length_sd, config.seed, seq, space
+  made once per recording whatever the likelihood setting (``truth``: its
+  items, sorted)."""
+  truth = dict(truth)
+  space = physsim.search_space(material)
+  grid = tuple(config.estimate.search.posterior_grid)
+  points = bo.posterior.grid_points(grid)
+  length = posterior_lib.simulated_reading(
+    'bending_length', truth, config.length_sd, config.seed, seq, space
+  )
+  wind = posterior_lib.simulated_reading(
+    'wind_speed', truth, config.measured_sd, config.seed, seq
+  )
+  readings = {
+    'bending length': length,
+    'known wind, bending length': dataclasses.replace(
+      length, wind_speed=wind.wind_speed, wind_speed_sd=wind.wind_speed_sd
+    ),
+  }
+  rng = np.random.default_rng([config.seed, 23, seq])
+  out = {}
+  for mode, m in readings.items():
+    lp = posterior_lib.log_prior(points, space, m, grid)
+    unit = posterior_lib.refine_draws(
+      _draws(rng, grid, lp, n), grid, space, m, seed=seq + 1
     )
-    wind = posterior_lib.simulated_reading(
-      'wind_speed', truth, config.measured_sd, config.seed, seq
-    )
-    readings = {
-      'bending length': length,
-      'known wind, bending length': dataclasses.replace(
-        length, wind_speed=wind.wind_speed, wind_speed_sd=wind.wind_speed_sd
-      ),
-    }
-    rng = np.random.default_rng([config.seed, 23, seq])
-    out = {}
-    for mode, m in readings.items():
-      lp = posterior_lib.log_prior(points, space, m, grid)
-      unit = posterior_lib.refine_draws(
-        _draws(rng, grid, lp, n), grid, space, m, seed=seq + 1
-      )
-      out[mode] = (m, lp, _physical_with_ratio(unit, space))
-    if len(_LENGTH_CACHE) > 1024:  # about 0.3 MB each
-      _LENGTH_CACHE.clear()
-    _LENGTH_CACHE[key] = out
-  return _LENGTH_CACHE[key]
-
-
-_LENGTH_CACHE: dict = {}
+    out[mode] = (m, lp, _physical_with_ratio(unit, space))
+  return out
 
 
 def _at(qf: np.ndarray, cdf_levels: np.ndarray) -> np.ndarray:
