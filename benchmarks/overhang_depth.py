@@ -20,9 +20,9 @@ softer than its nominal D: BENCHMARKS.md, ``benchmarks.overhang_mesh``).
 project's ray-caster, the table a box: the reader must not lean on the
 ray-caster's conventions.
 
-Two seeds: ``--seed=0`` sets the reader's ``FLOOR`` (the smallest relative
-uncertainty of c at which its 90% intervals hold c 90% of the time; the
-script prints it) and ``--seed=1`` checks it. With ``--packed`` (the runs of
+Two seeds: ``--seed=0`` sets the reader's error law (``DOF`` and ``FLOOR``:
+the Student's t whose 25, 50, 75 and 90% intervals hold c closest to as
+often as they say; the script prints it) and ``--seed=1`` checks it. With ``--packed`` (the runs of
 a calibration check, ``experiments.calibrate --check``, e.g. the 56
 recordings of the mismatched physics) each of its sheet recordings gets an
 overhang recording of its own fabric and truth, and the sheet's posterior
@@ -44,12 +44,12 @@ import glob
 import json
 import math
 import os
-import statistics
 import time
 
 import jax
 import matplotlib
 import numpy as np
+import scipy.stats
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
@@ -72,10 +72,11 @@ class Args:
   """The set-ups and what to combine them with.
 
   Attributes:
-    seed: of the set-ups (0 fits the floor, others check it).
+    seed: of the set-ups (0 fits the error law, others check it).
     sets: set-ups without ``packed`` (with it: one per packed recording).
     packed: a folder of packed runs (``runs-*.npz``) of sheet recordings.
-    floor: the reader's relative floor on c's sd (0: its ``FLOOR``).
+    floor: the reader's relative floor on its t law's scale (0: its ``FLOOR``).
+    dof: that law's degrees of freedom (0: its ``DOF``).
     grid: the posterior grid (bending, wind, area weight) of the packed runs.
     likelihood: the packed runs' likelihood form.
     sharpness: and its sharpness (the shipped paper-size table's).
@@ -93,6 +94,7 @@ class Args:
   sets: int = 40
   packed: str = ''
   floor: float = 0.0
+  dof: float = 0.0
   grid: tuple[int, ...] = (12, 64, 24)
   likelihood: str = 'gibbs'
   sharpness: float = 0.5
@@ -164,8 +166,10 @@ def render_setup(setup: dict, key, renderer: str = 'raycaster') -> np.ndarray:
   return np.asarray(sensor.apply_noise_frames(key, frames, intr))
 
 
-def read_setup(setup: dict, key, floor: float, renderer: str = 'raycaster') -> dict:
-  """The reader's c on a set-up, with its z-score at ``floor``."""
+def read_setup(setup: dict, key, floor: float, dof: float,
+               renderer: str = 'raycaster') -> dict:  # fmt: skip
+  """The reader's c on a set-up, with its error under the law (``floor``,
+  ``dof``: ``with_law``)."""
   depth = render_setup(setup, key, renderer)
   c = setup['strip']['bending_length']
   row = {'c': c, 'setup': setup}
@@ -175,27 +179,54 @@ def read_setup(setup: dict, key, floor: float, renderer: str = 'raycaster') -> d
     )
   except ValueError as e:
     return {**row, 'refused': str(e)}
-  sd = math.hypot(r.fit_sd, floor * r.bending_length)
-  return {
-    **row, 'read': r.to_dict(), 'c_hat': r.bending_length, 'sd': sd,
-    'error': r.bending_length / c - 1.0, 'z': (r.bending_length - c) / sd,
-    'profile': r.profile[:: max(1, len(r.profile) // 1500)],
-  }  # fmt: skip
+  row = {**row, 'read': r.to_dict(), 'c_hat': r.bending_length,
+         'error': r.bending_length / c - 1.0,
+         'profile': r.profile[:: max(1, len(r.profile) // 1500)]}  # fmt: skip
+  return with_law(row, floor, dof)
 
 
-def fitted_floor(rows: list[dict], level: float = 0.9) -> float:
-  """The smallest floor at which ``level`` of the rows' central intervals
-  (Gaussian, fit sd and floor) hold c."""
-  k = statistics.NormalDist().inv_cdf((1 + level) / 2)
-  ok = [r for r in rows if 'c_hat' in r]
-  for floor in np.arange(0.0, 0.2001, 0.0025):
-    held = np.mean([
-      abs(r['c_hat'] - r['c']) <= k * math.hypot(r['read']['fit_sd'], floor * r['c_hat'])
-      for r in ok
-    ])  # fmt: skip
-    if held >= level:
-      return float(floor)
-  return float('nan')
+def with_law(row: dict, floor: float, dof: float) -> dict:
+  """``row`` (a reading, or a refusal: unchanged) with its standard
+  deviation, t scale and law under ``floor`` and ``dof``
+  (``overhang_depth.reading_sd``), and ``z``, its error in scales."""
+  if 'c_hat' not in row:
+    return row
+  if 'read' not in row:
+    raise ValueError(
+      "a reading without the reader's fit (an abridged results file): run "
+      'the set-ups again'
+    )
+  fit_sd, c_hat = row['read']['fit_sd'], row['c_hat']
+  sd = overhang_depth.reading_sd(fit_sd, c_hat, floor, dof)
+  scale = math.hypot(fit_sd, floor * c_hat)
+  miss = c_hat - row['c']
+  z = miss / scale if scale > 0 else math.copysign(math.inf, miss) if miss else 0.0
+  return {**row, 'sd': sd, 'scale': scale, 'dof': dof, 'z': z}
+
+
+def held(rows: list[dict], level: float, dof: float) -> float:
+  """How often the rows' central ``level`` intervals (t of ``dof``, each
+  row's scale) hold c."""
+  z = np.array([r['z'] for r in rows if 'c_hat' in r])
+  return float(np.mean(np.abs(z) <= scipy.stats.t.ppf((1 + level) / 2, dof)))
+
+
+FIT_LEVELS = (0.25, 0.5, 0.75, 0.9)
+FIT_DOFS = (2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 20.0)
+
+
+def fitted_law(rows: list[dict]) -> tuple[float, float]:
+  """(dof, floor) whose t intervals at ``FIT_LEVELS`` hold c closest to
+  their levels on ``rows`` (least squares; floors on a 0.1% grid): the
+  reader's law, fitted on its calibration set-ups."""
+  best = None
+  for dof in FIT_DOFS:
+    for floor in np.arange(0.0, 0.0401, 0.001):
+      law = [with_law(r, float(floor), dof) for r in rows]
+      loss = sum((held(law, lv, dof) - lv) ** 2 for lv in FIT_LEVELS)
+      if best is None or loss < best[0] - 1e-12:
+        best = (loss, dof, round(float(floor), 4))
+  return best[1], best[2]
 
 
 def packed_runs(folder: str) -> list[dict]:
@@ -268,7 +299,7 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
   if 'c_hat' in reading:
     modes['sheet, anemometer, overhang'] = dataclasses.replace(
       modes['sheet, anemometer'], bending_length=reading['c_hat'],
-      bending_length_sd=reading['sd'],
+      bending_length_sd=reading['sd'], bending_length_dof=reading['dof'],
     )  # fmt: skip
   ll = np.asarray(
     bo.posterior.log_likelihood(
@@ -311,19 +342,20 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
   return out
 
 
-def summary(rows: list[dict], sets: list[dict]) -> dict:
+def summary(rows: list[dict], sets: list[dict], dof: float) -> dict:
   ok = [r for r in rows if 'c_hat' in r]
   err = np.array([r['error'] for r in ok])
-  z = np.array([r['z'] for r in ok])
   out = {
     'setups': len(rows),
     'refused': len(rows) - len(ok),
     'c_mean_abs_error': float(np.mean(np.abs(err))) if len(ok) else None,
     'c_median_abs_error': float(np.median(np.abs(err))) if len(ok) else None,
     'c_bias': float(np.mean(err)) if len(ok) else None,
-    'c_held_90': float(np.mean(np.abs(z) <= 1.6449)) if len(ok) else None,
-    'c_held_50': float(np.mean(np.abs(z) <= 0.6745)) if len(ok) else None,
-    'fitted_floor': fitted_floor(rows) if len(ok) else None,
+    'c_held_90': held(ok, 0.9, dof) if len(ok) else None,
+    'c_held_50': held(ok, 0.5, dof) if len(ok) else None,
+    'fitted_law': dict(zip(('dof', 'floor'), fitted_law(ok), strict=True))
+    if len(ok)
+    else None,
   }
   for mode in sets[0]['joint'] if sets else ():
     for how in ('raw', 'printed'):
@@ -370,8 +402,9 @@ def plot(rows: list[dict], example: dict | None, path: str) -> None:
     ax[0].set_title('one set-up: what the reader sees and fits', fontsize=9)
   c = np.array([r['c'] for r in ok])
   e = np.array([r['error'] for r in ok])
-  sd = np.array([r['sd'] / r['c_hat'] for r in ok])
-  ax[1].errorbar(100 * c, 100 * e, yerr=100 * 1.6449 * sd, fmt='o', ms=3, lw=0.8)
+  sd = np.array([r['scale'] / r['c_hat'] for r in ok])
+  k = np.array([scipy.stats.t.ppf(0.95, r['dof']) for r in ok])
+  ax[1].errorbar(100 * c, 100 * e, yerr=100 * k * sd, fmt='o', ms=3, lw=0.8)
   ax[1].axhline(0, color='k', lw=0.8)
   ax[1].set_xlabel('true bending length c (cm)')
   ax[1].set_ylabel('error of c (%), with its 90% interval')
@@ -438,6 +471,7 @@ def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
 
 def main(args: Args) -> None:
   floor = args.floor or overhang_depth.FLOOR
+  dof = args.dof or overhang_depth.DOF
   rng = np.random.default_rng([args.seed, 39])
   key = jax.random.key(args.seed)
   if args.readings and not args.packed:
@@ -465,12 +499,15 @@ def main(args: Args) -> None:
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
     if earlier is not None:
-      row = earlier[i]
-      if not math.isclose(row['c'], c, rel_tol=1e-9):
+      if not math.isclose(earlier[i]['c'], c, rel_tol=1e-9):
         raise ValueError(f'--readings={args.readings}: set-up {i} is of another truth')
+      try:
+        row = with_law(earlier[i], floor, dof)
+      except ValueError as e:
+        raise ValueError(f'--readings={args.readings}: set-up {i}: {e}') from None
     else:
       setup = draw_setup(rng, c)
-      row = read_setup(setup, jax.random.fold_in(key, i), floor, args.renderer)
+      row = read_setup(setup, jax.random.fold_in(key, i), floor, dof, args.renderer)
     rows.append(row)
     if example is None and 'c_hat' in row and 'profile' in row:
       example = row
@@ -489,22 +526,64 @@ def main(args: Args) -> None:
   for r in rows:
     r.pop('profile', None)
   out = {
-    'args': dataclasses.asdict(args), 'floor': floor,
-    'summary': summary(rows, sets), 'rows': rows, 'sets': sets,
+    'args': dataclasses.asdict(args), 'floor': floor, 'dof': dof,
+    'summary': summary(rows, sets, dof), 'rows': rows, 'sets': sets,
   }  # fmt: skip
   files.write_json(os.path.join(args.out, 'overhang_depth.json'), out)
+  files.write_json(os.path.join(args.out, 'summary.json'), compact(out))
   print(table(out))
+
+
+_ROW_KEYS = ('c', 'c_hat', 'sd', 'dof', 'error', 'z', 'told_overhang', 'refused')
+
+
+def compact(out: dict) -> dict:
+  """What a results file keeps of a run (``summary.json``, a few tens of
+  KB): the summary, each reading with its fit's spread (so that it can be
+  read again under another law: ``--readings``), and each protocol set as
+  printed (the raw reading's summary stays; ``plot_sets`` draws it); the
+  readings to 7 digits (their
+  errors are differences of nearby numbers), the rest to 4."""
+
+  def r4(x, digits=4):
+    if isinstance(x, float):
+      return float(f'{x:.{digits}g}')
+    if isinstance(x, dict):
+      return {k: r4(v, digits) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+      return [r4(v, digits) for v in x]
+    return x
+
+  rows = []
+  for r in out['rows']:
+    row = {k: r[k] for k in _ROW_KEYS if k in r}
+    if 'read' in r:
+      row['read'] = {'fit_sd': r['read']['fit_sd']}
+    rows.append(r4(row, 7))
+  # per set and field: the point, its 90% interval and which intervals held
+  # (its error and narrowing follow from them and the summary)
+  cell = lambda c: {k: c[k] for k in ('point', 'interval_90', 'held_90', 'held_50')}
+  sets = [
+    {**{k: s[k] for k in ('seq', 'material', 'truth')},
+     'joint': {m: {h: {f: cell(c) for f, c in v.items()} for h, v in by.items()
+                   if h == 'printed' or len(by) == 1}
+               for m, by in s['joint'].items()}}
+    for s in out['sets']
+  ]  # fmt: skip
+  keep = ('args', 'floor', 'dof', 'summary')
+  return {**r4({k: out[k] for k in keep}), 'rows': rows, 'sets': r4(sets)}
 
 
 def table(out: dict) -> str:
   s = out['summary']
   lines = [
-    '| set-ups | refused | c mean error | median | bias | 90% held | 50% held | floor | floor fitted here |',
+    '| set-ups | refused | c mean error | median | bias | 90% held | 50% held | law (dof, floor) | fitted here |',
     '|---|---|---|---|---|---|---|---|---|',
     f'| {s["setups"]} | {s["refused"]} | {100 * s["c_mean_abs_error"]:.1f}% | '
     f'{100 * s["c_median_abs_error"]:.1f}% | {100 * s["c_bias"]:+.1f}% | '
     f'{100 * s["c_held_90"]:.0f}% | {100 * s["c_held_50"]:.0f}% | '
-    f'{100 * out["floor"]:.1f}% | {100 * s["fitted_floor"]:.2f}% |',
+    f'{out["dof"]:g}, {100 * out["floor"]:.1f}% | '
+    f'{s["fitted_law"]["dof"]:g}, {100 * s["fitted_law"]["floor"]:.1f}% |',
   ]
   for mode in [k for k in s if k.startswith('sheet')]:
     m = s[mode]

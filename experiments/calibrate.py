@@ -7,6 +7,9 @@
   python -m experiments.calibrate --workdir=out/calibration --install  # ship its coverage
       # (the shipped file's checks are kept where their modes' tables did not change)
   python -m experiments.calibrate --workdir=out/calibration --analyse_only  # no simulation
+  python -m experiments.calibrate --workdir=out/calibration --analyse_only --install \
+      --install_modes='bending length;known wind, bending length'  # those modes'
+      # tables only: the others, and their checks, stay as shipped
   python -m experiments.calibrate --workdir=/tmp/cal --simulate_only   # GPU; then copy
       # /tmp/cal/packed/ to out/calibration/packed/ and --analyse_only there
   python -m experiments.calibrate --workdir=out/check --check --seed=1 \
@@ -51,6 +54,12 @@ class Args:
       ``check.json``: made now, or by an earlier check with
       ``--analyse_only``) in the calibration file it checked, where estimates
       quote it beside the calibration's own coverage.
+    install_modes: with ``--install``, the modes (``calibration.MODES``,
+      separated by ';') whose tables to install; the file's other tables and
+      the checks of them stay ('': install the whole refit). With
+      ``--check``: the modes whose coverage to record into the file's
+      earlier check of the same recordings (the others keep what it
+      measured of their unchanged tables).
     analyse_only: analyse the estimates the workdir holds (or those packed
       in its ``packed/``), simulating nothing (e.g. searches run on a GPU
       machine, analysis elsewhere).
@@ -64,6 +73,7 @@ class Args:
 
   workdir: str = 'out/calibration'
   install: bool = False
+  install_modes: str = ''
   analyse_only: bool = False
   simulate_only: bool = False
   check: bool = False
@@ -80,6 +90,17 @@ def main(args: Args) -> None:
       f'--likelihood={args.study.estimate.scoring.likelihood}: the calibration re-reads '
       f'likelihoods of one discrepancy ({", ".join(bo.posterior.DISCREPANCY_LIKELIHOODS)})'
     )
+  modes = tuple(m.strip() for m in args.install_modes.split(';') if m.strip())
+  unknown = [m for m in modes if m not in calibration.MODES]
+  if unknown or (modes and not args.install):
+    raise ValueError(
+      f'--install_modes={args.install_modes!r}: '
+      + (
+        f'no mode {unknown}; one or more of {list(calibration.MODES)}, separated by ";"'
+        if unknown
+        else "installs a refit's tables (or a check of them): give it with --install"
+      )
+    )
   if args.check:
     if args.simulate_only:
       raise ValueError('--check analyses what it simulates: drop --simulate_only')
@@ -89,7 +110,7 @@ def main(args: Args) -> None:
     if args.install and distributed.is_main():
       dest = calibration.checked_file(args.study)
       report.record_check(
-        dest, calibration.check_record(physsim.dataset.read_json(done))
+        dest, calibration.check_record(physsim.dataset.read_json(done)), modes
       )
       print(f'check recorded in {dest}')
     return
@@ -104,8 +125,18 @@ def main(args: Args) -> None:
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     new = physsim.dataset.read_json(src)
     old = physsim.dataset.read_json(dest) if os.path.isfile(dest) else {}
+    if modes:
+      if not old:
+        raise ValueError(f'--install_modes: no file at {dest} to install them into')
+      new = report.with_modes_of(old, new, modes)
     keep, drop = report.still_valid_checks(old, new)
-    if keep:  # checks of tables this refit left as they were
+    if modes:  # what the checks measured of the tables left as they were
+      keep, moved = report.trimmed_checks(old, new)
+      drop = []
+      if moved:
+        print(f'the checks keep their other modes; check {", ".join(moved)} again '
+              '(--check ... --install --install_modes=...)')  # fmt: skip
+    if keep or modes:  # checks of tables this refit left as they were
       new['checks'] = keep
       files.write_json(dest, new)
     else:
@@ -115,8 +146,9 @@ def main(args: Args) -> None:
     print(f'installed as {dest}')
     for c in keep:
       print(f'  kept the check on {c["n"]} recordings of {c["physics"]} physics '
-            f'(seed {c["seed"]}, searched {c.get("searched", "video")}): its tables '
-            'are unchanged')  # fmt: skip
+            f'(seed {c["seed"]}, searched {c.get("searched", "video")}): '
+            + ('its modes of the tables left as they were' if modes
+               else 'its tables are unchanged'))  # fmt: skip
     for c in drop:
       print(f'  dropped the check on {c["n"]} recordings of {c["physics"]} physics '
             f'(seed {c["seed"]}, searched {c.get("searched", "video")}): its tables '

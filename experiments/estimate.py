@@ -179,7 +179,8 @@ def with_fabric_readings(args: Args) -> Args:
       f'{r.bending_length_sd:.4f}) from {r.points} strip pixels over the edge'
     )
     readings.update(bending_length=r.bending_length,
-                    bending_length_sd=r.bending_length_sd)  # fmt: skip
+                    bending_length_sd=r.bending_length_sd,
+                    bending_length_dof=r.bending_length_dof)  # fmt: skip
   both = sorted(k for k in readings if getattr(args.search.measured, k) != 0.0)
   if both:
     raise ValueError(

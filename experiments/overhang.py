@@ -125,6 +125,9 @@ def reading(args: Args) -> dict:
     c_sd = max(c_sd, float(cs.std(ddof=1)) / math.sqrt(len(each)))
   out = {'bending_length': c, 'bending_length_sd': c_sd, 'readings': cs.tolist()}
   if found:
+    # a depth camera's readings err as its t law; their mean keeps it (its
+    # tails are a little lighter: the interval errs wide)
+    out['bending_length_dof'] = overhang_depth.DOF
     out['depth_readings'] = found
   if args.area_weight > 0:
     d = cantilever.rigidity(c, args.area_weight)
@@ -188,10 +191,13 @@ def main(args: Args) -> None:
         f"of {args.material}'s reference"
       )
     print(line)
+  dof = r.get('bending_length_dof', 0.0)
+  flag = f' --bending_length_dof={dof:g}' if dof else ''
+  key = f', "bending_length_dof": {dof:g}' if dof else ''
   print(
-    f'estimate with: --bending_length={c:.4g} --bending_length_sd={sd:.2g} '
+    f'estimate with: --bending_length={c:.4g} --bending_length_sd={sd:.2g}{flag} '
     f'(or a protocol file\'s "fabric": {{"bending_length": {c:.4g}, '
-    f'"bending_length_sd": {sd:.2g}}})'
+    f'"bending_length_sd": {sd:.2g}{key}}})'
   )
 
 

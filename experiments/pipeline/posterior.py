@@ -12,6 +12,7 @@ and area weight, one wind per recording).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import jax
 import matplotlib
@@ -44,6 +45,11 @@ class Measured:
       and its tip's reach). It reads bending and area weight together,
       c = (bending x D0 / (w g))^(1/3) (``physsim.params.bending_length``).
     bending_length_sd: its standard uncertainty, m.
+    bending_length_dof: the law of its error: 0, Gaussian (a ruler's
+      reading); more than 2, Student's t of that many degrees of freedom
+      with standard deviation ``bending_length_sd`` (a depth camera's
+      reading, ``physsim.overhang_depth.DOF``: most readings closer than a
+      Gaussian of that sd would put them, a few further off).
   """
 
   wind_speed: float = 0.0
@@ -52,6 +58,7 @@ class Measured:
   area_weight_sd: float = 0.0
   bending_length: float = 0.0
   bending_length_sd: float = 0.0
+  bending_length_dof: float = 0.0
 
   def to_dict(self) -> dict:
     """The readings as files hold them: a bending length only when given, so
@@ -60,10 +67,20 @@ class Measured:
     out = dataclasses.asdict(self)
     if not (self.bending_length or self.bending_length_sd):
       del out['bending_length'], out['bending_length_sd']
+    if not self.bending_length_dof:  # a Gaussian reading, as files held it
+      del out['bending_length_dof']
     return out
 
   def check(self, space: physsim.SearchSpace) -> None:
-    """Raises ValueError on a reading without uncertainty, or far outside the box."""
+    """Raises ValueError on a reading without uncertainty, or far outside the
+    box, or a bending length's error law that is neither Gaussian nor a t
+    with a finite variance."""
+    dof = self.bending_length_dof
+    if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= MAX_DOF)):
+      raise ValueError(
+        f'--bending_length_dof={dof}: 0 (a Gaussian reading) or a Student-t '
+        f'of more than 2 and at most {MAX_DOF} degrees of freedom'
+      )
     for name in ('wind_speed', 'area_weight', 'bending_length'):
       v, sd = getattr(self, name), getattr(self, f'{name}_sd')
       if v == 0 and sd == 0:
@@ -108,7 +125,7 @@ def _reading_range(space: physsim.SearchSpace, name: str) -> tuple[float, float]
 
 def simulated_reading(
   name: str, truth: dict, rel_sd: float, seed: int, seq: int,
-  space: physsim.SearchSpace | None = None,
+  space: physsim.SearchSpace | None = None, dof: float = 0.0,
 ) -> Measured:  # fmt: skip
   """A simulated instrument's reading of ``name`` ('wind_speed': an
   anemometer; 'area_weight': a scale and a ruler; 'bending_length': an
@@ -117,10 +134,15 @@ def simulated_reading(
   ``1 + rel_sd * z``, ``z`` standard normal drawn from ``(seed, seq)`` alone,
   so recording ``seq`` gets the same reading in every study that uses the
   same seed (the calibration's post-hoc modes and a search run with the
-  reading as its prior). Its uncertainty is ``rel_sd`` times the truth."""
+  reading as its prior). Its uncertainty is ``rel_sd`` times the truth. A
+  bending length with ``dof`` > 2 errs as Student's t of that many degrees
+  of freedom scaled to the same standard deviation (``Measured``), as the
+  depth reader does; ``dof`` 0 keeps the Gaussian draw, the same number."""
   names = (*FIELDS[1:], 'bending_length')
   if name not in names:
     raise ValueError(f'no instrument reads {name!r}: one of {names}')
+  if dof and name != 'bending_length':
+    raise ValueError(f'{name}: only a bending length has a t law, got dof={dof}')
   if name == 'bending_length':
     _reading_range(space, name)  # the box knows its fabric's rigidity
     value = float(
@@ -132,17 +154,29 @@ def simulated_reading(
     value = truth[name]
   stream = FIELDS.index(name) if name in FIELDS else len(FIELDS)
   rng = np.random.default_rng([seed, 13, seq, stream])
-  v = value * (1.0 + rel_sd * rng.standard_normal())
-  return Measured(**{name: v, f'{name}_sd': rel_sd * value})
+  z = rng.standard_t(dof) * math.sqrt((dof - 2) / dof) if dof else rng.standard_normal()
+  v = value * (1.0 + rel_sd * z)
+  out = Measured(**{name: v, f'{name}_sd': rel_sd * value})
+  return dataclasses.replace(out, bending_length_dof=dof) if dof else out
 
 
 SUB_CELLS = (32, 4)  # a bending length's term averaged over (bending, area weight)
 
 
+MAX_DOF = 1000.0  # a bending length's t law (beyond it, say 0: the Gaussian)
+
+
 def _length_term(b, w, space: physsim.SearchSpace, measured: Measured):
-  """The bending-length reading's log likelihood at physical (b, w)."""
+  """The bending-length reading's log likelihood at physical (b, w), up to
+  a constant: Gaussian, or Student's t with the reading's standard deviation
+  (``Measured.bending_length_dof``)."""
   c = physsim.params.bending_length(b, w, space.rigidity)
-  return -0.5 * ((c - measured.bending_length) / measured.bending_length_sd) ** 2
+  dof = measured.bending_length_dof
+  if not dof:
+    return -0.5 * ((c - measured.bending_length) / measured.bending_length_sd) ** 2
+  scale = measured.bending_length_sd * math.sqrt((dof - 2) / dof)
+  r = (c - measured.bending_length) / scale
+  return -0.5 * (dof + 1) * np.log1p(r**2 / dof)
 
 
 def _cell_offsets(grid, sub=SUB_CELLS) -> np.ndarray:

@@ -112,15 +112,85 @@ def still_valid_checks(old: dict, new: dict) -> tuple[list[dict], list[dict]]:
   return keep, drop
 
 
-def record_check(path: str, check: dict) -> dict:
+# What a mode's tables depend on beyond the mode's own entries: the readings
+# its recordings were given (``recalibration``'s keys).
+_LENGTH_KEYS = ('length_sd', 'length_sd_spread', 'length_sd_range', 'length_dof')
+_READING_KEYS = {'bending length': _LENGTH_KEYS,
+                 'known wind, bending length': _LENGTH_KEYS}  # fmt: skip
+
+
+def with_modes_of(old: dict, new: dict, modes: tuple[str, ...]) -> dict:
+  """Calibration ``old`` with ``modes``' tables (levels, weights, held-out
+  coverage, and the readings those modes simulate) taken from ``new``, a
+  refit of the same setting: one mode fitted again, e.g. after its simulated
+  readings changed, leaves every other mode's tables, and their checks
+  (``still_valid_checks``), as they were. The modes refitted are named in
+  ``recalibration.refitted``.
+
+  Raises:
+    ValueError: another setting or likelihood, or a mode ``new`` lacks.
+  """
+  for k in ('setting', 'likelihood', 'sharpness'):
+    if old.get(k) != new.get(k):
+      raise ValueError(
+        f'the refit has another {k} ({new.get(k)!r}; the shipped file: {old.get(k)!r}): '
+        'install it whole'
+      )
+  rec_new = new.get('recalibration') or {}
+  missing = [m for m in modes if m not in rec_new.get('modes', {})]
+  if missing:
+    raise ValueError(f'the refit has no tables for {missing}')
+  out = json.loads(json.dumps(old))  # a deep copy
+  rec = out['recalibration']
+  for m in modes:
+    rec['modes'][m] = rec_new['modes'][m]
+    rec.setdefault('weights', {})[m] = rec_new.get('weights', {}).get(m, {})
+    for part in ('held_out', 'held_out_uncalibrated'):
+      if m in new.get(part, {}):
+        out.setdefault(part, {})[m] = new[part][m]
+    for k in _READING_KEYS.get(m, ()):
+      if k in rec_new:
+        rec[k] = rec_new[k]
+  rec['refitted'] = sorted(set(rec.get('refitted', [])) | set(modes))
+  return out
+
+
+def trimmed_checks(old: dict, new: dict) -> tuple[list[dict], list[str]]:
+  """The checks of calibration ``old`` with the coverage of every mode whose
+  tables ``new`` changed taken out (a check left with none is dropped), and
+  those modes: ``calibrate --install --install_modes`` keeps what a check
+  measured of the tables it did not refit, for ``--check --install_modes``
+  to add the refitted modes' coverage back."""
+  rec_old, rec_new = old.get('recalibration') or {}, new.get('recalibration') or {}
+
+  def tables(rec, mode):
+    return (rec.get('modes', {}).get(mode), rec.get('weights', {}).get(mode))
+
+  out, moved = [], set()
+  for c in old.get('checks', []):
+    cov = {m: v for m, v in c.get('coverage', {}).items()
+           if tables(rec_old, m) is not None and tables(rec_old, m) == tables(rec_new, m)}  # fmt: skip
+    moved |= set(c.get('coverage', {})) - set(cov)
+    if cov:
+      out.append({**c, 'coverage': cov})
+  return out, sorted(moved)
+
+
+def record_check(path: str, check: dict, modes: tuple[str, ...] = ()) -> dict:
   """Keeps ``check`` (``calibration.check_record``: the calibration's tables
   on recordings they never saw) in the calibration file at ``path``, where
   every estimate that applies those tables quotes it; a check of the same
   physics, seed and searches (steered by the same reading) is replaced.
-  Written whole (temporary file, then rename).
+  With ``modes``, only those modes' coverage replaces the same check's
+  (``calibrate --install_modes``: the modes refitted; the others' tables, and
+  what the earlier check measured of them, are as they were), and the
+  record names them (``rechecked``). Written whole (temporary file, then
+  rename).
 
   Raises:
-    ValueError: the check was of another calibration (its setting differs).
+    ValueError: the check was of another calibration (its setting differs);
+      with ``modes``, no earlier check of the same recordings to add them
+      to, or a mode the check did not read.
   """
   cal = physsim.dataset.read_json(path)
   if check.get('setting') != cal.get('setting'):
@@ -130,6 +200,20 @@ def record_check(path: str, check: dict) -> dict:
     )
   key = lambda c: (c['physics'], c['seed'], c.get('searched', 'video'))
   same = lambda c: key(c) == key(check)
+  if modes:
+    earlier = [c for c in cal.get('checks', []) if same(c) and c['n'] == check['n']]
+    missing = [m for m in modes if m not in check['coverage']]
+    if not earlier or missing:
+      raise ValueError(
+        f'{path}: ' + (f'the check did not read {missing}' if missing else
+        f'no earlier check of these {check["n"]} recordings ({", ".join(map(str, key(check)))}) '
+        'to add modes to: record the whole check')
+      )  # fmt: skip
+    merged = json.loads(json.dumps(earlier[0]))
+    for m in modes:
+      merged['coverage'][m] = check['coverage'][m]
+    merged['rechecked'] = sorted(set(merged.get('rechecked', [])) | set(modes))
+    check = merged
   cal['checks'] = [c for c in cal.get('checks', []) if not same(c)] + [check]
   files.write_json(path, cal)
   return cal
@@ -288,6 +372,30 @@ def _readings_of(mode: str | None) -> tuple[str, ...]:
   }.get(mode, ())
 
 
+def _calibrated_range(rec: dict, name: str) -> tuple[float | None, float | None]:
+  """The relative errors of reading ``name`` an estimate may have and quote a
+  calibration's tables: the range its recordings' readings were drawn over
+  (a bending length's ``length_sd_range``), else within a factor of two of
+  the one error they all had."""
+  if name == 'bending_length' and 'length_sd_range' in rec:
+    lo, hi = rec['length_sd_range']
+    return float(lo), float(hi)
+  sd = rec.get('length_sd' if name == 'bending_length' else 'measured_sd')
+  return (None, None) if sd is None else (0.5 * sd, 2.0 * sd)
+
+
+def _pct_range(rec: dict, name: str) -> str:
+  """The simulated readings' relative error as the calibration line prints it."""
+  if name == 'bending_length' and 'length_sd_range' in rec:
+    lo, hi = rec['length_sd_range']
+    return f'{100 * lo:.2g}-{100 * hi:.2g}% (median {100 * rec["length_sd"]:.2g}%)'
+  return f'{100 * rec["length_sd" if name == "bending_length" else "measured_sd"]:.2g}%'
+
+
+def _law(dof: float) -> str:
+  return f"Student's t, {dof:g} degrees of freedom" if dof else 'Gaussian'
+
+
 def _same(mine, theirs) -> bool:
   if isinstance(mine, float):
     return bool(np.isclose(mine, theirs))
@@ -343,12 +451,18 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     differs.append(f'{mode} (not in this calibration)')
   for name in _readings_of(mode) if rec else ():
     value, sd = getattr(config.measured, name), getattr(config.measured, f'{name}_sd')
-    calibrated = rec.get('length_sd' if name == 'bending_length' else 'measured_sd')
-    if calibrated is None or not 0.5 <= (sd / value) / calibrated <= 2.0:
+    lo, hi = _calibrated_range(rec, name)
+    if lo is None or not lo <= sd / value <= hi:
       differs.append(
         f'{name} reading uncertainty ({100 * sd / value:.1f}%; calibrated: '
-        + (f'{100 * calibrated:.0f}%)' if calibrated else 'none)')
+        + (f'{_pct_range(rec, name)})' if lo is not None else 'none)')
       )
+    if name == 'bending_length':  # the reading's error law, as the tables drew it
+      dof, theirs = config.measured.bending_length_dof, rec.get('length_dof', 0.0)
+      if dof != theirs:
+        differs.append(
+          f'bending length error law ({_law(dof)}; calibrated: {_law(theirs)})'
+        )
   if differs:
     return {'matches': False, 'differs': differs, **head}
   if not rec or mode not in rec['modes']:  # a calibration without tables
@@ -381,10 +495,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     **({'checks': checks} if checks else {}),
     'n_calibration_recordings': rec['n_calibration_recordings'],
     # the readings its recordings were given, simulated to this relative error
-    'readings': {
-      name: rec['length_sd' if name == 'bending_length' else 'measured_sd']
-      for name in _readings_of(mode)
-    },
+    'readings': {name: _pct_range(rec, name) for name in _readings_of(mode)},
     'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
     'weights': rec.get('weights', {}).get(mode, {}),
     'coverage': {
@@ -616,7 +727,7 @@ def calibration_line(cal: dict | None) -> str:
       f'calibration ({cal["mode"]}): intervals read at levels recalibrated on '
       f'{cal["n_calibration_recordings"]} simulated recordings ({cal["setting"]}'
       + ''.join(
-        f'; {name.replace("_", " ")} read to {100 * sd:.0f}%'
+        f'; {name.replace("_", " ")} read to {sd}'
         for name, sd in cal.get('readings', {}).items()
       )
       + f'); read so, {held} held the truth in their 90%/50% intervals: {parts}.'

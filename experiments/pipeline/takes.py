@@ -143,8 +143,9 @@ def read(path: str) -> list[Take]:
 
 def fabric_readings(path: str) -> dict[str, float]:
   """The fabric's readings a protocol file gives (its ``"fabric"`` object:
-  ``area_weight``, ``bending_length``, each with its ``_sd``), as the
-  estimate's flat settings; {} where it gives none.
+  ``area_weight``, ``bending_length``, each with its ``_sd``, and the
+  bending length's ``bending_length_dof`` when a depth camera read it), as
+  the estimate's flat settings; {} where it gives none.
 
   Raises:
     ValueError: an unreadable file, an unknown key, a value out of range or a
@@ -155,7 +156,8 @@ def fabric_readings(path: str) -> dict[str, float]:
   where = f'{path}: fabric'
   if not isinstance(fabric, dict):
     raise ValueError(f'{where}: must be an object of readings, got {fabric!r}')
-  known = [k for name in FABRIC_KEYS for k in (name, f'{name}_sd')] + ['overhang']
+  known = [k for name in FABRIC_KEYS for k in (name, f'{name}_sd')]
+  known += ['bending_length_dof', 'overhang']
   unknown = sorted(set(fabric) - set(known))
   if unknown:
     raise ValueError(f'{where}: unknown keys {unknown}; known: {known}')
@@ -166,6 +168,17 @@ def fabric_readings(path: str) -> dict[str, float]:
     if name in fabric:
       out[name] = _number(where, name, fabric[name], lo, hi)
       out[f'{name}_sd'] = _number(where, f'{name}_sd', fabric[f'{name}_sd'], 1e-9, hi)
+  if 'bending_length_dof' in fabric:  # a depth reading's t law (experiments.overhang)
+    if 'bending_length' not in fabric:
+      raise ValueError(f'{where}: "bending_length_dof" without "bending_length"')
+    dof = _number(
+      where, 'bending_length_dof', fabric['bending_length_dof'], 0.0, 1000.0
+    )
+    if 0 < dof <= 2:
+      raise ValueError(
+        f'{where}: "bending_length_dof"={dof}: 0 (Gaussian) or more than 2'
+      )
+    out['bending_length_dof'] = dof
   return out
 
 

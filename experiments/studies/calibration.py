@@ -50,6 +50,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 import os
 import time
 
@@ -109,8 +110,18 @@ class Config:
       searches run with the estimate's sharpness).
     measured_sd: relative standard error of a measured wind or area weight.
     length_sd: relative standard error of a bending length read from an
-      overhang (``LENGTH_MODES``; 0.04: the depth reader's median printed
-      error on the overhang benchmark's held-out set-ups).
+      overhang (``LENGTH_MODES``), the median over recordings (0.035: the
+      depth reader's median printed error on the overhang benchmark's seed-0
+      set-ups).
+    length_sd_spread: how much that error varies between recordings, as a
+      depth reading's does with the strip's length and pixels: recording
+      ``seq``'s is ``length_sd`` x exp(spread x z), z standard normal clipped
+      to +-``LENGTH_SD_CLIP`` (0.47: the reader's sd of log error on seed 0,
+      1.6-9.1% there), so the tables hold for readings over that range
+      (``length_sd_range``); 0: every recording's is ``length_sd``.
+    length_dof: that reading's error law: Student's t of this many degrees
+      of freedom (the depth reader's, ``physsim.overhang_depth.DOF``), or 0,
+      Gaussian (a ruler's).
     sequences: training simulations of the network (the demo's recipe).
     batch_size: recordings simulated per batch when making them.
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
@@ -142,7 +153,9 @@ class Config:
   folds: int = 5
   sharpness_grid: tuple[float, ...] = (0.05, 0.1, 0.15, 0.25, 0.35, 0.5, 0.7, 1.0, 1.4)
   measured_sd: float = 0.02
-  length_sd: float = 0.04
+  length_sd: float = 0.035
+  length_sd_spread: float = 0.47
+  length_dof: float = 4.0
   sequences: int = 24
   batch_size: int = 64
   backend: str = cli.choice('auto', physsim.BACKENDS)
@@ -339,6 +352,16 @@ def check_config(config: Config) -> None:
     v = getattr(config, name)
     if not 0.0 < v <= 0.5:
       raise ValueError(f'--{name}={v}: a relative reading error in (0, 0.5]')
+  if not 0.0 <= config.length_sd_spread <= 2.0:
+    raise ValueError(
+      f'--length_sd_spread={config.length_sd_spread}: a spread of log errors in [0, 2]'
+    )
+  dof = config.length_dof
+  if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= posterior_lib.MAX_DOF)):
+    raise ValueError(
+      f'--length_dof={dof}: 0 (a Gaussian reading) or a t law of more than 2 and '
+      f'at most {posterior_lib.MAX_DOF:g} degrees of freedom'
+    )
   if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
@@ -632,11 +655,31 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
   return out
 
 
+LENGTH_SD_CLIP = 2.5  # standard deviations of log error a simulated reading spans
+
+
+def length_sd_of(config: Config, seq: int) -> float:
+  """Recording ``seq``'s simulated bending-length error (relative):
+  ``length_sd`` x exp(``length_sd_spread`` x z), z drawn from (seed, seq)
+  alone and clipped to +-``LENGTH_SD_CLIP``."""
+  z = np.random.default_rng([config.seed, 31, seq]).standard_normal()
+  z = float(np.clip(z, -LENGTH_SD_CLIP, LENGTH_SD_CLIP))
+  return config.length_sd * math.exp(config.length_sd_spread * z)
+
+
+def length_sd_range(config: Config) -> tuple[float, float]:
+  """The relative bending-length errors the length modes' tables were
+  fitted over (``length_sd_of``'s extremes)."""
+  k = config.length_sd_spread * LENGTH_SD_CLIP
+  return config.length_sd * math.exp(-k), config.length_sd * math.exp(k)
+
+
 @functools.lru_cache(maxsize=1024)  # about 0.3 MB a recording
 def _length_priors(config: Config, material: str, seq: int, truth: tuple,
                    n: int) -> dict:  # fmt: skip
   """For ``LENGTH_MODES``, recording ``seq``'s simulated readings (the
-  overhang's bending length to ``config.length_sd``, the anemometer's wind to
+  overhang's bending length to ``length_sd_of`` with its law
+  ``length_dof``, the anemometer's wind to
   ``measured_sd``, as the other modes draw it), their log priors on the
   posterior grid (the length's averaged over each cell, as an estimate forms
   it) and ``n`` of the prior's draws placed within their cells
@@ -648,7 +691,13 @@ def _length_priors(config: Config, material: str, seq: int, truth: tuple,
   grid = tuple(config.estimate.search.posterior_grid)
   points = bo.posterior.grid_points(grid)
   length = posterior_lib.simulated_reading(
-    'bending_length', truth, config.length_sd, config.seed, seq, space
+    'bending_length',
+    truth,
+    length_sd_of(config, seq),
+    config.seed,
+    seq,
+    space,
+    dof=config.length_dof,
   )
   wind = posterior_lib.simulated_reading(
     'wind_speed', truth, config.measured_sd, config.seed, seq
@@ -1085,6 +1134,9 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
       'n_calibration_recordings': raw['video'].get('n', 0),
       'measured_sd': config.measured_sd,
       'length_sd': config.length_sd,
+      'length_sd_spread': config.length_sd_spread,
+      'length_sd_range': list(length_sd_range(config)),
+      'length_dof': config.length_dof,
     },
     'held_out': held,
     'held_out_uncalibrated': raw,

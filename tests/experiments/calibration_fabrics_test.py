@@ -22,6 +22,7 @@ from experiments.pipeline import datasets as gen
 from experiments.pipeline import report
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
+from physsim.overhang_depth import DOF
 
 FABRICS = ('gray_interlock', 'black_denim')
 # The paper size's structure (its own recordings, the estimate's cloth and
@@ -70,6 +71,9 @@ def test_each_fabric_draws_over_its_own_box_and_the_first_keeps_its_stream():
     ({'pairs': 0}, ('--pairs=0',)),
     ({'length_sd': 0.0}, ('--length_sd=0.0', '(0, 0.5]')),
     ({'measured_sd': 0.9}, ('--measured_sd=0.9',)),
+    ({'length_dof': 2.0}, ('--length_dof=2.0', 'more than 2')),
+    ({'length_sd_spread': -0.1}, ('--length_sd_spread=-0.1',)),
+    ({'length_dof': float('nan')}, ('--length_dof=nan',)),
     ({'estimate': TINY.estimate.replace(distance='energy')}, ('--distance=energy',)),
     ({'size': 'demo', 'estimate': TINY.estimate.replace(distance='energy')},
      ('a study with networks calibrates one fabric',)),
@@ -206,8 +210,8 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
   wind = config.replace(wind_speed=3.0, wind_speed_sd=0.06)
   assert report.calibration_note(wind)['mode'] == 'known wind'
   assert report.calibration_note(config, joint=True, recordings=2)['matches']
-  # the protocol set (issue 39): with an overhang's bending length read to 4%
-  # (the depth reader's median), with and without the anemometer
+  # the protocol set (issue 39): with an overhang's bending length read to
+  # 3.5% under the depth reader's t law, with and without the anemometer
   space = physsim.search_space(material)
   c = float(
     physsim.params.bending_length(1.0, np.mean(space.area_weight), space.rigidity)
@@ -216,15 +220,33 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
     (config, 'bending length'),
     (wind, 'known wind, bending length'),
   ):
-    strip = readings.replace(bending_length=c, bending_length_sd=0.04 * c)
+    strip = readings.replace(
+      bending_length=c, bending_length_sd=0.035 * c, bending_length_dof=DOF
+    )
     note = report.calibration_note(strip)
     assert note['matches'] and note['recalibrated'] and note['mode'] == mode, note
     for field, cov in note['coverage'].items():
       for level, (lo, hi) in PAPER_BANDS.items():
         assert lo <= cov[level] <= hi, (mode, field, level, cov)
-  loose = wind.replace(bending_length=c, bending_length_sd=0.12 * c)
+  loose = wind.replace(
+    bending_length=c, bending_length_sd=0.12 * c, bending_length_dof=DOF
+  )
   assert (
     'bending_length reading uncertainty' in report.calibration_note(loose)['differs'][0]
+  )
+  # the reader's errors vary with the strip: the tables were fitted over a
+  # range of them (a short strip's 8.7% inside it)
+  lo, hi = cal_range = calibration.length_sd_range(calibration.PRESETS['paper'])
+  assert lo < 0.035 < 0.087 < hi < 0.12, cal_range
+  short = wind.replace(
+    bending_length=c, bending_length_sd=0.087 * c, bending_length_dof=DOF
+  )
+  assert report.calibration_note(short)['matches']
+  # a ruler's Gaussian reading is not what the tables drew
+  ruler = wind.replace(bending_length=c, bending_length_sd=0.035 * c)
+  (why,) = report.calibration_note(ruler)['differs']
+  assert why == (
+    "bending length error law (Gaussian; calibrated: Student's t, 4 degrees of freedom)"
   )
 
 
@@ -286,6 +308,36 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
   assert 'they held it in bending 70%/50%' in report.calibration_line(note)
 
 
+def test_a_check_of_refitted_modes_replaces_their_coverage_alone(tmp_path):
+  """``calibrate --check --install --install_modes``: the named modes'
+  coverage goes into the earlier check of the same recordings, which keeps
+  what it measured of the other (unchanged) tables; with no such check, or
+  a mode the check did not read, nothing is written."""
+  path = str(tmp_path / 'cal.json')
+  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  with open(path, 'w') as f:
+    json.dump(shipped, f)
+  earlier = next(c for c in shipped['checks'] if c['searched'] == 'video')
+  cells = {f: {'interval_50': 0.123, 'interval_90': 0.9} for f in calibration.FIELDS}
+  rerun = {**earlier, 'coverage': {m: cells for m in earlier['coverage']}}
+  rerun.pop('rechecked', None)
+  report.record_check(path, rerun, ('bending length',))
+  checks = json.load(open(path))['checks']
+  mine = next(c for c in checks if c['searched'] == 'video')
+  assert mine['coverage']['bending length'] == cells
+  for mode in set(earlier['coverage']) - {'bending length'}:
+    assert mine['coverage'][mode] == earlier['coverage'][mode], mode
+  assert 'bending length' in mine['rechecked'] and len(checks) == len(shipped['checks'])
+  before = open(path).read()
+  for check, modes, message in (
+    ({**rerun, 'seed': 9}, ('bending length',), 'no earlier check'),
+    ({**rerun, 'coverage': {'video': cells}}, ('bending length',), 'did not read'),
+  ):
+    with pytest.raises(ValueError, match=message):
+      report.record_check(path, check, modes)
+    assert open(path).read() == before
+
+
 def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypatch):
   """``calibrate --install``: a refit that adds a mode keeps the shipped
   file's checks; one that moves a checked mode's table drops that check."""
@@ -317,6 +369,86 @@ def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypa
   installed = json.load(open(dest))
   assert installed['checks'] == [wind_check]
   assert installed['recalibration'] == moved['recalibration']
+
+
+def test_each_recordings_length_error_is_its_own_over_the_calibrated_range():
+  """``length_sd_of``: a recording's simulated bending-length error, drawn
+  from (seed, seq) alone, log-normal about ``length_sd`` with the reader's
+  spread and inside ``length_sd_range``; no spread, every one the same."""
+  config = calibration.PRESETS['paper']
+  sds = np.array([calibration.length_sd_of(config, k) for k in range(4000)])
+  lo, hi = calibration.length_sd_range(config)
+  assert sds.min() >= lo * (1 - 1e-12) and sds.max() <= hi * (1 + 1e-12)
+  assert np.median(sds) == pytest.approx(config.length_sd, rel=0.05)
+  # the log error's spread: a standard normal's, clipped at 2.5 (0.99 of it)
+  assert np.log(sds).std() == pytest.approx(0.99 * config.length_sd_spread, rel=0.06)
+  assert calibration.length_sd_of(config, 7) == calibration.length_sd_of(config, 7)
+  flat = dataclasses.replace(config, length_sd_spread=0.0)
+  assert calibration.length_sd_of(flat, 7) == config.length_sd
+  assert calibration.length_sd_range(flat) == (config.length_sd, config.length_sd)
+
+
+def test_a_refit_of_some_modes_installs_their_tables_alone(tmp_path, monkeypatch):
+  """``calibrate --install --install_modes``: the named modes' tables (and
+  the readings they simulate) come from the refit, every other table and
+  the checks that read only those stay as shipped; a mode the refit lacks,
+  another setting, or the flag without --install are refused."""
+  from experiments import calibrate
+
+  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  refit = json.loads(json.dumps({k: v for k, v in shipped.items() if k != 'checks'}))
+  for mode in refit['recalibration']['modes']:  # every table moved
+    refit['recalibration']['modes'][mode][1][0] += 0.01
+  refit['recalibration']['length_sd'] = 0.123
+  refit['held_out']['bending length']['bending_scale']['interval_50'] = 0.4242
+  modes = ('bending length', 'known wind, bending length')
+  merged = report.with_modes_of(shipped, refit, modes)
+  rec, old = merged['recalibration'], shipped['recalibration']
+  for mode in rec['modes']:
+    want = refit if mode in modes else shipped
+    assert rec['modes'][mode] == want['recalibration']['modes'][mode], mode
+  assert rec['length_sd'] == 0.123 and rec['refitted'] == sorted(modes)
+  assert merged['held_out']['bending length']['bending_scale']['interval_50'] == 0.4242
+  assert merged['held_out']['video'] == shipped['held_out']['video']
+  assert old['length_sd'] != 0.123  # the shipped file's own dict untouched
+  keep, drop = report.still_valid_checks(shipped, merged)
+  assert [c['searched'] for c in keep] == ['known wind']  # read no length table
+  wind_check = keep[0]
+  video_check = next(c for c in shipped['checks'] if c['searched'] == 'video')
+  with pytest.raises(ValueError, match='another sharpness'):
+    report.with_modes_of(shipped, {**refit, 'sharpness': 0.7}, modes)
+  lacking = json.loads(json.dumps(refit))
+  del lacking['recalibration']['modes']['bending length']
+  with pytest.raises(ValueError, match=r"no tables for \['bending length'\]"):
+    report.with_modes_of(shipped, lacking, modes)
+  # the command
+  workdir, dest = tmp_path / 'w', tmp_path / 'shipped.json'
+  workdir.mkdir()
+  (workdir / calibration.RESULT_FILE).write_text(json.dumps(refit))
+  dest.write_text(json.dumps(shipped))
+  monkeypatch.setattr(report, 'shipped_calibration', lambda *a: str(dest))
+  monkeypatch.setattr(calibration, 'run', lambda *a, **k: {})
+  args = calibrate.Args(workdir=str(workdir), install=True, analyse_only=True,
+                        install_modes='; '.join(modes),
+                        study=calibration.PRESETS['paper'])  # fmt: skip
+  calibrate.main(args)
+  installed = json.load(open(dest))
+  assert installed['recalibration'] == rec
+  # the checks keep what they measured of the tables left as they were; the
+  # refitted modes wait for --check --install_modes
+  kept = {c['searched']: c for c in installed['checks']}
+  assert kept['known wind'] == wind_check
+  assert set(kept['video']['coverage']) == set(video_check['coverage']) - set(modes)
+  for mode, cov in kept['video']['coverage'].items():
+    assert cov == video_check['coverage'][mode], mode
+  for bad, message in (
+    (dataclasses.replace(args, install_modes='bending'), r"no mode \['bending'\]"),
+    (dataclasses.replace(args, install=False), 'give it with --install'),
+  ):
+    dest.write_text(json.dumps(shipped))
+    with pytest.raises(ValueError, match=message):
+      calibrate.main(bad)
+    assert json.load(open(dest)) == shipped  # nothing written
 
 
 def test_tables_fitted_with_a_model_error_apply_only_with_that_error(tmp_path):

@@ -22,10 +22,10 @@ from experiments.pipeline.posterior import Measured
 from experiments.studies import tables
 
 # The flags of the flat EstimateConfig before the split (``--fps`` of the
-# config was always ``--sim_fps``), with the bending-length reading and the
+# config was always ``--sim_fps``), with the bending-length reading (and its law) and the
 # joint's shared discrepancy added since.
 FLAT_FLAGS = [
-  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_sd', 'calibration', 'camera_sd_deg',
+  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
   'garment', 'garment_spacing', 'gusts', 'likelihood', 'material', 'max_iter',
   'min_iter', 'model_error', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
@@ -35,7 +35,7 @@ FLAT_FLAGS = [
 # experiments.estimate's flags before the split (and the bending length's).
 ESTIMATE_FLAGS = [
   'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
-  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_sd',
+  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd',
   'calibration', 'camera_json',
   'camera_sd_deg', 'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size',
   'cloth_sizes', 'depth_range', 'depth_scale', 'depth_topic', 'distance', 'fps',

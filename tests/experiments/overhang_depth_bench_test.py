@@ -1,4 +1,4 @@
-"""benchmarks/overhang_depth.py: the floor it fits, by hand, and the protocol
+"""benchmarks/overhang_depth.py: the reader's error law it fits, by hand, and the protocol
 set's joint estimate on a sheet whose video says nothing (a flat likelihood):
 the overhang's bending length and the anemometer alone."""
 
@@ -12,15 +12,38 @@ from benchmarks import overhang_depth as bench
 from experiments.pipeline import report
 
 
-def test_the_fitted_floor_is_the_smallest_holding_nine_in_ten():
-  # ten readings off by 1..10% with no fit spread: a 90% interval of
-  # +-1.645 f c_hat holds nine of them once 1.645 f 1.09 >= 0.09
-  rows = [
-    {'c': 1.0, 'c_hat': 1.0 + e / 100, 'read': {'fit_sd': 0.0}} for e in range(1, 11)
-  ]
-  f = bench.fitted_floor(rows)
-  want = 0.09 / (1.6448536269514722 * 1.09)
-  assert want <= f < want + 0.0025  # the 0.25% steps it tries
+def test_the_law_scales_the_fit_and_floor_and_counts_holds_by_t_quantiles():
+  row = {'c': 1.0, 'c_hat': 1.05, 'read': {'fit_sd': 0.03}}
+  r = bench.with_law(row, floor=0.04, dof=4.0)
+  # scale: 0.03 and 0.04 x 1.05 in quadrature; sd: x sqrt(4 / 2)
+  scale = float(np.hypot(0.03, 0.042))
+  assert r['scale'] == pytest.approx(scale, rel=1e-12)
+  assert r['sd'] == pytest.approx(scale * np.sqrt(2.0), rel=1e-12)
+  assert r['z'] == pytest.approx(0.05 / scale, rel=1e-12)
+  # t4's 50% and 90% quantiles by hand: 0.7407 and 2.1318
+  rows = [{'z': z, 'c_hat': 1.0} for z in (0.7, 0.75, 2.1, 2.2)]
+  assert bench.held(rows, 0.5, 4.0) == 0.25 and bench.held(rows, 0.9, 4.0) == 0.75
+  assert bench.with_law({'c': 1.0, 'refused': 'x'}, 0.01, 4.0) == {
+    'c': 1.0,
+    'refused': 'x',
+  }
+  with pytest.raises(ValueError, match='abridged'):
+    bench.with_law({'c': 1.0, 'c_hat': 1.0}, 0.01, 4.0)
+
+
+def test_the_fitted_law_recovers_the_law_readings_were_drawn_from():
+  # 400 readings, no fit spread, errors exactly at the quantiles of a t of
+  # 5 dof and scale 2%: the fit finds a law whose intervals hold as they say
+  from scipy import stats
+
+  q = (np.arange(400) + 0.5) / 400
+  err = stats.t.ppf(q, 5.0) * 0.02
+  rows = [{'c': 1.0, 'c_hat': 1.0 + e, 'read': {'fit_sd': 0.0}} for e in err]
+  dof, floor = bench.fitted_law(rows)
+  law = [bench.with_law(r, floor, dof) for r in rows]
+  for level in bench.FIT_LEVELS:
+    assert abs(bench.held(law, level, dof) - level) < 0.02, (dof, floor, level)
+  assert 4.0 <= dof <= 6.0 and floor == pytest.approx(0.02, abs=0.0015)
 
 
 def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
@@ -34,7 +57,7 @@ def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
     'truth': {'bending_scale': b, 'area_weight': w, 'wind_speed': v},
     'gp_mean': np.zeros(g), 'gp_var': np.full(g, 1e-4), 'floor': 0.0, 'noise_sd': 1.0,
   }  # fmt: skip
-  reading = {'c_hat': c, 'sd': 0.03 * c}
+  reading = {'c_hat': c, 'sd': 0.03 * c, 'dof': 4.0}
   tables = bench.shipped_tables(report.shipped_calibration('shape', 'paper'))
   assert set(tables) == set(bench.MODE_OF_SET)  # the shipped file calibrates both
   out = bench.joint_estimate(run, reading, bench.Args(), seed=0, tables=tables)
@@ -87,3 +110,26 @@ def test_a_protocol_set_is_written_for_a_sheet_recording(tmp_path):
   c = float(physsim.params.bending_length(1.3, 0.19, space.rigidity))
   r = overhang_depth.read_recording(strip.path, strip.camera_json, strip.length)
   assert r.bending_length == pytest.approx(c, rel=0.03)
+
+
+def test_the_results_file_keeps_what_reads_the_readings_again():
+  """``compact``: a reading keeps its fit's spread, so a results file can be
+  read again under another law (``--readings``), to 4 digits."""
+  row = bench.with_law(
+    {'c': 0.0123456, 'c_hat': 0.0125, 'read': {'fit_sd': 0.000321, 'ratio': 2.0},
+     'setup': {'big': list(range(100))}, 'profile': np.zeros((5, 2)),
+     'told_overhang': 0.03, 'error': 0.0125 / 0.0123456 - 1},
+    0.008, 4.0,
+  )  # fmt: skip
+  out = {'args': {'seed': 1}, 'floor': 0.008, 'dof': 4.0, 'summary': {'setups': 1},
+         'rows': [row, {'c': 0.02, 'refused': 'no strip'}], 'sets': []}  # fmt: skip
+  small = bench.compact(out)
+  kept = small['rows'][0]
+  assert (
+    'setup' not in kept
+    and 'profile' not in kept
+    and kept['read'] == {'fit_sd': 0.000321}
+  )
+  again = bench.with_law(kept, 0.008, 4.0)
+  assert again['z'] == pytest.approx(row['z'], rel=1e-3)
+  assert small['rows'][1] == {'c': 0.02, 'refused': 'no strip'}

@@ -10,7 +10,7 @@ import pytest
 
 import physsim
 from experiments import overhang
-from physsim import cantilever
+from physsim import cantilever, overhang_depth
 from tests.experiments import overhang_fixtures
 
 
@@ -32,6 +32,7 @@ def test_the_reading_is_the_elastica_and_the_scale_by_hand(capsys):
   overhang.main(args)
   out = capsys.readouterr().out
   assert f'--bending_length={c:.4g}' in out and 'bending scale' in out
+  assert 'dof' not in out  # a ruler's reading is Gaussian
   # without an area weight: the bending length alone
   assert set(overhang.reading(dataclasses.replace(args, area_weight=0.0))) == {
     'bending_length', 'bending_length_sd', 'readings'
@@ -92,10 +93,14 @@ def test_a_depth_recording_instead_of_a_ruler(tmp_path, capsys):
   r = overhang.reading(args)
   # mm-rounded frames of a clean render: c within the reader's clean tolerance
   assert r['bending_length'] == pytest.approx(0.02, rel=0.02)
-  assert r['bending_length_sd'] >= 0.02 * 0.02
+  assert r['bending_length_dof'] == overhang_depth.DOF  # the reader's t law
+  assert r['bending_length_sd'] >= overhang_depth.FLOOR * 0.02
   overhang.main(args)
   out = capsys.readouterr().out
   assert 'strip pixels' in out and '--bending_length=' in out and 'bending scale' in out
+  # the law goes with the reading to the estimate
+  assert f'--bending_length_dof={overhang_depth.DOF:g}' in out
+  assert f'"bending_length_dof": {overhang_depth.DOF:g}' in out
   assert (tmp_path / 'fit.png').stat().st_size > 0
 
 

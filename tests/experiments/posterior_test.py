@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import numpy as np
 import pytest
@@ -214,3 +216,61 @@ def test_a_shared_discrepancy_keeps_the_joint_area_weight_from_narrowing(shared)
   if shared:
     with pytest.raises(ValueError, match='area weight range'):
       posterior.joint(ll, grid, prior, jax.random.key(0), n=10, shared_bias_sd=shared)
+
+
+def test_a_depth_readings_t_law_is_scipys_with_the_readings_sd():
+  """The bending length's term with a t law: SciPy's log density of Student's
+  t (its scale sd sqrt((dof - 2) / dof)), up to a constant, at bending
+  values around the reading; 0 dof is the Gaussian."""
+  from scipy import stats
+
+  c0, sd, dof = 0.02, 0.0008, 4.0
+  m = posterior.Measured(
+    bending_length=c0, bending_length_sd=sd, bending_length_dof=dof
+  )
+  w = np.full(7, 0.2)
+  b = np.geomspace(0.5, 2.0, 7)
+  c = np.asarray(physsim.params.bending_length(b, w, FABRIC.rigidity))
+  mine = posterior._length_term(b, w, FABRIC, m)
+  want = stats.t.logpdf(c, dof, loc=c0, scale=sd * np.sqrt((dof - 2) / dof))
+  np.testing.assert_allclose(mine - mine[0], want - want[0], rtol=1e-9, atol=1e-9)
+  gauss = posterior._length_term(
+    b, w, FABRIC, dataclasses.replace(m, bending_length_dof=0.0)
+  )
+  np.testing.assert_allclose(gauss, -0.5 * ((c - c0) / sd) ** 2, rtol=1e-12)
+  m.check(FABRIC)
+
+
+@pytest.mark.parametrize('dof', [1.0, 2.0, -3.0, float('nan'), float('inf'), 1e4])
+def test_a_t_law_without_a_finite_variance_is_refused(dof):
+  m = posterior.Measured(
+    bending_length=0.02, bending_length_sd=0.001, bending_length_dof=dof
+  )
+  with pytest.raises(ValueError, match='--bending_length_dof'):
+    m.check(FABRIC)
+
+
+def test_simulated_t_readings_have_the_sd_they_say_and_gaussian_ones_are_unchanged():
+  truth = {'bending_scale': 1.0, 'wind_speed': 3.0, 'area_weight': 0.2}
+  c = float(physsim.params.bending_length(1.0, 0.2, FABRIC.rigidity))
+  draw = lambda k, dof: posterior.simulated_reading(
+    'bending_length', truth, 0.05, seed=1, seq=k, space=FABRIC, dof=dof
+  )
+  t = np.array([draw(k, 4.0).bending_length for k in range(20_000)]) / c - 1.0
+  # the t of 4 dof scaled to sd 5%: its sample sd to a few percent (the
+  # fourth moment is infinite: a looser bound than a Gaussian's), its
+  # quartiles at +-0.741 sqrt(1/2) 5% (a Gaussian's would be at +-0.674 x 5%)
+  assert np.std(t) == pytest.approx(0.05, rel=0.1)
+  assert np.quantile(np.abs(t), 0.5) == pytest.approx(
+    0.7407 * np.sqrt(0.5) * 0.05, rel=0.04
+  )
+  r = draw(3, 4.0)
+  assert r.bending_length_dof == 4.0 and r.bending_length_sd == pytest.approx(0.05 * c)
+  # dof 0: the Gaussian draw of before, the same number
+  rng = np.random.default_rng([1, 13, 3, len(posterior.FIELDS)])
+  assert draw(3, 0.0).bending_length == pytest.approx(
+    c * (1 + 0.05 * rng.standard_normal())
+  )
+  assert draw(3, 0.0).bending_length_dof == 0.0
+  with pytest.raises(ValueError, match='only a bending length'):
+    posterior.simulated_reading('wind_speed', truth, 0.02, seed=1, seq=0, dof=4.0)

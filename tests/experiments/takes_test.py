@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from experiments import estimate
 from experiments.pipeline import takes
+from physsim import overhang_depth
 from tests.experiments import overhang_fixtures
 
 
@@ -121,6 +123,11 @@ def test_a_protocol_file_gives_the_fabrics_own_readings(folder):
   # none given: the flags' own
   bare = _write(folder / 'q.json', {'recordings': [{'recording': 'sheet'}]})
   assert takes.fabric_readings(bare) == {}
+  # a depth camera's reading with its t law (experiments.overhang prints it)
+  t = _write(folder / 't.json', {'recordings': [{'recording': 'sheet'}],
+                                 'fabric': {**fabric, 'bending_length_dof': 4}})  # fmt: skip
+  m = estimate.with_fabric_readings(estimate.Args(protocol=t)).search.measured
+  assert m.bending_length_dof == 4.0
 
 
 def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
@@ -134,7 +141,12 @@ def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
   assert spec.path == str(folder / 'strip') and spec.length_sd == 0.001
   m = estimate.with_fabric_readings(estimate.Args(protocol=path)).search.measured
   assert m.bending_length == pytest.approx(0.02, rel=0.02)
-  assert m.bending_length_sd >= 0.02 * 0.02
+  # the reader's t law: at least its floor, times sqrt(dof / (dof - 2))
+  assert m.bending_length_dof == overhang_depth.DOF
+  floor = overhang_depth.FLOOR * m.bending_length
+  assert m.bending_length_sd >= floor * np.sqrt(
+    m.bending_length_dof / (m.bending_length_dof - 2)
+  )
   # the overhang beside a bending length, a missing file, a bad key
   for fabric, message in (
     ({'overhang': strip, 'bending_length': 0.02, 'bending_length_sd': 0.001},
@@ -156,6 +168,11 @@ def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
     ({'weight': 0.2}, r"unknown keys \['weight'\]"),
     ({'bending_length': 5.0, 'bending_length_sd': 0.1}, r'"bending_length"=5.0 must be in'),
     ([0.2], r'must be an object of readings'),
+    ({'bending_length_dof': 4}, r'"bending_length_dof" without "bending_length"'),
+    ({'bending_length': 0.02, 'bending_length_sd': 0.001, 'bending_length_dof': 1.5},
+     r'"bending_length_dof"=1.5: 0 \(Gaussian\) or more than 2'),
+    ({'bending_length': 0.02, 'bending_length_sd': 0.001, 'bending_length_dof': 'x'},
+     r'"bending_length_dof" must be a number'),
   ],
 )  # fmt: skip
 def test_a_bad_fabric_reading_is_refused_naming_file_and_key(folder, fabric, message):

@@ -45,8 +45,11 @@ def test_a_clean_strip_is_read_to_its_bending_length():
   height = float(np.asarray(pose.position)[2]) - TABLE.height
   assert r.camera_height_m == pytest.approx(height, abs=_HEIGHT_TOL_M)
   assert r.points > 100 and r.face_points > 500
-  # its sd: the floor the fit cannot see, at least
-  assert r.bending_length_sd >= overhang_depth.FLOOR * r.bending_length
+  # its law: a t of DOF degrees of freedom whose scale is the fit's spread
+  # and the floor in quadrature; its sd that scale times sqrt(dof / (dof - 2))
+  assert r.bending_length_dof == overhang_depth.DOF == 4.0
+  scale = np.hypot(r.fit_sd, overhang_depth.FLOOR * r.bending_length)
+  assert r.bending_length_sd == pytest.approx(scale * np.sqrt(2.0), rel=1e-12)
 
 
 def test_a_real_strip_under_a_noisy_camera_is_within_its_interval():
