@@ -338,6 +338,18 @@ def test_a_check_of_refitted_modes_replaces_their_coverage_alone(tmp_path):
     assert open(path).read() == before
 
 
+def _installing(tmp_path, monkeypatch, refit: dict, shipped: dict):
+  """A workdir holding ``refit`` as its result and a copy of ``shipped`` that
+  ``calibrate --install`` writes to (the study itself not run)."""
+  workdir, dest = tmp_path / 'w', tmp_path / 'shipped.json'
+  workdir.mkdir()
+  (workdir / calibration.RESULT_FILE).write_text(json.dumps(refit))
+  dest.write_text(json.dumps(shipped))
+  monkeypatch.setattr(report, 'shipped_calibration', lambda *a: str(dest))
+  monkeypatch.setattr(calibration, 'run', lambda *a, **k: {})
+  return workdir, dest
+
+
 def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypatch):
   """``calibrate --install``: a refit that adds a mode keeps the shipped
   file's checks; one that moves a checked mode's table drops that check."""
@@ -358,12 +370,7 @@ def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypa
   # the command: the refit's file installed with the checks it kept
   from experiments import calibrate
 
-  workdir, dest = tmp_path / 'w', tmp_path / 'shipped.json'
-  workdir.mkdir()
-  (workdir / calibration.RESULT_FILE).write_text(json.dumps(moved))
-  dest.write_text(json.dumps(shipped))
-  monkeypatch.setattr(report, 'shipped_calibration', lambda *a: str(dest))
-  monkeypatch.setattr(calibration, 'run', lambda *a, **k: {})
+  workdir, dest = _installing(tmp_path, monkeypatch, moved, shipped)
   calibrate.main(calibrate.Args(workdir=str(workdir), install=True, analyse_only=True,
                                 study=calibration.PRESETS['paper']))  # fmt: skip
   installed = json.load(open(dest))
@@ -422,12 +429,7 @@ def test_a_refit_of_some_modes_installs_their_tables_alone(tmp_path, monkeypatch
   with pytest.raises(ValueError, match=r"no tables for \['bending length'\]"):
     report.with_modes_of(shipped, lacking, modes)
   # the command
-  workdir, dest = tmp_path / 'w', tmp_path / 'shipped.json'
-  workdir.mkdir()
-  (workdir / calibration.RESULT_FILE).write_text(json.dumps(refit))
-  dest.write_text(json.dumps(shipped))
-  monkeypatch.setattr(report, 'shipped_calibration', lambda *a: str(dest))
-  monkeypatch.setattr(calibration, 'run', lambda *a, **k: {})
+  workdir, dest = _installing(tmp_path, monkeypatch, refit, shipped)
   args = calibrate.Args(workdir=str(workdir), install=True, analyse_only=True,
                         install_modes='; '.join(modes),
                         study=calibration.PRESETS['paper'])  # fmt: skip
