@@ -115,8 +115,9 @@ def still_valid_checks(old: dict, new: dict) -> tuple[list[dict], list[dict]]:
 # What a mode's tables depend on beyond the mode's own entries: the readings
 # its recordings were given (``recalibration``'s keys).
 _LENGTH_KEYS = ('length_sd', 'length_sd_spread', 'length_sd_range', 'length_dof')
-_READING_KEYS = {'bending length': _LENGTH_KEYS,
-                 'known wind, bending length': _LENGTH_KEYS}  # fmt: skip
+_READING_KEYS = {m: _LENGTH_KEYS for m in (
+  'bending length', 'known wind, bending length', 'bending length (ruler)',
+  'known wind, bending length (ruler)')}  # fmt: skip
 
 
 def with_modes_of(old: dict, new: dict, modes: tuple[str, ...]) -> dict:
@@ -356,7 +357,9 @@ def calibration_mode(measured, joint: bool = False) -> str | None:
   if weight and (wind or length):
     return None
   if length:
-    return 'known wind, bending length' if wind else 'bending length'
+    # a depth camera's reading (its t law) or a ruler's (Gaussian)
+    ruler = '' if getattr(measured, 'bending_length_dof', 0.0) else ' (ruler)'
+    return ('known wind, bending length' if wind else 'bending length') + ruler
   return 'known wind' if wind else 'known area weight' if weight else 'video'
 
 
@@ -369,6 +372,8 @@ def _readings_of(mode: str | None) -> tuple[str, ...]:
     'joint pair, known winds': ('wind_speed',),
     'bending length': ('bending_length',),
     'known wind, bending length': ('wind_speed', 'bending_length'),
+    'bending length (ruler)': ('bending_length',),
+    'known wind, bending length (ruler)': ('wind_speed', 'bending_length'),
   }.get(mode, ())
 
 
@@ -458,7 +463,8 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
         + (f'{_pct_range(rec, name)})' if lo is not None else 'none)')
       )
     if name == 'bending_length':  # the reading's error law, as the tables drew it
-      dof, theirs = config.measured.bending_length_dof, rec.get('length_dof', 0.0)
+      dof = config.measured.bending_length_dof
+      theirs = 0.0 if mode.endswith('(ruler)') else rec.get('length_dof', 0.0)
       if dof != theirs:
         differs.append(
           f'bending length error law ({_law(dof)}; calibrated: {_law(theirs)})'

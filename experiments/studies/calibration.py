@@ -78,8 +78,11 @@ MODE_OF_READING = {'none': 'video', 'wind_speed': 'known wind',
                    'area_weight': 'known area weight'}  # fmt: skip
 LEVELS = (50, 90)
 # The modes with a bending length read from an overhang (issue 39's protocol:
-# the sheet with the strip, and with an anemometer too).
-LENGTH_MODES = ('bending length', 'known wind, bending length')
+# the sheet with the strip, and with an anemometer too): by a depth camera
+# (its t law, ``length_dof``), and by a ruler (Gaussian).
+LENGTH_MODES = ('bending length', 'known wind, bending length',
+                'bending length (ruler)', 'known wind, bending length (ruler)')  # fmt: skip
+RULER_MODES = LENGTH_MODES[2:]
 MODES = ('video', 'known wind', 'known area weight', 'joint pair',
          'joint pair, known winds', *LENGTH_MODES)  # fmt: skip
 RESULT_FILE = 'calibration.json'
@@ -679,7 +682,8 @@ def _length_priors(config: Config, material: str, seq: int, truth: tuple,
                    n: int) -> dict:  # fmt: skip
   """For ``LENGTH_MODES``, recording ``seq``'s simulated readings (the
   overhang's bending length to ``length_sd_of`` with its law
-  ``length_dof``, the anemometer's wind to
+  ``length_dof``, a ruler's to the same error (Gaussian), the anemometer's
+  wind to
   ``measured_sd``, as the other modes draw it), their log priors on the
   posterior grid (the length's averaged over each cell, as an estimate forms
   it) and ``n`` of the prior's draws placed within their cells
@@ -702,11 +706,19 @@ def _length_priors(config: Config, material: str, seq: int, truth: tuple,
   wind = posterior_lib.simulated_reading(
     'wind_speed', truth, config.measured_sd, config.seed, seq
   )
+  # a ruler's reading: the same error, Gaussian (the same normal draw as
+  # length_dof 0 would give)
+  ruler = posterior_lib.simulated_reading(
+    'bending_length', truth, length_sd_of(config, seq), config.seed, seq, space
+  )
+  with_wind = lambda m: dataclasses.replace(
+    m, wind_speed=wind.wind_speed, wind_speed_sd=wind.wind_speed_sd
+  )
   readings = {
     'bending length': length,
-    'known wind, bending length': dataclasses.replace(
-      length, wind_speed=wind.wind_speed, wind_speed_sd=wind.wind_speed_sd
-    ),
+    'known wind, bending length': with_wind(length),
+    'bending length (ruler)': ruler,
+    'known wind, bending length (ruler)': with_wind(ruler),
   }
   rng = np.random.default_rng([config.seed, 23, seq])
   out = {}

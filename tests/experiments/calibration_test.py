@@ -199,12 +199,21 @@ def test_calibration_modes_follow_what_was_measured():
     report.calibration_mode(m(area_weight=0.2, area_weight_sd=0.004), joint=True)
     is None
   )
-  strip = m(bending_length=0.03, bending_length_sd=0.0012)
+  strip = m(bending_length=0.03, bending_length_sd=0.0012, bending_length_dof=4.0)
   assert report.calibration_mode(strip) == 'bending length'
   assert report.calibration_mode(dataclasses.replace(strip, wind_speed=3.0,
                                                      wind_speed_sd=0.06)) == (
     'known wind, bending length'
   )  # fmt: skip
+  # a ruler's reading (Gaussian) has modes of its own
+  ruler = dataclasses.replace(strip, bending_length_dof=0.0)
+  assert report.calibration_mode(ruler) == 'bending length (ruler)'
+  assert (
+    report.calibration_mode(
+      dataclasses.replace(ruler, wind_speed=3.0, wind_speed_sd=0.06)
+    )
+    == 'known wind, bending length (ruler)'
+  )
   assert report.calibration_mode(strip, joint=True) is None
   scale = dataclasses.replace(strip, area_weight=0.2, area_weight_sd=0.004)
   assert report.calibration_mode(scale) is None
