@@ -472,6 +472,9 @@ def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
 def main(args: Args) -> None:
   floor = args.floor or overhang_depth.FLOOR
   dof = args.dof or overhang_depth.DOF
+  posterior_lib.check_dof(dof, 'dof')
+  if not (math.isfinite(floor) and 0 < floor < 1):
+    raise ValueError(f'--floor={args.floor}: a relative floor in (0, 1)')
   rng = np.random.default_rng([args.seed, 39])
   key = jax.random.key(args.seed)
   if args.readings and not args.packed:

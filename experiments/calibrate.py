@@ -125,17 +125,16 @@ def main(args: Args) -> None:
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     new = physsim.dataset.read_json(src)
     old = physsim.dataset.read_json(dest) if os.path.isfile(dest) else {}
-    if modes:
+    if modes:  # those modes' tables; what the checks measured of the others
       if not old:
         raise ValueError(f'--install_modes: no file at {dest} to install them into')
       new = report.with_modes_of(old, new, modes)
-    keep, drop = report.still_valid_checks(old, new)
-    if modes:  # what the checks measured of the tables left as they were
-      keep, moved = report.trimmed_checks(old, new)
-      drop = []
+      (keep, moved), drop = report.trimmed_checks(old, new), []
       if moved:
         print(f'the checks keep their other modes; check {", ".join(moved)} again '
               '(--check ... --install --install_modes=...)')  # fmt: skip
+    else:
+      keep, drop = report.still_valid_checks(old, new)
     if keep or modes:  # checks of tables this refit left as they were
       new['checks'] = keep
       files.write_json(dest, new)

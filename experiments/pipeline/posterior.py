@@ -75,12 +75,7 @@ class Measured:
     """Raises ValueError on a reading without uncertainty, or far outside the
     box, or a bending length's error law that is neither Gaussian nor a t
     with a finite variance."""
-    dof = self.bending_length_dof
-    if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= MAX_DOF)):
-      raise ValueError(
-        f'--bending_length_dof={dof}: 0 (a Gaussian reading) or a Student-t '
-        f'of more than 2 and at most {MAX_DOF} degrees of freedom'
-      )
+    check_dof(self.bending_length_dof, 'bending_length_dof')
     for name in ('wind_speed', 'area_weight', 'bending_length'):
       v, sd = getattr(self, name), getattr(self, f'{name}_sd')
       if v == 0 and sd == 0:
@@ -164,6 +159,17 @@ SUB_CELLS = (32, 4)  # a bending length's term averaged over (bending, area weig
 
 
 MAX_DOF = 1000.0  # a bending length's t law (beyond it, say 0: the Gaussian)
+
+
+def check_dof(dof: float, flag: str) -> None:
+  """Raises ValueError naming ``--flag`` unless ``dof`` is 0 (a Gaussian
+  reading) or a t law with a finite variance (more than 2, at most
+  ``MAX_DOF``)."""
+  if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= MAX_DOF)):
+    raise ValueError(
+      f'--{flag}={dof}: 0 (a Gaussian reading) or a Student-t of more than 2 '
+      f'and at most {MAX_DOF:g} degrees of freedom'
+    )
 
 
 def _length_term(b, w, space: physsim.SearchSpace, measured: Measured):

@@ -97,27 +97,27 @@ def still_valid_checks(old: dict, new: dict) -> tuple[list[dict], list[dict]]:
   same_setting = all(
     old.get(k) == new.get(k) for k in ('setting', 'likelihood', 'sharpness')
   )
-  rec_old, rec_new = old.get('recalibration') or {}, new.get('recalibration') or {}
-
-  def tables(rec, mode):
-    return (rec.get('modes', {}).get(mode), rec.get('weights', {}).get(mode))
-
   keep, drop = [], []
   for c in old.get('checks', []):
-    ok = same_setting and all(
-      tables(rec_old, m) is not None and tables(rec_old, m) == tables(rec_new, m)
-      for m in c.get('coverage', {})
-    )
+    ok = same_setting and all(_same_tables(old, new, m) for m in c.get('coverage', {}))
     (keep if ok else drop).append(c)
   return keep, drop
 
 
-# What a mode's tables depend on beyond the mode's own entries: the readings
-# its recordings were given (``recalibration``'s keys).
+def _same_tables(old: dict, new: dict, mode: str) -> bool:
+  """Whether calibrations ``old`` and ``new`` read ``mode`` with the same
+  tables (CDF levels and weights)."""
+
+  def tables(cal):
+    rec = cal.get('recalibration') or {}
+    return (rec.get('modes', {}).get(mode), rec.get('weights', {}).get(mode))
+
+  return tables(old) == tables(new)
+
+
+# What a bending-length mode's tables depend on beyond the mode's own
+# entries: the readings its recordings were given (``recalibration``'s keys).
 _LENGTH_KEYS = ('length_sd', 'length_sd_spread', 'length_sd_range', 'length_dof')
-_READING_KEYS = {m: _LENGTH_KEYS for m in (
-  'bending length', 'known wind, bending length', 'bending length (ruler)',
-  'known wind, bending length (ruler)')}  # fmt: skip
 
 
 def with_modes_of(old: dict, new: dict, modes: tuple[str, ...]) -> dict:
@@ -149,7 +149,7 @@ def with_modes_of(old: dict, new: dict, modes: tuple[str, ...]) -> dict:
     for part in ('held_out', 'held_out_uncalibrated'):
       if m in new.get(part, {}):
         out.setdefault(part, {})[m] = new[part][m]
-    for k in _READING_KEYS.get(m, ()):
+    for k in _LENGTH_KEYS if 'bending_length' in _readings_of(m) else ():
       if k in rec_new:
         rec[k] = rec_new[k]
   rec['refitted'] = sorted(set(rec.get('refitted', [])) | set(modes))
@@ -162,15 +162,9 @@ def trimmed_checks(old: dict, new: dict) -> tuple[list[dict], list[str]]:
   those modes: ``calibrate --install --install_modes`` keeps what a check
   measured of the tables it did not refit, for ``--check --install_modes``
   to add the refitted modes' coverage back."""
-  rec_old, rec_new = old.get('recalibration') or {}, new.get('recalibration') or {}
-
-  def tables(rec, mode):
-    return (rec.get('modes', {}).get(mode), rec.get('weights', {}).get(mode))
-
   out, moved = [], set()
   for c in old.get('checks', []):
-    cov = {m: v for m, v in c.get('coverage', {}).items()
-           if tables(rec_old, m) is not None and tables(rec_old, m) == tables(rec_new, m)}  # fmt: skip
+    cov = {m: v for m, v in c.get('coverage', {}).items() if _same_tables(old, new, m)}
     moved |= set(c.get('coverage', {})) - set(cov)
     if cov:
       out.append({**c, 'coverage': cov})

@@ -82,7 +82,6 @@ LEVELS = (50, 90)
 # (its t law, ``length_dof``), and by a ruler (Gaussian).
 LENGTH_MODES = ('bending length', 'known wind, bending length',
                 'bending length (ruler)', 'known wind, bending length (ruler)')  # fmt: skip
-RULER_MODES = LENGTH_MODES[2:]
 MODES = ('video', 'known wind', 'known area weight', 'joint pair',
          'joint pair, known winds', *LENGTH_MODES)  # fmt: skip
 RESULT_FILE = 'calibration.json'
@@ -359,12 +358,7 @@ def check_config(config: Config) -> None:
     raise ValueError(
       f'--length_sd_spread={config.length_sd_spread}: a spread of log errors in [0, 2]'
     )
-  dof = config.length_dof
-  if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= posterior_lib.MAX_DOF)):
-    raise ValueError(
-      f'--length_dof={dof}: 0 (a Gaussian reading) or a t law of more than 2 and '
-      f'at most {posterior_lib.MAX_DOF:g} degrees of freedom'
-    )
+  posterior_lib.check_dof(config.length_dof, 'length_dof')
   if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
