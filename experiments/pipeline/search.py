@@ -266,9 +266,14 @@ def _pad(n: int) -> int:
 
 
 class Evaluator:
-  """Scores candidates of many problems, one fused call per structure.
+  """Scores candidates of many problems, one fused call per structure and
+  batch of at most the search's ``q`` candidates.
 
-  Holds one ``Objective`` per structure it has seen (built on first use).
+  Holds one ``Objective`` per structure it has seen (built on first use). An
+  initial design larger than ``q`` is scored in calls of ``q`` (the last one
+  padded), so that a search traces and compiles one program shape, not one
+  for its design and another for its steps; each candidate keeps its own
+  keys (its evaluation number), so the scores are those of one call.
   """
 
   def __init__(self):
@@ -292,33 +297,64 @@ class Evaluator:
     out: list = [None] * len(problems)
     for members in groups.values():
       rows = members + [members[0]] * (_pad(len(members)) - len(members))
-      q = max(len(us[i]) for i in members)
-      u = np.stack([np.concatenate([us[i], np.repeat(us[i][:1], q - len(us[i]), 0)])
-                    for i in rows])  # fmt: skip
-      keys = [obj_lib.candidate_keys(problems[i].config, firsts[i], q) for i in rows]
-      gust = jax.numpy.stack([k[0] for k in keys])
-      noise = jax.numpy.stack([k[1] for k in keys])
-      data = obj_lib.stack([problems[i].data for i in rows])
-      t0 = time.perf_counter()
-      s = self.objective(problems[members[0]])(
-        data, u, gust, noise, frames=frames, positions=positions
-      )
-      self.seconds += time.perf_counter() - t0
+      n_max = max(len(us[i]) for i in members)
+      q = min(n_max, max(problems[i].config.search.q for i in members))
+      chunks = [
+        self._call(problems, us, firsts, rows, lo, q, frames, positions)
+        for lo in range(0, n_max, q)
+      ]
       for r, i in enumerate(members):
         n = len(us[i])
+        psd, valid, pos, res = (
+          self._joined(chunks, name, r, n)
+          for name in ('psd', 'valid', 'positions', 'residual')
+        )
         out[i] = obj_lib.Scores(
-          s.psd[r, :n], s.valid[r, :n],
-          None if s.frames is None else s.frames[r],
-          None if s.positions is None else s.positions[r, :n],
-          None if s.residual is None else s.residual[r, :n],
-        )  # fmt: skip
+          psd, valid, self._best_frames(chunks, r, psd, q), pos, res
+        )
     return out
+
+  def _call(self, problems, us, firsts, rows, lo, q, frames, positions):
+    """One fused call: candidates ``lo .. lo + q - 1`` of each row's problem
+    (a row with fewer repeats its first)."""
+    part = []
+    for i in rows:
+      u = us[i][lo : lo + q]
+      if not len(u):
+        u = us[i][:1]
+      part.append(np.concatenate([u, np.repeat(u[:1], q - len(u), 0)]))
+    keys = [obj_lib.candidate_keys(problems[i].config, firsts[i] + lo, q) for i in rows]
+    gust = jax.numpy.stack([k[0] for k in keys])
+    noise = jax.numpy.stack([k[1] for k in keys])
+    data = obj_lib.stack([problems[i].data for i in rows])
+    t0 = time.perf_counter()
+    s = self.objective(problems[rows[0]])(
+      data, np.stack(part), gust, noise, frames=frames, positions=positions
+    )
+    self.seconds += time.perf_counter() - t0
+    return s
+
+  @staticmethod
+  def _joined(chunks, name: str, r: int, n: int):
+    """Row ``r``'s ``name`` over the calls, its first ``n`` candidates."""
+    if getattr(chunks[0], name) is None:
+      return None
+    return np.concatenate([getattr(c, name)[r] for c in chunks])[:n]
+
+  @staticmethod
+  def _best_frames(chunks, r: int, psd: np.ndarray, q: int):
+    """Row ``r``'s lowest-PSD candidate's frames: those of the call it was in."""
+    if chunks[0].frames is None:
+      return None
+    if len(chunks) == 1 or not np.isfinite(psd).any():
+      return chunks[0].frames[r]
+    return chunks[int(np.nanargmin(psd)) // q].frames[r]
 
 
 def score(problem: obj_lib.Problem, u, *, evaluator: Evaluator | None = None,
           first: int = 0, **outputs) -> obj_lib.Scores:  # fmt: skip
-  """Scores unit-cube points ``u (q, 3)`` of one problem in one fused call
-  (evaluations ``first ..`` for the keys); pass one ``evaluator`` to calls of
+  """Scores unit-cube points ``u (n, 3)`` of one problem in fused calls of
+  its search's ``q`` (evaluations ``first ..`` for the keys); pass one ``evaluator`` to calls of
   one structure so that they share its compile. ``outputs``: ``frames`` or
   ``positions`` (see ``Objective``)."""
   evaluator = evaluator or Evaluator()

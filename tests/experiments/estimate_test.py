@@ -77,6 +77,30 @@ def _score(env, u, config=CONFIG, problem=None, objective=None, **kw):
   )
 
 
+def test_a_design_larger_than_q_is_scored_in_calls_of_q(env, monkeypatch):
+  # Ten candidates of a search with q = 4: three calls of one program shape
+  # (the last padded), each candidate with its own keys (a posterior search's
+  # fresh gusts), so the scores, positions and best frames are those of one
+  # call of all ten (the reference: the same problem told q = 10).
+  config = CONFIG.replace(point='median', sensor_noise=True)
+  u = np.random.default_rng(0).uniform(-1, 1, (10, 3))
+  whole = search.score(
+    obj_lib.make_problem(config.replace(q=10), env['net'], env['rec']), u,
+    first=3, frames=True, positions=True,
+  )  # fmt: skip
+  counting = _CountCalls(monkeypatch)
+  chunked = search.score(
+    obj_lib.make_problem(config, env['net'], env['rec']), u,
+    first=3, frames=True, positions=True,
+  )  # fmt: skip
+  assert counting.calls == 3
+  assert chunked.psd.shape == (10,) and np.isfinite(chunked.psd).all()
+  assert len(np.unique(chunked.psd)) == 10  # fresh keys: no two alike
+  np.testing.assert_allclose(chunked.psd, whole.psd, rtol=1e-5)
+  np.testing.assert_allclose(chunked.positions, whole.positions, rtol=1e-5, atol=1e-6)
+  np.testing.assert_allclose(chunked.frames, whole.frames, rtol=1e-5, atol=1e-6)
+
+
 def _state(workdir: str) -> dict:
   with np.load(os.path.join(workdir, 'bo_state.npz')) as z:
     return {k: z[k] for k in z.files}
