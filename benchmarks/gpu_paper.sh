@@ -46,7 +46,7 @@ if [ "$LATENCY" = 1 ]; then  # one estimate after compile
   step latency 900 python -m benchmarks.estimate_latency \
     --recording="$R/eval/fabrics/$gi/0000" --material="$gi" $EST_ARGS \
     --model="$R/t1/physnet_depth/simulation/$gi" --out="$R/latency.json" \
-    --settings=default
+    --settings=psd
 fi
 # 3. Tables 2 and 3: every recording x method, each process its share in lockstep.
 step tables 3000 "${LAUNCH[@]}" --command="python -m experiments.tables \

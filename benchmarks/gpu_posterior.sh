@@ -54,14 +54,14 @@ if [ -n "${SMOKE:-}" ]; then
   TR="--preset=smoke"
   EV="--preset=smoke --materials=$GI --sequences=2 --resolution=32 --frames=8 --cloth_resolution=8"
   EST="--preset=smoke --backend=c"
-  LAT="--backend=c --settings=default --repeats=1"
+  LAT="--backend=c --settings=psd_smoke --repeats=1"
 else
   CAL="--backend=mjx"
   DS="--materials=$GI --batch_size=30"
   TR="--val_fraction=0.2 --patience=4"
   EV="--preset=eval --materials=$GI --sequences=${NREC:-3} --batch_size=${NREC:-3}"
   EST=""
-  LAT="--backend=mjx --settings=default${PAPER:+,paper} --repeats=1"
+  LAT="--backend=mjx --settings=psd${PAPER:+,paper} --repeats=1"
 fi
 case "$stage" in
   calibration)
@@ -165,7 +165,7 @@ case "$stage" in
     [ "${DISTANCE:-}" = shape ] && model="--image_size=$([ -n "${SMOKE:-}" ] && echo 32 || echo 256)"
     python -m benchmarks.joint_pairs "$model" \
       --workdir="$R/$name" --pairs="${NGROUPS:-8}" --group="${GROUP:-3}" --preset=$pre \
-      ${SMOKE:+--smoke --backend=c} ${DISTANCE:+--distance=$DISTANCE} \
+      ${SMOKE:+--smoke --backend=c} --distance="${DISTANCE:-energy}" \
       ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} ${SHARPNESS:+--sharpness=$SHARPNESS} \
       ${GUSTS:+--gusts=$GUSTS} ${CLOTH:+--cloth_resolution=$CLOTH} \
       ${SECONDS_CLIP:+--seconds=$SECONDS_CLIP} 2>&1 | tail -12 \

@@ -1,11 +1,13 @@
 r"""Estimate a fabric's bending, area weight and the wind from one depth video.
 
+  # the default: where the sheet hangs (--distance=shape), no network
   python -m experiments.estimate --recording=PATH --material=gray_interlock \
-      --model=out/table1/physnet_depth/simulation/gray_interlock --workdir=out/estimate
+      --workdir=out/estimate
 
-  # where the sheet hangs, no network: --distance=shape and the camera's pose
+  # through a trained PhySNet: the PSD between embeddings
   python -m experiments.estimate --recording=PATH --material=gray_interlock \
-      --distance=shape --workdir=out/estimate_shape
+      --distance=energy --model=out/table1/physnet_depth/simulation/gray_interlock \
+      --workdir=out/estimate_psd
 
   # a camera's own recording: its camera file, only the intake (no network)
   python -m experiments.estimate --recording=rec/depth --camera_json=rec/camera.json \
@@ -45,11 +47,13 @@ class Args:
       Several, comma-separated: one fabric in several recordings (e.g. two
       fan settings), estimated jointly (one bending and area weight, one wind
       each).
-    model: the material's trained network (a train or table1 run folder);
+    model: the material's trained network (a train or table1 run folder)
+      for a distance that embeds (--distance=energy, centroid, energy+shape);
       several, comma-separated: an ensemble of runs of one architecture (each
       video embedded by every member; PSD the geometric mean of theirs). Not
-      needed with intake_only, nor with --distance=shape (which reads the
-      sheet's place from the depth frames themselves).
+      needed with intake_only, nor with the default --distance=shape (which
+      reads the sheet's place from the depth frames themselves; a model given
+      with it only sets the frames' size, and a note says so).
     image_size: without a network (--distance=shape, no model), the size
       (pixels a side) the frames are compared at; a network fixes its own.
     workdir: where the search state, estimate.json and the pictures go.
@@ -286,6 +290,18 @@ def network(args: Args) -> setup.Network:
   )  # fmt: skip
 
 
+def model_note(args: Args) -> str:
+  """A line for a ``--model`` the estimate does not compare through (the
+  default distance, the shape, reads the frames themselves), else ''."""
+  if not (args.model and args.search.scoring.distance == 'shape'):
+    return ''
+  return (
+    f"note: --model={args.model} only sets the frames' size: --distance=shape (the "
+    'default, which reads more: BENCHMARKS.md) needs no network; --distance=energy '
+    'compares the frames through it'
+  )
+
+
 def _intake_dir(args: Args, i: int, n: int) -> str:
   """Where recording ``i`` of ``n``'s intake goes."""
   return args.workdir if n == 1 else f'{args.workdir}/intake_{i}'
@@ -337,6 +353,8 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     return
   loaded = network(args)
   net = loaded.embedding
+  if note := model_note(args):
+    print(note, flush=True)
   # The network restored here is the one the search uses (not restored twice).
   kw = dict(
     allow_other_material=args.allow_other_material,

@@ -40,7 +40,7 @@ class Args:
 
 
 PRESETS = {
-  k: Args(tables=tables_lib.Config(estimate=v))
+  k: Args(tables=tables_lib.Config(estimate=tables_lib.for_networks(v)))
   for k, v in objective_lib.PRESETS.items()
 }
 

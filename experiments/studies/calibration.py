@@ -165,7 +165,8 @@ class Config:
   network_seed: int = 0
   networks: int = 5
   estimate: EstimateConfig = cli.nested(
-    EstimateConfig().replace(q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24)),
+    EstimateConfig().replace(distance='energy', q=8, n_init=16, max_iter=6,
+                             posterior_grid=(12, 64, 24)),
     skip=('simulation.material', 'simulation.cloth_resolution', 'simulation.frames',
           'simulation.warmup', 'hardware.backend', 'seed', 'search.point', 'measured'),
   )  # fmt: skip
@@ -195,7 +196,7 @@ PRESETS = {
     batch_size=6,
     sharpness_grid=(0.25, 0.5, 1.0),
     estimate=EstimateConfig().replace(
-      q=4, n_init=8, max_iter=2, posterior_grid=(6, 16, 8)
+      distance='energy', q=4, n_init=8, max_iter=2, posterior_grid=(6, 16, 8)
     ),
   ),
 }

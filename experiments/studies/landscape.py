@@ -59,7 +59,7 @@ class Config:
   """
 
   objective: est.EstimateConfig = cli.nested(
-    est.EstimateConfig(), skip=('simulation.material',)
+    est.EstimateConfig().replace(distance='energy'), skip=('simulation.material',)
   )
   points_1d: int = 15
   grid: int = 9
@@ -70,7 +70,9 @@ PRESETS = {
   'default': Config(),
   # The demo's estimate settings at a few points: about a minute on a CPU.
   'smoke': Config(
-    objective=est.EstimateConfig().replace(cloth_resolution=10, frames=16, warmup=0.5),
+    objective=est.EstimateConfig().replace(
+      distance='energy', cloth_resolution=10, frames=16, warmup=0.5
+    ),
     points_1d=5,
     grid=4,
     batch=8,

@@ -17,7 +17,7 @@ from unittest import mock
 import pytest
 from absl import flags
 
-from experiments.pipeline import cli
+from experiments.pipeline import cli, objective
 
 _ROOT = pathlib.Path(__file__).resolve().parents[2]
 NAMES = sorted(
@@ -96,10 +96,13 @@ def test_a_benchmark_runs_as_a_module_and_names_a_missing_flag(tmp_path):
 def test_the_latency_benchmark_needs_a_network_only_for_a_distance_that_embeds():
   latency = _module('estimate_latency')
   with pytest.raises(
-    ValueError, match='--settings=default embeds frames: it needs --model'
+    ValueError, match='--settings=psd embeds frames: it needs --model'
   ):
-    latency.main(latency.Args(recording='/nowhere', settings=('default',)))
-  assert latency.SETTINGS['shape'][1] == {'distance': 'shape'}
+    latency.main(latency.Args(recording='/nowhere', settings=('psd',)))
+  assert latency.SETTINGS['psd'][1] == {'distance': 'energy'}
+  # the default setting is the estimate's default: the shape, no network
+  assert latency.SETTINGS['default'][1] == {}
+  assert objective.PRESETS['default'].scoring.distance == 'shape'
 
 
 def test_the_bayes_point_benchmark_compares_the_same_choice(tmp_path):
@@ -114,3 +117,4 @@ def test_the_bayes_point_benchmark_compares_the_same_choice(tmp_path):
   rows = json.loads(out.read_text())['rows']
   assert len(rows) == 2 and all(r['same_point'] for r in rows)
   assert all(r['matrix_ms'] > 0 and r['prefix_sums_ms'] > 0 for r in rows)
+

@@ -25,6 +25,10 @@ from experiments.pipeline import report, search
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
 
+# These tests calibrate and quote the estimates of networks (the PSD); the
+# estimate's default distance is the shape.
+PSD_ESTIMATE = EstimateConfig().replace(distance='energy')
+
 pytestmark = pytest.mark.slow  # the calibration study end to end
 
 S = 0.3  # observation noise, unit-cube coordinates
@@ -62,7 +66,7 @@ def _fake_runs(
 def test_analysis_recovers_the_exact_likelihoods_calibration(tmp_path):
   config = calibration.Config(
     pairs=100, sharpness_grid=(0.25, C_TRUE, 4.0),
-    estimate=EstimateConfig().replace(posterior_grid=GRID),
+    estimate=PSD_ESTIMATE.replace(posterior_grid=GRID),
   )  # fmt: skip
   runs = _fake_runs(config, str(tmp_path))
   analysis = calibration.analyse(config, runs)
@@ -101,7 +105,7 @@ def test_recalibration_repairs_a_too_sharp_likelihood_on_held_out_recordings(
   tmp_path,
 ):
   config = calibration.Config(
-    pairs=100, estimate=EstimateConfig().replace(posterior_grid=GRID)
+    pairs=100, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )
   scores = calibration.posteriors(
     config, _fake_runs(config, str(tmp_path)), 'gibbs', 4.0
@@ -130,7 +134,7 @@ def test_a_quantity_the_video_does_not_inform_keeps_its_nominal_levels(tmp_path)
   # intervals hold truths drawn from the prior exactly as often as they say,
   # so the recalibration keeps its nominal levels (and fits the others).
   config = calibration.Config(
-    pairs=40, estimate=EstimateConfig().replace(posterior_grid=GRID)
+    pairs=40, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )
   runs = _fake_runs(config, str(tmp_path), blind=(2,))
   video = calibration.posteriors(config, runs, 'gibbs', C_TRUE)['video']
@@ -155,28 +159,26 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   path = tmp_path / 'calibration.json'
   path.write_text(json.dumps(cal))
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(path))
-  same = report.calibration_note(EstimateConfig().replace(sharpness=0.7))
+  same = report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
   assert 'wind 88%/48%' in report.calibration_line(same)
-  other = report.calibration_note(EstimateConfig().replace(sharpness=1.4))
+  other = report.calibration_note(PSD_ESTIMATE.replace(sharpness=1.4))
   assert other['matches'] is False
   assert 'not for this sharpness' in report.calibration_line(other)
   other = report.calibration_note(
-    EstimateConfig().replace(sharpness=0.7, likelihood='threshold')
+    PSD_ESTIMATE.replace(sharpness=0.7, likelihood='threshold')
   )
   assert other['matches'] is False
   assert other['differs'] == ['likelihood']
   # A setting that changes what a score means (the mesh) also voids the quote.
   cal['config'] = {'estimate': {'cloth_resolution': 25, 'frames': 60, 'q': 24}}
   path.write_text(json.dumps(cal))
-  assert (
-    report.calibration_note(EstimateConfig().replace(sharpness=0.7))['matches'] is True
-  )
+  assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))['matches'] is True
   other = report.calibration_note(
-    EstimateConfig().replace(sharpness=0.7, cloth_resolution=10)
+    PSD_ESTIMATE.replace(sharpness=0.7, cloth_resolution=10)
   )
   assert other['differs'] == ['cloth_resolution']
   other = report.calibration_note(
-    EstimateConfig().replace(sharpness=0.7, q=8)
+    PSD_ESTIMATE.replace(sharpness=0.7, q=8)
   )  # the budget
   assert other['differs'] == ['q']
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
@@ -252,25 +254,25 @@ def _recalibrated_file(tmp_path, monkeypatch) -> dict:
 def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkeypatch):
   _recalibrated_file(tmp_path, monkeypatch)
   m = posterior_lib.Measured
-  note = report.calibration_note(EstimateConfig().replace(sharpness=0.7))
+  note = report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
   assert note['recalibrated'] and note['mode'] == 'video'
   assert note['levels']['wind_speed'] == [0.01, 0.1, 0.4, 0.9, 0.99]
   assert 'recalibrated on 200' in report.calibration_line(note)
-  wind = EstimateConfig().replace(
+  wind = PSD_ESTIMATE.replace(
     sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.06)
   )
   assert report.calibration_note(wind)['mode'] == 'known wind'
   # A reading five times less certain than the calibrated 2% is another mode.
-  loose = EstimateConfig().replace(
+  loose = PSD_ESTIMATE.replace(
     sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.3)
   )
   note = report.calibration_note(loose)
   assert note['matches'] is False and 'uncertainty' in note['differs'][0]
   joint = report.calibration_note(
-    EstimateConfig().replace(sharpness=0.7), joint=True, recordings=3
+    PSD_ESTIMATE.replace(sharpness=0.7), joint=True, recordings=3
   )
   assert joint['matches'] is False
-  assert report.calibration_note(EstimateConfig().replace(sharpness=0.7), joint=True,
+  assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7), joint=True,
                                  recordings=2)['mode'] == 'joint pair'  # fmt: skip
   # A joint pair with a wind reading at each: its own tables, when calibrated.
   assert report.calibration_note(wind, joint=True, recordings=2)['mode'] == (
@@ -289,7 +291,7 @@ def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypa
   cal = _recalibrated_file(tmp_path, monkeypatch)
   cal['network'] = {'seeds': [0, 1], 'triplet_accuracy': [0.71, 0.88]}
   (tmp_path / 'calibration.json').write_text(json.dumps(cal))
-  config = EstimateConfig().replace(sharpness=0.7)
+  config = PSD_ESTIMATE.replace(sharpness=0.7)
   within = report.calibration_note(config, accuracy=0.75)
   assert within['recalibrated'] and 'weaker_network' not in within
   weak = report.calibration_note(config, accuracy=0.66)
@@ -373,7 +375,7 @@ def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
   with pytest.raises(ValueError, match='no finished estimates'):
     calibration.saved_runs(str(tmp_path))
   config = calibration.Config(
-    pairs=2, estimate=EstimateConfig().replace(posterior_grid=GRID)
+    pairs=2, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )
   runs = _fake_runs(config, str(tmp_path / 'estimates'))
   for r in runs[:3]:  # the fourth has no estimate.json: not finished
@@ -410,7 +412,7 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
   # elsewhere: the exact likelihood's intervals hold the truth as often as
   # they say; a four-times sharper one's are caught short.
   config = calibration.Config(
-    pairs=60, seed=1, estimate=EstimateConfig().replace(posterior_grid=GRID)
+    pairs=60, seed=1, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )  # fmt: skip
   runs = _fake_runs(config, str(tmp_path), noise_seed=2)
   good = calibration.check_analysis(config, runs, _tables(C_TRUE))
@@ -449,7 +451,7 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
 
 def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   config = calibration.Config(
-    pairs=5, seed=3, estimate=EstimateConfig().replace(posterior_grid=GRID)
+    pairs=5, seed=3, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )
   shipped = tmp_path / 'calibration.json'
   shipped.write_text(json.dumps(_tables(C_TRUE, seed=3)))
@@ -516,13 +518,11 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   )
   # The reading each estimate gets is the one the analysis's mode applies.
   truth = runs[3]['truth']
-  est = calibration.with_reading(knw, EstimateConfig(), 'wind_speed', truth, 3)
+  est = calibration.with_reading(knw, PSD_ESTIMATE, 'wind_speed', truth, 3)
   assert est.measured == posterior_lib.simulated_reading(
     'wind_speed', truth, knw.measured_sd, knw.seed, 3
   )
-  assert calibration.with_reading(knw, EstimateConfig(), 'none', truth, 3) == (
-    EstimateConfig()
-  )
+  assert calibration.with_reading(knw, PSD_ESTIMATE, 'none', truth, 3) == PSD_ESTIMATE
   assert '8 of 10 estimates applied' in text
   assert (tmp_path / 'w' / 'check_ranks.png').stat().st_size > 0
   # An estimate without intervals (the paper's argmin) cannot be checked.
@@ -583,7 +583,7 @@ def test_the_tables_apply_only_to_a_network_of_their_recipe(tmp_path, monkeypatc
 
   cal = _recalibrated_file(tmp_path, monkeypatch)
   mine = embedding.network_recipe(_fake_network(tmp_path / 'a'))
-  config = EstimateConfig().replace(sharpness=0.7)
+  config = PSD_ESTIMATE.replace(sharpness=0.7)
   # A calibration that recorded no recipe checks none.
   assert report.calibration_note(config, network=mine)['recalibrated']
   cal['network'] = {'recipe': mine, 'seeds': [0, 1]}
@@ -645,7 +645,7 @@ def test_the_study_records_its_networks_and_refuses_mixed_recipes(tmp_path):
 
 def test_packed_runs_carry_what_the_analysis_reads(tmp_path):
   config = calibration.Config(
-    pairs=30, estimate=EstimateConfig().replace(posterior_grid=GRID)
+    pairs=30, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )
   runs = _fake_runs(config, str(tmp_path / 'estimates'))  # 60: two packed files
   written = calibration.pack_runs(runs, str(tmp_path / 'study'))
@@ -667,13 +667,13 @@ def test_an_estimate_applies_the_calibration_file_it_is_given(tmp_path, monkeypa
   cal['recalibration']['n_calibration_recordings'] = 77
   mine.write_text(json.dumps(cal))
   monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
-  assert report.calibration_note(EstimateConfig().replace(sharpness=0.7)) is None
+  assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7)) is None
   note = report.calibration_note(
-    EstimateConfig().replace(sharpness=0.7, calibration=str(mine))
+    PSD_ESTIMATE.replace(sharpness=0.7, calibration=str(mine))
   )
   assert note['recalibrated'] and note['n_calibration_recordings'] == 77
   with pytest.raises(ValueError, match='missing.json'):
-    EstimateConfig().replace(calibration=str(tmp_path / 'missing.json')).check()
+    PSD_ESTIMATE.replace(calibration=str(tmp_path / 'missing.json')).check()
 
 
 def test_a_corrupt_packed_file_is_named(tmp_path):

@@ -64,6 +64,10 @@ OLD_SMOKE = {
   'calibration': '',
 }  # fmt: skip
 SMOKE = objective.PRESETS['smoke']
+# The files above were written when the PSD was the default distance; the
+# shape is now (it reads more): an old file is read as the PSD it says.
+OLD_SMOKE_CONFIG = SMOKE.replace(distance='energy')
+TODAYS_SMOKE = {**OLD_SMOKE, 'distance': 'shape'}
 
 
 def test_the_flags_are_the_flat_configs():
@@ -118,14 +122,31 @@ def test_the_flat_form_is_the_old_files():
     flat = json.loads(json.dumps(config.flat()))
     assert sorted(flat) == sorted(OLD_SMOKE), name
     assert objective.EstimateConfig.from_flat(flat) == config, name
-  assert json.loads(json.dumps(SMOKE.flat())) == OLD_SMOKE
-  assert objective.EstimateConfig.from_flat(OLD_SMOKE) == SMOKE
+  assert json.loads(json.dumps(SMOKE.flat())) == TODAYS_SMOKE
+  assert objective.EstimateConfig.from_flat(TODAYS_SMOKE) == SMOKE
+  assert objective.EstimateConfig.from_flat(OLD_SMOKE) == OLD_SMOKE_CONFIG
   # a file from before cloth_size and the camera's error were settings
   older = {
     k: v for k, v in OLD_SMOKE.items()
     if k not in ('cloth_size', 'camera_sd_m', 'camera_sd_deg')
   }  # fmt: skip
-  assert objective.EstimateConfig.from_flat(older) == SMOKE
+  assert objective.EstimateConfig.from_flat(older) == OLD_SMOKE_CONFIG
+
+
+def test_a_model_given_to_the_default_distance_gets_a_note():
+  args = estimate.Args(recording='r', model='out/m')
+  assert '--model=out/m' in estimate.model_note(args)
+  assert '--distance=energy' in estimate.model_note(args)
+  psd = dataclasses.replace(args, search=args.search.replace(distance='energy'))
+  assert estimate.model_note(psd) == ''
+  assert estimate.model_note(estimate.Args(recording='r')) == ''
+
+
+def test_the_default_distance_is_the_shape_and_the_papers_the_psd():
+  assert objective.EstimateConfig().scoring.distance == 'shape'
+  assert objective.PRESETS['default'].scoring.distance == 'shape'
+  assert objective.PRESETS['paper'].scoring.distance == 'energy'
+  assert objective.PRESETS['paper'].search.point == 'argmin'
   with pytest.raises(ValueError, match="no setting 'nonsense'"):
     objective.EstimateConfig.from_flat({**OLD_SMOKE, 'nonsense': 1})
 
@@ -175,13 +196,20 @@ def test_an_old_workdirs_run_resumes(tmp_path):
   with open(path) as f:
     run = json.load(f)
   resumable = ('workers', 'calibration')
-  assert run['config'] == {k: v for k, v in OLD_SMOKE.items() if k not in resumable}
-  # run.json as the flat config wrote it: the same run
+  assert run['config'] == {k: v for k, v in TODAYS_SMOKE.items() if k not in resumable}
+  # run.json as the flat config wrote it, when the PSD was the default: the
+  # same run for that distance; today's default is another, named
   run['config'] = {k: v for k, v in OLD_SMOKE.items() if k not in resumable}
   files.write_json(path, run)
-  search.check_run(search.Job(SMOKE.replace(workers=3), rec, '', workdir), problem)
+  search.check_run(
+    search.Job(OLD_SMOKE_CONFIG.replace(workers=3), rec, '', workdir), problem
+  )
   with pytest.raises(ValueError, match=r'config\.gusts'):
-    search.check_run(search.Job(SMOKE.replace(gusts=0.3), rec, '', workdir), problem)
+    search.check_run(
+      search.Job(OLD_SMOKE_CONFIG.replace(gusts=0.3), rec, '', workdir), problem
+    )
+  with pytest.raises(ValueError, match=r'config\.distance'):
+    search.check_run(search.Job(SMOKE, rec, '', workdir), problem)
 
 
 def test_a_bending_length_enters_the_files_only_when_given():

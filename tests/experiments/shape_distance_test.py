@@ -228,7 +228,7 @@ def test_camera_error_out_of_range_is_refused():
 
 
 def test_estimate_warns_when_a_shape_distance_trusts_an_aligned_camera():
-  base = obj_lib.PRESETS['smoke']
+  base = obj_lib.PRESETS['smoke'].replace(distance='energy')
   shape = base.replace(distance='shape')
   warn = report.shape_camera_warning
   assert 'camera_sd_m=0.02' in warn(shape, aligned=True)
