@@ -6,8 +6,12 @@
    noise, 24 fps, an unseen camera pose, gustier wind: ``make_eval_set``'s
    settings, small);
 4. estimate bending, wind and area weight from that recording alone
-   (``search.estimate``), and print them beside the truth and beside the
-   trivial guess (the centre of the search range).
+   (``search.estimate``) with the estimate's default, the sheet's shape
+   (``--distance=shape``, no network), and print them beside the truth and
+   beside the trivial guess (the centre of the search range);
+5. estimate them again through the PhySNet of step 2 (the PSD between
+   embeddings, ``--distance=energy``) and print both side by side: the
+   default is the distance that reads more (README, BENCHMARKS.md).
 
 Every stage resumes from what ``workdir`` already holds. ``experiments/demo.py``
 is its command line.
@@ -80,26 +84,36 @@ def configs(
   return data, recording, training, est
 
 
+# The demo's PhySNet estimate: the same search through the network.
+NETWORK_DISTANCE = 'energy'
+
+
 def run(workdir: str, material: str, sequences: int, seed: int, backend: str):
+  """The demo's five stages (each resumes); returns the default estimate's
+  result, with the network's under ``'physnet'``."""
   data_cfg, rec_cfg, train_cfg, est_cfg = configs(material, sequences, seed, backend)
   t0 = time.time()
-  print('== 1/4 training set', flush=True)
+  print('== 1/5 training set', flush=True)
   gen.run(data_cfg, os.path.join(workdir, 'data'))
-  print('== 2/4 training PhySNet', flush=True)
+  print('== 2/5 training PhySNet', flush=True)
   train_lib.run(
     train_cfg, os.path.join(workdir, 'data'), os.path.join(workdir, 'model')
   )
-  print('== 3/4 a real-like recording', flush=True)
+  print('== 3/5 a real-like recording', flush=True)
   rec_root = os.path.join(workdir, 'recording')
   gen.run(rec_cfg, rec_root)
   rec_dir = physsim.dataset.sequence_dir(rec_root, material, '0000')
   rec = recording_lib.load_recording(
     rec_dir, fps=est_cfg.simulation.fps, size=IMAGE_SIZE, frames=_FRAMES
   )
-  print('== 4/4 estimate', flush=True)
-  result = search.estimate(
-    est_cfg, rec, os.path.join(workdir, 'model', material), workdir + '/estimate'
-  )
+  print("== 4/5 estimate (the default: the sheet's shape, no network)", flush=True)
+  result = search.estimate(est_cfg, rec, '', workdir + '/estimate')
   print(report.report_table(result))
+  print('== 5/5 the same recording through the PhySNet of step 2', flush=True)
+  physnet = search.estimate(
+    est_cfg.replace(distance=NETWORK_DISTANCE), rec,
+    os.path.join(workdir, 'model', material), workdir + '/estimate_physnet',
+  )  # fmt: skip
+  print(report.distances_table({'shape (default)': result, 'PhySNet PSD': physnet}))
   print(f'total {time.time() - t0:.0f} s; pictures in {workdir}/estimate')
-  return result
+  return {**result, 'physnet': physnet}

@@ -567,6 +567,40 @@ def errors_table(errors: dict) -> list[str]:
   return _markdown(['error against the truth', 'point', 'range centre'], rows)
 
 
+def distances_table(results: dict[str, dict]) -> str:
+  """Estimates of one recording by several distances, side by side: per
+  quantity each one's point and 90% interval, the truth beside them, and
+  each point's error against it (percent; a factor for bending)."""
+  names = list(results)
+  first = results[names[0]]
+  truth = dict(first.get('truth') or {})
+  if truth:
+    truth['load_ratio'] = float(
+      physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
+    )
+  error_key = {'wind_speed': 'wind_speed_pct', 'area_weight': 'area_weight_pct',
+               'bending_scale': 'bending_factor', 'load_ratio': 'load_ratio_pct'}  # fmt: skip
+  rows = []
+  for q in [*physsim.Params._fields, 'load_ratio']:
+    cells = [ROW_NAMES[q]] + ([f'{truth[q]:.3g}'] if truth else [])
+    for n in names:
+      r = results[n]
+      e = r['load_ratio'] if q == 'load_ratio' else r['estimate'][q]
+      lo, hi = e['interval_90']
+      cell = f'{e["value"]:.3g} [{lo:.3g}, {hi:.3g}]'
+      if truth and 'errors' in r:
+        v = r['errors']['estimate'][error_key[q]]
+        cell += f' ({f"x{v:.2f}" if q == "bending_scale" else f"{v:.1f}%"})'
+      cells.append(cell)
+    rows.append(cells)
+  head = (
+    ['quantity']
+    + (['true'] if truth else [])
+    + [f'{n}: point [90%] (error)' for n in names]
+  )
+  return '\n'.join(_markdown(head, rows))
+
+
 def report_table(result: dict) -> str:
   """An estimate for a person, in at most ``WIDTH`` columns: per quantity the
   point, its 50% and 90% credible intervals and how much narrower the 90% one

@@ -92,6 +92,38 @@ def test_shape_estimates_quote_their_own_calibration_at_their_size():
   assert report.calibration_file(config) == '/elsewhere/mine.json'
 
 
+def test_the_default_estimate_of_every_fabric_quotes_measured_coverage():
+  # issue 41: a paper-size estimate with the defaults (the shape distance)
+  # quotes the shipped paper tables for each of the 7 fabrics, never
+  # "indicative"; through a network it does not (the PSD's tables are demo-size)
+  for fabric in sorted(physsim.FABRICS):
+    config = objective.EstimateConfig().replace(material=fabric)
+    note = report.calibration_note(config)
+    assert note['matches'] and note['recalibrated'], (fabric, note.get('differs'))
+    assert note['mode'] == 'video'
+    assert 'indicative' not in report.calibration_line(note)
+  psd = objective.EstimateConfig().replace(distance='energy')
+  assert 'indicative' in report.calibration_line(report.calibration_note(psd))
+
+
+def test_the_distances_table_sets_each_estimate_beside_the_truth():
+  shape = _result()
+  psd = _result(
+    estimate={**shape['estimate'], 'wind_speed': _entry(4.4, 4.2, 4.6, 4.0, 4.9, 3)}
+  )
+  psd['errors'] = report.errors(physsim.Params(0.5, 4.4, 0.25), shape['truth'],
+                                physsim.search_space('gray_interlock'))  # fmt: skip
+  table = report.distances_table({'shape (default)': shape, 'PhySNet PSD': psd})
+  lines = table.splitlines()
+  assert max(map(len, lines)) <= report.WIDTH
+  assert 'shape (default): point [90%] (error)' in lines[0]
+  wind = next(x for x in lines if x.startswith('| wind'))
+  assert '| 4 ' in wind  # the truth
+  assert '5 [4.41, 5.62] (25.0%)' in wind and '4.4 [4, 4.9] (10.0%)' in wind
+  bending = next(x for x in lines if x.startswith('| bending'))
+  assert '(x4.00)' in bending  # 0.5 against a true 2
+
+
 def test_iterations_of_counts_the_initial_design_as_iteration_zero():
   it = report.iterations_of(n_evals=10, n_init=4, q=2)
   assert list(it) == [0, 0, 0, 0, 1, 1, 2, 2, 3, 3]
