@@ -118,3 +118,53 @@ def test_the_bayes_point_benchmark_compares_the_same_choice(tmp_path):
   assert len(rows) == 2 and all(r['same_point'] for r in rows)
   assert all(r['matrix_ms'] > 0 and r['prefix_sums_ms'] > 0 for r in rows)
 
+
+def test_the_default_fabrics_table_reads_what_the_script_wrote(tmp_path):
+  # one estimate.json as experiments.estimate writes it (its fields that the
+  # table reads), and the shell's times; a malformed times line is refused
+  import json
+
+  from benchmarks import default_fabrics
+
+  entry = lambda v, lo, hi: {'value': v, 'interval_90': [lo, hi],
+                             'interval_50': [v, v], 'narrowing_90': 2.0}  # fmt: skip
+  result = {
+    'config': {'distance': 'shape'},
+    'calibration': {
+      'matches': True,
+      'recalibrated': True,
+      'mode': 'video',
+      'n_calibration_recordings': 210,
+      'setting': 's',
+      'coverage': {},
+    },  # fmt: skip
+    'truth': {'bending_scale': 1.0, 'wind_speed': 3.0, 'area_weight': 0.2},
+    'estimate': {
+      'bending_scale': entry(1.0, 0.5, 2.0),
+      'wind_speed': entry(3.3, 3.1, 3.5),
+      'area_weight': entry(0.2, 0.15, 0.25),
+    },  # fmt: skip
+    'load_ratio': entry(1.0, 0.5, 2.0),
+    'errors': {
+      'estimate': {
+        'wind_speed_pct': 10.0,
+        'area_weight_pct': 1.0,
+        'bending_factor': 1.0,
+        'load_ratio_pct': 5.0,
+      }
+    },  # fmt: skip
+  }
+  (tmp_path / 'est_black_denim').mkdir()
+  (tmp_path / 'est_black_denim' / 'estimate.json').write_text(json.dumps(result))
+  (tmp_path / 'times.txt').write_text('black_denim rc=0 47214 ms\n')
+  out = tmp_path / 'df.json'
+  default_fabrics.main(default_fabrics.Args(root=str(tmp_path), out=str(out)))
+  summary = json.loads(out.read_text())
+  row = summary['rows']['black_denim']
+  assert row['calibrated'] and not row['indicative'] and row['seconds'] == 47.214
+  assert row['held']['wind_speed'] == {'90': False, '50': False}  # 3.0 below 3.1
+  assert row['held']['area_weight']['90'] and row['held']['bending_scale']['90']
+  assert summary['summary']['calibrated'] == 1
+  (tmp_path / 'times.txt').write_text('black_denim 47214\n')
+  with pytest.raises(ValueError, match='times.txt:1'):
+    default_fabrics.main(default_fabrics.Args(root=str(tmp_path), out=str(out)))
