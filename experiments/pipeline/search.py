@@ -265,14 +265,25 @@ def _pad(n: int) -> int:
   return 1 << max(0, int(np.ceil(np.log2(max(n, 1)))))
 
 
-class Evaluator:
-  """Scores candidates of many problems, one fused call per structure and
-  batch of at most the search's ``q`` candidates.
+def _call_size(configs, n: int) -> int:
+  """Candidates per fused call for ``n`` of searches with ``configs``: their
+  ``q`` on MuJoCo C, all ``n`` elsewhere (``Evaluator``)."""
+  if all(physsim.resolve_backend(c.hardware.backend) == 'c' for c in configs):
+    return min(n, max(c.search.q for c in configs))
+  return n
 
-  Holds one ``Objective`` per structure it has seen (built on first use). An
-  initial design larger than ``q`` is scored in calls of ``q`` (the last one
-  padded), so that a search traces and compiles one program shape, not one
-  for its design and another for its steps; each candidate keeps its own
+
+class Evaluator:
+  """Scores candidates of many problems, one fused call per structure (on
+  MuJoCo C, per batch of at most the search's ``q`` candidates).
+
+  Holds one ``Objective`` per structure it has seen (built on first use). On
+  the C backend, whose time grows with the worlds and where every program
+  shape compiles for seconds, an initial design larger than ``q`` is scored
+  in calls of ``q`` (the last one padded): a search compiles one program
+  shape, not one for its design and another for its steps. On a GPU a call of
+  48 candidates costs what one of 24 does, so the design stays one call
+  (BENCHMARKS.md: two calls were slower there). Each candidate keeps its own
   keys (its evaluation number), so the scores are those of one call.
   """
 
@@ -298,7 +309,7 @@ class Evaluator:
     for members in groups.values():
       rows = members + [members[0]] * (_pad(len(members)) - len(members))
       n_max = max(len(us[i]) for i in members)
-      q = min(n_max, max(problems[i].config.search.q for i in members))
+      q = _call_size([problems[i].config for i in members], n_max)
       chunks = [
         self._call(problems, us, firsts, rows, lo, q, frames, positions)
         for lo in range(0, n_max, q)
@@ -353,8 +364,9 @@ class Evaluator:
 
 def score(problem: obj_lib.Problem, u, *, evaluator: Evaluator | None = None,
           first: int = 0, **outputs) -> obj_lib.Scores:  # fmt: skip
-  """Scores unit-cube points ``u (n, 3)`` of one problem in fused calls of
-  its search's ``q`` (evaluations ``first ..`` for the keys); pass one ``evaluator`` to calls of
+  """Scores unit-cube points ``u (n, 3)`` of one problem in one fused call
+  (on MuJoCo C, calls of its search's ``q``: ``Evaluator``; evaluations
+  ``first ..`` for the keys); pass one ``evaluator`` to calls of
   one structure so that they share its compile. ``outputs``: ``frames`` or
   ``positions`` (see ``Objective``)."""
   evaluator = evaluator or Evaluator()

@@ -142,6 +142,19 @@ def test_a_model_given_to_the_default_distance_gets_a_note():
   assert estimate.model_note(estimate.Args(recording='r')) == ''
 
 
+def test_a_design_is_scored_in_calls_of_q_only_on_mujoco_c():
+  # the C backend: time grows with the worlds, a second program shape compiles
+  # for seconds; a GPU scores 48 as fast as 24 (BENCHMARKS.md)
+  paper = objective.EstimateConfig()  # q = 24, n_init = 48
+  assert search._call_size([paper.replace(backend='c')], 48) == 24
+  assert search._call_size([paper.replace(backend='c')], 24) == 24
+  assert search._call_size([paper.replace(backend='c')], 1) == 1
+  assert search._call_size([paper.replace(backend='warp')], 48) == 48
+  assert search._call_size([paper.replace(backend='mjx')], 48) == 48
+  mixed = [paper.replace(backend='c'), paper.replace(backend='c', q=8)]
+  assert search._call_size(mixed, 48) == 24
+
+
 def test_the_default_distance_is_the_shape_and_the_papers_the_psd():
   assert objective.EstimateConfig().scoring.distance == 'shape'
   assert objective.PRESETS['default'].scoring.distance == 'shape'
