@@ -593,12 +593,13 @@ def distances_table(results: dict[str, dict]) -> str:
         cell += f' ({f"x{v:.2f}" if q == "bending_scale" else f"{v:.1f}%"})'
       cells.append(cell)
     rows.append(cells)
-  head = (
-    ['quantity']
-    + (['true'] if truth else [])
-    + [f'{n}: point [90%] (error)' for n in names]
+  head = ['quantity'] + (['true'] if truth else []) + names
+  lines = _markdown(head, rows) + notes(
+    'each: the point, [its 90% interval]'
+    + (" and (the point's error against the truth)" if truth else '')
+    + '; percent, a factor for bending.'
   )
-  return '\n'.join(_markdown(head, rows))
+  return '\n'.join(lines)
 
 
 def report_table(result: dict) -> str:

@@ -116,7 +116,8 @@ def test_the_distances_table_sets_each_estimate_beside_the_truth():
   table = report.distances_table({'shape (default)': shape, 'PhySNet PSD': psd})
   lines = table.splitlines()
   assert max(map(len, lines)) <= report.WIDTH
-  assert 'shape (default): point [90%] (error)' in lines[0]
+  assert 'shape (default)' in lines[0] and 'PhySNet PSD' in lines[0]
+  assert "(the point's error against the truth)" in table
   wind = next(x for x in lines if x.startswith('| wind'))
   assert '| 4 ' in wind  # the truth
   assert '5 [4.41, 5.62] (25.0%)' in wind and '4.4 [4, 4.9] (10.0%)' in wind
