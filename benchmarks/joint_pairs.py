@@ -21,7 +21,8 @@ gentle fan settings; by default the whole search box). The shape distance
 needs no network (no ``--model``: frames at ``--image_size``). A GPU at paper
 size:
 
-  python -m benchmarks.joint_pairs --model=out/table1/physnet_depth/simulation/gray_interlock \\
+  python -m benchmarks.joint_pairs --distance=energy \\
+      --model=out/table1/physnet_depth/simulation/gray_interlock \\
       --workdir=/tmp/pairs --pairs=6 [--group=3]
   python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_shape --pairs=6
   python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_mm --pairs=16 \

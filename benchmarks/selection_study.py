@@ -146,6 +146,8 @@ def main(args: Args) -> None:
   run_dir, evals = train_all_epochs(wd, material, sequences, args.epochs, args.backend)
   chosen = picks(evals)
   _, rec_cfg, _, est_cfg = demo.configs(material, sequences, 0, args.backend)
+  # the network's PSD, not the estimate's default (the shape)
+  est_cfg = est_cfg.replace(distance='energy')
   space = physsim.search_space(material)
   centre = dict(zip(physsim.Params._fields, map(float, space.center()), strict=True))
   rec_root = os.path.join(wd, 'recordings')
