@@ -63,17 +63,8 @@ def row(result: dict) -> dict:
   and which intervals held the truth."""
   note = result.get('calibration') or {}
   line = report.calibration_line(note or None)
-  truth = dict(result['truth'])
-  truth['load_ratio'] = float(
-    physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
-  )
-  held = {}
-  for q in _QUANTITIES:
-    e = result['load_ratio'] if q == 'load_ratio' else result['estimate'][q]
-    held[q] = {
-      lv: bool(e[f'interval_{lv}'][0] <= truth[q] <= e[f'interval_{lv}'][1])
-      for lv in (90, 50)
-    }
+  cov = report.covered(result, result['truth'])
+  held = {q: {lv: cov[q][f'interval_{lv}'] for lv in (90, 50)} for q in _QUANTITIES}
   return {
     'distance': result['config']['distance'],
     'calibrated': bool(note.get('matches') and note.get('recalibrated')),

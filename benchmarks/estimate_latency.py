@@ -36,8 +36,8 @@ SETTINGS = {
   'q16': ('default', dict(q=16, n_init=32), {}),
   'smoke': ('smoke', {}, {}),  # a CPU-sized search (checks the script)
   # through the trained network (--model): the PSD between embeddings
-  'psd': ('default', dict(distance='energy'), {}),
-  'psd_smoke': ('smoke', dict(distance='energy'), {}),
+  'psd': ('default', dict(distance=objective_lib.NETWORK_DISTANCE), {}),
+  'psd_smoke': ('smoke', dict(distance=objective_lib.NETWORK_DISTANCE), {}),
   # the paper's argmin (PSD; q=4, n_init=8, <= 30 iterations)
   'paper': ('paper', {}, {}),
   # the shape distance named (the default's; older commands)

@@ -37,6 +37,7 @@ from experiments.pipeline import cli, demo, embedding, files, search
 from experiments.pipeline import datasets as gen
 from experiments.pipeline import recording as recording_lib
 from experiments.pipeline import training as train_lib
+from experiments.pipeline.objective import NETWORK_DISTANCE
 from model import checkpoint
 
 
@@ -147,7 +148,7 @@ def main(args: Args) -> None:
   chosen = picks(evals)
   _, rec_cfg, _, est_cfg = demo.configs(material, sequences, 0, args.backend)
   # the network's PSD, not the estimate's default (the shape)
-  est_cfg = est_cfg.replace(distance='energy')
+  est_cfg = est_cfg.replace(distance=NETWORK_DISTANCE)
   space = physsim.search_space(material)
   centre = dict(zip(physsim.Params._fields, map(float, space.center()), strict=True))
   rec_root = os.path.join(wd, 'recordings')

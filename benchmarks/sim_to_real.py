@@ -103,7 +103,7 @@ def main(args: Args) -> None:
   material = args.material
   train_cfg, rec_cfg, _, est_cfg = demo.configs(material, 24, args.seed, args.backend)
   # the network's PSD, not the estimate's default (the shape)
-  est_cfg = est_cfg.replace(distance='energy')
+  est_cfg = est_cfg.replace(distance=objective_lib.NETWORK_DISTANCE)
   size = net.image_size
   results, truth0 = {}, None
   evaluator = search.Evaluator()

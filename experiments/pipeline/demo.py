@@ -28,7 +28,7 @@ from experiments.pipeline import datasets as gen
 from experiments.pipeline import recording as recording_lib
 from experiments.pipeline import report, search
 from experiments.pipeline import training as train_lib
-from experiments.pipeline.objective import EstimateConfig
+from experiments.pipeline.objective import NETWORK_DISTANCE, EstimateConfig
 
 _RES = 32  # image size
 _FRAMES = 16  # at 20 Hz: 0.8 s clips
@@ -82,10 +82,6 @@ def configs(
   )
   est = EstimateConfig.preset('demo', material=material, backend=backend, seed=seed)
   return data, recording, training, est
-
-
-# The demo's PhySNet estimate: the same search through the network.
-NETWORK_DISTANCE = 'energy'
 
 
 def run(workdir: str, material: str, sequences: int, seed: int, backend: str):

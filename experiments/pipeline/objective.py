@@ -64,6 +64,9 @@ DISTANCES = ('energy', 'centroid', 'shape', 'energy+shape')
 # that embed frames with the network.
 SHAPE_DISTANCES = ('shape', 'energy+shape')
 EMBEDDING_DISTANCES = ('energy', 'centroid', 'energy+shape')
+# A trained network's distance (the paper's PSD): what --preset=paper and the
+# studies of networks read; the estimate's default is the shape.
+NETWORK_DISTANCE = 'energy'
 POINTS = ('median', 'bayes', 'argmin')
 LIKELIHOODS = bo.posterior.LIKELIHOODS
 
@@ -425,7 +428,7 @@ _RANGES = (
 # The paper's protocol: Bayesian optimisation to the lowest PSD (qUCB there,
 # log-EI here), from the range centre, stopped when the best point settles.
 PAPER = EstimateConfig().replace(
-  distance='energy',
+  distance=NETWORK_DISTANCE,
   point='argmin',
   q=4,
   n_init=8,

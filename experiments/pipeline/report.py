@@ -284,14 +284,19 @@ def mean_error(values, name: str) -> float:
   return float(np.mean(values))
 
 
+def with_load_ratio(truth: dict) -> dict:
+  """A truth (wind speed, area weight, ...) with its load ratio beside it."""
+  return {
+    **truth,
+    'load_ratio': float(physsim.load_ratio(truth['wind_speed'], truth['area_weight'])),
+  }
+
+
 def covered(result: dict, truth: dict) -> dict:
   """Per parameter and the load ratio: does each credible interval hold the truth?"""
   out = {}
   rows = dict(result['estimate'], load_ratio=result.get('load_ratio', {}))
-  true = dict(truth)
-  true['load_ratio'] = float(
-    physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
-  )
+  true = with_load_ratio(truth)
   for name, e in rows.items():
     out[name] = {
       k: bool(e[k][0] <= true[name] <= e[k][1]) for k in e if k.startswith('interval_')
@@ -555,15 +560,21 @@ def notes(*paragraphs: str, width: int = WIDTH) -> list[str]:
   ]
 
 
+def _error_cell(key: str, v: float) -> str:
+  """An error of ``errors``' ``key`` as a table prints it: a factor for
+  bending, else percent."""
+  return f'x{v:.2f}' if _ERROR_NAMES[key][1] == 'x' else f'{v:.1f}%'
+
+
 def errors_table(errors: dict) -> list[str]:
   """The point's errors against the truth beside the range centre's, as a small
   table (percent; a factor for bending)."""
   rows = []
-  for key, (name, unit) in _ERROR_NAMES.items():
-    cell = lambda v: f'x{v:.2f}' if unit == 'x' else f'{v:.1f}%'  # noqa: B023
+  for key, (name, _) in _ERROR_NAMES.items():
     rows.append(
-      [name, cell(errors['estimate'][key]), cell(errors['range_centre'][key])]
-    )
+      [name, _error_cell(key, errors['estimate'][key]),
+       _error_cell(key, errors['range_centre'][key])]
+    )  # fmt: skip
   return _markdown(['error against the truth', 'point', 'range centre'], rows)
 
 
@@ -573,13 +584,7 @@ def distances_table(results: dict[str, dict]) -> str:
   each point's error against it (percent; a factor for bending)."""
   names = list(results)
   first = results[names[0]]
-  truth = dict(first.get('truth') or {})
-  if truth:
-    truth['load_ratio'] = float(
-      physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
-    )
-  error_key = {'wind_speed': 'wind_speed_pct', 'area_weight': 'area_weight_pct',
-               'bending_scale': 'bending_factor', 'load_ratio': 'load_ratio_pct'}  # fmt: skip
+  truth = with_load_ratio(first['truth']) if first.get('truth') else {}
   rows = []
   for q in [*physsim.Params._fields, 'load_ratio']:
     cells = [ROW_NAMES[q]] + ([f'{truth[q]:.3g}'] if truth else [])
@@ -589,8 +594,8 @@ def distances_table(results: dict[str, dict]) -> str:
       lo, hi = e['interval_90']
       cell = f'{e["value"]:.3g} [{lo:.3g}, {hi:.3g}]'
       if truth and 'errors' in r:
-        v = r['errors']['estimate'][error_key[q]]
-        cell += f' ({f"x{v:.2f}" if q == "bending_scale" else f"{v:.1f}%"})'
+        key = 'bending_factor' if q == 'bending_scale' else f'{q}_pct'
+        cell += f' ({_error_cell(key, r["errors"]["estimate"][key])})'
       cells.append(cell)
     rows.append(cells)
   head = ['quantity'] + (['true'] if truth else []) + names
@@ -617,11 +622,7 @@ def report_table(result: dict) -> str:
   else:
     head += ['point (argmin)', 'GP 90% interval']
   head += ['retrieval'] if retrieval else []
-  true = dict(truth or {})
-  if truth:
-    true['load_ratio'] = float(
-      physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
-    )
+  true = with_load_ratio(truth) if truth else {}
   iv = lambda e, k: f'[{e[k][0]:.3g}, {e[k][1]:.3g}]'
   rows = []
   for name in [*physsim.Params._fields, 'load_ratio']:

@@ -165,7 +165,7 @@ class Config:
   network_seed: int = 0
   networks: int = 5
   estimate: EstimateConfig = cli.nested(
-    EstimateConfig().replace(distance='energy', q=8, n_init=16, max_iter=6,
+    EstimateConfig().replace(distance=objective_lib.NETWORK_DISTANCE, q=8, n_init=16, max_iter=6,
                              posterior_grid=(12, 64, 24)),
     skip=('simulation.material', 'simulation.cloth_resolution', 'simulation.frames',
           'simulation.warmup', 'hardware.backend', 'seed', 'search.point', 'measured'),
@@ -196,7 +196,11 @@ PRESETS = {
     batch_size=6,
     sharpness_grid=(0.25, 0.5, 1.0),
     estimate=EstimateConfig().replace(
-      distance='energy', q=4, n_init=8, max_iter=2, posterior_grid=(6, 16, 8)
+      distance=objective_lib.NETWORK_DISTANCE,
+      q=4,
+      n_init=8,
+      max_iter=2,
+      posterior_grid=(6, 16, 8),
     ),
   ),
 }

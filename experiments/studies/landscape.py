@@ -59,7 +59,8 @@ class Config:
   """
 
   objective: est.EstimateConfig = cli.nested(
-    est.EstimateConfig().replace(distance='energy'), skip=('simulation.material',)
+    est.EstimateConfig().replace(distance=est.NETWORK_DISTANCE),
+    skip=('simulation.material',),
   )
   points_1d: int = 15
   grid: int = 9
@@ -71,7 +72,7 @@ PRESETS = {
   # The demo's estimate settings at a few points: about a minute on a CPU.
   'smoke': Config(
     objective=est.EstimateConfig().replace(
-      distance='energy', cloth_resolution=10, frames=16, warmup=0.5
+      distance=est.NETWORK_DISTANCE, cloth_resolution=10, frames=16, warmup=0.5
     ),
     points_1d=5,
     grid=4,

@@ -53,7 +53,7 @@ from experiments.pipeline import (  # noqa: E402
 from experiments.pipeline import objective as objective_lib  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
-from experiments.pipeline.objective import EstimateConfig  # noqa: E402
+from experiments.pipeline.objective import NETWORK_DISTANCE, EstimateConfig  # noqa: E402
 from experiments.studies import table1  # noqa: E402
 from physsim import dataset  # noqa: E402
 
@@ -72,14 +72,12 @@ PAPER = {
 }
 # The paper's four methods, as <network>_<modality> run folders of table1.
 METHODS = ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
-# The tables compare networks: their estimates read the PSD unless told
-# another distance (the estimate's own default is the shape).
-NETWORK_DISTANCE = 'energy'
 
 
 def for_networks(estimate: EstimateConfig) -> EstimateConfig:
   """``estimate`` with the networks' distance where it has the shape (a
-  preset's default): the tables compare what the networks read."""
+  preset's default): the tables compare what the networks read, unless told
+  another distance."""
   if estimate.scoring.distance == 'shape':
     return estimate.replace(distance=NETWORK_DISTANCE)
   return estimate
