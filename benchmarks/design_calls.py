@@ -52,7 +52,7 @@ class Args:
 PRESETS = {'default': Args()}
 
 
-def _one_call(configs, n: int) -> int:
+def _one_call(configs, n: int, rows: int = 1) -> int:
   return n
 
 

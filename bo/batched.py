@@ -213,3 +213,35 @@ def result_many(searches: Sequence, states: Sequence, *,
   fit, batched as in ``ask_many``; the same arguments)."""
   plans = [s.result_plan(st) for s, st in zip(searches, states, strict=True)]
   return _gather(plans, devices, [s.device for s in searches], mode, min_rows)
+
+
+def warm_ask(searches: Sequence, states: Sequence, xs: Sequence, *,
+             devices: Sequence | None = None, mode: str | None = None,
+             min_rows: int = 1) -> None:  # fmt: skip
+  """Runs the GP program that ``ask_many`` will run once the searches are
+  told values at ``xs``, on placeholder values, and drops what it returns.
+
+  Tracing a step's program (and loading it from JAX's compilation cache)
+  takes seconds on the host; a driver calls this in a thread while the
+  simulations of ``xs`` run, so that the real step finds the program ready.
+  Nothing is told or saved: ``ask_plan`` is pure, and the placeholder state
+  has the told state's shapes (the values, ``1 + |x|^2``, only need to be
+  finite), hence the same program.
+
+  Args:
+    searches, states: as ``ask_many``'s (the states before the tell).
+    xs: per search, the points it asked.
+    devices, mode, min_rows: as ``ask_many``'s.
+  """
+  plans, where = [], []
+  for s, st, x in zip(searches, states, xs, strict=True):
+    x = np.asarray(x, np.float64).reshape(-1, st.X.shape[1])
+    y = 1.0 + np.sum(x**2, axis=1)
+    y = np.broadcast_to(
+      y.reshape(-1, *[1] * (st.Y.ndim - 1)), (len(x), *st.Y.shape[1:])
+    )
+    told = st._replace(X=np.concatenate([st.X, x]), Y=np.concatenate([st.Y, y]))
+    if not s.done(told):
+      plans.append(s.ask_plan(told))
+      where.append(s.device)
+  _gather(plans, devices, where, mode, min_rows)

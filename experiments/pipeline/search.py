@@ -22,6 +22,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import threading
 import time
 from typing import NamedTuple
 
@@ -265,12 +266,41 @@ def _pad(n: int) -> int:
   return 1 << max(0, int(np.ceil(np.log2(max(n, 1)))))
 
 
-def _call_size(configs, n: int) -> int:
-  """Candidates per fused call for ``n`` of searches with ``configs``: their
-  ``q`` on MuJoCo C, all ``n`` elsewhere (``Evaluator``)."""
-  if all(physsim.resolve_backend(c.hardware.backend) == 'c' for c in configs):
+# On a GPU a fused call of up to this many worlds (rows x candidates) costs
+# what one of 24 does: the simulation's steps wait on kernel launches, not on
+# arithmetic (BENCHMARKS.md: 48 candidates as fast as 24 on an H200).
+FLAT_WORLDS = 48
+
+
+def _on_mujoco_c(configs) -> bool:
+  return all(physsim.resolve_backend(c.hardware.backend) == 'c' for c in configs)
+
+
+def _in_background(fn, *args, **kw) -> threading.Thread:
+  """``fn(*args, **kw)`` started in a daemon thread, for a warm-up: what it
+  returns or raises is dropped (the real call that follows raises the same)."""
+
+  def quiet():
+    try:
+      fn(*args, **kw)
+    except Exception:  # noqa: BLE001 - see the docstring
+      pass
+
+  t = threading.Thread(target=quiet, daemon=True)
+  t.start()
+  return t
+
+
+def _call_size(configs, n: int, rows: int = 1) -> int:
+  """Candidates per fused call for ``n`` candidates of ``rows`` searches with
+  ``configs`` (``Evaluator``): their ``q`` on MuJoCo C; elsewhere all ``n``,
+  padded up to the searches' initial design where that keeps the call within
+  ``FLAT_WORLDS`` worlds, so that a single estimate compiles one program
+  shape for its design and its steps."""
+  if _on_mujoco_c(configs):
     return min(n, max(c.search.q for c in configs))
-  return n
+  design = max(c.search.n_init for c in configs)
+  return max(n, design) if rows * max(n, design) <= FLAT_WORLDS else n
 
 
 class Evaluator:
@@ -283,8 +313,10 @@ class Evaluator:
   in calls of ``q`` (the last one padded): a search compiles one program
   shape, not one for its design and another for its steps. On a GPU a call of
   48 candidates costs what one of 24 does, so the design stays one call
-  (BENCHMARKS.md: two calls were slower there). Each candidate keeps its own
-  keys (its evaluation number), so the scores are those of one call.
+  (BENCHMARKS.md: two calls were slower there) and a small call is padded to
+  the design's size instead (``FLAT_WORLDS``): one program shape there too.
+  Each candidate keeps its own keys (its evaluation number), so the scores are
+  those of one call.
   """
 
   def __init__(self):
@@ -309,7 +341,7 @@ class Evaluator:
     for members in groups.values():
       rows = members + [members[0]] * (_pad(len(members)) - len(members))
       n_max = max(len(us[i]) for i in members)
-      q = _call_size([problems[i].config for i in members], n_max)
+      q = _call_size([problems[i].config for i in members], n_max, len(rows))
       chunks = [
         self._call(problems, us, firsts, rows, lo, q, frames, positions)
         for lo in range(0, n_max, q)
@@ -555,10 +587,26 @@ def estimate_many(
       asked.append(x)
     t1 = time.perf_counter()
     gp_seconds += t1 - t0
+    # The next step's GP program is traced while this one's simulations run
+    # (a GPU's: on MuJoCo C they hold the host's cores and Python's lock).
+    warm = (
+      _in_background(
+        bo.batched.warm_ask,
+        [s.opt for s in active],
+        [s.state for s in active],
+        asked,
+        devices=gp_devices,
+        min_rows=len(live),
+      )  # fmt: skip
+      if step == 0 and not _on_mujoco_c([s.problem.config for s in active])
+      else None
+    )
     scores = evaluate(
       [s.problem for s in active], asked, [len(s.state.Y) for s in active],
       frames=True,
     )  # fmt: skip
+    if warm is not None:
+      warm.join()
     t2 = time.perf_counter()
     for s, x, sc in zip(active, asked, scores, strict=True):
       s.best.update(x, sc.psd, sc.frames)

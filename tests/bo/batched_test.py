@@ -4,6 +4,8 @@ finished, fresh and failed searches and other settings in the same call."""
 
 from __future__ import annotations
 
+import threading
+
 import jax
 import numpy as np
 import pytest
@@ -178,3 +180,35 @@ def test_bad_mode():
   s = opt.tell(s, x, discrepancy(0, x, 0))
   with pytest.raises(ValueError, match='mode'):
     batched.ask_many([opt], [s], mode='pmap')
+
+
+def test_a_warm_up_on_placeholders_compiles_the_next_step_and_changes_nothing(
+  tmp_path,
+):
+  """``warm_ask`` in a thread (as the estimate runs it beside the design's
+  simulations) runs the program that the next ``ask`` runs, so none compiles
+  there; it writes no state, and the search asks what it asks without it."""
+
+  def search(path=None):
+    return bo.PosteriorSearch(CONFIG, n_init=4, n_iter=3, seed=7, state_path=path)
+
+  opt = search(str(tmp_path / 'state.npz'))
+  ((x, state),) = batched.ask_many([opt], [opt.start()], devices=cpus())
+  batched._program.cache_clear()
+  t = threading.Thread(
+    target=batched.warm_ask, args=([opt], [state], [x]), kwargs=dict(devices=cpus())
+  )
+  t.start()
+  t.join()
+  assert not list(tmp_path.iterdir())  # nothing told, nothing saved
+  assert batched._program.cache_info().misses == 1
+  ((after, _),) = batched.ask_many(
+    [opt], [opt.tell(state, x, discrepancy(0, x, 0))], devices=cpus()
+  )
+  assert batched._program.cache_info().misses == 1  # the program was ready
+  ref = search()
+  ((y, ref_state),) = batched.ask_many([ref], [ref.start()], devices=cpus())
+  ((ref_after, _),) = batched.ask_many(
+    [ref], [ref.tell(ref_state, y, discrepancy(0, y, 0))], devices=cpus()
+  )
+  np.testing.assert_allclose(after, ref_after, rtol=0, atol=_REASSOCIATION_TOLERANCE)

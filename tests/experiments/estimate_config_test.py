@@ -145,7 +145,7 @@ def test_a_model_given_to_the_default_distance_gets_a_note():
 def test_a_design_is_scored_in_calls_of_q_only_on_mujoco_c():
   # the C backend: time grows with the worlds, a second program shape compiles
   # for seconds; a GPU scores 48 as fast as 24 (BENCHMARKS.md)
-  paper = objective.EstimateConfig()  # q = 24, n_init = 48
+  paper = objective.EstimateConfig().replace(q=24, n_init=48)
   assert search._call_size([paper.replace(backend='c')], 48) == 24
   assert search._call_size([paper.replace(backend='c')], 24) == 24
   assert search._call_size([paper.replace(backend='c')], 1) == 1
@@ -153,6 +153,23 @@ def test_a_design_is_scored_in_calls_of_q_only_on_mujoco_c():
   assert search._call_size([paper.replace(backend='mjx')], 48) == 48
   mixed = [paper.replace(backend='c'), paper.replace(backend='c', q=8)]
   assert search._call_size(mixed, 48) == 24
+
+
+def test_a_small_gpu_call_is_padded_to_the_design_but_a_lockstep_is_not():
+  # one estimate on a GPU: its steps of q and a resumed search's one
+  # candidate run the design's program shape (within FLAT_WORLDS worlds)
+  paper = objective.EstimateConfig().replace(q=24, n_init=48, backend='warp')
+  assert search.FLAT_WORLDS == 48
+  assert search._call_size([paper], 24) == 48
+  assert search._call_size([paper], 1) == 48
+  assert search._call_size([paper], 48) == 48
+  # two searches' rows: 2 x 48 worlds is past the flat cost, no padding
+  assert search._call_size([paper, paper], 24, rows=2) == 24
+  small = paper.replace(q=4, n_init=8)
+  assert search._call_size([small], 4, rows=4) == 8
+  assert search._call_size([small], 4, rows=8) == 4
+  # MuJoCo C never pads past q
+  assert search._call_size([paper.replace(backend='c')], 1) == 1
 
 
 def test_the_default_distance_is_the_shape_and_the_papers_the_psd():

@@ -550,11 +550,27 @@ def test_fused_objective_on_mjx_matches_mujoco_c(env):
   # The same fused program with MJX (MuJoCo Warp, traced) in place of the
   # MuJoCo C callback: PSDs agree to the two simulators' parity (float32
   # MJX vs float64 forces in C; physsim's rollout test bounds positions by 5 mm).
-  config = CONFIG.replace(backend='mjx')
+  config = CONFIG.replace(backend='mjx', n_init=2)
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
   u = np.stack([_u_truth(), np.zeros(3)])
-  mjx = _score(env, u, config, problem, obj_lib.Objective(problem))
+  objective = obj_lib.Objective(problem)
+  mjx = _score(env, u, config, problem, objective)
   c = _score(env, u)
   assert mjx.valid.all()
   np.testing.assert_allclose(mjx.psd, c.psd, rtol=0.2, atol=5e-3)
   assert mjx.psd[0, 0] < 0.5 * mjx.psd[0, 1]  # the truth still scores best
+  # Off MuJoCo C one candidate is scored in a call padded to the design's
+  # size (search.FLAT_WORLDS): the program above, the same score (common
+  # random numbers: a candidate's score does not depend on its neighbours).
+  shapes = []
+
+  def spy(data, u, *args, **kw):
+    shapes.append(np.shape(u))
+    return objective(data, u, *args, **kw)
+
+  evaluator = search.Evaluator()
+  evaluator.objectives[problem.structure()] = spy
+  one = search.score(problem, u[:1], evaluator=evaluator)
+  assert shapes == [(1, 2, 3)]  # (problems, candidates, 3)
+  assert one.psd.shape == (1,)
+  np.testing.assert_allclose(one.psd, mjx.psd[0, :1], rtol=1e-5)
