@@ -34,6 +34,8 @@ SETTINGS = {
   'default': ('default', {}, {}),
   'gp_on_gpu': ('default', {}, dict(gp_on_cpu=False)),  # GP on JAX's default device
   'q16': ('default', dict(q=16, n_init=32), {}),
+  # the default's budget before 2026-11-29: 48 + 3 x 24 simulations, four steps
+  'q24': ('default', dict(q=24, n_init=48, max_iter=3), {}),
   'smoke': ('smoke', {}, {}),  # a CPU-sized search (checks the script)
   # through the trained network (--model): the PSD between embeddings
   'psd': ('default', dict(distance=objective_lib.NETWORK_DISTANCE), {}),
@@ -69,7 +71,7 @@ class Args:
   model: str = ''
   image_size: int = 256
   out: str = 'out/benchmarks/estimate_latency.json'
-  settings: tuple[str, ...] = ('default', 'gp_on_gpu', 'q16')
+  settings: tuple[str, ...] = ('default', 'q24', 'gp_on_gpu')
   backend: str = cli.choice('auto', physsim.BACKENDS)
   repeats: int = 1
 

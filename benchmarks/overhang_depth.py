@@ -85,8 +85,9 @@ class Args:
       read with, as an estimate prints them ('': the shipped paper-size
       shape calibration).
     readings: an earlier run's ``overhang_depth.json`` whose set-ups and
-      readings to reuse (same seed and packed runs), rendering nothing: the
-      protocol sets re-read, e.g. with new calibration tables.
+      readings to reuse (same seed and packed runs' truths, matched by the
+      bending length, in any order), rendering nothing: the protocol sets
+      re-read, e.g. with new calibration tables or new searches.
     out: output folder (JSON, PNG).
   """
 
@@ -482,6 +483,7 @@ def main(args: Args) -> None:
   runs = packed_runs(args.packed) if args.packed else []
   n = len(runs) or args.sets
   earlier = earlier_rows(args.readings, args, n) if args.readings else None
+  unused = list(range(n))
   tables = shipped_tables(
     args.calibration or report.shipped_calibration('shape', 'paper')
   ) if runs else {}  # fmt: skip
@@ -502,10 +504,18 @@ def main(args: Args) -> None:
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
     if earlier is not None:
-      if not math.isclose(earlier[i]['c'], c, rel_tol=1e-9):
-        raise ValueError(f'--readings={args.readings}: set-up {i} is of another truth')
+      # by its truth: runs packed by another number of processes come in
+      # another order
+      mine = [
+        k for k in unused if math.isclose(earlier[k]['c'], c, rel_tol=1e-6)
+      ]  # a pair's two recordings share a truth: each takes a reading of its own
+      if not mine:
+        raise ValueError(
+          f"--readings={args.readings}: no set-up of run {i}'s truth (c = {c:.6g} m)"
+        )
       try:
-        row = with_law(earlier[i], floor, dof)
+        unused.remove(mine[0])
+        row = with_law(earlier[mine[0]], floor, dof)
       except ValueError as e:
         raise ValueError(f'--readings={args.readings}: set-up {i}: {e}') from None
     else:

