@@ -48,6 +48,21 @@ def world_mesh(devices: Sequence[jax.Device] | None = None) -> Mesh:
   return Mesh(np.array(devices), (AXIS,))
 
 
+# On a GPU a MuJoCo Warp step of up to this many worlds costs one step's fixed
+# time, its kernel launches and the solver's loops (BENCHMARKS.md: 48 worlds
+# as fast as 24 on an H200): a batch this small gains nothing from a second
+# device and pays its set-up (Warp's buffers, the frame's graph, the program).
+FLAT_WORLDS = 48
+
+
+def mesh_for(mesh: Mesh | None, n_worlds: int) -> Mesh | None:
+  """The mesh a batch of ``n_worlds`` runs on: ``mesh``, or its first device
+  alone when the batch is at most ``FLAT_WORLDS`` worlds."""
+  if mesh is None or mesh.devices.size == 1 or n_worlds > FLAT_WORLDS:
+    return mesh
+  return world_mesh([mesh.devices.flat[0]])
+
+
 def mesh_key(mesh: Mesh | None) -> tuple:
   """A hashable identity of a mesh (its device ids), for caches of programs."""
   return () if mesh is None else tuple(d.id for d in mesh.devices.flat)

@@ -671,13 +671,14 @@ class Objective:
       * max(net.members, 1)
     )
     self._chunk = physsim.devices.chunk_size(per_world)
-    # The worlds of a call split over every local device (MuJoCo Warp); MuJoCo
-    # C runs on the host through a callback, whose process pool is the
-    # parallelism.
+    # The worlds of a call split over every local device (MuJoCo Warp), but
+    # for a call small enough to cost one step's fixed time on one device
+    # (``physsim.devices.mesh_for``); MuJoCo C runs on the host through a
+    # callback, whose process pool is the parallelism.
     on_device = physsim.resolve_backend(hw.backend) != 'c'
     self.world_mesh = physsim.devices.world_mesh() if on_device else None
     self._program = jax.jit(
-      self._fused, static_argnames=('with_frames', 'with_positions')
+      self._fused, static_argnames=('with_frames', 'with_positions', 'split')
     )
 
   def _frames(self, positions, poses, noise_keys, colors):
@@ -747,7 +748,7 @@ class Objective:
     return d, resid, valid, positions
 
   def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
-             with_positions):  # fmt: skip
+             with_positions, split=True):  # fmt: skip
     p, q = u.shape[:2]
     x = physsim.params.from_unit_traced(
       u, data.lo[:, None], data.hi[:, None], data.log[:, None]
@@ -755,9 +756,8 @@ class Objective:
     ratio = jnp.repeat(data.rigidity_ratio, q)
     owner = jnp.arange(p * q) // q  # each world's problem
     noise_keys = noise_keys.reshape(-1)
-    worlds = physsim.devices.shard_worlds(
-      self._worlds, self.world_mesh, replicated=(0,)
-    )
+    mesh = self.world_mesh if split else physsim.devices.mesh_for(self.world_mesh, 0)
+    worlds = physsim.devices.shard_worlds(self._worlds, mesh, replicated=(0,))
     d, resid, valid, positions = worlds(
       data, x, ratio, gust_keys.reshape(-1), owner, noise_keys
     )
@@ -808,10 +808,14 @@ class Objective:
       raise ValueError(
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
+    mesh = physsim.devices.mesh_for(self.world_mesh, u.shape[0] * u.shape[1])
     args = physsim.devices.place(
-      (data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys), self.world_mesh
+      (data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys), mesh
     )
-    out = self._program(*args, with_frames=frames, with_positions=positions)
+    out = self._program(
+      *args, with_frames=frames, with_positions=positions,
+      split=mesh is self.world_mesh,
+    )  # fmt: skip
     out = jax.device_get(out)
     return Scores(
       np.asarray(out['psd'], np.float64),

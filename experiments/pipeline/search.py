@@ -268,8 +268,8 @@ def _pad(n: int) -> int:
 
 # On a GPU a fused call of up to this many worlds (rows x candidates) costs
 # what one of 24 does: the simulation's steps wait on kernel launches, not on
-# arithmetic (BENCHMARKS.md: 48 candidates as fast as 24 on an H200).
-FLAT_WORLDS = 48
+# arithmetic (physsim.devices; such a call also runs on one device).
+FLAT_WORLDS = physsim.devices.FLAT_WORLDS
 
 
 def _on_mujoco_c(configs) -> bool:

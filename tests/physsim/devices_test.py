@@ -33,6 +33,19 @@ def test_split_worlds_equal_one_device(b):
     np.testing.assert_allclose(got[k], want[k], atol=_TOL)
 
 
+def test_a_batch_of_few_worlds_runs_on_one_device():
+  # a GPU step of up to FLAT_WORLDS worlds costs its fixed time on one device,
+  # so a second only adds its set-up; larger batches keep the whole mesh
+  mesh = devices.world_mesh()
+  first = devices.mesh_for(mesh, devices.FLAT_WORLDS)
+  assert devices.mesh_key(first) == (jax.local_devices()[0].id,)
+  assert devices.mesh_for(mesh, 1).devices.size == 1
+  assert devices.mesh_for(mesh, devices.FLAT_WORLDS + 1) is mesh
+  assert devices.mesh_for(None, 1) is None
+  single = devices.world_mesh(jax.local_devices()[:1])
+  assert devices.mesh_for(single, 1) is single
+
+
 def test_one_device_is_the_function_itself():
   assert devices.shard_worlds(_per_world, None) is _per_world
   mesh = devices.world_mesh(jax.local_devices()[:1])
