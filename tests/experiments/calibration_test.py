@@ -170,7 +170,9 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   assert other['matches'] is False
   assert other['differs'] == ['likelihood']
   # A setting that changes what a score means (the mesh) also voids the quote.
-  cal['config'] = {'estimate': {'cloth_resolution': 25, 'frames': 60, 'q': 24}}
+  cal['config'] = {
+    'estimate': {'cloth_resolution': 25, 'frames': 60, 'q': PSD_ESTIMATE.search.q}
+  }
   path.write_text(json.dumps(cal))
   assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))['matches'] is True
   other = report.calibration_note(
