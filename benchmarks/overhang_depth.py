@@ -504,17 +504,15 @@ def main(args: Args) -> None:
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
     if earlier is not None:
-      # by its truth: runs packed by another number of processes come in
-      # another order
-      mine = [
-        k for k in unused if math.isclose(earlier[k]['c'], c, rel_tol=1e-6)
-      ]  # a pair's two recordings share a truth: each takes a reading of its own
+      # Matched by truth (runs packed by another number of processes come in
+      # another order); a pair's two recordings share one, each its own reading.
+      mine = [k for k in unused if math.isclose(earlier[k]['c'], c, rel_tol=1e-6)]
       if not mine:
         raise ValueError(
           f"--readings={args.readings}: no set-up of run {i}'s truth (c = {c:.6g} m)"
         )
+      unused.remove(mine[0])
       try:
-        unused.remove(mine[0])
         row = with_law(earlier[mine[0]], floor, dof)
       except ValueError as e:
         raise ValueError(f'--readings={args.readings}: set-up {i}: {e}') from None

@@ -678,7 +678,7 @@ class Objective:
     on_device = physsim.resolve_backend(hw.backend) != 'c'
     self.world_mesh = physsim.devices.world_mesh() if on_device else None
     self._program = jax.jit(
-      self._fused, static_argnames=('with_frames', 'with_positions', 'split')
+      self._fused, static_argnames=('with_frames', 'with_positions', 'worlds_on')
     )
 
   def _frames(self, positions, poses, noise_keys, colors):
@@ -748,7 +748,7 @@ class Objective:
     return d, resid, valid, positions
 
   def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
-             with_positions, split=True):  # fmt: skip
+             with_positions, worlds_on=None):  # fmt: skip
     p, q = u.shape[:2]
     x = physsim.params.from_unit_traced(
       u, data.lo[:, None], data.hi[:, None], data.log[:, None]
@@ -756,8 +756,8 @@ class Objective:
     ratio = jnp.repeat(data.rigidity_ratio, q)
     owner = jnp.arange(p * q) // q  # each world's problem
     noise_keys = noise_keys.reshape(-1)
-    mesh = self.world_mesh if split else physsim.devices.mesh_for(self.world_mesh, 0)
-    worlds = physsim.devices.shard_worlds(self._worlds, mesh, replicated=(0,))
+    # worlds_on: the mesh this call's worlds split over (``__call__``)
+    worlds = physsim.devices.shard_worlds(self._worlds, worlds_on, replicated=(0,))
     d, resid, valid, positions = worlds(
       data, x, ratio, gust_keys.reshape(-1), owner, noise_keys
     )
@@ -813,9 +813,8 @@ class Objective:
       (data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys), mesh
     )
     out = self._program(
-      *args, with_frames=frames, with_positions=positions,
-      split=mesh is self.world_mesh,
-    )  # fmt: skip
+      *args, with_frames=frames, with_positions=positions, worlds_on=mesh
+    )
     out = jax.device_get(out)
     return Scores(
       np.asarray(out['psd'], np.float64),

@@ -299,8 +299,8 @@ def _call_size(configs, n: int, rows: int = 1) -> int:
   shape for its design and its steps."""
   if _on_mujoco_c(configs):
     return min(n, max(c.search.q for c in configs))
-  design = max(c.search.n_init for c in configs)
-  return max(n, design) if rows * max(n, design) <= FLAT_WORLDS else n
+  padded = max(n, *(c.search.n_init for c in configs))
+  return padded if rows * padded <= FLAT_WORLDS else n
 
 
 class Evaluator:
