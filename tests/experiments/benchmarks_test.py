@@ -168,3 +168,34 @@ def test_the_default_fabrics_table_reads_what_the_script_wrote(tmp_path):
   (tmp_path / 'times.txt').write_text('black_denim 47214\n')
   with pytest.raises(ValueError, match='times.txt:1'):
     default_fabrics.main(default_fabrics.Args(root=str(tmp_path), out=str(out)))
+
+
+def test_the_warm_start_stages_are_read_from_the_estimates_stamped_lines():
+  from benchmarks import warm_start
+
+  jax_log = 'W1129 03:29:48.511306 1406 dispatch.py:204] '
+  lines = [
+    (2.9, 'gray_interlock: 1 recording into /tmp/w; reading and aligning, then'),
+    (8.0, jax_log + 'Finished tracing _fused for jit in 1.5 sec'),
+    (8.6, jax_log + 'Finished jaxpr to MLIR module conversion jit(_fused) in 0.5 sec'),
+    (9.0, jax_log + "Persistent compilation cache hit for 'jit__fused' with key 'k'"),
+    (9.0, jax_log + 'Finished XLA compilation of jit(_fused) in 0.4 sec'),
+    (9.1, jax_log + 'Finished XLA compilation of jit(add) in 0.05 sec'),
+    (20.0, 'iteration   0: initial design scored (40 simulations 12.0 s, search 0.0 s)'),
+    (25.0, 'iteration   1: posterior so far (40 simulations 4.5 s, search 0.5 s)'),
+    (30.0, 'iteration   2: posterior so far (40 simulations 4.5 s, search 0.5 s)'),
+    (33.0, '| quantity        | true  | point | 50% interval   |'),
+  ]  # fmt: skip
+  s = warm_start.stages(lines, 36.0)
+  want = dict(
+    total=36.0, to_table=33.0, imports=2.9, before_search=20.0 - 12.0 - 2.9,
+    first_step=12.0, later_steps=10.0, to_table_after_search=3.0,
+    after_search=6.0, steps=3,
+  )  # fmt: skip
+  assert s.keys() == want.keys()
+  for k, v in want.items():
+    assert s[k] == pytest.approx(v), k
+  j = warm_start.jax_times(lines)
+  assert j['tracing'] == 1.5 and j['lowering'] == 0.5 and j['cache_hits'] == 1
+  assert j['compile_or_load'] == pytest.approx(0.45)
+  assert j['top'][0] == ['_fused', 2.4] and j['top'][1] == ['add', 0.05]
