@@ -26,9 +26,11 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 
 from absl import logging
 
+import physsim
 from experiments.pipeline import cli, files, intake, report, search, setup, takes
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
@@ -318,6 +320,8 @@ def main(args: Args) -> None:
   recorded = recording_takes(args)  # checked before anything is read
   for take in recorded:
     take_settings(args, take)
+  if not args.intake_only:  # the simulator's modules load while the intake runs
+    physsim.rollout.prefetch(args.search.hardware.backend)
   with files.locked(args.workdir):
     _main(args, recorded)
 
@@ -413,9 +417,12 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     print(report.joint_table(result))
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
-    result = search.estimate(configs[0], recs[0], args.model, args.workdir, **kw)
+    pictures = []  # drawn once the answer is printed
+    result = search.estimate(
+      configs[0], recs[0], args.model, args.workdir, pictures=pictures, **kw
+    )
     _record_alignment(os.path.join(args.workdir, search.ESTIMATE_FILE), record)
-    print(report.report_table(result))
+    print(report.report_table(result), flush=True)
     ratios = [report.point_of(result['load_ratio'])]
   for line in (record or {}).get('warnings', []):
     if 'up is a guess' in line:
@@ -431,6 +438,9 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
       print(note)
   where = os.path.abspath(args.workdir)
   if n == 1:
+    sys.stdout.flush()  # the answer before the pictures are drawn
+    for draw in pictures:
+      draw()
     pictures = (
       ('posterior.png', 'trace.png', 'montage.png')
       if configs[0].posterior

@@ -11,7 +11,8 @@ devices (``--xla_force_host_platform_device_count``, as the tests do). Across
 processes (``jax.distributed``) each process shards its own jobs over its own
 devices.
 
-``chunk_size`` turns free device memory into a batch size, so stages that
+``on_host`` keeps the small eager work around those programs (set-up,
+stacking, read-out) on the CPU. ``chunk_size`` turns free device memory into a batch size, so stages that
 loop over chunks (rendering a sweep, scoring candidates) size them from what
 the device has rather than from a constant.
 """
@@ -61,6 +62,21 @@ def mesh_for(mesh: Mesh | None, n_worlds: int) -> Mesh | None:
   if mesh is None or mesh.devices.size == 1 or n_worlds > FLAT_WORLDS:
     return mesh
   return world_mesh([mesh.devices.flat[0]])
+
+
+def host() -> jax.Device:
+  """This process's first CPU device (under ``jax.distributed``, its own)."""
+  return jax.local_devices(backend='cpu')[0]
+
+
+def on_host():
+  """A context in which arrays made without a device land on the host's CPU
+  (``jax.default_device``), for a stage's small set-up and read-out work: on a
+  GPU every eager operation compiles a program of its own, in every process
+  (tens of milliseconds each, against a few on a CPU), and an estimate makes
+  about a hundred of them. Programs placed explicitly (``place``) still run
+  where they are placed."""
+  return jax.default_device(host())
 
 
 def mesh_key(mesh: Mesh | None) -> tuple:

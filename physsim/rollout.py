@@ -33,7 +33,9 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import dataclasses
+import importlib
 import os
+import threading
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -522,6 +524,33 @@ def resolve_backend(name: str) -> str:
   if name not in BACKENDS:
     raise ValueError(f'backend must be one of {BACKENDS}, got {name!r}')
   return name
+
+
+# What a backend's rollout imports on first use: seconds of Python (MuJoCo
+# Warp defines its kernels as its modules load, MJX builds its JAX functions).
+_BACKEND_MODULES = {'warp': 'physsim.warp_frames', 'mjx': 'mujoco.mjx'}
+
+
+def prefetch(backend: str = 'auto') -> threading.Thread | None:
+  """Starts importing ``backend``'s simulator modules in a background thread,
+  so that a process that will simulate on it reads and aligns its recording
+  meanwhile; the rollout's own import later finds them loaded, or waits for
+  the thread (Python imports a module once). Returns the thread, or None
+  where there is nothing to import (MuJoCo C). An import that fails there is
+  left to fail again, with its error, where the rollout imports it."""
+  name = _BACKEND_MODULES.get(resolve_backend(backend))
+  if name is None:
+    return None
+
+  def load():
+    try:
+      importlib.import_module(name)
+    except Exception:  # noqa: BLE001 - see the docstring
+      pass
+
+  t = threading.Thread(target=load, name=f'prefetch {name}', daemon=True)
+  t.start()
+  return t
 
 
 def rollout_fn(

@@ -569,6 +569,33 @@ def make_problem(
       "shape in the world, so it needs the recording's camera pose "
       '(--camera_json) and a depth network'
     )
+  rec_points = jnp.zeros((1, 1), jnp.float32)  # no network: nothing embedded
+  if net.network is not None:  # on the network's device
+    inputs = embedding.network_inputs(
+      jnp.asarray(rec_frames)[None], net.modality, net.input_mode
+    )
+    # (N, D), or (K, N, D) for an ensemble of K: each member's own embedding.
+    rec_points = jax.jit(embedding.embed_videos, static_argnums=(0, 3, 4))(
+      net.network, net.params, inputs, net.clip_frames, net.members
+    )[..., 0, :, :]
+  with physsim.devices.on_host():  # small arrays: placed by each call
+    space, intr, poses, rec_shape = _recording_view(config, recording, shaped)
+    lo, hi, log = physsim.params.unit_map(space)
+    model = cloth(sim)
+    data = ProblemData(
+      jnp.asarray(lo, jnp.float32), jnp.asarray(hi, jnp.float32), jnp.asarray(log),
+      jnp.float32(physsim.reference_rigidity(sim.material) / model.rigidity),
+      poses, jnp.asarray(embedding.rgb_color(sim.material), jnp.float32),
+      net.params, rec_points, rec_shape,
+    )  # fmt: skip
+  return Problem(config, recording.source, space, n_frames, intr, net, data)
+
+
+def _recording_view(config: EstimateConfig, recording: Recording, shaped: bool):
+  """The recording's search box, camera model, camera poses and (for a shape
+  distance) its sheet's shape summary (``physsim.shape.summary``, one jitted
+  program rather than an eager operation at a time)."""
+  sim = config.simulation
   space = physsim.search_space(sim.material)
   h, w = recording.depth.shape[1:]
   key = jax.random.key(config.seed)
@@ -581,31 +608,15 @@ def make_problem(
     if not sim.garment:
       ranges = ranges.for_cloth(sim.cloth_size)
     poses = physsim.sample_poses(jax.random.fold_in(key, 1), sim.cameras, ranges)
-  rec_points = jnp.zeros((1, 1), jnp.float32)  # no network: nothing embedded
-  if net.network is not None:
-    inputs = embedding.network_inputs(
-      jnp.asarray(rec_frames)[None], net.modality, net.input_mode
-    )
-    # (N, D), or (K, N, D) for an ensemble of K: each member's own embedding.
-    rec_points = jax.jit(embedding.embed_videos, static_argnums=(0, 3, 4))(
-      net.network, net.params, inputs, net.clip_frames, net.members
-    )[..., 0, :, :]
   rec_shape = jnp.zeros(len(physsim.shape.SUMMARY), jnp.float32)
   if shaped:
-    rec_shape = physsim.shape.summary(
-      recording.depth, intr, jax.tree.map(lambda a: a[0], poses)
+    summary = jax.jit(lambda depth, pose: physsim.shape.summary(depth, intr, pose))
+    rec_shape = summary(
+      jnp.asarray(recording.depth), jax.tree.map(lambda a: a[0], poses)
     )
     if not np.all(np.isfinite(np.asarray(rec_shape))):
       raise ValueError(f'{recording.source}: no frame has a valid depth pixel')
-  lo, hi, log = physsim.params.unit_map(space)
-  model = cloth(sim)
-  data = ProblemData(
-    jnp.asarray(lo, jnp.float32), jnp.asarray(hi, jnp.float32), jnp.asarray(log),
-    jnp.float32(physsim.reference_rigidity(sim.material) / model.rigidity),
-    poses, jnp.asarray(embedding.rgb_color(sim.material), jnp.float32),
-    net.params, rec_points, rec_shape,
-  )  # fmt: skip
-  return Problem(config, recording.source, space, n_frames, intr, net, data)
+  return space, intr, poses, rec_shape
 
 
 class Scores(NamedTuple):

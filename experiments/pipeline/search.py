@@ -19,6 +19,7 @@ batch it was in (per-candidate keys), so each search goes as it would alone.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -366,10 +367,13 @@ class Evaluator:
       if not len(u):
         u = us[i][:1]
       part.append(np.concatenate([u, np.repeat(u[:1], q - len(u), 0)]))
-    keys = [obj_lib.candidate_keys(problems[i].config, firsts[i] + lo, q) for i in rows]
-    gust = jax.numpy.stack([k[0] for k in keys])
-    noise = jax.numpy.stack([k[1] for k in keys])
-    data = obj_lib.stack([problems[i].data for i in rows])
+    with physsim.devices.on_host():  # small: the call places them
+      keys = [
+        obj_lib.candidate_keys(problems[i].config, firsts[i] + lo, q) for i in rows
+      ]
+      gust = jax.numpy.stack([k[0] for k in keys])
+      noise = jax.numpy.stack([k[1] for k in keys])
+      data = obj_lib.stack([problems[i].data for i in rows])
     t0 = time.perf_counter()
     s = self.objective(problems[rows[0]])(
       data, np.stack(part), gust, noise, frames=frames, positions=positions
@@ -417,6 +421,7 @@ def estimate(
   allow_other_material: bool = False,
   nets: dict[str, embedding.EmbeddingNet] | None = None,
   setup: setup_lib.Setup | None = None,
+  pictures: list | None = None,
 ) -> dict:
   """Runs (or resumes) one estimate; returns and writes ``estimate.json``.
 
@@ -435,6 +440,8 @@ def estimate(
     nets: the network already restored, by ``model_dir`` (not restored again).
     setup: ``setup.resolve(config, model_dir)`` if the caller has it (nothing
       is read again); its settings must be ``config``'s.
+    pictures: a list to put the pictures' drawing in, for the caller to run
+      after it printed the answer (``estimate_many``); None: drawn here.
 
   Returns:
     The result dict written to ``estimate.json``.
@@ -456,6 +463,7 @@ def estimate(
   (out,) = estimate_many(
     [Job(config, recording, model_dir, workdir, allow_other_material, setup)],
     progress=progress, gp_on_cpu=gp_on_cpu, evaluator=evaluator, nets=nets,
+    pictures=pictures,
   )  # fmt: skip
   if isinstance(out, Exception):
     raise out
@@ -470,6 +478,7 @@ def estimate_many(
   nets: dict[str, embedding.EmbeddingNet] | None = None,
   evaluator: Evaluator | None = None,
   figures: bool = True,
+  pictures: list | None = None,
 ) -> list[dict | Exception]:
   """Runs (or resumes) every job's estimate, scoring their candidates together.
 
@@ -480,6 +489,9 @@ def estimate_many(
     nets: networks the caller has loaded already, by ``model_dir``.
     evaluator: an ``Evaluator`` to reuse across calls (default a new one).
     figures: draw each estimate's pictures (a study of hundreds may not want them).
+    pictures: a list to put the pictures' drawing in (callables, for the
+      caller to run once it has printed the answer: the table first, the
+      pictures after); None: drawn as each estimate is written.
 
   Returns:
     Per job, its ``estimate.json`` dict, or the exception that stopped it (a
@@ -558,9 +570,11 @@ def estimate_many(
         seconds_in_search=gp_seconds + t_result,
         recordings_in_batch=len(jobs),
       )
-      out[s.index] = write_result(
-        job, s, res, frames[s.index], figures=figures, **timing
-      )
+      with physsim.devices.on_host():  # the read-out's small eager work
+        out[s.index] = write_result(
+          job, s, res, frames[s.index], figures=figures, pictures=pictures,
+          **timing,
+        )  # fmt: skip
       if progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
@@ -640,6 +654,7 @@ def write_result(
   res,
   best_frames: np.ndarray,
   figures: bool = True,
+  pictures: list | None = None,
   **timing,
 ) -> dict:
   """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
@@ -656,6 +671,8 @@ def write_result(
     best_frames: the lowest-PSD candidate's camera-0 frames as its network saw
       them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
     figures: draw the pictures (else only the JSON and ``posterior.npz``).
+    pictures: where to put the pictures' drawing, as callables, instead of
+      drawing them here (``estimate_many``).
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
   st, recording, workdir = job.setup, job.recording, job.workdir
@@ -667,12 +684,14 @@ def write_result(
     'garment': config.simulation.garment,
     'point': config.search.point,
   }
+  draws = []  # the pictures, each a callable
   if config.search.point == 'argmin':
     result.update(_argmin_summary(st, res, x_best))
   else:
-    result.update(
-      _posterior_summary(st, res, workdir, recording.truth, figures, recording.source)
-    )
+    result.update(_posterior_summary(
+      st, res, workdir, recording.truth, draws if figures else None,
+      recording.source,
+    ))  # fmt: skip
   retrieval = st.network.retrieval
   material = physsim.load_material(physsim.fabric(config.simulation.material).material)
   point = result['point_unit']
@@ -703,19 +722,21 @@ def write_result(
     return result
   n_init = config.search.n_init
   iteration = report.iterations_of(len(res.Y), n_init, config.search.q)
-  report.plot_trace(
-    res.X,
-    discrepancies(res.Y),
-    iteration,
-    space,
-    recording.truth,
-    os.path.join(workdir, 'trace.png'),
-  )
-  report.plot_montage(
+  draws.append(functools.partial(
+    report.plot_trace, res.X, discrepancies(res.Y), iteration, space,
+    recording.truth, os.path.join(workdir, 'trace.png'),
+  ))  # fmt: skip
+  draws.append(functools.partial(
+    report.plot_montage,
     recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
     best_frames, recording.fps, os.path.join(workdir, 'montage.png'),
     sim_label='best simulation',
-  )  # fmt: skip
+  ))  # fmt: skip
+  if pictures is not None:
+    pictures.extend(draws)
+  else:
+    for draw in draws:
+      draw()
   return result
 
 
@@ -742,11 +763,11 @@ def _name(source: str) -> str:
 
 
 def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
-                       figures: bool = True, source: str = '') -> dict:  # fmt: skip
+                       draws: list | None = None, source: str = '') -> dict:  # fmt: skip
   """The posterior median as the point, credible intervals, the prior's width;
-  writes ``posterior.npz`` and ``posterior.png``. The intervals are read at
-  the levels of ``st.calibration`` where it matched these settings, network
-  and mode."""
+  writes ``posterior.npz`` and puts the drawing of ``posterior.png`` in
+  ``draws`` (None: no picture). The intervals are read at the levels of
+  ``st.calibration`` where it matched these settings, network and mode."""
   config, space, note = st.config, st.space, st.calibration
   key = jax.random.key(config.seed)
   pc = posterior_config(config)
@@ -780,12 +801,13 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
       noise_sd=res.noise_sd, floor=res.floor,
     ),
   )  # fmt: skip
-  if figures:
-    posterior_lib.plot(
-      samples, prior, space, truth, os.path.join(workdir, 'posterior.png'),
+  if draws is not None:
+    draws.append(functools.partial(
+      posterior_lib.plot, samples, prior, space, truth,
+      os.path.join(workdir, 'posterior.png'),
       title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
       summary=summary, point=which,
-    )  # fmt: skip
+    ))  # fmt: skip
   recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
   return {
     'point_unit': np.ravel(median).tolist(),

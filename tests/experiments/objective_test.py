@@ -10,6 +10,7 @@ import jax
 import numpy as np
 import pytest
 
+import physsim
 from experiments.pipeline import embedding
 from experiments.pipeline import objective as obj
 from tests.experiments.estimate_fixtures import (
@@ -21,6 +22,8 @@ from tests.experiments.estimate_fixtures import (
 )
 
 SMOKE = obj.PRESETS['smoke']
+# One jitted program against the same operations run one at a time (float32).
+_SUMMARY_RTOL = 1e-5
 
 
 def _data(keys):
@@ -80,3 +83,23 @@ def test_an_objective_is_built_from_each_section_of_its_config(tmp_path, distanc
   assert built.mesh.vertices.shape == (n * n, 3)
   assert built.n_frames == problem.n_frames <= config.simulation.frames
   assert built._distance == distance and built._camera_sd == (0.0, 0.0)
+
+
+def test_a_problems_arrays_are_made_on_the_host_and_its_shape_in_one_program(
+  tmp_path,
+):
+  """make_problem's small arrays land on the host's CPU (each call places
+  them), and the recording's shape summary, computed as one jitted program,
+  is ``physsim.shape.summary``'s (tested against its reference in shape_test)
+  to float32 rounding."""
+  config = CONFIG.replace(distance='shape', backend='c', workers=1)
+  rec = load(write_recording(str(tmp_path), TRUTH))
+  net = embedding.no_network(rec.depth.shape[1:])
+  problem = obj.make_problem(config, net, rec)
+  host = {physsim.devices.host()}
+  for leaf in (problem.data.lo, problem.data.rec_shape, problem.data.poses.position):
+    assert leaf.devices() == host
+  want = physsim.shape.summary(
+    rec.depth, problem.intr, jax.tree.map(lambda a: a[0], problem.data.poses)
+  )
+  np.testing.assert_allclose(problem.data.rec_shape, want, rtol=_SUMMARY_RTOL)

@@ -189,8 +189,17 @@ def test_a_posterior_alone_and_in_a_batch_of_three(env):
     for i, (config, rec) in enumerate(env['recs'])
   ]  # fmt: skip
   together = em.estimate_many(jobs, progress=False, figures=False)
+  pictures = []  # drawn when the caller asks (after its table)
   alone = em.estimate(*jobs[1][:3], os.path.join(env['root'], 'post_alone'),
-                      progress=False)  # fmt: skip
+                      progress=False, pictures=pictures)  # fmt: skip
+  names = ('posterior.png', 'trace.png', 'montage.png')
+  for workdir in (jobs[1].workdir, os.path.join(env['root'], 'post_alone')):
+    assert not any(os.path.exists(os.path.join(workdir, n)) for n in names)
+  assert len(pictures) == len(names)
+  for draw in pictures:
+    draw()
+  for n in names:
+    assert os.path.getsize(os.path.join(env['root'], 'post_alone', n)) > 0
   a = _posterior_state(os.path.join(env['root'], 'post_alone'))
   b = _posterior_state(jobs[1].workdir)
   np.testing.assert_allclose(b['X'], a['X'], rtol=0, atol=_BATCH_TOLERANCE)

@@ -101,3 +101,14 @@ def test_without_a_mesh_a_program_runs_on_one_device():
   np.testing.assert_allclose(one['y'], spread['y'], atol=_TOL)
   single = devices.world_mesh(jax.local_devices()[1:])
   assert devices.place(scale, single).devices() == {jax.local_devices()[1]}
+
+
+def test_on_host_puts_new_arrays_on_the_hosts_first_cpu():
+  # Whatever the default device, the set-up work of a stage lands on the host.
+  other = jax.local_devices()[1]
+  with jax.default_device(other):
+    assert jnp.zeros(3).devices() == {other}
+    with devices.on_host():
+      x = jnp.arange(3.0) * 2
+    assert x.devices() == {devices.host()}
+  assert devices.host().platform == 'cpu'

@@ -309,3 +309,19 @@ def test_a_plain_script_simulates_with_c_workers(tmp_path):
   )
   assert done.returncode == 0, done.stderr[-2000:]
   assert done.stdout.strip() == 'valid [True, True]'
+
+
+def test_prefetch_imports_a_backends_modules_in_the_background():
+  # In a fresh interpreter (this one has imported them): a daemon thread
+  # leaves MJX imported whole; MuJoCo C has nothing to import.
+  assert sim.prefetch('c') is None
+  code = (
+    'import sys, physsim; print("mujoco.mjx" in sys.modules); '
+    't = physsim.rollout.prefetch("mjx"); print(t.daemon); t.join(); '
+    'print(hasattr(sys.modules.get("mujoco.mjx"), "step"))'
+  )
+  out = subprocess.run(
+    [sys.executable, '-c', code], capture_output=True, text=True, check=True,
+    env={**os.environ, 'JAX_PLATFORMS': 'cpu'},
+  ).stdout.split()  # fmt: skip
+  assert out == ['False', 'True', 'True']
