@@ -180,6 +180,34 @@ def width_ratio(draws, prior_draws, log=None) -> np.ndarray:
   return width(x) / np.maximum(width(p), 1e-300)
 
 
+def linear_quantiles(draws, q) -> np.ndarray:
+  """``np.quantile(draws, q, axis=0)`` (its default linear method), the same
+  numbers, from one sort: NumPy selects each level's neighbours by
+  partitioning, which for many levels (the calibration reads 1001 per set of
+  draws) costs far more than sorting once.
+
+  Args:
+    draws: (S,) or (S, k) values.
+    q: (m,) levels in [0, 1].
+
+  Returns:
+    (m,) or (m, k) quantiles.
+  """
+  s = np.sort(np.asarray(draws, np.float64), axis=0)
+  n = s.shape[0]
+  v = (n - 1) * np.asarray(q, np.float64)  # NumPy's virtual index
+  lo = np.floor(v)
+  lo[v >= n - 1] = n - 1
+  lo = lo.astype(np.intp)
+  hi = np.minimum(lo + 1, n - 1)
+  g = (v - lo).reshape(v.shape + (1,) * (s.ndim - 1))
+  a, b = s[lo], s[hi]
+  d = b - a
+  out = a + d * g
+  np.subtract(b, d * (1 - g), out=out, where=g >= 0.5)  # as NumPy's lerp
+  return out
+
+
 def quantiles(draws, cdf_levels) -> np.ndarray:
   """Per column, the draws' quantiles at that column's CDF levels.
 
@@ -197,7 +225,10 @@ def quantiles(draws, cdf_levels) -> np.ndarray:
   if lv.shape[1] != draws.shape[1]:
     raise ValueError(f'levels for {lv.shape[1]} columns, draws have {draws.shape[1]}')
   return np.stack(
-    [np.quantile(draws[:, j], np.clip(lv[:, j], 0.0, 1.0)) for j in range(lv.shape[1])],
+    [
+      linear_quantiles(draws[:, j], np.clip(lv[:, j], 0.0, 1.0))
+      for j in range(lv.shape[1])
+    ],
     axis=1,
   )
 

@@ -141,9 +141,16 @@ def log_likelihood(mean, var, floor, noise_sd, *, form='gibbs', sharpness=1.0,
   model error; float64 NumPy."""
   with jax.enable_x64(True):
     f64 = lambda a: jnp.asarray(a, jnp.float64)
-    log_m1, _ = _moments(f64(mean), f64(var), f64(floor), f64(noise_sd), form,
-                         sharpness, model_error)  # fmt: skip
+    log_m1 = _log_m1(f64(mean), f64(var), f64(floor), f64(noise_sd),
+                     f64(sharpness), f64(model_error), form)  # fmt: skip
     return np.asarray(log_m1)
+
+
+@functools.partial(jax.jit, static_argnames=('form',))
+def _log_m1(mean, var, floor, sn, sharpness, model_error, form):
+  """``_moments``' log E_f[L] as one program (a calibration reads thousands of
+  saved GPs; op by op, dispatch cost more than the arithmetic)."""
+  return _moments(mean, var, floor, sn, form, sharpness, model_error)[0]
 
 
 def choose_sharpness(coverage, levels) -> float:

@@ -379,7 +379,9 @@ def _stats(x: np.ndarray, prior: np.ndarray, log: bool = False, cdf_levels=None,
   if weight is None:
     uninformed = 1.0 / out['narrowing_90'] >= bo.calibration.UNINFORMED
     weight = 0.0 if uninformed else 1.0
-  calibrated = x if nominal else np.quantile(x, bo.calibration.warp(_U, lv))
+  calibrated = (
+    x if nominal else bo.calibration.linear_quantiles(x, bo.calibration.warp(_U, lv))
+  )
   loss = 'factor' if factor else 'relative'
   own = bo.calibration.bayes_point(calibrated, loss)
   if prior_point is None:

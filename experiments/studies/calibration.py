@@ -540,7 +540,7 @@ def _score(draws_phys: np.ndarray, prior_phys: np.ndarray, truth_row: np.ndarray
     'width_ratio': bo.calibration.width_ratio(mix, box_phys, log=_LOG_COLUMNS),
     # how an interval that knows nothing (the prior's own) fares on this truth
     'prior_rank': bo.calibration.ranks(prior_phys, truth_row),
-    'qf': np.quantile(mix, _QGRID, axis=0),  # (len(_QGRID), fields)
+    'qf': bo.calibration.linear_quantiles(mix, _QGRID),  # (len(_QGRID), fields)
     'prior_point': prior_point,
   }
 

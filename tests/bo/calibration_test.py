@@ -50,6 +50,19 @@ def test_quantiles_per_column():
   np.testing.assert_allclose(q, [[0.1, 5.0], [0.9, 10.0]], atol=1e-12)
 
 
+@pytest.mark.parametrize('shape', [(2500, 4), (401,), (7, 2)])
+def test_linear_quantiles_are_numpys_to_the_bit(shape):
+  # NumPy's default method is the reference: every level of a dense grid (its
+  # ends included), on draws with ties, 1-D and 2-D.
+  rng = np.random.default_rng(3)
+  x = rng.standard_normal(shape) * 10.0 ** rng.integers(-3, 3)
+  x[: max(1, shape[0] // 10)] = x[0]  # ties
+  q = np.concatenate([np.linspace(0.0, 1.0, 1001), rng.random(50)])
+  np.testing.assert_array_equal(
+    calibration.linear_quantiles(x, q), np.quantile(x, q, axis=0)
+  )
+
+
 def test_defensive_mixture_holds_the_share_of_prior_draws():
   post, prior = np.zeros((980, 2)), np.ones((50, 2))
   mix = calibration.defensive(post, prior, share=0.02)
