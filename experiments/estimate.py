@@ -417,9 +417,9 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     print(report.joint_table(result))
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
-    pictures = []  # drawn once the answer is printed
+    drawings = []  # the pictures, drawn once the answer is printed
     result = search.estimate(
-      configs[0], recs[0], args.model, args.workdir, pictures=pictures, **kw
+      configs[0], recs[0], args.model, args.workdir, pictures=drawings, **kw
     )
     _record_alignment(os.path.join(args.workdir, search.ESTIMATE_FILE), record)
     print(report.report_table(result), flush=True)
@@ -439,7 +439,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   where = os.path.abspath(args.workdir)
   if n == 1:
     sys.stdout.flush()  # the answer before the pictures are drawn
-    for draw in pictures:
+    for draw in drawings:
       draw()
     pictures = (
       ('posterior.png', 'trace.png', 'montage.png')

@@ -12,9 +12,9 @@ processes (``jax.distributed``) each process shards its own jobs over its own
 devices.
 
 ``on_host`` keeps the small eager work around those programs (set-up,
-stacking, read-out) on the CPU. ``chunk_size`` turns free device memory into a batch size, so stages that
-loop over chunks (rendering a sweep, scoring candidates) size them from what
-the device has rather than from a constant.
+stacking, read-out) on the CPU. ``chunk_size`` turns free device memory into a
+batch size, so stages that loop over chunks (rendering a sweep, scoring
+candidates) size them from what the device has rather than from a constant.
 """
 
 from __future__ import annotations
@@ -73,9 +73,8 @@ def on_host():
   """A context in which arrays made without a device land on the host's CPU
   (``jax.default_device``), for a stage's small set-up and read-out work: on a
   GPU every eager operation compiles a program of its own, in every process
-  (tens of milliseconds each, against a few on a CPU), and an estimate makes
-  about a hundred of them. Programs placed explicitly (``place``) still run
-  where they are placed."""
+  and far slower than a CPU compiles it, and an estimate makes many. Programs
+  placed explicitly (``place``) still run where they are placed."""
   return jax.default_device(host())
 
 
