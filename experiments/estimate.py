@@ -405,19 +405,20 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     if line:
       print(line)
   record = alignment_record(intakes, configs[0])
+  drawings = []  # the pictures, drawn once the answer is printed
   if n > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
     flats = [c.flat() for c in configs]
     overrides = [{k: f[k] for k in search.PER_RECORDING} for f in flats]
     result = search.estimate_joint(
       config, recs, args.model, args.workdir,
-      winds if any(t.wind for t in recorded) else None, overrides=overrides, **kw,
+      winds if any(t.wind for t in recorded) else None, overrides=overrides,
+      pictures=drawings, **kw,
     )  # fmt: skip
     _record_alignment(os.path.join(args.workdir, search.JOINT_FILE), record)
-    print(report.joint_table(result))
+    print(report.joint_table(result), flush=True)
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
-    drawings = []  # the pictures, drawn once the answer is printed
     result = search.estimate(
       configs[0], recs[0], args.model, args.workdir, pictures=drawings, **kw
     )
@@ -437,10 +438,10 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     if note:
       print(note)
   where = os.path.abspath(args.workdir)
+  sys.stdout.flush()  # the answer before the pictures are drawn
+  for draw in drawings:
+    draw()
   if n == 1:
-    sys.stdout.flush()  # the answer before the pictures are drawn
-    for draw in drawings:
-      draw()
     pictures = (
       ('posterior.png', 'trace.png', 'montage.png')
       if configs[0].posterior
