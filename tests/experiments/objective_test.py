@@ -103,3 +103,27 @@ def test_a_problems_arrays_are_made_on_the_host_and_its_shape_in_one_program(
     rec.depth, problem.intr, jax.tree.map(lambda a: a[0], problem.data.poses)
   )
   np.testing.assert_allclose(problem.data.rec_shape, want, rtol=_SUMMARY_RTOL)
+
+
+def test_a_network_problem_made_beside_an_accelerator_enters_its_program(tmp_path):
+  """With an accelerator the default device (here the second CPU device stands
+  in for it), a problem's small arrays are made on the host and the network's
+  parameters and the recording's embedding on the accelerator; stacked for a
+  call and placed where the program runs, every leaf lands on that device
+  (no leaf mixes devices)."""
+  accelerator = jax.local_devices()[1]
+  assert accelerator != physsim.devices.host()
+  config = CONFIG.replace(distance='energy', backend='c', workers=1)
+  with jax.default_device(accelerator):
+    net = embedding.load_embedding(write_hand_made_model(str(tmp_path / 'model')))
+    net = net._replace(params=jax.device_put(net.params, accelerator))
+    rec = load(write_recording(str(tmp_path), TRUTH))
+    problem = obj.make_problem(config, net, rec)
+    assert problem.data.lo.devices() == {physsim.devices.host()}
+    assert problem.data.rec_points.devices() == {accelerator}
+    data = obj.stack([problem.data, problem.data])
+    mesh = physsim.devices.world_mesh([accelerator])
+    placed = physsim.devices.place(data, mesh)
+  for leaf in jax.tree.leaves(placed):
+    assert leaf.devices() == {accelerator}
+  np.testing.assert_array_equal(placed.rec_shape[0], problem.data.rec_shape)

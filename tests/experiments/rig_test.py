@@ -234,6 +234,8 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
     for k in range(2)
   ]
   assert [o['config']['cloth_size'] for o in own] == [1.0, 0.3]
+  for k in range(2):  # each recording's pictures, drawn after the table
+    assert os.path.getsize(tmp_path / 'w' / f'recording_{k}' / 'posterior.png') > 0
   up = [json.load(open(tmp_path / 'w' / f'intake_{k}' / 'intake.json'))['up_from']
         for k in range(2)]  # fmt: skip
   assert up == ['world_up', 'gravity']
