@@ -591,6 +591,11 @@ def make_problem(
   return Problem(config, recording.source, space, n_frames, intr, net, data)
 
 
+# A recording's shape summary as one program, compiled once per frame shape and
+# camera model (``Intrinsics`` is hashable) for every recording a process reads.
+_shape_summary = jax.jit(physsim.shape.summary, static_argnums=1)
+
+
 def _recording_view(config: EstimateConfig, recording: Recording, shaped: bool):
   """The recording's search box, camera model, camera poses and (for a shape
   distance) its sheet's shape summary (``physsim.shape.summary``, one jitted
@@ -610,9 +615,8 @@ def _recording_view(config: EstimateConfig, recording: Recording, shaped: bool):
     poses = physsim.sample_poses(jax.random.fold_in(key, 1), sim.cameras, ranges)
   rec_shape = jnp.zeros(len(physsim.shape.SUMMARY), jnp.float32)
   if shaped:
-    summary = jax.jit(lambda depth, pose: physsim.shape.summary(depth, intr, pose))
-    rec_shape = summary(
-      jnp.asarray(recording.depth), jax.tree.map(lambda a: a[0], poses)
+    rec_shape = _shape_summary(
+      jnp.asarray(recording.depth), intr, jax.tree.map(lambda a: a[0], poses)
     )
     if not np.all(np.isfinite(np.asarray(rec_shape))):
       raise ValueError(f'{recording.source}: no frame has a valid depth pixel')
