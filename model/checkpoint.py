@@ -8,19 +8,31 @@ writes its own as flax msgpack (``<step>/state.msgpack``, written atomically).
 ``restore`` reads either.
 """
 
+from __future__ import annotations
+
 import os
 import re
 import shutil
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import numpy as np
-import orbax.checkpoint as ocp
 from flax import serialization
+
+if TYPE_CHECKING:
+  import orbax.checkpoint as ocp
 
 _MSGPACK = 'state.msgpack'
 
 CHECKPOINT_DIR = 'checkpoints'
+
+
+def _orbax():
+  """``orbax.checkpoint``, imported on first use (half a second of imports an
+  estimate without a network does not need)."""
+  import orbax.checkpoint
+
+  return orbax.checkpoint
 
 
 class LocalManager:
@@ -88,6 +100,7 @@ def manager(
   path = os.path.join(os.path.abspath(workdir), subdir)
   if jax.process_count() > 1:
     return LocalManager(path, max_to_keep)
+  ocp = _orbax()
   options = ocp.CheckpointManagerOptions(max_to_keep=max_to_keep, create=True)
   return ocp.CheckpointManager(path, options=options)
 
@@ -97,6 +110,7 @@ def save(mngr: ocp.CheckpointManager, step: int, state: Any) -> None:
   if isinstance(mngr, LocalManager):
     mngr.save(step, state)
     return
+  ocp = _orbax()
   mngr.save(int(step), args=ocp.args.StandardSave(state), force=True)
   mngr.wait_until_finished()
 
@@ -126,6 +140,7 @@ def restore(
   step = mngr.latest_step() if step is None else step
   if step is None:
     return None
+  ocp = _orbax()
   try:
     if os.path.isfile(os.path.join(str(mngr.directory), str(int(step)), _MSGPACK)):
       return LocalManager(str(mngr.directory), None).restore(step, target)

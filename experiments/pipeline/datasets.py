@@ -24,15 +24,11 @@ import zlib
 
 import jax
 import jax.numpy as jnp
-import matplotlib
+import numpy as np
+from absl import logging
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from absl import logging  # noqa: E402
-
-import physsim  # noqa: E402
-from experiments.pipeline import (  # noqa: E402
+import physsim
+from experiments.pipeline import (
   cli,
   deadline,
   distributed,
@@ -40,7 +36,7 @@ from experiments.pipeline import (  # noqa: E402
   files,
   progress,
 )
-from physsim import dataset  # noqa: E402
+from physsim import dataset
 
 
 @dataclasses.dataclass(frozen=True)
@@ -438,6 +434,7 @@ def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str |
   cols = np.unique(np.linspace(0, t - 1, min(n, t)).round().astype(int))
   valid = np.concatenate([s.depth[0][cols][s.depth[0][cols] > 0] for s in seqs])
   lo, hi = np.percentile(valid, [1, 99]) if valid.size else (0.0, 1.0)
+  plt = files.pyplot()
   cmap = plt.get_cmap('viridis').with_extremes(bad='white')
   fig, axes = plt.subplots(
     len(seqs), len(cols), figsize=(1.6 * len(cols) + 1.0, 1.6 * len(seqs) + 0.4),

@@ -17,11 +17,25 @@ from physsim.dataset import write_json_atomic as write_json
 from physsim.dataset import write_text_atomic as write_text
 
 __all__ = [
-  'LOCK_FILE', 'locked', 'resume', 'savefig', 'write_atomic', 'write_json',
-  'write_text',
+  'LOCK_FILE', 'locked', 'pyplot', 'resume', 'savefig', 'write_atomic',
+  'write_json', 'write_text',
 ]  # fmt: skip
 
 LOCK_FILE = '.lock'
+
+
+def pyplot():
+  """``matplotlib.pyplot`` on the file-only Agg backend, imported on first use.
+
+  An estimate prints its table before it draws; matplotlib's import (about
+  half a second) need not come before the table.
+  """
+  import matplotlib
+
+  matplotlib.use('Agg')
+  import matplotlib.pyplot as plt
+
+  return plt
 
 
 def savefig(fig, path: str, dpi: int = 100) -> None:

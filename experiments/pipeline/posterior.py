@@ -15,16 +15,12 @@ import dataclasses
 import math
 
 import jax
-import matplotlib
 import numpy as np
 from jax.scipy.special import logsumexp
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-
-import bo  # noqa: E402
-import physsim  # noqa: E402
-from experiments.pipeline import files  # noqa: E402
+import bo
+import physsim
+from experiments.pipeline import files
 
 FIELDS = physsim.params.FIELDS  # bending_scale, wind_speed, area_weight
 LEVELS = (50, 90)
@@ -565,6 +561,7 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
   pcols = [*(prior[:, i] for i in range(3)), ratio(prior)]
   names = [*FIELDS, 'load_ratio']
   stats = {}
+  plt = files.pyplot()
   fig, axes = plt.subplots(2, 4, figsize=(17, 7.4), layout='constrained')
   true = None
   if truth is not None:

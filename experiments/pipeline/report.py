@@ -12,16 +12,12 @@ import json
 import os
 import textwrap
 
-import matplotlib
 import numpy as np
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-
-import model as model_lib  # noqa: E402
-import physsim  # noqa: E402
-from experiments.pipeline import embedding, files  # noqa: E402
-from experiments.pipeline import objective as obj_lib  # noqa: E402
+import model as model_lib
+import physsim
+from experiments.pipeline import embedding, files
+from experiments.pipeline import objective as obj_lib
 
 LABELS = {
   'bending_scale': 'bending (x measured)',
@@ -847,6 +843,7 @@ def plot_trace(X_unit, Y, iteration, space, truth, path: str) -> None:
   its = np.array(sorted(last_of))
   jitter = (np.random.default_rng(0).random(len(Y)) - 0.5) * 0.3
   xs = iteration + jitter
+  plt = files.pyplot()
   fig, axes = plt.subplots(1, 4, figsize=(17, 3.8), layout='constrained')
   ax = axes[0]
   ax.plot(xs[ok], Y[ok], '.', color='0.55', label='candidate')
@@ -893,6 +890,7 @@ def plot_montage(
   both = np.concatenate([np.ravel(recorded[idx]), np.ravel(simulated[idx])])
   valid = both[both > 0]
   lo, hi = np.quantile(valid, [0.01, 0.99]) if valid.size else (0.0, 1.0)
+  plt = files.pyplot()
   cmap = plt.get_cmap('viridis').with_extremes(bad='white')
   fig, axes = plt.subplots(2, len(idx), figsize=(2.1 * len(idx) + 1.2, 4.6),
                            squeeze=False, layout='constrained')  # fmt: skip

@@ -79,3 +79,24 @@ def test_another_process_is_refused_while_held_and_served_after(tmp_path):
     out = run()
   assert out.startswith('refused:') and f'process {os.getpid()}' in out
   assert run().strip() == 'held'
+
+
+def test_an_estimate_loads_matplotlib_and_orbax_only_when_it_uses_them(tmp_path):
+  """An estimate prints its table before it draws, and a shape-distance one
+  reads no checkpoint: importing the estimate imports neither matplotlib nor
+  orbax (about a second of a warm start); ``files.pyplot`` then gives pyplot
+  on the Agg backend, and a figure saved through it is a PNG."""
+  code = (
+    'import sys, experiments.estimate; '
+    "print(sorted(m for m in ('matplotlib', 'orbax') if m in sys.modules)); "
+    'from experiments.pipeline import files; plt = files.pyplot(); '
+    'import matplotlib; print(matplotlib.get_backend().lower()); '
+    f'fig = plt.figure(); files.savefig(fig, {str(tmp_path / "f.png")!r})'
+  )
+  out = subprocess.run(
+    [sys.executable, '-c', code], capture_output=True, text=True, check=True,
+    env={**os.environ, 'JAX_PLATFORMS': 'cpu'}, timeout=300,
+  ).stdout.split('\n')  # fmt: skip
+  assert out[:2] == ['[]', 'agg']
+  with open(tmp_path / 'f.png', 'rb') as f:
+    assert f.read(8) == b'\x89PNG\r\n\x1a\n'
