@@ -46,6 +46,40 @@ def test_the_fitted_law_recovers_the_law_readings_were_drawn_from():
   assert 4.0 <= dof <= 6.0 and floor == pytest.approx(0.02, abs=0.0015)
 
 
+def test_short_and_long_bending_lengths_are_reported_apart():
+  # two short readings (one outside its 90% interval), three long (all in),
+  # a refusal: coverage per group by t4's 90% quantile (2.1318)
+  short, long_ = 0.5 * bench.SHORT_C, 2.0 * bench.SHORT_C
+  rows = [
+    {'c': short, 'c_hat': short, 'error': 0.1, 'z': 3.0},
+    {'c': short, 'c_hat': short, 'error': -0.02, 'z': -0.5},
+    *({'c': long_, 'c_hat': long_, 'error': 0.01, 'z': z} for z in (0.1, 1.0, 2.0)),
+    {'c': short, 'refused': 'too few pixels'},
+  ]
+  g = bench.by_length(rows, 4.0)
+  assert g['short']['readings'] == 2 and g['long']['readings'] == 3
+  assert g['short']['held_90'] == 0.5 and g['long']['held_90'] == 1.0
+  assert g['short']['mean_abs_error'] == pytest.approx(0.06)
+  assert g['long']['held_50'] == pytest.approx(1 / 3)
+
+
+@pytest.mark.parametrize('ranges', sorted(bench.SETUPS))
+def test_set_ups_are_drawn_inside_their_ranges(ranges):
+  r = bench.SETUPS[ranges]
+  rng = np.random.default_rng(0)
+  for c in (0.006, 0.02, 0.035):
+    for _ in range(40):
+      s = bench.draw_setup(rng, c, ranges)
+      cam, strip = s['camera'], s['strip']
+      assert r['distance'][0] <= cam['distance'] <= r['distance'][1]
+      assert r['elevation'][0] <= cam['elevation_deg'] <= r['elevation'][1]
+      assert abs(cam['azimuth_deg']) <= r['azimuth']
+      assert r['width'][0] <= strip['width'] <= r['width'][1]
+      # the overhang: the ruler's marks and its 1 mm error around 2 c x range
+      lo, hi = 2 * c * r['overhang'][0], 2 * c * r['overhang'][1]
+      assert max(0.015, lo) - 0.01 < strip['overhang'] < hi + 0.01
+
+
 def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
   material = 'gray_interlock'
   space = physsim.search_space(material)
