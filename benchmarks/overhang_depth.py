@@ -361,9 +361,8 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
   return out
 
 
-# Bending lengths below this (soft fabrics: the overhang is 1.3-2.3 cm) are
-# reported apart: their readings have missed more often than their law says.
-SHORT_C = 0.009  # m
+# Bending lengths below this are reported apart (``overhang_depth.caution``).
+SHORT_C = overhang_depth.SHORT_C
 
 
 def by_length(rows: list[dict], dof: float) -> dict:

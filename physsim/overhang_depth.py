@@ -62,6 +62,10 @@ RATIOS = np.geomspace(0.2, cantilever.MAX_RATIO, 160)  # L / c fitted
 # its 25, 50, 75 and 90% intervals hold c as often as they say).
 DOF = 4.0
 FLOOR = 0.008
+# Bending lengths under this (soft fabrics, an overhang of 1.3-2.3 cm) have been
+# read less surely than the law says, on average over its set-ups it holds
+# (docs/protocol.md, "Limits"): a reading there says so (``caution``).
+SHORT_C = 0.009  # m
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,6 +116,18 @@ def reading_sd(fit_sd: float, c: float, floor: float = FLOOR,
   ``fit_sd``: its t law's scale (``fit_sd`` and ``floor * c`` in quadrature)
   times sqrt(dof / (dof - 2))."""
   return math.hypot(fit_sd, floor * c) * math.sqrt(dof / (dof - 2.0))
+
+
+def caution(reading: Reading, name: str = 'the recording') -> str | None:
+  """A line for a reading of a bending length under ``SHORT_C``, whose
+  interval is likely too narrow; None otherwise."""
+  if reading.bending_length >= SHORT_C:
+    return None
+  return (
+    f'{name}: a bending length under {100 * SHORT_C:g} cm (a soft fabric): such '
+    'readings have missed their intervals more often than these say '
+    '(docs/protocol.md, Limits); treat its interval as too narrow'
+  )
 
 
 def _oriented(plane: scene_lib.Plane) -> scene_lib.Plane:

@@ -52,6 +52,23 @@ def test_a_clean_strip_is_read_to_its_bending_length():
   assert r.bending_length_sd == pytest.approx(scale * np.sqrt(2.0), rel=1e-12)
 
 
+def test_a_soft_fabrics_reading_says_its_interval_is_likely_too_narrow():
+  """A reading of c under ``SHORT_C`` (where the law has held less often
+  than it says) comes with one line naming the recording; one from there up
+  with none."""
+  long_ = overhang_depth.Reading(
+    bending_length=overhang_depth.SHORT_C, bending_length_sd=0.0004,
+    bending_length_dof=4.0, fit_sd=0.0002, overhang=0.02, ratio=2.2, reach=0.015,
+    drop=0.01, residual_m=0.0005, points=300, face_points=900, camera_height_m=0.3,
+    profile=np.zeros((0, 2)),
+  )  # fmt: skip
+  assert overhang_depth.caution(long_, 'strip/') is None
+  short = dataclasses.replace(long_, bending_length=0.99 * overhang_depth.SHORT_C)
+  line = overhang_depth.caution(short, 'strip/')
+  assert line.startswith('strip/: a bending length under 0.9 cm')
+  assert 'too narrow' in line and '\n' not in line
+
+
 def test_a_real_strip_under_a_noisy_camera_is_within_its_interval():
   """Thickness, a curled cross-section, an askew strip, a Kinect-class
   camera's noise and holes: the reading moves, within its uncertainty."""
