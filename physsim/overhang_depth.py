@@ -62,9 +62,10 @@ RATIOS = np.geomspace(0.2, cantilever.MAX_RATIO, 160)  # L / c fitted
 # its 25, 50, 75 and 90% intervals hold c as often as they say).
 DOF = 4.0
 FLOOR = 0.008
-# Bending lengths under this (soft fabrics, an overhang of 1.3-2.3 cm) have been
-# read less surely than the law says, on average over its set-ups it holds
-# (docs/protocol.md, "Limits"): a reading there says so (``caution``).
+# The law holds on average over its set-ups, but not for bending lengths under
+# this (soft fabrics, an overhang of 1.3-2.3 cm), whose intervals have held the
+# truth less often than they say (docs/protocol.md, "Limits"): a reading there
+# says so (``caution``).
 SHORT_C = 0.009  # m
 
 
