@@ -369,12 +369,12 @@ def by_length(rows: list[dict], dof: float) -> dict:
   """The readings' errors and coverage for bending lengths under and over
   ``SHORT_C`` (a law can hold on average and not for a subgroup)."""
   ok = [r for r in rows if 'c_hat' in r]
+  groups = {
+    'short': [r for r in ok if r['c'] < SHORT_C],
+    'long': [r for r in ok if r['c'] >= SHORT_C],
+  }
   out = {}
-  for name, keep in (
-    ('short', lambda c: c < SHORT_C),
-    ('long', lambda c: c >= SHORT_C),
-  ):
-    part = [r for r in ok if keep(r['c'])]
+  for name, part in groups.items():
     out[name] = {
       'readings': len(part),
       'mean_abs_error': float(np.mean([abs(r['error']) for r in part])) if part else None,
