@@ -18,7 +18,8 @@ per-pixel median:
    of its points is a (reach out from the edge, drop below the top) pair;
 4. the heavy elastica of overhang L over bending length c, scaled by L, is
    fitted to those pairs (each point's distance to the curve) on a grid of
-   L / c, with L within its ruler uncertainty: the posterior of c = L / (L/c).
+   L / c at the given L; with L's ruler uncertainty, the posterior of
+   c = L / (L/c). The curve reads the strip's shape, the ruler its length.
 
 Using the whole curve rather than the tip alone keeps the reading off the
 places a depth camera sees worst: the strip's outline (where sensors drop
@@ -57,16 +58,16 @@ MAX_FIT_POINTS = 800  # subsampled for the fit: its spread is floored anyway
 MAX_RESIDUAL = 0.004  # m, RMS: points further from any elastica are not a strip
 RATIOS = np.geomspace(0.2, cantilever.MAX_RATIO, 160)  # L / c fitted
 # c's error law: Student's t of DOF degrees of freedom, its scale the fit's
-# spread and FLOOR (relative: what the fit cannot see) in quadrature
-# (``benchmarks.overhang_depth``: fitted on its calibration set-ups so that
-# its 25, 50, 75 and 90% intervals hold c as often as they say).
+# spread (the ruler's L and the curve's L / c) and FLOOR (relative: what the
+# fit cannot see) in quadrature (``benchmarks.overhang_depth``: fitted on its
+# calibration set-ups so that its 25, 50, 75 and 90% intervals hold c as
+# often as they say). Since the reader keeps the ruler's L, the set-ups would
+# fit a near-Gaussian law (20 degrees of freedom, no floor: their ruler's
+# error is Gaussian by construction); the t of 4 is kept, wider at 90% on
+# long strips, holding on soft ones (docs/protocol.md), and as the shipped
+# calibration's bending-length tables drew their readings.
 DOF = 4.0
 FLOOR = 0.008
-# The law holds on average over its set-ups, but not for bending lengths under
-# this (soft fabrics, an overhang of 1.3-2.3 cm), whose intervals have held the
-# truth less often than they say (docs/protocol.md, "Limits"): a reading there
-# says so (``caution``).
-SHORT_C = 0.009  # m
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,7 +81,7 @@ class Reading:
       spread and ``FLOOR`` in quadrature (``posterior.Measured`` reads it so).
     bending_length_dof: that law's degrees of freedom (``DOF``).
     fit_sd: the fit's own part, m.
-    overhang: posterior mean of L, m (the given one, refined by the curve).
+    overhang: L, m (the given one: the ruler's, not refined by the curve).
     ratio: L / c at the best fit.
     reach: the best fit's free end out from the edge, m.
     drop: and below the table's top, m.
@@ -117,18 +118,6 @@ def reading_sd(fit_sd: float, c: float, floor: float = FLOOR,
   ``fit_sd``: its t law's scale (``fit_sd`` and ``floor * c`` in quadrature)
   times sqrt(dof / (dof - 2))."""
   return math.hypot(fit_sd, floor * c) * math.sqrt(dof / (dof - 2.0))
-
-
-def caution(reading: Reading, name: str = 'the recording') -> str | None:
-  """A line for a reading of a bending length under ``SHORT_C``, whose
-  interval is likely too narrow; None otherwise."""
-  if reading.bending_length >= SHORT_C:
-    return None
-  return (
-    f'{name}: a bending length under {100 * SHORT_C:g} cm (a soft fabric): such '
-    'readings have missed their intervals more often than these say '
-    '(docs/protocol.md, Limits); treat its interval as too narrow'
-  )
 
 
 def _oriented(plane: scene_lib.Plane) -> scene_lib.Plane:
@@ -244,15 +233,15 @@ def _lengths(overhang: float, overhang_sd: float, nodes: int) -> np.ndarray:
   return ls[ls > 0]
 
 
-def _posterior(profile, ls, ratios, curves, overhang, overhang_sd, point_sd):
+def _posterior(profile, ls, ratios, curves, point_sd):
+  """(L, R) posterior over the curves of ``ratios`` scaled by each of
+  ``ls`` (flat priors), the best fit's (i, j), its RMS residual, offset."""
   fits = [_misfit(profile, length, curves) for length in ls]
   sq = np.stack([f[0] for f in fits])  # (L, R)
   i, j = np.unravel_index(np.argmin(sq), sq.shape)
   residual = math.sqrt(sq[i, j] / len(profile))
   sd = point_sd or max(residual, 1e-5)
   log_p = -0.5 * sq / sd**2
-  if overhang_sd > 0:
-    log_p += (-0.5 * ((ls - overhang) / overhang_sd) ** 2)[:, None]
   p = np.exp(log_p - log_p.max())
   return p / p.sum(), (i, j), residual, fits[i][1][j]
 
@@ -261,45 +250,50 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
         point_sd: float | None = None, seed: int = 0) -> dict:  # fmt: skip
   """The elastica fitted to (N, 2) (reach, drop) points, m.
 
-  The overhang L has a Gaussian prior (``overhang`` +- ``overhang_sd``;
-  exact when the sd is 0); L / c is log-uniform over ``RATIOS``; the seen
-  face lies at an unknown offset from the centre line (fitted, within
+  The curve gives the strip's shape, L / c, and the ruler its length: the
+  shape is fitted at the given overhang L, and c = L / (L / c) with L
+  Gaussian (``overhang`` +- ``overhang_sd``; exact when the sd is 0) and
+  independent of the shape. The curve is not let refine L: what scales it
+  besides L (the sensor's noise along its rays, the strip's thickness, curl,
+  and fibres of unequal overhang when it lies askew) moved a refined L by
+  3-8% on short strips, more than the ruler's 1 mm, and c with it
+  (docs/protocol.md, "Limits"). L / c is log-uniform over ``RATIOS``; the
+  seen face lies at an unknown offset from the centre line (fitted, within
   ``OFFSET_RANGE``). Each point's distance to the curve is Gaussian with sd
   ``point_sd`` (default: the RMS distance at the best fit). A coarse grid
-  (``RATIOS``, 5 lengths, ``COARSE_POINTS`` points) finds the best fit, a
-  fine one around it (81 ratios over 8 coarse steps, 9 lengths) gives the
-  posterior.
+  (``RATIOS``, ``COARSE_POINTS`` points) finds the best fit, a fine one
+  around it (81 ratios over 8 coarse steps) gives the posterior.
 
   Returns:
     dict: ``c`` and ``c_sd`` (posterior mean and sd, m), ``length`` (L's
-    mean), ``ratio``, ``reach``, ``drop``, ``offset`` and ``residual`` (the
-    best fit's), ``edge_mass`` (the coarse posterior's share in the two
-    outermost ratios at either end: the reading cannot bound c there).
+    mean: ``overhang``), ``ratio``, ``reach``, ``drop``, ``offset`` and
+    ``residual`` (the best fit's), ``edge_mass`` (the coarse posterior's
+    share in the two outermost ratios at either end: the reading cannot
+    bound c there).
   """
   rng = np.random.default_rng(seed)
   few = profile
   if len(few) > COARSE_POINTS:
     few = profile[rng.choice(len(profile), COARSE_POINTS, replace=False)]
-  ls = _lengths(overhang, overhang_sd, 5)
-  p, (_, j), _, _ = _posterior(
-    few, ls, RATIOS, _coarse_curves(), overhang, overhang_sd, point_sd
-  )
+  told = np.array([overhang])
+  p, (_, j), _, _ = _posterior(few, told, RATIOS, _coarse_curves(), point_sd)
   edge_mass = float(p[:, :2].sum() + p[:, -2:].sum())
   ratios, curves = _fine_grid(int(j))
+  p, (_, j), residual, offset = _posterior(profile, told, ratios, curves, point_sd)
   ls = _lengths(overhang, overhang_sd, 9)
-  p, (i, j), residual, offset = _posterior(
-    profile, ls, ratios, curves, overhang, overhang_sd, point_sd
-  )
+  weight = np.exp(-0.5 * ((ls - overhang) / max(overhang_sd, 1e-12)) ** 2)
+  # (L, R): the ruler's L, independent of the curve's L / c
+  joint = (weight / weight.sum())[:, None] * p
   c = ls[:, None] / ratios[None, :]
-  mean = float((p * c).sum())
+  mean = float((joint * c).sum())
   reach, drop = cantilever.tip(ratios[j])
   return {
     'c': mean,
-    'c_sd': float(math.sqrt(max((p * (c - mean) ** 2).sum(), 0.0))),
-    'length': float((p.sum(axis=1) * ls).sum()),
+    'c_sd': float(math.sqrt(max((joint * (c - mean) ** 2).sum(), 0.0))),
+    'length': float(overhang),
     'ratio': float(ratios[j]),
-    'reach': float(reach[0] * ls[i]),
-    'drop': float(drop[0] * ls[i]),
+    'reach': float(reach[0] * overhang),
+    'drop': float(drop[0] * overhang),
     'offset': float(offset),
     'residual': residual,
     'edge_mass': edge_mass,

@@ -77,10 +77,19 @@ class Strip:
       v = getattr(self, name)
       if not (math.isfinite(v) and v > 0):
         raise ValueError(f'Strip.{name} must be a finite length > 0 m, got {v!r}')
-    ratio = self.overhang / self.bending_length
+    if not (math.isfinite(self.yaw_deg) and abs(self.yaw_deg) < 45.0):
+      raise ValueError(f'Strip.yaw_deg must be within +-45 degrees: {self.yaw_deg!r}')
+    spread = self.width / 2 * abs(math.tan(math.radians(self.yaw_deg)))
+    if not self.overhang > spread:
+      raise ValueError(
+        f'Strip: askew by {self.yaw_deg} degrees, a fibre at its side would not '
+        f'reach the edge (overhang {self.overhang} m, width {self.width} m)'
+      )
+    ratio = (self.overhang + spread) / self.bending_length
     if not ratio <= cantilever.MAX_RATIO:
       raise ValueError(
-        f'Strip: an overhang of {self.overhang} m is {ratio:.3g} bending lengths; '
+        f'Strip: an overhang of {self.overhang} m (its longest fibre '
+        f'{self.overhang + spread:.4g} m) is {ratio:.3g} bending lengths; '
         f'the elastica is solved to {cantilever.MAX_RATIO:g}'
       )
 
@@ -125,30 +134,46 @@ def _join(parts) -> tuple[np.ndarray, np.ndarray]:
   return np.concatenate(verts), np.concatenate(faces)
 
 
+def fibre_overhangs(strip: Strip, cols: int = 9) -> tuple[np.ndarray, np.ndarray]:
+  """(across offsets t, overhangs) of ``cols`` fibres along the strip: a strip
+  laid askew (``yaw_deg``) crosses the edge obliquely, so with its end cut
+  square each fibre leaves the edge at its own point and hangs by its own
+  length, ``overhang`` at the middle (where the ruler reads it) and
+  ``overhang - t tan(yaw)`` at ``t`` across."""
+  t = np.linspace(-strip.width / 2, strip.width / 2, cols)
+  return t, strip.overhang - t * math.tan(math.radians(strip.yaw_deg))
+
+
 def strip_mesh(strip: Strip, table: Table, rows: int = 80,
                cols: int = 9) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
   """(vertices, faces) of the strip's upper face: ``rows`` points along its
-  hanging part (the elastica), a few on the table, ``cols`` across."""
-  line = cantilever.shape(strip.overhang / strip.bending_length) * strip.overhang
-  pick = np.unique(np.round(np.linspace(0, len(line) - 1, rows)).astype(int))
-  along, drop = line[pick, 0], line[pick, 1]
+  hanging part, a few on the table, ``cols`` across. Each fibre (a column)
+  bends at the edge, where the table stops holding it, and hangs as the
+  heavy elastica of its own overhang (``fibre_overhangs``; one length for
+  all when the strip is square to the edge), its centre line half the
+  thickness above the top."""
+  t, lengths = fibre_overhangs(strip, cols)
+  line = cantilever.shape(lengths / strip.bending_length) * lengths[:, None, None]
+  pick = np.unique(np.round(np.linspace(0, line.shape[1] - 1, rows)).astype(int))
+  along, drop = line[:, pick, 0].T, line[:, pick, 1].T  # (rows, cols)
   # the tangent's angle below the horizontal, and the upper face's normal
-  theta = np.arctan2(np.gradient(drop), np.gradient(along))
+  theta = np.arctan2(np.gradient(drop, axis=0), np.gradient(along, axis=0))
   n_along, n_up = np.sin(theta), np.cos(theta)
-  back = np.linspace(-strip.on_table, 0.0, 6)[:-1]
-  along = np.concatenate([back, along])
+  yaw = math.radians(strip.yaw_deg)
+  start = t * math.tan(yaw)  # (cols,) where each fibre meets the edge, along it
+  back = np.linspace(-strip.on_table, 0.0, 6)[:-1, None] + np.zeros_like(start)
+  along = np.concatenate([back, along]) + start
   drop = np.concatenate([np.zeros_like(back), drop])
   n_along = np.concatenate([np.zeros_like(back), n_along])
   n_up = np.concatenate([np.ones_like(back), n_up])
-  yaw = math.radians(strip.yaw_deg)
-  d = np.array([math.sin(yaw), math.cos(yaw), 0.0])  # out over the edge
+  d = np.array([math.sin(yaw), math.cos(yaw), 0.0])  # along the strip, outwards
   e = np.array([math.cos(yaw), -math.sin(yaw), 0.0])  # across
-  t = np.linspace(-strip.width / 2, strip.width / 2, cols)
+  up = np.array([0.0, 0.0, 1.0])
   lift = strip.thickness / 2 + strip.curl * (2 * t / strip.width) ** 2  # (cols,)
   root = np.array([strip.x, 0.0, table.height + strip.thickness / 2])
-  centre = root + along[:, None] * d - drop[:, None] * np.array([0, 0, 1.0])
-  normal = n_along[:, None] * d + n_up[:, None] * np.array([0, 0, 1.0])
-  v = centre[:, None] + t[None, :, None] * e + lift[None, :, None] * normal[:, None]
+  centre = root + along[..., None] * d - drop[..., None] * up  # (rows, cols, 3)
+  normal = n_along[..., None] * d + n_up[..., None] * up
+  v = centre + t[None, :, None] * e + lift[None, :, None] * normal
   return v.reshape(-1, 3), _grid_faces(len(along), cols)
 
 
