@@ -23,16 +23,15 @@ per-pixel median:
 
 Using the whole curve rather than the tip alone keeps the reading off the
 places a depth camera sees worst: the strip's outline (where sensors drop
-pixels at depth jumps) and its free end. The fit's own spread shrinks with
-the number of pixels; what it does not see (the strip's curl and thickness,
-the angle it leaves the edge at, the camera's noise pattern) is the
-``FLOOR`` on c's relative uncertainty. The error is not Gaussian: most
-readings land closer than the fit's spread says, a few (short strips, a
-pose that hides the strip's root) further off, so a reading is a Student's
-t of ``DOF`` degrees of freedom, its scale the fit's spread and the floor in
-quadrature. Both are fitted by ``benchmarks.overhang_depth`` on simulated
-set-ups (so that its 25-90% intervals hold as often as they say) and
-checked there on others.
+pixels at depth jumps) and its free end. The fit's spread is the ruler's
+share of c (L's sd over L: 1 mm is 2-7% of a 1.5-5 cm overhang) and the
+shape's, which shrinks with the number of pixels; what the fit does not see
+(the strip's curl and thickness, the angle it leaves the edge at, the
+camera's noise pattern) is the ``FLOOR`` on c's relative uncertainty. A
+reading is a Student's t of ``DOF`` degrees of freedom, its scale the fit's
+spread and the floor in quadrature: both set by ``benchmarks.overhang_depth``
+on simulated set-ups (so that its 25-90% intervals hold as often as they
+say) and checked there on others.
 """
 
 from __future__ import annotations

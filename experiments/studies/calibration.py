@@ -114,7 +114,8 @@ class Config:
     length_sd: relative standard error of a bending length read from an
       overhang (``LENGTH_MODES``), the median over recordings (0.035: the
       depth reader's median printed error on the overhang benchmark's seed-0
-      set-ups).
+      set-ups on 2026-11-28; since the reader keeps the ruler's overhang,
+      4.2-4.8% on seeds 0 and 2, inside the range the tables span).
     length_sd_spread: how much that error varies between recordings, as a
       depth reading's does with the strip's length and pixels: recording
       ``seq``'s is ``length_sd`` x exp(spread x z), z standard normal clipped
