@@ -149,7 +149,7 @@ def draw_setup(rng: np.random.Generator, c: float, ranges: str = 'protocol') -> 
     'told_overhang': float(told_l),
   }  # fmt: skip
   strip = setup['strip']  # its longest fibre within the elastica's table
-  spread = strip['width'] / 2 * abs(math.tan(math.radians(strip['yaw_deg'])))
+  spread = tabletop.askew_spread(strip['width'], strip['yaw_deg'])
   strip['overhang'] = min(true_l, 0.98 * cantilever.MAX_RATIO * c - spread)
   return setup
 

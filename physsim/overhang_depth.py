@@ -225,24 +225,28 @@ def _misfit(profile: np.ndarray, length: float, curves) -> tuple[np.ndarray, ...
   return ((d - offset[:, None]) ** 2).sum(axis=1), offset
 
 
-def _lengths(overhang: float, overhang_sd: float, nodes: int) -> np.ndarray:
+def _ruler(overhang: float, overhang_sd: float, nodes: int = 9):
+  """L's nodes over +-3 sd of the ruler and their Gaussian weights, summing
+  to 1 (the given L alone when the sd is 0)."""
   if overhang_sd <= 0:
-    return np.array([overhang])
+    return np.array([overhang]), np.ones(1)
   ls = overhang + overhang_sd * np.linspace(-3, 3, nodes)
-  return ls[ls > 0]
+  ls = ls[ls > 0]
+  weight = np.exp(-0.5 * ((ls - overhang) / overhang_sd) ** 2)
+  return ls, weight / weight.sum()
 
 
-def _posterior(profile, ls, ratios, curves, point_sd):
-  """(L, R) posterior over the curves of ``ratios`` scaled by each of
-  ``ls`` (flat priors), the best fit's (i, j), its RMS residual, offset."""
-  fits = [_misfit(profile, length, curves) for length in ls]
-  sq = np.stack([f[0] for f in fits])  # (L, R)
-  i, j = np.unravel_index(np.argmin(sq), sq.shape)
-  residual = math.sqrt(sq[i, j] / len(profile))
+def _posterior(profile, length, ratios, curves, point_sd):
+  """The (R,) posterior over the curves of ``ratios`` scaled by ``length``
+  (the grid's log-uniform prior), the best fit's index, its RMS residual and
+  the seen face's offset there."""
+  sq, offsets = _misfit(profile, length, curves)
+  j = int(np.argmin(sq))
+  residual = math.sqrt(sq[j] / len(profile))
   sd = point_sd or max(residual, 1e-5)
   log_p = -0.5 * sq / sd**2
   p = np.exp(log_p - log_p.max())
-  return p / p.sum(), (i, j), residual, fits[i][1][j]
+  return p / p.sum(), j, residual, offsets[j]
 
 
 def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
@@ -274,15 +278,12 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
   few = profile
   if len(few) > COARSE_POINTS:
     few = profile[rng.choice(len(profile), COARSE_POINTS, replace=False)]
-  told = np.array([overhang])
-  p, (_, j), _, _ = _posterior(few, told, RATIOS, _coarse_curves(), point_sd)
-  edge_mass = float(p[:, :2].sum() + p[:, -2:].sum())
-  ratios, curves = _fine_grid(int(j))
-  p, (_, j), residual, offset = _posterior(profile, told, ratios, curves, point_sd)
-  ls = _lengths(overhang, overhang_sd, 9)
-  weight = np.exp(-0.5 * ((ls - overhang) / max(overhang_sd, 1e-12)) ** 2)
-  # (L, R): the ruler's L, independent of the curve's L / c
-  joint = (weight / weight.sum())[:, None] * p
+  p, j, _, _ = _posterior(few, overhang, RATIOS, _coarse_curves(), point_sd)
+  edge_mass = float(p[:2].sum() + p[-2:].sum())
+  ratios, curves = _fine_grid(j)
+  p, j, residual, offset = _posterior(profile, overhang, ratios, curves, point_sd)
+  ls, weight = _ruler(overhang, overhang_sd)
+  joint = weight[:, None] * p[None, :]  # (L, R): the ruler's L, apart from L / c
   c = ls[:, None] / ratios[None, :]
   mean = float((joint * c).sum())
   reach, drop = cantilever.tip(ratios[j])

@@ -79,7 +79,7 @@ class Strip:
         raise ValueError(f'Strip.{name} must be a finite length > 0 m, got {v!r}')
     if not (math.isfinite(self.yaw_deg) and abs(self.yaw_deg) < 45.0):
       raise ValueError(f'Strip.yaw_deg must be within +-45 degrees: {self.yaw_deg!r}')
-    spread = self.width / 2 * abs(math.tan(math.radians(self.yaw_deg)))
+    spread = askew_spread(self.width, self.yaw_deg)
     if not self.overhang > spread:
       raise ValueError(
         f'Strip: askew by {self.yaw_deg} degrees, a fibre at its side would not '
@@ -132,6 +132,12 @@ def _join(parts) -> tuple[np.ndarray, np.ndarray]:
     faces.append(f + n)
     n += len(v)
   return np.concatenate(verts), np.concatenate(faces)
+
+
+def askew_spread(width: float, yaw_deg: float) -> float:
+  """How much longer an askew strip's longest fibre hangs than its middle
+  (and its shortest shorter), m: half the width times tan(yaw)."""
+  return width / 2 * abs(math.tan(math.radians(yaw_deg)))
 
 
 def fibre_overhangs(strip: Strip, cols: int = 9) -> tuple[np.ndarray, np.ndarray]:
