@@ -7,7 +7,8 @@ the bending length c = (D / (w g))^(1/3). Here each set-up is a world the
 reader (``physsim.overhang_depth``) does not know: a fabric and truth drawn
 from its search box, a strip 2.5-5 cm wide, 0.3-1.5 mm thick, its
 cross-section curled by -1 to 1.5 mm, leaving the edge up to 5 degrees
-askew, slid 0.8-1.3 times Peirce's two bending lengths over a table 0.7-0.8 m
+askew, slid 2.5-3.5 bending lengths over (``--setups=peirce``: 1.6-2.6, Peirce's
+two bending lengths, the protocol before 2026-11-29) a table 0.7-0.8 m
 high with a 1.8-4 cm top board, the length the user reads off the strip off
 by a ruler's 1 mm; a Kinect-class camera (640 x 480, 58 degrees,
 ``physsim.sensor``'s noise, holes at depth jumps, dropouts) 0.35-0.55 m away,
@@ -68,13 +69,20 @@ LEVELS = (0.5, 0.9)
 
 
 # The ranges set-ups are drawn from: 'protocol' as README's "How to record"
-# asks (the overhang in Peirce's two bending lengths, camera distance in m and
-# angles in degrees); 'wide' as a user who reads it loosely might film: the
-# overhang from one to four bending lengths, the camera up to 1 m away, 10-60
-# degrees above the table and 40 to the side, strips 1.5-8 cm wide.
+# asks (the overhang in Peirce's two bending lengths: 1.25-1.75 of them is
+# about three, the tip hanging nearly straight down; camera distance in m and
+# angles in degrees); 'peirce' the same at Peirce's own overhang (0.8-1.3 of
+# two bending lengths, the tip some 40 degrees down: the protocol before
+# 2026-11-29, whose 1 mm of ruler was a larger share of a shorter strip);
+# 'wide' as a user who reads it loosely might film: the overhang from one to
+# four bending lengths, the camera up to 1 m away, 10-60 degrees above the
+# table and 40 to the side, strips 1.5-8 cm wide.
+_CAMERA = dict(
+  width=(0.025, 0.05), distance=(0.35, 0.55), elevation=(20.0, 40.0), azimuth=25.0
+)
 SETUPS = {
-  'protocol': dict(overhang=(0.8, 1.3), width=(0.025, 0.05), distance=(0.35, 0.55),
-                   elevation=(20.0, 40.0), azimuth=25.0),
+  'protocol': dict(overhang=(1.25, 1.75), **_CAMERA),
+  'peirce': dict(overhang=(0.8, 1.3), **_CAMERA),
   'wide': dict(overhang=(0.5, 2.0), width=(0.015, 0.08), distance=(0.3, 1.0),
                elevation=(10.0, 60.0), azimuth=40.0),
 }  # fmt: skip
@@ -88,7 +96,8 @@ class Args:
     seed: of the set-ups (0 fits the error law, others check it).
     sets: set-ups without ``packed`` (with it: one per packed recording).
     packed: a folder of packed runs (``runs-*.npz``) of sheet recordings.
-    floor: the reader's relative floor on its t law's scale (0: its ``FLOOR``).
+    floor: the reader's relative floor on its t law's scale (negative: its
+      ``FLOOR``).
     dof: that law's degrees of freedom (0: its ``DOF``).
     grid: the posterior grid (bending, wind, area weight) of the packed runs.
     likelihood: the packed runs' likelihood form.
@@ -99,17 +108,18 @@ class Args:
     calibration: the calibration file whose tables the protocol sets are also
       read with, as an estimate prints them ('': the shipped paper-size
       shape calibration).
-    readings: an earlier run's ``overhang_depth.json`` whose set-ups and
-      readings to reuse (same seed and packed runs' truths, matched by the
-      bending length, in any order), rendering nothing: the protocol sets
-      re-read, e.g. with new calibration tables or new searches.
+    readings: an earlier run's ``overhang_depth.json`` (or ``summary.json``)
+      whose set-ups and readings to reuse (same seed and truths, matched by
+      the bending length, in any order), rendering nothing: the readings
+      read again under another law (``floor``, ``dof``), the protocol sets
+      with new calibration tables or new searches.
     out: output folder (JSON, PNG).
   """
 
   seed: int = 0
   sets: int = 40
   packed: str = ''
-  floor: float = 0.0
+  floor: float = -1.0
   dof: float = 0.0
   grid: tuple[int, ...] = (12, 64, 24)
   likelihood: str = 'gibbs'
@@ -428,7 +438,13 @@ def summary(rows: list[dict], sets: list[dict], dof: float) -> dict:
 
 def plot(rows: list[dict], example: dict | None, path: str) -> None:
   ok = [r for r in rows if 'c_hat' in r]
-  fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
+  # a re-read (``--readings``) keeps no pixels: the errors alone
+  fig, ax = (
+    plt.subplots(1, 2, figsize=(11, 4.2))
+    if example
+    else plt.subplots(1, 1, figsize=(6, 4.2))
+  )
+  ax = ax if example else [None, ax]
   if example is not None:
     prof = np.asarray(example['profile'])
     ax[0].plot(100 * prof[:, 0], -100 * prof[:, 1], '.', ms=1.5, alpha=0.4,
@@ -506,7 +522,7 @@ def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
     ValueError: its seed, renderer or number of set-ups differs.
   """
   old = physsim.dataset.read_json(path)
-  for name in ('seed', 'renderer'):
+  for name in ('seed', 'renderer', 'setups'):
     theirs = old['args'].get(name, getattr(Args(), name))  # older runs: the default
     if theirs != getattr(args, name):
       raise ValueError(
@@ -518,15 +534,13 @@ def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
 
 
 def main(args: Args) -> None:
-  floor = args.floor or overhang_depth.FLOOR
+  floor = overhang_depth.FLOOR if args.floor < 0 else args.floor
   dof = args.dof or overhang_depth.DOF
   posterior_lib.check_dof(dof, 'dof')
-  if not (math.isfinite(floor) and 0 < floor < 1):
-    raise ValueError(f'--floor={args.floor}: a relative floor in (0, 1)')
+  if not (math.isfinite(floor) and 0 <= floor < 1):
+    raise ValueError(f'--floor={args.floor}: a relative floor in [0, 1)')
   rng = np.random.default_rng([args.seed, 39])
   key = jax.random.key(args.seed)
-  if args.readings and not args.packed:
-    raise ValueError('--readings re-reads protocol sets: give --packed too')
   runs = packed_runs(args.packed) if args.packed else []
   n = len(runs) or args.sets
   earlier = earlier_rows(args.readings, args, n) if args.readings else None
@@ -550,6 +564,9 @@ def main(args: Args) -> None:
       p = physsim.params.from_unit(u, space)
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
+    setup = draw_setup(
+      rng, c, args.setups
+    )  # on a re-read too: the next truth's draw follows it
     if earlier is not None:
       # Matched by truth (runs packed by another number of processes come in
       # another order); a pair's two recordings share one, each its own reading.
@@ -564,7 +581,6 @@ def main(args: Args) -> None:
       except ValueError as e:
         raise ValueError(f'--readings={args.readings}: set-up {i}: {e}') from None
     else:
-      setup = draw_setup(rng, c, args.setups)
       row = read_setup(setup, jax.random.fold_in(key, i), floor, dof, args.renderer)
     rows.append(row)
     if example is None and 'c_hat' in row and 'profile' in row:

@@ -5,7 +5,7 @@ Given a dataset sequence of the 1 m sheet (``experiments.generate_dataset``,
 e.g. ``--preset=eval --physics=mismatched``), writes beside it, under
 ``--out``: a depth recording of the same fabric's strip over a table's edge
 (``physsim.tabletop.write_recording``: the heavy elastica of the truth's
-bending length, slid about two bending lengths over, read off 5 mm marks)
+bending length, slid about three bending lengths over, read off 5 mm marks)
 and ``protocol.json`` naming both, the sheet with a simulated anemometer
 reading of its wind (``--reading_sd``). Then time the estimate a user runs:
 
@@ -64,7 +64,7 @@ def main(args: Args) -> None:
     raise ValueError(f'--reading_sd={args.reading_sd}: need 0 <= sd < 1')
   space = physsim.search_space(args.material)
   c = float(physsim.params.bending_length(b, w, space.rigidity))
-  length = max(0.015, round(2 * c * 200) / 200)  # the strip's 5 mm marks
+  length = max(0.015, round(3 * c * 200) / 200)  # README's three c, to 5 mm marks
   os.makedirs(args.out, exist_ok=True)
   tabletop.write_recording(args.out, tabletop.Strip(length, c))
   reading = v * (

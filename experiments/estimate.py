@@ -184,6 +184,8 @@ def with_fabric_readings(args: Args) -> Args:
       f'{strip.path}: bending length {r.bending_length:.4f} m (sd '
       f'{r.bending_length_sd:.4f}) from {r.points} strip pixels over the edge'
     )
+    if hint := overhang_depth.advice(r):
+      print(f'{strip.path}: {hint}')
     readings.update(bending_length=r.bending_length,
                     bending_length_sd=r.bending_length_sd,
                     bending_length_dof=r.bending_length_dof)  # fmt: skip

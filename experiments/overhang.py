@@ -174,6 +174,8 @@ def main(args: Args) -> None:
         f'{d.ratio:.2f} bending lengths fits them to {1000 * d.residual_m:.2f} mm '
         f'(RMS): reach {d.reach:.4f} m, drop {d.drop:.4f} m'
       )
+      if hint := overhang_depth.advice(d):
+        print(f'{path}: {hint}')
     if args.figure:
       plot(args.depth, r['depth_readings'], args.figure)
   first = f'{args.reach[0]} m out' if args.reach else f'as {args.depth[0]} shows it'

@@ -112,19 +112,20 @@ class Config:
       searches run with the estimate's sharpness).
     measured_sd: relative standard error of a measured wind or area weight.
     length_sd: relative standard error of a bending length read from an
-      overhang (``LENGTH_MODES``), the median over recordings (0.035: the
+      overhang (``LENGTH_MODES``), the median over recordings (0.025: the
       depth reader's median printed error on the overhang benchmark's seed-0
-      set-ups on 2026-11-28; since the reader keeps the ruler's overhang,
-      4.2-4.8% on seeds 0 and 2, inside the range the tables span).
+      set-ups at the protocol's three bending lengths, 2026-11-29; 0.035 at
+      Peirce's two, 2026-11-28).
     length_sd_spread: how much that error varies between recordings, as a
       depth reading's does with the strip's length and pixels: recording
       ``seq``'s is ``length_sd`` x exp(spread x z), z standard normal clipped
-      to +-``LENGTH_SD_CLIP`` (0.47: the reader's sd of log error on seed 0,
-      1.6-9.1% there), so the tables hold for readings over that range
-      (``length_sd_range``); 0: every recording's is ``length_sd``.
+      to +-``LENGTH_SD_CLIP`` (0.43: the reader's sd of log error on seed 0,
+      1.1-5.7% there), so the tables hold for readings over that range
+      (``length_sd_range``: 0.85-7.3%); 0: every recording's is
+      ``length_sd``.
     length_dof: that reading's error law: Student's t of this many degrees
-      of freedom (the depth reader's, ``physsim.overhang_depth.DOF``), or 0,
-      Gaussian (a ruler's).
+      of freedom (the depth reader's, ``physsim.overhang_depth.DOF``: 10 since
+      2026-11-29, 4 before), or 0, Gaussian (a ruler's).
     sequences: training simulations of the network (the demo's recipe).
     batch_size: recordings simulated per batch when making them.
     backend: simulator: 'auto' (MuJoCo Warp a frame at a time on a GPU, else MuJoCo C), 'warp', 'mjx' or 'c' (physsim.rollout).
@@ -156,9 +157,9 @@ class Config:
   folds: int = 5
   sharpness_grid: tuple[float, ...] = (0.05, 0.1, 0.15, 0.25, 0.35, 0.5, 0.7, 1.0, 1.4)
   measured_sd: float = 0.02
-  length_sd: float = 0.035
-  length_sd_spread: float = 0.47
-  length_dof: float = 4.0
+  length_sd: float = 0.025
+  length_sd_spread: float = 0.43
+  length_dof: float = 10.0
   sequences: int = 24
   batch_size: int = 64
   backend: str = cli.choice('auto', physsim.BACKENDS)

@@ -141,10 +141,11 @@ def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
   assert spec.path == str(folder / 'strip') and spec.length_sd == 0.001
   m = estimate.with_fabric_readings(estimate.Args(protocol=path)).search.measured
   assert m.bending_length == pytest.approx(0.02, rel=0.02)
-  # the reader's t law: at least its floor, times sqrt(dof / (dof - 2))
+  # the reader's t law: at least its floor and half the ruler's 1 mm share of
+  # c (the spec's 4 cm overhang), times sqrt(dof / (dof - 2))
   assert m.bending_length_dof == overhang_depth.DOF
-  floor = overhang_depth.FLOOR * m.bending_length
-  assert m.bending_length_sd >= floor * np.sqrt(
+  least = max(overhang_depth.FLOOR, 0.5 * 0.001 / 0.04) * m.bending_length
+  assert m.bending_length_sd >= least * np.sqrt(
     m.bending_length_dof / (m.bending_length_dof - 2)
   )
   # the overhang beside a bending length, a missing file, a bad key

@@ -47,9 +47,12 @@ def test_a_clean_strip_is_read_to_its_bending_length():
   assert r.points > 100 and r.face_points > 500
   # its law: a t of DOF degrees of freedom whose scale is the fit's spread
   # and the floor in quadrature; its sd that scale times sqrt(dof / (dof - 2))
-  assert r.bending_length_dof == overhang_depth.DOF == 4.0
+  assert r.bending_length_dof == overhang_depth.DOF == 10.0
   scale = np.hypot(r.fit_sd, overhang_depth.FLOOR * r.bending_length)
-  assert r.bending_length_sd == pytest.approx(scale * np.sqrt(2.0), rel=1e-12)
+  assert r.bending_length_sd == pytest.approx(scale * np.sqrt(10.0 / 8.0), rel=1e-12)
+  # the ruler's 1 mm is in it: at least its share of c were the shape exact
+  # (the shape refits at each length take up some; more than half remains)
+  assert r.fit_sd > 0.5 * 0.02 * 0.001 / 0.04
 
 
 def test_a_real_strip_under_a_noisy_camera_is_within_its_interval():
@@ -173,3 +176,14 @@ def test_a_strip_rendered_by_mujocos_own_renderer_is_read_too():
   assert r.bending_length == pytest.approx(0.02, rel=2 * _CLEAN_TOL)
   height = float(np.asarray(pose.position)[2]) - TABLE.height
   assert r.camera_height_m == pytest.approx(height, abs=_HEIGHT_TOL_M)
+
+
+def test_a_strip_short_of_the_protocols_overhang_is_told_how_far_to_slide_it():
+  """Under ``SHORT_RATIO`` bending lengths, one line naming how many it hangs
+  and the protocol's overhang in cm (three of the read c); none at three."""
+  strip = tabletop.Strip(overhang=0.03, bending_length=0.015)  # two
+  r = overhang_depth.read(_render(strip, _pose()), INTR, 0.03, 0.001)
+  hint = overhang_depth.advice(r)
+  assert hint.startswith('the strip hangs 2.0 bending lengths over the edge')
+  assert f'about 3 ({100 * 3 * r.bending_length:.1f} cm' in hint
+  assert overhang_depth.advice(dataclasses.replace(r, ratio=3.0)) is None
