@@ -53,7 +53,7 @@ PARALLEL_COS = math.cos(math.radians(5.0))  # planes this close are parallel
 VERTICAL_SIN = math.sin(math.radians(8.0))  # the face's normal off horizontal
 MIN_FACE_POINTS = 200
 MIN_STRIP_POINTS = 60
-MAX_FIT_POINTS = 800  # subsampled for the fit: its spread is floored anyway
+MAX_FIT_POINTS = 800  # subsampled for the fit (its law was fitted so)
 MAX_RESIDUAL = 0.004  # m, RMS: points further from any elastica are not a strip
 RATIOS = np.geomspace(0.2, cantilever.MAX_RATIO, 160)  # L / c fitted
 # c's error law: Student's t of DOF degrees of freedom, its scale the fit's
