@@ -519,7 +519,8 @@ def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
   """The set-ups and readings of an earlier run (``--readings``).
 
   Raises:
-    ValueError: its seed, renderer or number of set-ups differs.
+    ValueError: its seed, renderer, set-up ranges or number of set-ups
+      differs.
   """
   old = physsim.dataset.read_json(path)
   for name in ('seed', 'renderer', 'setups'):
@@ -564,9 +565,8 @@ def main(args: Args) -> None:
       p = physsim.params.from_unit(u, space)
       b, w = float(p.bending_scale), float(p.area_weight)
     c = float(physsim.params.bending_length(b, w, space.rigidity))
-    setup = draw_setup(
-      rng, c, args.setups
-    )  # on a re-read too: the next truth's draw follows it
+    # drawn on a re-read too, so that the next truth's draw follows it
+    setup = draw_setup(rng, c, args.setups)
     if earlier is not None:
       # Matched by truth (runs packed by another number of processes come in
       # another order); a pair's two recordings share one, each its own reading.

@@ -26,7 +26,7 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import cli, files
-from physsim import tabletop
+from physsim import overhang_depth, tabletop
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,7 +64,8 @@ def main(args: Args) -> None:
     raise ValueError(f'--reading_sd={args.reading_sd}: need 0 <= sd < 1')
   space = physsim.search_space(args.material)
   c = float(physsim.params.bending_length(b, w, space.rigidity))
-  length = max(0.015, round(3 * c * 200) / 200)  # README's three c, to 5 mm marks
+  # README's overhang in bending lengths, read off the strip's 5 mm marks
+  length = max(0.015, round(overhang_depth.PROTOCOL_RATIO * c * 200) / 200)
   os.makedirs(args.out, exist_ok=True)
   tabletop.write_recording(args.out, tabletop.Strip(length, c))
   reading = v * (

@@ -50,8 +50,8 @@ def test_a_clean_strip_is_read_to_its_bending_length():
   assert r.bending_length_dof == overhang_depth.DOF == 10.0
   scale = np.hypot(r.fit_sd, overhang_depth.FLOOR * r.bending_length)
   assert r.bending_length_sd == pytest.approx(scale * np.sqrt(10.0 / 8.0), rel=1e-12)
-  # the ruler's 1 mm is in it: at least its share of c were the shape exact
-  # (the shape refits at each length take up some; more than half remains)
+  # the ruler's 1 mm is in it: its share of c, c x 1 mm / L, is a lower bound
+  # (half of it here, loosely: the shape's own spread adds to it)
   assert r.fit_sd > 0.5 * 0.02 * 0.001 / 0.04
 
 
