@@ -1,0 +1,345 @@
+"""The shipped tables and the protocol sets on recordings of another physics,
+pooled over several check seeds.
+
+One run of the paper-size check on ``physsim.mismatch.WORLD`` is 56
+recordings (4 pairs per fabric); at 56, a 50% interval's coverage has a
+binomial standard error of 7 points, and the seeds' truths differ enough that
+one seed's 90% coverage can read 84% and another's 98% for the same tables.
+This script adds up the counts of several such runs, each with its own seed
+(new truths, cameras, gusts), so that a coverage is read to 3-4 points:
+
+  for s in 2 3 4; do   # the searches: GPU, 6.5-8 minutes a seed on one H200
+    python -m experiments.calibrate --preset=paper --check --physics=mismatched \
+        --seed=$s --pairs=4 --workdir=/tmp/chk$s --time_limit=545
+    # its packed/ (calibration.pack_runs) copied to out/chk_mm_cpu_s$s, then (CPU,
+    # a minute; the same numbers as the device's own analysis):
+    python -m experiments.calibrate --preset=paper --check --physics=mismatched \
+        --seed=$s --pairs=4 --analyse_only --workdir=out/chk_mm_cpu_s$s
+    # the protocol sets: an overhang recording of each sheet's fabric and truth
+    # (CPU, 3.5 minutes a seed)
+    python -m benchmarks.overhang_depth --seed=$s \
+        --packed=out/chk_mm_cpu_s$s/packed --out=out/od_s$s
+  done
+  # seed 1 is BENCHMARKS.md's [C19] (analysed the same way) and [C22]'s seed-1 run
+  python -m benchmarks.pooled_check \
+      --checks=out/chk_mm_cpu_s1/check.json,...,out/chk_mm_cpu_s4/check.json \
+      --protocol_sets=out/od_s1/summary.json,...,out/od_s4/summary.json \
+      --out=out/pooled_check
+
+Nothing is fitted here. The counts are exact (each check's coverage times
+its recordings); the 95% intervals (Wilson's) count recordings as
+independent, which for bending and area weight makes them too narrow: a pair's two
+recordings share both. A protocol set's bending interval is compared with the
+prior's central 90% (0.9 of the box's log range: bending is log-uniform in
+it).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+
+import matplotlib
+import numpy as np
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+
+import bo  # noqa: E402
+import physsim  # noqa: E402
+from experiments.pipeline import cli, files  # noqa: E402
+
+FIELDS = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
+SET_FIELDS = ('bending_scale', 'wind_speed', 'area_weight')
+SET_MODES = ('sheet, anemometer', 'sheet, anemometer, overhang')
+LEVELS = (50, 90)
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """What to pool.
+
+  Attributes:
+    checks: ``check.json`` files of ``experiments.calibrate --check``, one per
+      seed, of one physics and one shipped calibration.
+    protocol_sets: ``summary.json`` files of ``benchmarks.overhang_depth
+      --packed``, one per seed, of one reader's law and set-up ranges.
+    out: folder for ``pooled_check.json``, ``pooled_check.md`` and the figure.
+  """
+
+  checks: tuple[str, ...] = ()
+  protocol_sets: tuple[str, ...] = ()
+  out: str = 'out/pooled_check'
+
+
+PRESETS = {'default': Args()}
+
+
+def _load(path: str) -> dict:
+  try:
+    with open(path) as f:
+      return json.load(f)
+  except FileNotFoundError:
+    raise ValueError(f'{path}: no such file') from None
+  except json.JSONDecodeError as e:
+    raise ValueError(f'{path}: not JSON ({e.msg}, line {e.lineno})') from None
+
+
+def _one_of_each(paths, seeds, what: str) -> None:
+  if len(set(seeds)) != len(seeds):
+    raise ValueError(f'{what}: two files of one seed ({", ".join(paths)}): {seeds}')
+
+
+def _same(paths, values, what: str) -> None:
+  if len({json.dumps(v, sort_keys=True) for v in values}) > 1:
+    raise ValueError(
+      f'{what} differs between {paths[0]} and '
+      + next(p for p, v in zip(paths, values, strict=True) if v != values[0])
+    )
+
+
+def _count(frac: float, n: int) -> int:
+  return int(round(frac * n))
+
+
+def _held(k: int, n: int) -> dict:
+  lo, hi = bo.calibration.binomial_interval(k, n)
+  return {'held': k / n, 'count': k, 'ci': [lo, hi]}
+
+
+def pool_checks(paths: list[str]) -> dict:
+  """Per mode and quantity, the checks' counts added up: how often the 50%
+  and 90% intervals held (with Wilson's 95% interval and each seed's own),
+  the mean error of the point and of the range centre (recording-weighted).
+
+  Raises:
+    ValueError: a file missing or unreadable, two of one seed, or checks of
+      different physics, calibration or search settings.
+  """
+  docs = [_load(p) for p in paths]
+  for p, d in zip(paths, docs, strict=True):
+    if 'modes' not in d or 'n' not in d:
+      raise ValueError(f'{p}: not a check.json of experiments.calibrate --check')
+  _one_of_each(paths, [d['seed'] for d in docs], '--checks')
+  _same(paths, [d['physics'] for d in docs], 'physics')
+  _same(paths, [d['shipped']['setting'] for d in docs], 'the shipped calibration')
+  _same(
+    paths,
+    [{k: v for k, v in d['config']['estimate'].items() if k != 'calibration'}
+     for d in docs],
+    'the estimate settings',
+  )  # fmt: skip
+  modes = [m for m in docs[0]['modes'] if all(m in d['modes'] for d in docs)]
+  ns = [int(d['n']) for d in docs]
+  n = sum(ns)
+  out = {}
+  for mode in modes:
+    out[mode] = {}
+    for q in FIELDS:
+      cells = [d['modes'][mode][q] for d in docs]
+      err = 'point_error_factor' if q == 'bending_scale' else 'point_error_pct'
+      centre = 'centre_error_factor' if q == 'bending_scale' else 'centre_error_pct'
+      row = {
+        f'held_{lv}': _held(
+          sum(_count(c[f'interval_{lv}'], k) for c, k in zip(cells, ns, strict=True)), n
+        )
+        for lv in LEVELS
+      }  # fmt: skip
+      for lv in LEVELS:
+        row[f'held_{lv}']['per_seed'] = [c[f'interval_{lv}'] for c in cells]
+      row['point_error'] = float(np.average([c[err] for c in cells], weights=ns))
+      row['centre_error'] = float(np.average([c[centre] for c in cells], weights=ns))
+      row['point_error_per_seed'] = [c[err] for c in cells]
+      out[mode][q] = row
+  return {
+    'files': list(paths), 'seeds': [d['seed'] for d in docs], 'n': n,
+    'physics': docs[0]['physics'], 'calibration': docs[0]['shipped']['setting'],
+    'modes': out,
+  }  # fmt: skip
+
+
+def _error(f: str, point: float, truth: float) -> float:
+  if f == 'bending_scale':
+    return math.exp(abs(math.log(point / truth)))
+  return abs(point / truth - 1.0)
+
+
+def _narrowing(s: dict, cell: dict) -> float:
+  """The bending's 90% interval against the prior's central 90% (0.9 of the
+  box's log range)."""
+  b0, b1 = physsim.search_space(s['material']).bending_scale
+  lo, hi = cell['interval_90']
+  return 0.9 * math.log(b1 / b0) / max(math.log(hi / lo), 1e-12)
+
+
+def pool_sets(paths: list[str]) -> dict:
+  """The protocol sets of several ``overhang_depth`` runs as one: per mode,
+  the bending's median factor error and narrowing, area weight's and wind's
+  mean percent error, and how often each interval held, as printed (else the
+  raw posterior's, as the run kept).
+
+  Raises:
+    ValueError: a file missing, without protocol sets, two of one seed, or
+      runs of another reader's law or set-up ranges.
+  """
+  docs = [_load(p) for p in paths]
+  for p, d in zip(paths, docs, strict=True):
+    if not d.get('sets'):
+      raise ValueError(f'{p}: no protocol sets (an overhang_depth run with --packed)')
+  _one_of_each(paths, [d['args']['seed'] for d in docs], '--protocol_sets')
+  _same(paths, [[d['dof'], d['floor']] for d in docs], "the reader's law")
+  _same(paths, [d['args']['setups'] for d in docs], 'the set-up ranges')
+  sets = [s for d in docs for s in d['sets']]
+  out = {}
+  for mode in SET_MODES:
+    mine = [s for s in sets if mode in s['joint']]
+    if not mine:
+      continue
+    how = 'printed' if all('printed' in s['joint'][mode] for s in mine) else 'raw'
+
+    def cell(s, f, mode=mode, how=how):
+      return s['joint'][mode][how][f]
+
+    n = len(mine)
+    row = {'sets': n, 'how': how}
+    row['bending_median_factor'] = float(
+      np.median([_error('bending_scale', cell(s, 'bending_scale')['point'],
+                        s['truth']['bending_scale']) for s in mine])
+    )  # fmt: skip
+    row['bending_narrowing_90_median'] = float(
+      np.median([_narrowing(s, cell(s, 'bending_scale')) for s in mine])
+    )
+    for f, key in (
+      ('area_weight', 'area_weight_mean_pct'),
+      ('wind_speed', 'wind_mean_pct'),
+    ):
+      row[key] = 100 * float(
+        np.mean([_error(f, cell(s, f)['point'], s['truth'][f]) for s in mine])
+      )
+    for f in SET_FIELDS:
+      for lv in LEVELS:
+        k = sum(bool(cell(s, f)[f'held_{lv}']) for s in mine)
+        row[f'{f}_held_{lv}'] = _held(k, n)
+        row[f'{f}_held_{lv}']['per_seed'] = [
+          float(np.mean([bool(cell(x, f)[f'held_{lv}']) for x in d['sets']
+                         if mode in x['joint']]))
+          for d in docs
+        ]  # fmt: skip
+    out[mode] = row
+  return {
+    'files': list(paths), 'seeds': [d['args']['seed'] for d in docs],
+    'law': {'dof': docs[0]['dof'], 'floor': docs[0]['floor']},
+    'setups': docs[0]['args']['setups'], 'modes': out,
+  }  # fmt: skip
+
+
+def _pct(h: dict) -> str:
+  lo, hi = h['ci']
+  return f'{100 * h["held"]:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]'
+
+
+def _seeds(h: dict) -> str:
+  v = [100 * x for x in h['per_seed']]
+  return f'{min(v):.0f}-{max(v):.0f}%'
+
+
+def table(checks: dict | None, sets: dict | None) -> str:
+  lines = []
+  if checks:
+    lines += [
+      f'Shipped tables on {checks["n"]} recordings of the {checks["physics"]} '
+      f'physics (seeds {", ".join(map(str, checks["seeds"]))}; {checks["calibration"]}); '
+      "brackets: 95% intervals counting recordings as independent (a pair's two "
+      "share bending and area weight); seeds: the range of the seeds' own",
+      '',
+      '| mode | quantity | 50% held | seeds | 90% held | seeds | mean error: point | range centre |',
+      '|---|---|---|---|---|---|---|---|',
+    ]
+    for mode, by in checks['modes'].items():
+      for q, r in by.items():
+        fmt = (
+          (lambda v: f'x{v:.2f}') if q == 'bending_scale' else (lambda v: f'{v:.1f}%')
+        )
+        lines.append(
+          f'| {mode} | {q} | {_pct(r["held_50"])} | {_seeds(r["held_50"])} | '
+          f'{_pct(r["held_90"])} | {_seeds(r["held_90"])} | {fmt(r["point_error"])} | '
+          f'{fmt(r["centre_error"])} |'
+        )
+  if sets:
+    lines += [
+      '',
+      f"Protocol sets (seeds {', '.join(map(str, sets['seeds']))}; the reader's t of "
+      f'{sets["law"]["dof"]:g}, set-ups "{sets["setups"]}")',
+      '',
+      "| sets | n | bending factor (median) | its 90% vs the prior's | area weight | wind "
+      '| bending 90% / 50% held | wind | area weight |',
+      '|---|---|---|---|---|---|---|---|---|',
+    ]
+    for mode, r in sets['modes'].items():
+      held = ' | '.join(
+        f'{_pct(r[f"{f}_held_90"])} / {_pct(r[f"{f}_held_50"])}' for f in SET_FIELDS
+      )
+      lines.append(
+        f'| {mode} ({r["how"]}) | {r["sets"]} | x{r["bending_median_factor"]:.2f} | '
+        f'x{r["bending_narrowing_90_median"]:.1f} narrower | '
+        f'{r["area_weight_mean_pct"]:.1f}% | {r["wind_mean_pct"]:.1f}% | {held} |'
+      )
+  return '\n'.join(lines)
+
+
+def plot(checks: dict | None, sets: dict | None, path: str) -> None:
+  """Coverage at 50% and 90%: each seed (dots) and the pool (diamond, 95%
+  interval) for the check's modes with an anemometer and the protocol sets."""
+  rows = []
+  if checks:
+    for mode in ('video', 'known wind', 'known wind, bending length'):
+      for q in FIELDS[:3]:
+        if mode in checks['modes']:
+          rows.append((f'{mode}: {q}', checks['modes'][mode][q], 'held_'))
+  if sets and SET_MODES[1] in sets['modes']:
+    for f in SET_FIELDS:
+      rows.append((f'protocol set: {f}', sets['modes'][SET_MODES[1]], f'{f}_held_'))
+  if not rows:
+    return
+  fig, ax = plt.subplots(1, 2, figsize=(12, 0.35 * len(rows) + 1.5), sharey=True)
+  y = np.arange(len(rows))
+  for a, lv in zip(ax, LEVELS, strict=True):
+    for i, (_, r, pre) in enumerate(rows):
+      h = r[f'{pre}{lv}']
+      lo, hi = h['ci']
+      a.plot([lo, hi], [i, i], 'k-', lw=1.2)
+      a.plot(h['held'], i, 'D', color='C0', ms=6)
+      a.plot(h['per_seed'], [i] * len(h['per_seed']), 'o', color='C1', ms=3, alpha=0.8)
+    a.axvline(lv / 100, color='k', ls='--', lw=0.8)
+    a.axvspan(*((0.40, 0.60) if lv == 50 else (0.85, 0.95)), color='C2', alpha=0.12)
+    a.set_xlim(*((0.2, 0.8) if lv == 50 else (0.7, 1.0)))
+    a.set_xlabel(f'how often the {lv}% interval held the truth')
+  ax[0].set_yticks(y, [name for name, _, _ in rows], fontsize=8)
+  ax[0].invert_yaxis()
+  fig.suptitle(
+    'Another physics, pooled over seeds: the pool (diamond, its 95% interval) and '
+    "each seed's (dots); shaded: issue 39's targets", fontsize=10,
+  )  # fmt: skip
+  fig.tight_layout()
+  files.savefig(fig, path, dpi=100)
+  plt.close(fig)
+
+
+def main(args: Args) -> None:
+  if not args.checks and not args.protocol_sets:
+    raise ValueError('give --checks and/or --protocol_sets (files to pool)')
+  checks = pool_checks(list(args.checks)) if args.checks else None
+  sets = pool_sets(list(args.protocol_sets)) if args.protocol_sets else None
+  text = table(checks, sets)
+  print(text)
+  os.makedirs(args.out, exist_ok=True)
+  files.write_json(os.path.join(args.out, 'pooled_check.json'),
+                   {'checks': checks, 'protocol_sets': sets})  # fmt: skip
+  files.write_text(os.path.join(args.out, 'pooled_check.md'), text + '\n')
+  plot(checks, sets, os.path.join(args.out, 'pooled_check.png'))
+
+
+if __name__ == '__main__':
+  cli.run(Args, PRESETS, main)
