@@ -26,6 +26,15 @@ This script adds up the counts of several such runs, each with its own seed
       --protocol_sets=out/od_s1/summary.json,...,out/od_s4/summary.json \
       --out=out/pooled_check
 
+The shipped calibration file keeps each seed's check (the device's
+``check.json``, whose video cells are what the estimates printed) and an
+estimate quotes them pooled (``report.quoted_checks``):
+
+  python -c "import json; from experiments.pipeline import report; \
+    from experiments.studies import calibration as c; \
+    [report.record_check(report.SHAPE_PAPER_CALIBRATION_FILE, \
+      c.check_record(json.load(open(f'/tmp/chk{s}/check.json')))) for s in (2, 3, 4)]"
+
 Nothing is fitted here. The counts are exact (each check's coverage times
 its recordings); the 95% intervals (Wilson's) count recordings as
 independent, which for bending and area weight makes them too narrow: a pair's two
