@@ -36,9 +36,10 @@ estimate quotes them pooled (``report.quoted_checks``):
       c.check_record(json.load(open(f'/tmp/chk{s}/check.json')))) for s in (2, 3, 4)]"
 
 Nothing is fitted here. The counts are exact (each check's coverage times
-its recordings); the 95% intervals (Wilson's) count recordings as
-independent, which for bending and area weight makes them too narrow: a pair's two
-recordings share both. A protocol set's bending interval is compared with the
+its recordings); a check's 95% intervals (Wilson's) count recordings as
+independent, which for bending and area weight makes them too narrow: a pair's
+two recordings share both. The protocol sets keep each set, so theirs resample
+whole pairs (``pair_interval``). A protocol set's bending interval is compared with the
 prior's central 90% (0.9 of the box's log range: bending is log-uniform in
 it).
 """
@@ -183,6 +184,23 @@ def _narrowing(s: dict, cell: dict) -> float:
   return 0.9 * math.log(b1 / b0) / max(math.log(hi / lo), 1e-12)
 
 
+def pair_interval(held, pairs, level: float = 0.95, draws: int = 4000,
+                  seed: int = 0) -> list[float]:  # fmt: skip
+  """A coverage's ``level`` interval resampling whole pairs (a percentile
+  bootstrap over clusters): ``held[i]`` whether set ``i``'s interval held,
+  ``pairs[i]`` its pair (sets sharing a truth). Where a pair's two hold or
+  miss together, it is as wide as Wilson's on half as many sets."""
+  held = np.asarray(held, np.float64)
+  _, which = np.unique(np.asarray(pairs), return_inverse=True)
+  k = np.bincount(which, weights=held)
+  m = np.bincount(which).astype(np.float64)
+  rng = np.random.default_rng(seed)
+  pick = rng.integers(0, len(k), (draws, len(k)))
+  cov = k[pick].sum(axis=1) / m[pick].sum(axis=1)
+  a = (1.0 - level) / 2.0
+  return [float(np.quantile(cov, a)), float(np.quantile(cov, 1.0 - a))]
+
+
 def pool_sets(paths: list[str]) -> dict:
   """The protocol sets of several ``overhang_depth`` runs as one: per mode,
   the bending's median factor error and narrowing, area weight's and wind's
@@ -200,7 +218,7 @@ def pool_sets(paths: list[str]) -> dict:
   _one_of_each(paths, [d['args']['seed'] for d in docs], '--protocol_sets')
   _same(paths, [[d['dof'], d['floor']] for d in docs], "the reader's law")
   _same(paths, [d['args']['setups'] for d in docs], 'the set-up ranges')
-  sets = [s for d in docs for s in d['sets']]
+  sets = [{**s, 'seed_of_run': d['args']['seed']} for d in docs for s in d['sets']]
   out = {}
   for mode in SET_MODES:
     mine = [s for s in sets if mode in s['joint']]
@@ -213,6 +231,12 @@ def pool_sets(paths: list[str]) -> dict:
 
     n = len(mine)
     row = {'sets': n, 'how': how}
+    # a pair's two recordings share a truth (bending and area weight)
+    pairs = [
+      f'{s["seed_of_run"]}:{s["material"]}:{s["truth"]["bending_scale"]:.9g}:'
+      f'{s["truth"]["area_weight"]:.9g}'
+      for s in mine
+    ]
     row['bending_median_factor'] = float(
       np.median([_error('bending_scale', cell(s, 'bending_scale')['point'],
                         s['truth']['bending_scale']) for s in mine])
@@ -231,6 +255,9 @@ def pool_sets(paths: list[str]) -> dict:
       for lv in LEVELS:
         k = sum(bool(cell(s, f)[f'held_{lv}']) for s in mine)
         row[f'{f}_held_{lv}'] = _held(k, n)
+        row[f'{f}_held_{lv}']['ci_pairs'] = pair_interval(
+          [bool(cell(s, f)[f'held_{lv}']) for s in mine], pairs
+        )
         row[f'{f}_held_{lv}']['per_seed'] = [
           float(np.mean([bool(cell(x, f)[f'held_{lv}']) for x in d['sets']
                          if mode in x['joint']]))
@@ -244,8 +271,8 @@ def pool_sets(paths: list[str]) -> dict:
   }  # fmt: skip
 
 
-def _pct(h: dict) -> str:
-  lo, hi = h['ci']
+def _pct(h: dict, key: str = 'ci') -> str:
+  lo, hi = h[key]
   return f'{100 * h["held"]:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]'
 
 
@@ -280,7 +307,8 @@ def table(checks: dict | None, sets: dict | None) -> str:
     lines += [
       '',
       f"Protocol sets (seeds {', '.join(map(str, sets['seeds']))}; the reader's t of "
-      f'{sets["law"]["dof"]:g}, set-ups "{sets["setups"]}")',
+      f'{sets["law"]["dof"]:g}, set-ups "{sets["setups"]}"); brackets: 95% intervals '
+      'resampling whole pairs (a pair shares its truth)',
       '',
       "| sets | n | bending factor (median) | its 90% vs the prior's | area weight | wind "
       '| bending 90% / 50% held | wind | area weight |',
@@ -288,7 +316,8 @@ def table(checks: dict | None, sets: dict | None) -> str:
     ]
     for mode, r in sets['modes'].items():
       held = ' | '.join(
-        f'{_pct(r[f"{f}_held_90"])} / {_pct(r[f"{f}_held_50"])}' for f in SET_FIELDS
+        f'{_pct(r[f"{f}_held_90"], "ci_pairs")} / {_pct(r[f"{f}_held_50"], "ci_pairs")}'
+        for f in SET_FIELDS
       )
       lines.append(
         f'| {mode} ({r["how"]}) | {r["sets"]} | x{r["bending_median_factor"]:.2f} | '

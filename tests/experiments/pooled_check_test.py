@@ -6,8 +6,10 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
+import bo
 import physsim
 from benchmarks import pooled_check
 
@@ -109,3 +111,24 @@ def test_protocol_sets_pool_their_errors_and_the_bending_narrowing_by_hand(tmp_p
   c = _write(tmp_path, 'c.json', other)
   with pytest.raises(ValueError, match="reader's law differs"):
     pooled_check.pool_sets([a, c])
+
+
+def test_pairs_that_hold_together_widen_the_interval_as_half_as_many_sets():
+  """Pairs whose two sets always hold or miss together carry half the
+  information: their bootstrap interval is about Wilson's on the pairs'
+  count, wider than Wilson's on the sets'; independent sets in pairs of one
+  give about Wilson's on the sets."""
+  rng = np.random.default_rng(3)
+  one = rng.random(100) < 0.5
+  together = np.repeat(one, 2)  # 200 sets, 100 pairs
+  pairs = np.repeat(np.arange(100), 2)
+  lo, hi = pooled_check.pair_interval(together, pairs)
+  k = int(together.sum())
+  wl, wh = bo.calibration.binomial_interval(k, 200)
+  pl, ph = bo.calibration.binomial_interval(k // 2, 100)
+  assert hi - lo > 1.25 * (wh - wl)
+  assert hi - lo == pytest.approx(ph - pl, rel=0.15)
+  alone = rng.random(200) < 0.5
+  lo, hi = pooled_check.pair_interval(alone, np.arange(200))
+  wl, wh = bo.calibration.binomial_interval(int(alone.sum()), 200)
+  assert hi - lo == pytest.approx(wh - wl, rel=0.15)
