@@ -17,6 +17,12 @@ is an analysis only (no simulation):
   done
   python -m benchmarks.model_error --errors=0,0.5,1,2 --root=/tmp/me
 
+With more check seeds (``benchmarks.pooled_check``'s runs), each seed's check
+at each ``e`` in ``chk_<e>_s<seed>`` (the same check command with that seed,
+its packed runs, and ``--workdir=/tmp/me/chk_<e>_s<seed>``) is pooled in:
+
+  python -m benchmarks.model_error --errors=0,0.5,1 --seeds=2,3,4 --root=/tmp/me
+
 The term is chosen as a calibration's sharpness is, by the interval score
 (Gneiting & Raftery: narrow, but holding the truth), here on the mismatched
 recordings, where it matters: the smallest ``e`` whose mean score is within
@@ -46,6 +52,9 @@ class Args:
   Attributes:
     errors: the model errors analysed (``cal_<e>`` and ``chk_<e>`` under root).
     root: the folder holding each error's calibration and check workdirs.
+    seeds: further check seeds, read from ``chk_<e>_s<seed>`` and pooled with
+      ``chk_<e>`` (each cell the recordings' mean): a 50% coverage on one
+      seed's 56 recordings is known to +-7 points.
     tolerance: relative margin over the best mean interval score within which
       the smallest model error is chosen.
     out: JSON path.
@@ -53,6 +62,7 @@ class Args:
 
   errors: tuple[str, ...] = ('0', '0.5', '1', '2')
   root: str = '/tmp/me'
+  seeds: tuple[str, ...] = ()
   tolerance: float = 0.01
   out: str = 'out/benchmarks/model_error.json'
 
@@ -70,20 +80,51 @@ def _cells(summary: dict) -> dict:
   }
 
 
-def row(root: str, error: str) -> dict:
+def _pooled(checks: list[dict]) -> dict:
+  """Checks of one calibration on several seeds as one: ``n`` added up and
+  every numeric cell of every mode the recordings' mean."""
+  if len(checks) == 1:
+    return checks[0]
+  n = sum(k['n'] for k in checks)
+  modes = {}
+  for m in checks[0]['modes']:
+    if all(m in k['modes'] for k in checks):
+      modes[m] = {
+        f: {
+          key: sum(k['modes'][m][f][key] * k['n'] for k in checks) / n
+          for key, v in checks[0]['modes'][m][f].items()
+          if isinstance(v, (int, float))
+        }
+        for f in FIELDS
+      }  # fmt: skip
+  return {'n': n, 'modes': modes}
+
+
+def row(root: str, error: str, seeds: tuple[str, ...] = ()) -> dict:
   """One model error's numbers: held out on its own physics (cross-fitted),
-  and on the mismatched recordings per mode."""
+  and on the mismatched recordings per mode (``seeds``' checks pooled in)."""
   cal = os.path.join(root, f'cal_{error}', 'calibration.json')
-  chk = os.path.join(root, f'chk_{error}', 'check.json')
-  for p in (cal, chk):
+  chks = [os.path.join(root, f'chk_{error}', 'check.json')] + [
+    os.path.join(root, f'chk_{error}_s{s}', 'check.json') for s in seeds
+  ]
+  for p in (cal, *chks):
     if not os.path.isfile(p):
       raise ValueError(f'{p}: missing (run the commands in the module doc)')
   with open(cal) as f:
     c = json.load(f)
-  with open(chk) as f:
-    k = json.load(f)
+  ks = []
+  for p in chks:
+    with open(p) as f:
+      ks.append(json.load(f))
   if float(c.get('model_error', 0.0)) != float(error):
     raise ValueError(f'{cal}: made with model error {c.get("model_error", 0.0)}')
+  for p, x in zip(chks, ks, strict=True):
+    made = float(x.get('config', {}).get('estimate', {}).get('model_error', error))
+    if made != float(error):
+      raise ValueError(f'{p}: made with model error {made}')
+  if len({x.get('seed') for x in ks}) != len(ks):
+    raise ValueError(f'{", ".join(chks)}: two checks of one seed')
+  k = _pooled(ks)
   mm = {m: _cells(k['modes'][m]) for m in MODES if m in k['modes']}
   return {
     'model_error': float(error),
@@ -132,7 +173,7 @@ def choose(rows: list[dict], tolerance: float) -> float:
 
 
 def main(args: Args) -> None:
-  rows = [row(args.root, e) for e in args.errors]
+  rows = [row(args.root, e, args.seeds) for e in args.errors]
   chosen = choose(rows, args.tolerance)
   print(table(rows))
   print(
