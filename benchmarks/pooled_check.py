@@ -201,6 +201,26 @@ def pair_interval(held, pairs, level: float = 0.95, draws: int = 4000,
   return [float(np.quantile(cov, a)), float(np.quantile(cov, 1.0 - a))]
 
 
+def _by_fabric(sets: list[dict], cell) -> dict:
+  """Per fabric, area weight's mean percent error against the search box's
+  centre's on the same truths, the box's width (high over low) and how often
+  the 90% interval held: the error follows the box."""
+  out = {}
+  for material in sorted({s['material'] for s in sets}):
+    mine = [s for s in sets if s['material'] == material]
+    lo, hi = physsim.search_space(material).area_weight
+    truth = np.array([s['truth']['area_weight'] for s in mine])
+    point = np.array([cell(s, 'area_weight')['point'] for s in mine])
+    out[material] = {
+      'sets': len(mine),
+      'mean_pct': 100 * float(np.mean(np.abs(point / truth - 1))),
+      'centre_pct': 100 * float(np.mean(np.abs((lo + hi) / 2 / truth - 1))),
+      'box_ratio': hi / lo,
+      'held_90': float(np.mean([bool(cell(s, 'area_weight')['held_90']) for s in mine])),
+    }  # fmt: skip
+  return out
+
+
 def pool_sets(paths: list[str]) -> dict:
   """The protocol sets of several ``overhang_depth`` runs as one: per mode,
   the bending's median factor error and narrowing, area weight's and wind's
@@ -263,6 +283,15 @@ def pool_sets(paths: list[str]) -> dict:
                          if mode in x['joint']]))
           for d in docs
         ]  # fmt: skip
+    row['area_weight_by_fabric'] = _by_fabric(mine, cell)
+    wind = np.array([s['truth']['wind_speed'] for s in mine])
+    err = np.array([_error('area_weight', cell(s, 'area_weight')['point'],
+                           s['truth']['area_weight']) for s in mine])  # fmt: skip
+    row['area_weight_by_wind'] = {
+      f'{lo}-{lo + 1} m/s': 100 * float(err[(wind >= lo) & (wind < lo + 1)].mean())
+      for lo in range(1, 6)
+      if ((wind >= lo) & (wind < lo + 1)).any()
+    }
     out[mode] = row
   return {
     'files': list(paths), 'seeds': [d['args']['seed'] for d in docs],
@@ -324,6 +353,28 @@ def table(checks: dict | None, sets: dict | None) -> str:
         f'x{r["bending_narrowing_90_median"]:.1f} narrower | '
         f'{r["area_weight_mean_pct"]:.1f}% | {r["wind_mean_pct"]:.1f}% | {held} |'
       )
+    last = list(sets['modes'])[-1]
+    lines += [
+      '',
+      f"Area weight by fabric ({last}): mean error, the box centre's on the same "
+      'truths, the box (high / low), 90% held',
+      '',
+      '| fabric | sets | area weight | box centre | box | 90% held |',
+      '|---|---|---|---|---|---|',
+    ]
+    for material, a in sets['modes'][last]['area_weight_by_fabric'].items():
+      lines.append(
+        f'| {material} | {a["sets"]} | {a["mean_pct"]:.1f}% | {a["centre_pct"]:.1f}% | '
+        f'x{a["box_ratio"]:.2f} | {100 * a["held_90"]:.0f}% |'
+      )
+    lines += [
+      '',
+      'Area weight by the true wind: '
+      + ', '.join(
+        f'{band} {v:.1f}%'
+        for band, v in sets['modes'][last]['area_weight_by_wind'].items()
+      ),
+    ]
   return '\n'.join(lines)
 
 

@@ -101,6 +101,14 @@ def test_protocol_sets_pool_their_errors_and_the_bending_narrowing_by_hand(tmp_p
   assert out['area_weight_mean_pct'] == pytest.approx(10.0)
   assert out['bending_scale_held_90']['count'] == 2
   assert out['bending_scale_held_90']['per_seed'] == pytest.approx([0.5, 1.0])
+  fab = out['area_weight_by_fabric']['gray_interlock']
+  lo, hi = physsim.search_space('gray_interlock').area_weight
+  centre = np.mean([abs((lo + hi) / 2 / t - 1) for t in (1.0, 1.0, 2.0)])
+  assert fab['sets'] == 3 and fab['mean_pct'] == pytest.approx(10.0)
+  assert fab['centre_pct'] == pytest.approx(100 * centre)
+  assert fab['box_ratio'] == pytest.approx(hi / lo)
+  # truths (= winds here) 1, 1 and 2 m/s: 15% and 0%
+  assert out['area_weight_by_wind'] == pytest.approx({'1-2 m/s': 15.0, '2-3 m/s': 0.0})
   # every interval spans a factor of 4: the prior's 0.9 of the log box over log 4
   b0, b1 = physsim.search_space('gray_interlock').bending_scale
   assert out['bending_narrowing_90_median'] == pytest.approx(
