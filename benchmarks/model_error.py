@@ -39,7 +39,7 @@ import os
 
 import numpy as np
 
-from experiments.pipeline import cli, files
+from experiments.pipeline import cli, files, report
 
 FIELDS = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
 MODES = ('video', 'known wind', 'joint pair, known winds')
@@ -83,21 +83,14 @@ def _cells(summary: dict) -> dict:
 def _pooled(checks: list[dict]) -> dict:
   """Checks of one calibration on several seeds as one: ``n`` added up and
   every numeric cell of every mode the recordings' mean."""
-  if len(checks) == 1:
-    return checks[0]
-  n = sum(k['n'] for k in checks)
-  modes = {}
-  for m in checks[0]['modes']:
-    if all(m in k['modes'] for k in checks):
-      modes[m] = {
-        f: {
-          key: sum(k['modes'][m][f][key] * k['n'] for k in checks) / n
-          for key, v in checks[0]['modes'][m][f].items()
-          if isinstance(v, (int, float))
-        }
-        for f in FIELDS
-      }  # fmt: skip
-  return {'n': n, 'modes': modes}
+  ns = [k['n'] for k in checks]
+  modes = [m for m in checks[0]['modes'] if all(m in k['modes'] for k in checks)]
+  return {
+    'n': sum(ns),
+    'modes': {
+      m: report.pooled_cells([k['modes'][m] for k in checks], ns) for m in modes
+    },
+  }
 
 
 def row(root: str, error: str, seeds: tuple[str, ...] = ()) -> dict:

@@ -59,7 +59,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, files  # noqa: E402
+from experiments.pipeline import cli, files, report  # noqa: E402
 
 FIELDS = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
 SET_FIELDS = ('bending_scale', 'wind_speed', 'area_weight')
@@ -110,10 +110,6 @@ def _same(paths, values, what: str) -> None:
     )
 
 
-def _count(frac: float, n: int) -> int:
-  return int(round(frac * n))
-
-
 def _held(k: int, n: int) -> dict:
   lo, hi = bo.calibration.binomial_interval(k, n)
   return {'held': k / n, 'count': k, 'ci': [lo, hi]}
@@ -146,21 +142,18 @@ def pool_checks(paths: list[str]) -> dict:
   n = sum(ns)
   out = {}
   for mode in modes:
+    pooled = report.pooled_cells([d['modes'][mode] for d in docs], ns)
     out[mode] = {}
     for q in FIELDS:
       cells = [d['modes'][mode][q] for d in docs]
       err = 'point_error_factor' if q == 'bending_scale' else 'point_error_pct'
       centre = 'centre_error_factor' if q == 'bending_scale' else 'centre_error_pct'
-      row = {
-        f'held_{lv}': _held(
-          sum(_count(c[f'interval_{lv}'], k) for c, k in zip(cells, ns, strict=True)), n
-        )
-        for lv in LEVELS
-      }  # fmt: skip
-      for lv in LEVELS:
+      row = {}
+      for lv in LEVELS:  # the pooled fraction times n: the count over all recordings
+        row[f'held_{lv}'] = _held(int(round(pooled[q][f'interval_{lv}'] * n)), n)
         row[f'held_{lv}']['per_seed'] = [c[f'interval_{lv}'] for c in cells]
-      row['point_error'] = float(np.average([c[err] for c in cells], weights=ns))
-      row['centre_error'] = float(np.average([c[centre] for c in cells], weights=ns))
+      row['point_error'] = pooled[q][err]
+      row['centre_error'] = pooled[q][centre]
       row['point_error_per_seed'] = [c[err] for c in cells]
       out[mode][q] = row
   return {
@@ -171,9 +164,11 @@ def pool_checks(paths: list[str]) -> dict:
 
 
 def _error(f: str, point: float, truth: float) -> float:
-  if f == 'bending_scale':
-    return math.exp(abs(math.log(point / truth)))
-  return abs(point / truth - 1.0)
+  """Bending's factor error, else the percent error (``bo.calibration.error``)."""
+  return float(bo.calibration.error(point, truth, _LOSS.get(f, 'relative')))
+
+
+_LOSS = {'bending_scale': 'factor'}
 
 
 def _narrowing(s: dict, cell: dict) -> float:
@@ -201,20 +196,22 @@ def pair_interval(held, pairs, level: float = 0.95, draws: int = 4000,
   return [float(np.quantile(cov, a)), float(np.quantile(cov, 1.0 - a))]
 
 
-def _by_fabric(sets: list[dict], cell) -> dict:
-  """Per fabric, area weight's mean percent error against the search box's
-  centre's on the same truths, the box's width (high over low) and how often
-  the 90% interval held: the error follows the box."""
+def _by_fabric(sets: list[dict], cell, errors: np.ndarray) -> dict:
+  """Per fabric, area weight's mean percent error (``errors``, one per set)
+  against the search box's centre's on the same truths, the box's width
+  (high over low) and how often the 90% interval held: the error follows the
+  box."""
   out = {}
-  for material in sorted({s['material'] for s in sets}):
+  materials = np.array([s['material'] for s in sets])
+  for material in sorted(set(materials)):
     mine = [s for s in sets if s['material'] == material]
     lo, hi = physsim.search_space(material).area_weight
     truth = np.array([s['truth']['area_weight'] for s in mine])
-    point = np.array([cell(s, 'area_weight')['point'] for s in mine])
+    centre = bo.calibration.error((lo + hi) / 2, truth, 'relative')
     out[material] = {
       'sets': len(mine),
-      'mean_pct': 100 * float(np.mean(np.abs(point / truth - 1))),
-      'centre_pct': 100 * float(np.mean(np.abs((lo + hi) / 2 / truth - 1))),
+      'mean_pct': float(np.mean(errors[materials == material])),
+      'centre_pct': float(np.mean(centre)),
       'box_ratio': hi / lo,
       'held_90': float(np.mean([bool(cell(s, 'area_weight')['held_90']) for s in mine])),
     }  # fmt: skip
@@ -257,10 +254,12 @@ def pool_sets(paths: list[str]) -> dict:
       f'{s["truth"]["area_weight"]:.9g}'
       for s in mine
     ]
-    row['bending_median_factor'] = float(
-      np.median([_error('bending_scale', cell(s, 'bending_scale')['point'],
-                        s['truth']['bending_scale']) for s in mine])
-    )  # fmt: skip
+    # each set's error: bending's factor, the others' percent
+    errs = {
+      f: np.array([_error(f, cell(s, f)['point'], s['truth'][f]) for s in mine])
+      for f in SET_FIELDS
+    }
+    row['bending_median_factor'] = float(np.median(errs['bending_scale']))
     row['bending_narrowing_90_median'] = float(
       np.median([_narrowing(s, cell(s, 'bending_scale')) for s in mine])
     )
@@ -268,9 +267,7 @@ def pool_sets(paths: list[str]) -> dict:
       ('area_weight', 'area_weight_mean_pct'),
       ('wind_speed', 'wind_mean_pct'),
     ):
-      row[key] = 100 * float(
-        np.mean([_error(f, cell(s, f)['point'], s['truth'][f]) for s in mine])
-      )
+      row[key] = float(np.mean(errs[f]))
     for f in SET_FIELDS:
       for lv in LEVELS:
         k = sum(bool(cell(s, f)[f'held_{lv}']) for s in mine)
@@ -283,12 +280,11 @@ def pool_sets(paths: list[str]) -> dict:
                          if mode in x['joint']]))
           for d in docs
         ]  # fmt: skip
-    row['area_weight_by_fabric'] = _by_fabric(mine, cell)
+    row['area_weight_by_fabric'] = _by_fabric(mine, cell, errs['area_weight'])
     wind = np.array([s['truth']['wind_speed'] for s in mine])
-    err = np.array([_error('area_weight', cell(s, 'area_weight')['point'],
-                           s['truth']['area_weight']) for s in mine])  # fmt: skip
+    err = errs['area_weight']
     row['area_weight_by_wind'] = {
-      f'{lo}-{lo + 1} m/s': 100 * float(err[(wind >= lo) & (wind < lo + 1)].mean())
+      f'{lo}-{lo + 1} m/s': float(err[(wind >= lo) & (wind < lo + 1)].mean())
       for lo in range(1, 6)
       if ((wind >= lo) & (wind < lo + 1)).any()
     }

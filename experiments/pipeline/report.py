@@ -210,6 +210,24 @@ def record_check(path: str, check: dict, modes: tuple[str, ...] = ()) -> dict:
   return cal
 
 
+def pooled_cells(cells: list[dict], ns: list[int]) -> dict:
+  """Checks' cells of one mode (``{quantity: {key: number}}``, one per check
+  of ``ns[i]`` recordings) as one: each number the recordings' mean, over the
+  quantities every check has (entries that are not a quantity's cells are
+  left out; a coverage pooled so is the exact count over all recordings, as a
+  fraction)."""
+  total = sum(ns)
+  return {
+    f: {
+      k: sum(c[f][k] * n for c, n in zip(cells, ns, strict=True)) / total
+      for k, v in cells[0][f].items()
+      if isinstance(v, (int, float)) and not isinstance(v, bool)
+    }
+    for f in cells[0]
+    if isinstance(cells[0][f], dict) and all(f in c for c in cells)
+  }
+
+
 def quoted_checks(cal: dict, mode: str) -> list[dict]:
   """What an estimate in ``mode`` quotes of calibration ``cal``'s checks: per
   physics, the checks whose searches ran in this mode (steered by its
@@ -225,18 +243,10 @@ def quoted_checks(cal: dict, mode: str) -> list[dict]:
   out = []
   for physics, by in groups.items():
     group = by.get(True) or by[False]
-    n = sum(c['n'] for c in group)
-    cov = {
-      f: {
-        k: sum(c['coverage'][mode][f][k] * c['n'] for c in group) / n
-        for k in cells
-      }
-      for f, cells in group[0]['coverage'][mode].items()
-      if all(f in c['coverage'][mode] for c in group)
-    }  # fmt: skip
+    ns = [c['n'] for c in group]
     out.append({
-      'physics': physics, 'n': n, 'seeds': sorted(c['seed'] for c in group),
-      'coverage': cov,
+      'physics': physics, 'n': sum(ns), 'seeds': sorted(c['seed'] for c in group),
+      'coverage': pooled_cells([c['coverage'][mode] for c in group], ns),
     })  # fmt: skip
   return out
 
