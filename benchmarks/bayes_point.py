@@ -52,6 +52,8 @@ def matrix_costs(x, loss: str, n_candidates: int = 199, weights=None):
   c = x[order][np.minimum(np.searchsorted(cw, probs), x.size - 1)][:, None]
   if loss == 'relative':
     cost = np.abs(c - x) / x @ w
+  elif loss == 'log':
+    cost = np.abs(np.log(c) - np.log(x)) @ w
   else:
     cost = np.exp(np.abs(np.log(c) - np.log(x))) @ w
   return c[:, 0], cost

@@ -155,6 +155,11 @@ def pool_checks(paths: list[str]) -> dict:
       row['point_error'] = pooled[q][err]
       row['centre_error'] = pooled[q][centre]
       row['point_error_per_seed'] = [c[err] for c in cells]
+      if all('confident_misses' in c for c in cells):  # counts: they add up
+        row['confident_misses'] = sum(int(c['confident_misses']) for c in cells)
+        row['confident_misses_expected'] = float(
+          sum(c['confident_misses_expected'] for c in cells)
+        )
       out[mode][q] = row
   return {
     'files': list(paths), 'seeds': [d['seed'] for d in docs], 'n': n,
@@ -328,6 +333,19 @@ def table(checks: dict | None, sets: dict | None) -> str:
           f'{_pct(r["held_90"])} | {_seeds(r["held_90"])} | {fmt(r["point_error"])} | '
           f'{fmt(r["centre_error"])} |'
         )
+    conf = [(m, by['wind_speed']) for m, by in checks['modes'].items()
+            if 'confident_misses' in by.get('wind_speed', {})]  # fmt: skip
+    if conf:
+      lines += [
+        '',
+        'Wind points more than 25% off with the truth outside the 90% interval, '
+        'per mode, beside how many the posteriors themselves expect (their mass '
+        'there, summed; calibrated intervals expect some): '
+        + '; '.join(
+          f'{m} {r["confident_misses"]} ({r["confident_misses_expected"]:.1f})'
+          for m, r in conf
+        ),
+      ]
   if sets:
     lines += [
       '',

@@ -40,7 +40,7 @@ from concurrent import futures
 
 import numpy as np
 
-from experiments.pipeline import cli, files, rig
+from experiments.pipeline import cli, files, objective, rig
 
 MODES = ('world_up', 'imu', 'none', 'guessed', 'trusted')
 BACKENDS = ('c', 'auto', 'mjx', 'warp')
@@ -54,7 +54,7 @@ class Args:
     workdir: the recording, each estimate's workdir and log, the JSON.
     modes: which of world_up, imu, none, guessed, trusted (comma-separated).
     distance: the estimate's --distance.
-    max_iter: the estimate's --max_iter.
+    max_iter: the estimate's --max_iter (default: the estimate's own).
     smoke: a tiny recording and the estimate's smoke preset (a test's run).
     recipe: the recording's recipe: 'default' (the estimator's physics, a
       finer mesh, gustier, another noise model) or 'mismatched' (also a
@@ -72,7 +72,7 @@ class Args:
   workdir: str = 'out/benchmarks/windy_rig'
   modes: str = ','.join(MODES[:4])
   distance: str = 'shape'
-  max_iter: int = 3
+  max_iter: int = objective.Search().max_iter
   smoke: bool = False
   recipe: str = cli.choice('default', tuple(rig.RECIPES))
   backend: str = cli.choice('c', BACKENDS)
@@ -172,8 +172,11 @@ def _estimate(args: Args, mode: str, paths: dict, where: str, truth: float) -> d
     f'--backend={args.backend}', f'--max_iter={args.max_iter}',
     *(['--preset=smoke'] if args.smoke else []),
   ]  # fmt: skip
+  env = dict(os.environ)
+  if args.parallel > 1:  # estimates sharing a GPU: none may take most of it
+    env.setdefault('XLA_PYTHON_CLIENT_PREALLOCATE', 'false')
   t0 = time.perf_counter()
-  done = subprocess.run(command, capture_output=True, text=True)
+  done = subprocess.run(command, capture_output=True, text=True, env=env)
   seconds = time.perf_counter() - t0
   log = os.path.join(where, f'est_{mode}.log')
   files.write_text(log, done.stdout + done.stderr)

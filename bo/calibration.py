@@ -253,13 +253,15 @@ def unwarp(rank, cdf_levels, probs=PROBS) -> np.ndarray:
   return np.interp(rank, [0.0, *np.asarray(cdf_levels), 1.0], [0.0, *probs, 1.0])
 
 
-LOSSES = ('relative', 'factor')
+LOSSES = ('relative', 'factor', 'log')
 
 
 def bayes_point(samples, loss: str, n_candidates: int = 199, weights=None) -> float:
   """The value with the least expected error over ``samples`` (the Bayes
-  action for that error): ``'relative'`` |c - x| / x (a percent error) or
-  ``'factor'`` exp|log c - log x| (a factor error, for positive scales).
+  action for that error): ``'relative'`` |c - x| / x (a percent error),
+  ``'factor'`` exp|log c - log x| (a factor error, for positive scales) or
+  ``'log'`` |log c - log x| (whose action is the median: it follows the
+  posterior's centre, where the percent error's leans to its low tail).
 
   If the samples are a calibrated posterior, no fixed guess (such as the
   centre of the search box) has a lower expected error over problems drawn
@@ -288,13 +290,20 @@ def bayes_point(samples, loss: str, n_candidates: int = 199, weights=None) -> fl
   # Each candidate's expected error from prefix sums over the sorted samples
   # (O(S) instead of a candidates x samples matrix): with k samples at or
   # below c, 'relative' sums w |c - x| / x = c (lo(w/x) - hi(w/x)) - (lo(w) -
-  # hi(w)); 'factor' sums w exp|log c - log x| = c lo(w/x) + hi(w x) / c.
+  # hi(w)); 'factor' sums w exp|log c - log x| = c lo(w/x) + hi(w x) / c;
+  # 'log' sums w |log c - log x| = log c (lo(w) - hi(w)) - (lo(w log x) -
+  # hi(w log x)).
   k = np.searchsorted(xs, c, side='right')
 
   def below(v):  # sums of v over the first k sorted samples, and the rest
     cum = np.concatenate([[0.0], np.cumsum(v)])
     return cum[k], cum[-1] - cum[k]
 
+  if loss == 'log':
+    w_lo, w_hi = below(ws)
+    wl_lo, wl_hi = below(ws * np.log(xs))
+    cost = np.log(c) * (w_lo - w_hi) - (wl_lo - wl_hi)
+    return float(c[np.argmin(cost)])
   w_over_x_lo, w_over_x_hi = below(ws / xs)
   if loss == 'relative':
     w_lo, w_hi = below(ws)
@@ -306,13 +315,15 @@ def bayes_point(samples, loss: str, n_candidates: int = 199, weights=None) -> fl
 
 
 def error(estimate, truth, loss: str) -> np.ndarray:
-  """Percent error |e - t| / t x 100 (``'relative'``) or the factor
-  exp|log(e / t)| (``'factor'``), elementwise."""
+  """Percent error |e - t| / t x 100 (``'relative'``), the factor
+  exp|log(e / t)| (``'factor'``) or |log(e / t)| (``'log'``), elementwise."""
   e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
   if loss == 'relative':
     return 100.0 * np.abs(e - t) / t
   if loss == 'factor':
     return np.exp(np.abs(np.log(e / t)))
+  if loss == 'log':
+    return np.abs(np.log(e / t))
   raise ValueError(f'loss must be one of {LOSSES}, got {loss!r}')
 
 
@@ -322,12 +333,13 @@ WEIGHTS = tuple(np.round(np.linspace(0.0, 1.0, 11), 2))
 
 def shrink(point, prior_point, weight: float, loss: str):
   """The prior's point moved towards the posterior's by ``weight`` (0: the
-  prior's, 1: the posterior's), on a log scale for ``'factor'`` errors."""
+  prior's, 1: the posterior's), on a log scale for ``'factor'`` and ``'log'``
+  errors."""
   point, prior_point = (
     np.asarray(point, np.float64),
     np.asarray(prior_point, np.float64),
   )
-  if loss == 'factor':
+  if loss in ('factor', 'log'):
     return prior_point * (point / prior_point) ** weight
   return prior_point + weight * (point - prior_point)
 

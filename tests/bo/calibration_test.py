@@ -171,6 +171,13 @@ def test_bayes_point_by_hand():
   # Factor error on a log-symmetric sample: its geometric centre.
   y = np.exp(np.linspace(-1, 1, 2001))
   assert calibration.bayes_point(y, 'factor') == pytest.approx(1.0, rel=0.01)
+  # Absolute log error: the (weighted) median, here 2 (more than half the
+  # weight at or below it, more than half at or above), where the percent
+  # error's action stays at 1.
+  z = np.array([1.0] * 30 + [2.0] * 40 + [4.0] * 30)
+  assert calibration.bayes_point(z, 'log') == 2.0
+  assert calibration.bayes_point(z, 'relative') == 1.0
+  assert calibration.bayes_point(z, 'log', weights=np.r_[[3.0] * 30, [1.0] * 70]) == 1.0
   with pytest.raises(ValueError, match='positive'):
     calibration.bayes_point(np.array([0.0, 1.0]), 'relative')
 
@@ -198,6 +205,8 @@ def test_error_and_shrink_by_hand():
     calibration.error([3.0, 1.0], [2.0, 2.0], 'relative'), [50, 50]
   )
   np.testing.assert_allclose(calibration.error(4.0, 1.0, 'factor'), 4.0)
+  np.testing.assert_allclose(calibration.error([4.0, 0.25], 1.0, 'log'), np.log(4.0))
+  assert calibration.shrink(4.0, 1.0, 0.5, 'log') == pytest.approx(2.0)
   assert calibration.shrink(4.0, 1.0, 0.5, 'factor') == pytest.approx(2.0)  # log-midway
   assert calibration.shrink(4.0, 1.0, 0.5, 'relative') == pytest.approx(2.5)
 

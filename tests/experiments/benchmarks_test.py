@@ -111,11 +111,13 @@ def test_the_bayes_point_benchmark_compares_the_same_choice(tmp_path):
   import json
 
   from benchmarks import bayes_point
+  from bo import calibration
 
   out = tmp_path / 'bp.json'
   bayes_point.main(dataclasses.replace(bayes_point.PRESETS['smoke'], out=str(out)))
   rows = json.loads(out.read_text())['rows']
-  assert len(rows) == 2 and all(r['same_point'] for r in rows)
+  assert [r['loss'] for r in rows] == list(calibration.LOSSES)  # the smoke's one size
+  assert all(r['same_point'] for r in rows)
   assert all(r['matrix_ms'] > 0 and r['prefix_sums_ms'] > 0 for r in rows)
 
 

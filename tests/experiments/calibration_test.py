@@ -364,12 +364,18 @@ def test_without_calibration_an_uninformed_quantity_takes_the_priors_point():
   )
   # Calibrated weights, when given, are used as they are.
   ones = dict.fromkeys(calibration.FIELDS, 1.0)
-  assert (
-    posterior_lib.summarise(post, space, prior, weights=ones)['wind_speed'][
-      'bayes_weight'
-    ]
-    == 1.0
-  )
+  trusted = posterior_lib.summarise(post, space, prior, weights=ones)
+  assert trusted['wind_speed']['bayes_weight'] == 1.0
+  # The wind's and the load ratio's own point is their median (absolute log
+  # error), the others' the least percent (bending: factor) error's.
+  for i, f in enumerate(calibration.FIELDS):
+    own = bo.calibration.bayes_point(post_phys[:, i], posterior_lib.POINT_LOSS[f])
+    assert trusted[f]['bayes'] == pytest.approx(own, rel=1e-12)
+  for f in ('wind_speed', 'load_ratio'):
+    assert trusted[f]['bayes'] == pytest.approx(trusted[f]['median'], rel=2e-3)
+  # here the percent error's action sits lower on the wind's wide posterior
+  low = bo.calibration.bayes_point(post_phys[:, 1], 'relative')
+  assert low < 0.95 * trusted['wind_speed']['bayes']
 
 
 def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
