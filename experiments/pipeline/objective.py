@@ -143,9 +143,10 @@ class Search:
   Attributes:
     point: the posterior's point with 50% and 90% credible intervals (a
       posterior search; fresh gusts and sensor noise for every simulation):
-      'median', or 'bayes', the value with the least expected error (percent
-      error; the factor for bending), which where the video says little stays
-      near the guess that errs least over the search box; or 'argmin': the
+      'median', or 'bayes', the value with the least expected error (the
+      factor for bending, percent for area weight; for the wind and the load
+      ratio the median: ``posterior.POINT_LOSS``), which where the video says
+      little stays near the guess that errs least over the search box; or 'argmin': the
       paper's protocol, the lowest PSD that Bayesian optimisation found
       (common random numbers), with no calibrated interval.
     q: candidates per iteration (one simulation batch).

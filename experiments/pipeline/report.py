@@ -666,7 +666,8 @@ def report_table(result: dict) -> str:
     lines += [''] + errors_table(result['errors'])
   lines.append('')
   point = {
-    'bayes': 'the value with the least expected error',
+    'bayes': 'the value with the least expected error (wind and load ratio: '
+    'the posterior median)',
     'median': 'the posterior median',
   }
   lines += notes(
