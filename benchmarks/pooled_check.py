@@ -87,16 +87,6 @@ class Args:
 PRESETS = {'default': Args()}
 
 
-def _load(path: str) -> dict:
-  try:
-    with open(path) as f:
-      return json.load(f)
-  except FileNotFoundError:
-    raise ValueError(f'{path}: no such file') from None
-  except json.JSONDecodeError as e:
-    raise ValueError(f'{path}: not JSON ({e.msg}, line {e.lineno})') from None
-
-
 def _one_of_each(paths, seeds, what: str) -> None:
   if len(set(seeds)) != len(seeds):
     raise ValueError(f'{what}: two files of one seed ({", ".join(paths)}): {seeds}')
@@ -124,7 +114,7 @@ def pool_checks(paths: list[str]) -> dict:
     ValueError: a file missing or unreadable, two of one seed, or checks of
       different physics, calibration or search settings.
   """
-  docs = [_load(p) for p in paths]
+  docs = [physsim.dataset.read_json(p) for p in paths]
   for p, d in zip(paths, docs, strict=True):
     if 'modes' not in d or 'n' not in d:
       raise ValueError(f'{p}: not a check.json of experiments.calibrate --check')
@@ -233,7 +223,7 @@ def pool_sets(paths: list[str]) -> dict:
     ValueError: a file missing, without protocol sets, two of one seed, or
       runs of another reader's law or set-up ranges.
   """
-  docs = [_load(p) for p in paths]
+  docs = [physsim.dataset.read_json(p) for p in paths]
   for p, d in zip(paths, docs, strict=True):
     if not d.get('sets'):
       raise ValueError(f'{p}: no protocol sets (an overhang_depth run with --packed)')

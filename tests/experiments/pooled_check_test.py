@@ -69,11 +69,14 @@ def test_checks_that_cannot_be_pooled_are_refused_naming_the_file(
 
 
 def test_a_missing_or_foreign_file_is_named(tmp_path):
-  with pytest.raises(ValueError, match='nope.json: no such file'):
+  with pytest.raises(ValueError, match='nope.json: file not found'):
     pooled_check.pool_checks([str(tmp_path / 'nope.json')])
   bad = _write(tmp_path, 'x.json', {'sets': []})
   with pytest.raises(ValueError, match='x.json: not a check.json'):
     pooled_check.pool_checks([bad])
+  listed = _write(tmp_path, 'l.json', [1, 2])  # JSON, but not an object
+  with pytest.raises(ValueError, match='l.json: expected a JSON object'):
+    pooled_check.pool_checks([listed])
 
 
 def _sets_doc(seed: int, truths_points: list[tuple[float, float, bool]]) -> dict:
