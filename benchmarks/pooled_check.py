@@ -59,7 +59,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, files, report  # noqa: E402
+from experiments.pipeline import cli, files, posterior, report  # noqa: E402
 
 FIELDS = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
 SET_FIELDS = ('bending_scale', 'wind_speed', 'area_weight')
@@ -159,11 +159,9 @@ def pool_checks(paths: list[str]) -> dict:
 
 
 def _error(f: str, point: float, truth: float) -> float:
-  """Bending's factor error, else the percent error (``bo.calibration.error``)."""
-  return float(bo.calibration.error(point, truth, _LOSS.get(f, 'relative')))
-
-
-_LOSS = {'bending_scale': 'factor'}
+  """The error ``f`` is judged by (``posterior.ERROR_LOSS``: bending's factor,
+  else percent)."""
+  return float(bo.calibration.error(point, truth, posterior.ERROR_LOSS[f]))
 
 
 def _narrowing(s: dict, cell: dict) -> float:

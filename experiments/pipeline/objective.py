@@ -146,8 +146,8 @@ class Search:
       'median', or 'bayes', the value with the least expected error (the
       factor for bending, percent for area weight; for the wind and the load
       ratio the median: ``posterior.POINT_LOSS``), which where the video says
-      little stays near the guess that errs least over the search box; or 'argmin': the
-      paper's protocol, the lowest PSD that Bayesian optimisation found
+      little stays near the guess that errs least over the search box; or
+      'argmin': the paper's protocol, the lowest PSD that Bayesian optimisation found
       (common random numbers), with no calibrated interval.
     q: candidates per iteration (one simulation batch).
     n_init: initial design size (the first point is the range centre).

@@ -501,12 +501,10 @@ def _confident_misses(scores, levels, i: int, point, lo, hi, loss: str):
   below, above = np.minimum(lo, point * a), np.maximum(hi, point * b)
   seen = int(np.sum((t < below) | (t > above)))
   expected = 0.0
-  for k, s in enumerate(scores):
-    qf = s['qf'][:, i]
-    cdf = lambda x, qf=qf, lv=levels[k]: bo.calibration.unwarp(  # noqa: E731
-      np.interp(x, qf, _QGRID), lv
-    )
-    expected += float(cdf(below[k]) + 1.0 - cdf(above[k]))
+  for k, s in enumerate(scores):  # the recalibrated CDF at both cuts
+    raw = np.interp([below[k], above[k]], s['qf'][:, i], _QGRID)
+    at_lo, at_hi = bo.calibration.unwarp(raw, levels[k])
+    expected += float(at_lo + 1.0 - at_hi)
   return seen, expected
 
 
