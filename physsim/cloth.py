@@ -15,7 +15,9 @@ Modelling choices (measured; see BENCHMARKS.md and experiments/fabric_motion.py)
     (``flex_bending``) times each world's bending scale as an applied force,
     because MuJoCo Warp keeps ``flex_bending`` shared by all worlds.
   * Mass: per-vertex, a third of each adjacent face's rest area times the area
-    weight (ArcSim's rule), set per world through ``body_mass``.
+    weight (ArcSim's rule), set per world through ``body_mass``; plus any
+    known masses attached to vertices (``build``'s ``extra_mass``: coins taped
+    along a hem), the same in every world.
   * Wind: ArcSim's face force, computed in JAX each substep (``physsim.wind``).
     MuJoCo's own fluid model stays off (density 0), so nothing double counts.
   * Self-collision off: a sheet in a fan's wind barely touches itself, and the
@@ -221,6 +223,8 @@ class ClothModel:
     hinge_verts: (H, 4) the edge's two vertices then its two flaps.
     hinge_coef: (H, 4, 4) MuJoCo's compiled bending stencil at D0.
     hinge_c16: (H,) MuJoCo's curved-rest-shape term (0 for flat meshes).
+    extra_mass: (V,) kg attached to each vertex besides the cloth's own (a
+      known mass: coins taped along a hem), the same in every world.
   """
 
   mesh: Mesh
@@ -233,6 +237,7 @@ class ClothModel:
   hinge_verts: np.ndarray
   hinge_coef: np.ndarray
   hinge_c16: np.ndarray
+  extra_mass: np.ndarray
   # Compiled rollouts and worker pools of this model (``physsim.rollout``),
   # built on first use and kept as long as the model: a model is compiled for
   # MJX once, whoever simulates it.
@@ -245,8 +250,10 @@ class ClothModel:
     return len(self.mesh.vertices)
 
   def vertex_masses(self, area_weight) -> np.ndarray:
-    """(..., V) physical vertex masses, kg, for area weights of shape (...)."""
-    return np.asarray(area_weight, np.float64)[..., None] * self.mesh.vertex_areas
+    """(..., V) physical vertex masses, kg, for area weights of shape (...),
+    the attached ``extra_mass`` included."""
+    own = np.asarray(area_weight, np.float64)[..., None] * self.mesh.vertex_areas
+    return own + self.extra_mass
 
   def body_masses(self, area_weight) -> np.ndarray:
     """(..., nbody) MuJoCo body masses for the given area weights."""
@@ -261,24 +268,34 @@ class ClothModel:
     moving = self.vert_qadr >= 0
     areas = jnp.asarray(self.mesh.vertex_areas[moving], jnp.float32)
     out = jnp.zeros(jnp.shape(area_weight) + (self.mj_model.nbody,), jnp.float32)
-    mass = jnp.asarray(area_weight, jnp.float32)[..., None] * areas
+    extra = jnp.asarray(self.extra_mass[moving], jnp.float32)
+    mass = jnp.asarray(area_weight, jnp.float32)[..., None] * areas + extra
     return out.at[..., self.vert_body[moving]].set(mass)
 
 
 def build(
-  mesh: Mesh, material: str = 'gray_interlock', config: SimConfig | None = None
-):
+  mesh: Mesh, material: str = 'gray_interlock', config: SimConfig | None = None,
+  extra_mass=None,
+):  # fmt: skip
   """Compiles ``mesh`` into a ``ClothModel`` for ``material``.
 
   Args:
     mesh: rest mesh with pinned vertices.
     material: a paper fabric name or an ArcSim material file stem.
     config: static settings; defaults to ``SimConfig()``.
+    extra_mass: (V,) kg attached to each vertex (``hem_mass``), or None.
 
   Returns:
     The ``ClothModel``.
   """
   config = config or SimConfig()
+  n = len(mesh.vertices)
+  extra = np.zeros(n) if extra_mass is None else np.asarray(extra_mass, np.float64)
+  if extra.shape != (n,) or not np.all(np.isfinite(extra) & (extra >= 0)):
+    raise ValueError(
+      f'extra_mass: need {n} finite masses >= 0 (kg, one per vertex), got shape '
+      f'{extra.shape}'
+    )
   rigidity = reference_rigidity(material)
   m = mujoco.MjModel.from_xml_string(mjcf(mesh, config, rigidity))
   if m.nflexvert != len(mesh.vertices):
@@ -314,7 +331,26 @@ def build(
     hinge_verts=hinge_verts,
     hinge_coef=coef[:, :16].reshape(-1, 4, 4).copy(),
     hinge_c16=coef[:, 16].copy(),
+    extra_mass=extra,
   )
   # Area-weighted masses at a typical 0.2 kg/m^2; rollouts set their own.
   m.body_mass[:] = model.body_masses(0.2)
   return model
+
+
+def hem_mass(mesh: Mesh, rows: int, mass: float) -> np.ndarray:
+  """(V,) ``build``'s ``extra_mass`` for ``mass`` kg spread evenly over the
+  last row of a ``rows``-row grid mesh (``square``'s bottom edge, or an
+  overhang's tip): a strip of coins or a rod of known mass along the free edge,
+  which a recording can add so that the cloth's own weight is measured
+  against it (``experiments.studies.protocol``)."""
+  n = len(mesh.vertices)
+  if n % rows or not (np.isfinite(mass) and mass >= 0):
+    raise ValueError(
+      f'hem_mass: need a grid of {rows} rows (got {n} vertices) and a mass '
+      f'>= 0 kg, got {mass}'
+    )
+  out = np.zeros(n)
+  last = np.arange(n - n // rows, n)
+  out[last] = mass / len(last)
+  return out

@@ -42,6 +42,7 @@ model error) can only widen. ``experiments/protocol.py`` is its command line.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import time
@@ -92,6 +93,11 @@ class Candidate:
       edge, in still air, filmed from the side (the textile cantilever test,
       ASTM D1388: the droop is set by the bending length
       (D / (w g))^(1/3) over the overhang); else it hangs from its pins.
+    hem: grams of known mass taped evenly along the free bottom edge (coins:
+      a US nickel is 5.000 g, a 1-euro coin 7.50 g), 0 for none
+      (``physsim.hem_mass``). In a fan the cloth's weight is then measured
+      against a known one: the wind's push, whatever the drag law, is the same
+      with and without it at one fan setting.
   """
 
   size: float
@@ -99,6 +105,7 @@ class Candidate:
   pins: int = 2
   resolution: int = 9
   overhang: bool = False
+  hem: float = 0.0
 
   @property
   def name(self) -> str:
@@ -108,7 +115,8 @@ class Candidate:
     where = 'sheet' if self.size >= 0.5 else 'swatch'
     fan = f'{self.wind:g}ms' if self.wind > 0 else 'still'
     pin = '' if self.pins == 2 else '_1pin'
-    return f'{where}_{cm}cm_{fan}{pin}_r{self.resolution}'
+    hem = f'_hem{self.hem:g}g' if self.hem > 0 else ''
+    return f'{where}_{cm}cm_{fan}{pin}{hem}_r{self.resolution}'
 
 
 def parse(name: str) -> Candidate:
@@ -122,13 +130,17 @@ def parse(name: str) -> Candidate:
       c = Candidate(size, 0.0, 2, res, overhang=True)
     else:
       wind = 0.0 if parts[2] == 'still' else float(parts[2].removesuffix('ms'))
-      c = Candidate(size, wind, 1 if '1pin' in parts else 2, res)
+      hems = [p for p in parts[3:-1] if p.startswith('hem')]
+      hem = float(hems[0].removeprefix('hem').removesuffix('g')) if hems else 0.0
+      c = Candidate(size, wind, 1 if '1pin' in parts else 2, res, hem=hem)
   except (IndexError, ValueError):
     raise ValueError(
       f'candidate {name!r}: need e.g. sheet_100cm_2ms_r9, swatch_20cm_still_r9, '
-      'swatch_20cm_2ms_1pin_r9, overhang_15cm_r17'
+      'swatch_20cm_2ms_1pin_r9, sheet_100cm_2ms_hem100g_r9, overhang_15cm_r17'
     ) from None
-  if c.name != name or not (0 < size <= 2 and 0 <= c.wind <= 6 and res >= 3):
+  if c.name != name or not (
+    0 < size <= 2 and 0 <= c.wind <= 6 and res >= 3 and 0 <= c.hem <= 1000
+  ):
     raise ValueError(f'candidate {name!r} is not a canonical name (or out of range)')
   return c
 
@@ -272,6 +284,10 @@ class Config:
     curvature_floor: floor of the curvature statistic's noise (size / m).
     shrink: weight of the gust covariance's diagonal (``bo.design.shrink``).
     reading: relative standard error of an anemometer's or scale's reading.
+    drag_sd: prior standard deviation of the log of the wind force's
+      coefficient, shared by a set's recordings in the fan: how far the
+      simulator's drag law may be from the world's (``set_narrowing``; 0:
+      trusted, as the first studies did).
     workers: MuJoCo C processes.
     seed: gust histories.
     scaled_edges: the edges' time constant shrinks with the spacing
@@ -320,6 +336,7 @@ class Config:
   curvature_floor: float = 0.05
   shrink: float = 0.5
   reading: float = 0.02
+  drag_sd: float = 0.0
   workers: int = 1
   seed: int = 0
   scaled_edges: bool = True
@@ -381,20 +398,35 @@ def floats(name: str, values) -> list[float]:
 
 def parse_sets(text: str, names: list[str]) -> dict[str, list[str]]:
   """``label=a+b;...`` as {label: [candidate names]}, each resolved against
-  ``names`` (a name without its ``_rNN`` suffix means the one listed)."""
+  ``names`` (a name without its ``_rNN`` suffix means the one listed). A
+  member joined by ``&`` instead of ``+`` was recorded at the same fan
+  setting as the one before it, the fan untouched (one wind for both): its
+  name keeps a leading ``&`` (``shares_wind``)."""
   out = {}
   for item in filter(None, (s.strip() for s in text.split(';'))):
     label, _, members = item.partition('=')
     resolved = []
-    for m in filter(None, members.split('+')):
-      hits = [n for n in names if n == m or n.rsplit('_r', 1)[0] == m]
-      if len(hits) != 1:
-        raise ValueError(f'--sets: {m!r} in {label!r} is not one of --candidates')
-      resolved.append(hits[0])
+    for part in filter(None, members.split('+')):
+      for j, m in enumerate(part.split('&')):
+        hits = [n for n in names if n == m or n.rsplit('_r', 1)[0] == m]
+        if len(hits) != 1:
+          raise ValueError(f'--sets: {m!r} in {label!r} is not one of --candidates')
+        if j and not (0 < parse(hits[0]).wind == parse(resolved[-1]).wind):
+          raise ValueError(
+            f'--sets: {m!r} in {label!r} shares the wind (&) of a recording at '
+            'another fan setting, or of one without a fan'
+          )
+        resolved.append(('&' if j else '') + hits[0])
     if not label or not resolved:
       raise ValueError(f'--sets: {item!r} is not label=candidate+candidate')
     out[label.strip()] = resolved
   return out
+
+
+def shares_wind(member: str) -> tuple[str, bool]:
+  """A ``parse_sets`` member: its candidate's name, and whether it shares the
+  wind of the member before it."""
+  return member.removeprefix('&'), member.startswith('&')
 
 
 def robust_slope(near, far, scramble=0.0) -> np.ndarray:
@@ -420,7 +452,8 @@ def simulate_candidate(c: Candidate, bending: float, area_weight: float,
   (``robust_slope``), ``draws`` gusty histories at the truth."""
   m = mesh(c)
   sim = sim_config(c, config)
-  model = physsim.build(m, config.material, sim)
+  hem = physsim.hem_mass(m, c.resolution, c.hem / 1000) if c.hem > 0 else None
+  model = physsim.build(m, config.material, sim, extra_mass=hem)
   frames = round(config.clip * config.fps)
   common = dict(frames=frames, fps=config.fps, warmup=config.warmup, backend='c',
                 workers=config.workers, space=SPACE)  # fmt: skip
@@ -488,14 +521,33 @@ def simulate_candidate(c: Candidate, bending: float, area_weight: float,
   }  # fmt: skip
 
 
+# Config fields a cached slope file depends on besides its name's own.
+_SLOPE_FIELDS = ('gusts', 'draws', 'clip', 'warmup', 'fps', 'camera_fps',
+                 'step_bending', 'step_area_weight', 'step_wind', 'setup_mm',
+                 'curvature_floor', 'shrink', 'seed')  # fmt: skip
+
+
 def candidate_slopes(c: Candidate, bending: float, area_weight: float,
                      config: Config, cache_dir: str, key) -> dict:  # fmt: skip
   """``simulate_candidate``, cached as JSON under ``cache_dir`` (a rerun, or
-  ``experiments.plan``, reuses it)."""
+  ``experiments.plan``, reuses it). The file's name carries every setting that
+  changes what is simulated or how its noise is read (``_SLOPE_FIELDS``; a
+  short digest of those that differ from the defaults), so that a study of
+  other clips never reads another's slopes."""
+  default = Config()
+  changed = {
+    f: getattr(config, f)
+    for f in _SLOPE_FIELDS
+    if getattr(config, f) != getattr(default, f)
+  }
+  digest = (
+    '_' + hashlib.sha1(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:8]
+    if changed else ''
+  )  # fmt: skip
   path = os.path.join(
     cache_dir,
     f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}'
-    f'{"" if config.scaled_edges else "_fixed_edges"}_v{CACHE_VERSION}.json',
+    f'{"" if config.scaled_edges else "_fixed_edges"}{digest}_v{CACHE_VERSION}.json',
   )
   if os.path.exists(path):
     with open(path) as f:
@@ -519,25 +571,43 @@ def priors(material: str, reading: float) -> dict[str, float]:
   }
 
 
-def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str) -> dict:
+def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
+                  shared=None, drag_sd: float = 0.0) -> dict:  # fmt: skip
   """Narrowing of log bending and log area weight by the recordings ``rows``
   (each ``simulate_candidate``'s dict) together, in ``mode``: ``'video'``,
-  ``'anemometer'`` (every wind read) or ``'scale'`` (area weight read)."""
-  n = 2 + sum(r['wind'] > 0 for r in rows)
+  ``'anemometer'`` (every wind read) or ``'scale'`` (area weight read).
+
+  ``shared``: per row, whether it was recorded at the fan setting of the row
+  before it (one wind parameter for both). ``drag_sd``: the prior standard
+  deviation of the log of the wind force's coefficient, one for every
+  recording in the fan: what the simulator's drag law gets wrong about the
+  world (0: nothing). The force goes as that coefficient times v^2, and the
+  slopes are taken in steady wind with the cloth at rest, so a recording's
+  slope in it is half its slope in log wind."""
+  shared = list(shared) if shared is not None else [False] * len(rows)
+  windy = [r['wind'] > 0 for r in rows]
+  n_wind = sum(w and not s for w, s in zip(windy, shared, strict=True))
+  drag = drag_sd > 0 and any(windy)
+  n = 2 + n_wind + int(drag)
   infos, indices = [], []
-  k = 2
-  for r in rows:
-    info = design.fisher(np.array(r['slopes']), np.array(r['noise_cov']))
+  k = 1
+  for r, w, s in zip(rows, windy, shared, strict=True):
+    slopes = np.array(r['slopes'])
     index = [0, 1]
-    if r['wind'] > 0:
+    if w:
+      k += 0 if s else 1
       index.append(k)
-      k += 1
-    infos.append(info)
+      if drag:
+        slopes = np.concatenate([slopes, 0.5 * slopes[:, 2:3]], axis=1)
+        index.append(n - 1)
+    infos.append(design.fisher(slopes, np.array(r['noise_cov'])))
     indices.append(index)
   total = design.combine(infos, indices, n)
   sd = np.full(n, prior['log_wind'] if mode != 'anemometer' else prior['reading'])
   sd[0] = prior['log_bending']
   sd[1] = prior['reading'] if mode == 'scale' else prior['log_area_weight']
+  if drag:
+    sd[-1] = drag_sd
   post = design.widths(sd, total)
   base_sd = sd.copy()  # what the mode knows without the video
   no_video = design.widths(base_sd, np.zeros((n, n)))
@@ -576,11 +646,12 @@ def run(config: Config, workdir: str) -> dict:
   prior = priors(config.material, config.reading)
   table = []
   for label, members in sets.items():
+    names, shared = zip(*map(shares_wind, members), strict=True)
     for b in bendings:
-      rows = [slopes[(n, b)] for n in members]
+      rows = [slopes[(n, b)] for n in names]
       entry = {'set': label, 'members': members, 'bending_truth': b}
       for mode in MODES:
-        entry[mode] = set_narrowing(rows, prior, mode)
+        entry[mode] = set_narrowing(rows, prior, mode, shared, config.drag_sd)
       table.append(entry)
   convergence = []
   for c in conv:

@@ -64,6 +64,48 @@ def test_set_narrowing_by_hand():
   )
 
 
+def test_a_hem_at_one_fan_setting_weighs_the_cloth_whatever_the_drag_law():
+  # A statistic that reads the load ratio, s = log Cd + 2 log v - log(w + h):
+  # slopes in (log bending, log w, log v) [0, -1, 2] without a hem, [0, -a, 2]
+  # with one (a = w / (w + h)), and half the wind's in log Cd. With the wind
+  # and the drag law unknown (prior sds huge), one fan setting for both
+  # recordings leaves their difference, (1 - a) log w, noise sd sqrt(2) sigma:
+  # sd^-2 = prior^-2 + (1 - a)^2 / (2 sigma^2). The fan moved between them (a
+  # wind each), nothing is learnt of w.
+  sigma, a = 0.02, 0.6
+  prior = {**protocol.priors('gray_interlock', 0.02), 'log_wind': 1e4}
+  rows = [
+    {'wind': 2.0, 'slopes': [[0.0, -1.0, 2.0]], 'noise_cov': [[sigma**2]]},
+    {'wind': 2.0, 'slopes': [[0.0, -a, 2.0]], 'noise_cov': [[sigma**2]]},
+  ]
+  sw = prior['log_area_weight']
+  one = protocol.set_narrowing(rows, prior, 'video', [False, True], drag_sd=1e4)
+  assert one['area_weight'] == pytest.approx(
+    sw * np.sqrt(1 / sw**2 + (1 - a) ** 2 / (2 * sigma**2)), rel=1e-6
+  )
+  moved = protocol.set_narrowing(rows, prior, 'video', [False, False], drag_sd=1e4)
+  assert moved['area_weight'] == pytest.approx(1.0, abs=1e-6)
+  # with the winds read to 2% but the drag law unknown, one recording says
+  # nothing of w either: the load ratio is Cd v^2 / w
+  read = protocol.set_narrowing(rows[:1], prior, 'anemometer', drag_sd=1e4)
+  assert read['area_weight'] == pytest.approx(1.0, abs=1e-6)
+  trusted = protocol.set_narrowing(rows[:1], prior, 'anemometer')
+  assert trusted['area_weight'] > 2
+
+
+def test_sets_sharing_a_fan_setting():
+  names = ['sheet_100cm_2ms_r9', 'sheet_100cm_2ms_hem100g_r9', 'sheet_100cm_3.5ms_r9',
+           'overhang_3cm_r9']  # fmt: skip
+  sets = protocol.parse_sets(
+    'a=sheet_100cm_2ms&sheet_100cm_2ms_hem100g+sheet_100cm_3.5ms', names
+  )
+  assert sets == {'a': [names[0], '&' + names[1], names[2]]}
+  assert protocol.shares_wind(sets['a'][1]) == (names[1], True)
+  for bad in ('b=sheet_100cm_2ms&sheet_100cm_3.5ms', 'c=overhang_3cm&overhang_3cm'):
+    with pytest.raises(ValueError, match='shares the wind'):
+      protocol.parse_sets(bad, names)
+
+
 def test_camera_distance_and_names():
   assert protocol.camera_distance(1.0) == pytest.approx(
     1.0 / (0.6 * 2 * np.tan(np.radians(29)))
@@ -74,10 +116,14 @@ def test_camera_distance_and_names():
     'swatch_20cm_still_r17',
     'swatch_20cm_2ms_1pin_r9',
     'overhang_5cm_r9',
+    'sheet_100cm_2ms_hem100g_r9',
+    'swatch_20cm_2ms_1pin_hem7.5g_r17',
   ):
     assert protocol.parse(name).name == name
-  with pytest.raises(ValueError):
-    protocol.parse('swatch_20_r9')
+  assert protocol.parse('sheet_100cm_2ms_hem100g_r9').hem == 100.0
+  for bad in ('swatch_20_r9', 'sheet_100cm_2ms_hemg_r9', 'sheet_100cm_2ms_hem-5g_r9'):
+    with pytest.raises(ValueError):
+      protocol.parse(bad)
 
 
 def test_an_overhang_lies_flat_with_its_first_two_rows_held():
@@ -176,3 +222,24 @@ def test_the_simulated_overhang_hangs_near_the_elastica_of_its_rigidity():
   want = cantilever.tip(0.03 / c)[0][0]
   assert reach == pytest.approx(want, rel=_ELASTICA_REACH_TOL)
   assert reach > cantilever.tip(0.03 / (c / 2 ** (1 / 3)))[0][0]
+
+
+def test_cached_slopes_are_kept_apart_by_the_settings_that_made_them(
+  tmp_path, monkeypatch
+):
+  calls = []
+
+  def fake(c, bending, area_weight, config, key):
+    calls.append(config.clip)
+    return {'clip': config.clip}
+
+  monkeypatch.setattr(protocol, 'simulate_candidate', fake)
+  c = protocol.parse('sheet_100cm_2ms_r9')
+  for clip in (1.5, 5.0, 1.5, 5.0):
+    config = protocol.Config(clip=clip)
+    row = protocol.candidate_slopes(c, 1.0, 0.185, config, str(tmp_path), None)
+    assert row['clip'] == clip  # never another clip's slopes
+  assert calls == [1.5, 5.0]  # each simulated once, then read back
+  names = sorted(os.listdir(tmp_path))
+  assert len(names) == 2 and any(n.endswith(f'_v{protocol.CACHE_VERSION}.json')
+                                 and '_b1_w0.185_v' in n for n in names)  # fmt: skip
