@@ -203,12 +203,17 @@ def timestep(c: Candidate) -> float:
   return 0.002 if h >= 0.0124 else 0.001 if h >= 0.008 else 0.0005
 
 
-def sim_config(c: Candidate, config: Config) -> physsim.SimConfig:
+def sim_config(
+  c: Candidate, config: Config, physics: physsim.Mismatch = physsim.mismatch.OWN
+) -> physsim.SimConfig:
   """The simulator's settings for the candidate: at most ``timestep(c)``, the
-  step and edges ``physsim.config_for_mesh`` gives its mesh."""
+  step and edges ``physsim.config_for_mesh`` gives its mesh; ``physics``'s
+  edges, drag and damping (``physsim.Mismatch``; default the estimator's)."""
+  fields = physics.sim_fields()
   return physsim.config_for_mesh(
-    mesh(c), config.fps, timestep(c), scaled_edges=config.scaled_edges
-  )
+    mesh(c), config.fps, timestep(c), fields.pop('edge_solref'),
+    scaled_edges=config.scaled_edges, **fields,
+  )  # fmt: skip
 
 
 def mesh(c: Candidate) -> physsim.Mesh:
@@ -527,6 +532,22 @@ _SLOPE_FIELDS = ('gusts', 'draws', 'clip', 'warmup', 'fps', 'camera_fps',
                  'curvature_floor', 'shrink', 'seed')  # fmt: skip
 
 
+def _slope_digest(config: Config) -> str:
+  """'' at the default settings, else '_' and a short digest of those of
+  ``_SLOPE_FIELDS`` that differ from them."""
+  default = Config()
+  changed = {
+    f: getattr(config, f)
+    for f in _SLOPE_FIELDS
+    if getattr(config, f) != getattr(default, f)
+  }
+  if not changed:
+    return ''
+  return (
+    '_' + hashlib.sha1(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:8]
+  )
+
+
 def candidate_slopes(c: Candidate, bending: float, area_weight: float,
                      config: Config, cache_dir: str, key) -> dict:  # fmt: skip
   """``simulate_candidate``, cached as JSON under ``cache_dir`` (a rerun, or
@@ -559,6 +580,47 @@ def candidate_slopes(c: Candidate, bending: float, area_weight: float,
   return out
 
 
+WORLD_VERSION = 1  # bump when what a cached world file means changes
+
+
+def world_residual(c: Candidate, bending: float, area_weight: float, config: Config,
+                   cache_dir: str, physics: physsim.Mismatch = physsim.mismatch.WORLD
+                   ) -> list[float]:  # fmt: skip
+  """(len(STATS),) what ``physics`` (a world unlike the estimator's simulator,
+  ``physsim.mismatch``) shows minus what the estimator's own simulator shows,
+  in steady wind at the truth: the statistics' misfit that a fit with the
+  estimator's simulator turns into bias (``set_bias``). Cached as JSON beside
+  the slopes."""
+  name = (
+    f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}'
+    f'{_slope_digest(config)}_world{physics.fan_yaw_deg:g}_{physics.air_drag:g}_'
+    f'{physics.bending_damping:g}_{physics.edge_solref_scale:g}_v{WORLD_VERSION}.json'
+  )  # fmt: skip
+  path = os.path.join(cache_dir, name)
+  if os.path.exists(path):
+    with open(path) as f:
+      return json.load(f)['residual']
+  m = mesh(c)
+  hem = physsim.hem_mass(m, c.resolution, c.hem / 1000) if c.hem > 0 else None
+  common = dict(frames=round(config.clip * config.fps), fps=config.fps,
+                warmup=config.warmup, backend='c', workers=config.workers,
+                space=SPACE)  # fmt: skip
+  params = physsim.params.make(bending, c.wind, area_weight)
+  stats = []
+  for phys in (physsim.mismatch.OWN, physics):
+    model = physsim.build(
+      m, config.material, sim_config(c, config, phys), extra_mass=hem
+    )
+    out = physsim.simulate(model, params, wind=phys.wind(0.0), **common)
+    if not np.all(out.valid):
+      raise RuntimeError(f'{c.name}: a steady simulation blew up at bending {bending}')
+    stats.append(summaries(out.positions, m.vertices, c.resolution, c.size)[0])
+  residual = (stats[1] - stats[0]).tolist()
+  files.write_json(path, {'candidate': c.name, 'bending': bending,
+                          'area_weight': area_weight, 'residual': residual})  # fmt: skip
+  return residual
+
+
 def priors(material: str, reading: float) -> dict[str, float]:
   """Prior standard deviations in log space: the search box's (bending 0.1-10x,
   the fabric's area-weight range, wind 1-6 m/s) and a reading's."""
@@ -569,6 +631,34 @@ def priors(material: str, reading: float) -> dict[str, float]:
     'log_wind': design.log_box_sd(*space.wind_speed),
     'reading': float(np.log1p(reading)),
   }
+
+
+def _assemble(rows, prior, mode, shared, drag_sd):
+  """The set's parameters and each recording's slopes on them: (the prior
+  sds (n,), per recording (slopes (m, p_k), its parameters' indices))."""
+  shared = list(shared) if shared is not None else [False] * len(rows)
+  windy = [r['wind'] > 0 for r in rows]
+  n_wind = sum(w and not s for w, s in zip(windy, shared, strict=True))
+  drag = drag_sd > 0 and any(windy)
+  n = 2 + n_wind + int(drag)
+  parts = []
+  k = 1
+  for r, w, s in zip(rows, windy, shared, strict=True):
+    slopes = np.array(r['slopes'])
+    index = [0, 1]
+    if w:
+      k += 0 if s else 1
+      index.append(k)
+      if drag:
+        slopes = np.concatenate([slopes, 0.5 * slopes[:, 2:3]], axis=1)
+        index.append(n - 1)
+    parts.append((slopes, index))
+  sd = np.full(n, prior['log_wind'] if mode != 'anemometer' else prior['reading'])
+  sd[0] = prior['log_bending']
+  sd[1] = prior['reading'] if mode == 'scale' else prior['log_area_weight']
+  if drag:
+    sd[-1] = drag_sd
+  return sd, parts
 
 
 def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
@@ -584,39 +674,47 @@ def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
   world (0: nothing). The force goes as that coefficient times v^2, and the
   slopes are taken in steady wind with the cloth at rest, so a recording's
   slope in it is half its slope in log wind."""
-  shared = list(shared) if shared is not None else [False] * len(rows)
-  windy = [r['wind'] > 0 for r in rows]
-  n_wind = sum(w and not s for w, s in zip(windy, shared, strict=True))
-  drag = drag_sd > 0 and any(windy)
-  n = 2 + n_wind + int(drag)
-  infos, indices = [], []
-  k = 1
-  for r, w, s in zip(rows, windy, shared, strict=True):
-    slopes = np.array(r['slopes'])
-    index = [0, 1]
-    if w:
-      k += 0 if s else 1
-      index.append(k)
-      if drag:
-        slopes = np.concatenate([slopes, 0.5 * slopes[:, 2:3]], axis=1)
-        index.append(n - 1)
-    infos.append(design.fisher(slopes, np.array(r['noise_cov'])))
-    indices.append(index)
-  total = design.combine(infos, indices, n)
-  sd = np.full(n, prior['log_wind'] if mode != 'anemometer' else prior['reading'])
-  sd[0] = prior['log_bending']
-  sd[1] = prior['reading'] if mode == 'scale' else prior['log_area_weight']
-  if drag:
-    sd[-1] = drag_sd
+  sd, parts = _assemble(rows, prior, mode, shared, drag_sd)
+  n = len(sd)
+  infos = [
+    design.fisher(j, np.array(r['noise_cov']))
+    for (j, _), r in zip(parts, rows, strict=True)
+  ]
+  total = design.combine(infos, [i for _, i in parts], n)
   post = design.widths(sd, total)
-  base_sd = sd.copy()  # what the mode knows without the video
-  no_video = design.widths(base_sd, np.zeros((n, n)))
+  no_video = design.widths(sd, np.zeros((n, n)))
   return {
     'bending': float(prior['log_bending'] / post[0]),
     'area_weight': float(prior['log_area_weight'] / post[1]),
     'bending_sd_log': float(post[0]),
     'area_weight_sd_log': float(post[1]),
     'area_weight_without_video': float(prior['log_area_weight'] / no_video[1]),
+  }
+
+
+def set_bias(rows: list[dict], residuals: list, prior: dict[str, float], mode: str,
+             shared=None, drag_sd: float = 0.0) -> dict:  # fmt: skip
+  """What a fit with the estimator's simulator makes of recordings of another
+  physics, to first order: the shift of the posterior mean of (log bending,
+  log area weight) that the statistics' misfit ``residuals`` (per row,
+  ``world_residual``) causes, (F + P)^-1 sum_k J_k^T R_k^-1 r_k, beside the
+  posterior's sd (``set_narrowing``'s model of the set)."""
+  sd, parts = _assemble(rows, prior, mode, shared, drag_sd)
+  n = len(sd)
+  info = np.zeros((n, n))
+  score = np.zeros(n)
+  for (j, index), r, res in zip(parts, rows, residuals, strict=True):
+    w = np.linalg.inv(np.array(r['noise_cov']))
+    info[np.ix_(index, index)] += j.T @ w @ j
+    score[index] += j.T @ w @ np.asarray(res, np.float64)
+  cov = np.linalg.inv(info + np.diag(1.0 / sd**2))
+  shift = cov @ score
+  post = np.sqrt(np.diag(cov))
+  return {
+    'bending_bias_log': float(shift[0]),
+    'area_weight_bias_log': float(shift[1]),
+    'area_weight_sd_log': float(post[1]),
+    'area_weight_z': float(shift[1] / post[1]),
   }
 
 

@@ -243,3 +243,28 @@ def test_cached_slopes_are_kept_apart_by_the_settings_that_made_them(
   names = sorted(os.listdir(tmp_path))
   assert len(names) == 2 and any(n.endswith(f'_v{protocol.CACHE_VERSION}.json')
                                  and '_b1_w0.185_v' in n for n in names)  # fmt: skip
+
+
+def test_the_bias_another_physics_causes_by_hand():
+  # The load-ratio statistic of the hem test above; the world shows it d
+  # higher than the simulator at the truth (a drag law d stronger, in log).
+  # With the wind read and the law trusted, a fit blames the area weight:
+  # its log shifts by -d (prior sds huge: the data's own answer). A hem at
+  # the same fan setting, the wind unknown: the wind takes it (2 log v = d),
+  # the area weight does not move.
+  d, a, sigma = 0.05, 0.6, 0.02
+  prior = {**protocol.priors('gray_interlock', 1e-4), 'log_area_weight': 1e3}
+  rows = [
+    {'wind': 2.0, 'slopes': [[0.0, -1.0, 2.0]], 'noise_cov': [[sigma**2]]},
+    {'wind': 2.0, 'slopes': [[0.0, -a, 2.0]], 'noise_cov': [[sigma**2]]},
+  ]
+  read = protocol.set_bias(rows[:1], [[d]], prior, 'anemometer')
+  assert read['area_weight_bias_log'] == pytest.approx(-d, rel=1e-3)
+  loose = {**prior, 'log_wind': 1e3}
+  pair = protocol.set_bias(rows, [[d], [d]], loose, 'video', [False, True])
+  assert abs(pair['area_weight_bias_log']) < 1e-6
+  # its sd is set_narrowing's, the same model of the set
+  narrow = protocol.set_narrowing(rows, loose, 'video', [False, True])
+  assert pair['area_weight_sd_log'] == pytest.approx(
+    narrow['area_weight_sd_log'], rel=1e-9
+  )
