@@ -105,6 +105,26 @@ def _held(k: int, n: int) -> dict:
   return {'held': k / n, 'count': k, 'ci': [lo, hi]}
 
 
+def _by_material(cells: list[dict]) -> dict:
+  """One mode's per-fabric coverage of several checks added up (counts: each
+  check's fraction times its fabric's recordings); {} where a check has none."""
+  if not all('by_material' in c for c in cells):
+    return {}
+  out = {}
+  for m in sorted({m for c in cells for m in c['by_material']}):
+    mine = [c['by_material'][m] for c in cells if m in c['by_material']]
+    n = sum(int(x['n']) for x in mine)
+    out[m] = {'n': n}
+    for q in FIELDS:
+      out[m][q] = {
+        f'held_{lv}': _held(
+          sum(int(round(x[q][f'interval_{lv}'] * x['n'])) for x in mine), n
+        )
+        for lv in LEVELS
+      }
+  return out
+
+
 def pool_checks(paths: list[str]) -> dict:
   """Per mode and quantity, the checks' counts added up: how often the 50%
   and 90% intervals held (with Wilson's 95% interval and each seed's own),
@@ -151,6 +171,9 @@ def pool_checks(paths: list[str]) -> dict:
           sum(c['confident_misses_expected'] for c in cells)
         )
       out[mode][q] = row
+    fabrics = _by_material([d['modes'][mode] for d in docs]) if mode == 'video' else {}
+    if fabrics:  # the video's alone: every mode's would make the file too big
+      out[mode]['by_material'] = fabrics
   return {
     'files': list(paths), 'seeds': [d['seed'] for d in docs], 'n': n,
     'physics': docs[0]['physics'], 'calibration': docs[0]['shipped']['setting'],
@@ -313,6 +336,8 @@ def table(checks: dict | None, sets: dict | None) -> str:
     ]
     for mode, by in checks['modes'].items():
       for q, r in by.items():
+        if q == 'by_material':
+          continue
         fmt = (
           (lambda v: f'x{v:.2f}') if q == 'bending_scale' else (lambda v: f'{v:.1f}%')
         )
@@ -334,6 +359,20 @@ def table(checks: dict | None, sets: dict | None) -> str:
           for m, r in conf
         ),
       ]
+    video = checks['modes'].get('video', {}).get('by_material')
+    if video:
+      lines += [
+        '',
+        'By fabric, the video alone: how often the 90% intervals held '
+        "(brackets: 95% intervals; a fabric's recordings are few, and a pair's two "
+        'share bending and area weight)',
+        '',
+        '| fabric | n | ' + ' | '.join(FIELDS) + ' |',
+        '|---|---|' + '---|' * len(FIELDS),
+      ]
+      for m, r in video.items():
+        cells = ' | '.join(_pct(r[q]['held_90']) for q in FIELDS)
+        lines.append(f'| {m} | {r["n"]} | {cells} |')
   if sets:
     lines += [
       '',

@@ -1393,7 +1393,8 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
 
   Returns:
     ``{mode: summarise(...)}``, each coverage with its 95% binomial interval
-    (``'interval_50_ci'``, ``'interval_90_ci'``).
+    (``'interval_50_ci'``, ``'interval_90_ci'``), and per fabric
+    (``'by_material'``: its recordings and how often their intervals held).
 
   Raises:
     ValueError: the calibration has no tables, or for other quantities.
@@ -1424,6 +1425,15 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
           'n': sub['n'],
           **{f: {c: sub[f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS},
         }
+    s['by_material'] = {}  # how often each fabric's intervals held
+    for m in sorted({x['material'] for x in v}):
+      sub = summarise(
+        [{**x, 'levels': levels} for x in v if x['material'] == m], space, bayes=False
+      )
+      s['by_material'][m] = {
+        'n': sub['n'],
+        **{f: {c: sub[f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS},
+      }
     ranks = np.stack([x['rank'] for x in v])  # (n, fields)
     for i, f in enumerate(FIELDS):
       r = bo.calibration.unwarp(ranks[:, i], levels[:, i])

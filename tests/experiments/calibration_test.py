@@ -447,6 +447,14 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
   nets = good['video']['per_network']
   assert len(nets) == config.networks
   assert sum(c['n'] for c in nets.values()) == 120
+  # Fabric by fabric: every recording counted once, each fabric's coverage
+  # that of its own recordings (one fabric here: the mode's own).
+  fab = good['video']['by_material']
+  assert sum(c['n'] for c in fab.values()) == 120
+  for m, c in fab.items():
+    if c['n'] == 120:
+      for f in calibration.FIELDS:
+        assert c[f]['interval_90'] == good['video'][f]['interval_90'], (m, f)
   assert 'network by network' in calibration.check_table({
     'shipped': {**_tables(C_TRUE), 'held_out': {}}, 'n': 120, 'seed': 1,
     'printed': {'n': 120, 'recalibrated': 120, **{f: {

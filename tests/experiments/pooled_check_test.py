@@ -143,3 +143,24 @@ def test_pairs_that_hold_together_widen_the_interval_as_half_as_many_sets():
   lo, hi = pooled_check.pair_interval(alone, np.arange(200))
   wl, wh = bo.calibration.binomial_interval(int(alone.sum()), 200)
   assert hi - lo == pytest.approx(wh - wl, rel=0.15)
+
+
+def test_each_fabric_counts_add_up_over_the_checks(tmp_path, capsys):
+  def fabrics(held90):
+    cell = {'interval_50': 0.5, 'interval_90': held90}
+    return {'white_tablecloth': {'n': 8, **{q: cell for q in Q}},
+            'black_denim': {'n': 8, **{q: {**cell, 'interval_90': 1.0} for q in Q}}}  # fmt: skip
+
+  docs = [_check(1, 16, 0.5, 0.9, 6.0), _check(2, 16, 0.5, 0.9, 6.0)]
+  for d, held in zip(docs, (6 / 8, 5 / 8), strict=True):
+    d['modes']['video'] = {**d['modes']['known wind'], 'by_material': fabrics(held)}
+  paths = [_write(tmp_path, f'{k}.json', d) for k, d in enumerate(docs)]
+  out = pooled_check.pool_checks(paths)
+  by = out['modes']['video']['by_material']
+  r = by['white_tablecloth']['wind_speed']['held_90']
+  assert by['white_tablecloth']['n'] == 16 and r['count'] == 11
+  assert r['ci'][0] < 11 / 16 < r['ci'][1]
+  assert by['black_denim']['area_weight']['held_90']['count'] == 16
+  assert 'by_material' not in out['modes']['known wind']  # the checks had none
+  text = pooled_check.table(out, None)
+  assert '| white_tablecloth | 16 | 69%' in text
