@@ -20,6 +20,7 @@ an estimate: the estimate does not yet simulate a hem (the closing note of
 the session that added this says what is left).
 
   python -m benchmarks.hem_weight --workdir=out/hem_weight --workers=16
+  python -m benchmarks.hem_weight --workdir=out/hem_weight --world=air_drag=0.1  # one part
   python -m benchmarks.hem_weight --workdir=/tmp/hw --preset=smoke   # CPU, < 1 min
 
 Writes ``hem_weight.json`` and ``hem_weight.png`` to ``--workdir`` (and the
@@ -37,6 +38,7 @@ import numpy as np
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
+import physsim  # noqa: E402
 from experiments.pipeline import cli, files  # noqa: E402
 from experiments.studies import protocol  # noqa: E402
 
@@ -66,12 +68,17 @@ class Args:
     drag_sds: the drag law's log standard deviations compared (comma-separated;
       0: trusted).
     figure: also copy the figure here ('' none).
+    world: the other physics the bias is read on: '' for
+      ``physsim.mismatch.WORLD``, else ``field=value`` pairs
+      (comma-separated) of a ``physsim.Mismatch`` that differs from the
+      estimator's in those alone (e.g. ``edge_solref_scale=2``).
     study: the protocol study's candidates, sets and noise (5 s clips).
   """
 
   workdir: str = cli.required()
   drag_sds: tuple[str, ...] = ('0', '0.2')
   figure: str = ''
+  world: tuple[str, ...] = ()
   study: protocol.Config = protocol.Config(
     candidates=(
       'sheet_100cm_2ms_r9', 'sheet_100cm_2ms_hem100g_r9', 'sheet_100cm_2ms_hem300g_r9',
@@ -111,10 +118,11 @@ def drag_values(values) -> list[float]:
   return out
 
 
-def biases(result: dict, config: protocol.Config, workdir: str, drag: float) -> dict:
+def biases(result: dict, config: protocol.Config, workdir: str, drag: float,
+           world: physsim.Mismatch = physsim.mismatch.WORLD) -> dict:  # fmt: skip
   """Per (set, mode): the first-order bias of log area weight that recordings
-  of another physics (``physsim.mismatch.WORLD``) cause in a fit with the
-  estimator's simulator (``protocol.set_bias``), per bending truth."""
+  of another physics (``world``) cause in a fit with the estimator's
+  simulator (``protocol.set_bias``), per bending truth."""
   slopes = {(r['candidate'], r['bending']): r for r in result['slopes']}
   sets = protocol.parse_sets(config.sets, list(config.candidates))
   prior = protocol.priors(config.material, config.reading)
@@ -128,13 +136,33 @@ def biases(result: dict, config: protocol.Config, workdir: str, drag: float) -> 
         rows = [slopes[(n, b)] for n in names]
         res = [
           protocol.world_residual(
-            protocol.parse(n), b, result['area_weight'], config, cache
+            protocol.parse(n), b, result['area_weight'], config, cache, world
           )
           for n in names
         ]
         cells.append(protocol.set_bias(rows, res, prior, mode, shared, drag))
       out[(label, mode)] = cells
   return out
+
+
+def world_of(items) -> physsim.Mismatch:
+  """``--world`` as a ``physsim.Mismatch``; a ValueError naming the flag."""
+  if not items:
+    return physsim.mismatch.WORLD
+  fields = {f.name for f in dataclasses.fields(physsim.Mismatch)}
+  pairs = [item.partition('=') for item in items]
+  keys = [k for k, _, _ in pairs]
+  try:
+    if not set(keys) <= fields or len(set(keys)) < len(keys):
+      raise ValueError
+    return physsim.Mismatch(
+      **{k: int(v) if k == 'gust_modes' else float(v) for k, _, v in pairs}
+    )
+  except (TypeError, ValueError):
+    raise ValueError(
+      f'--world={",".join(items)}: need field=value pairs of {sorted(fields)}, '
+      'each field once, finite and >= 0'
+    ) from None
 
 
 def rows(results: dict[float, dict], bias: dict[float, dict]) -> list[dict]:
@@ -214,12 +242,13 @@ def plot(table: list[dict], path: str, material: str) -> None:
 
 def main(args: Args) -> None:
   drags = drag_values(args.drag_sds)
+  world = world_of(args.world)
   results = {
     d: protocol.run(dataclasses.replace(args.study, drag_sd=d), args.workdir)
     for d in drags
   }
   bias = {
-    d: biases(r, dataclasses.replace(args.study, drag_sd=d), args.workdir, d)
+    d: biases(r, dataclasses.replace(args.study, drag_sd=d), args.workdir, d, world)
     for d, r in results.items()
   }
   table = rows(results, bias)
@@ -227,6 +256,7 @@ def main(args: Args) -> None:
     'material': args.study.material,
     'rows': table,
     'config': dataclasses.asdict(args.study) | {'drag_sds': drags},
+    'world': dataclasses.asdict(world),
     'simulation_seconds': max(r['simulation_seconds'] for r in results.values()),
   }
   files.write_json(os.path.join(args.workdir, RESULT_FILE), out)
