@@ -726,6 +726,8 @@ def run(config: Config, workdir: str) -> dict:
     raise ValueError(
       f'need --draws >= 3 and --clip > 0, got {config.draws}, {config.clip}'
     )
+  if not (np.isfinite(config.drag_sd) and config.drag_sd >= 0):
+    raise ValueError(f'--drag_sd={config.drag_sd}: need a number >= 0 (0: trusted)')
   cands = [parse(n) for n in config.candidates]
   conv = [parse(n) for n in config.convergence]
   sets = parse_sets(config.sets, list(config.candidates))

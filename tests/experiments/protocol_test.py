@@ -268,3 +268,9 @@ def test_the_bias_another_physics_causes_by_hand():
   assert pair['area_weight_sd_log'] == pytest.approx(
     narrow['area_weight_sd_log'], rel=1e-9
   )
+
+
+@pytest.mark.parametrize('drag', [-0.1, float('nan'), float('inf')])
+def test_a_bad_drag_law_sd_is_refused_by_name(tmp_path, drag):
+  with pytest.raises(ValueError, match='--drag_sd'):
+    protocol.run(protocol.Config(drag_sd=drag), str(tmp_path))
