@@ -1415,25 +1415,21 @@ def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
     w = rc.get('weights', {}).get(mode, {})
     s = summarise([{**x, 'levels': levels, 'weights': w} for x in v], space)
     seeds = network_seeds(config)
+    read = [{**x, 'levels': levels, 'weights': w} for x in v]
+    held = lambda rows: {  # noqa: E731
+      'n': len(rows),
+      **_coverage_of(summarise(rows, space, bayes=False)),
+    }
     s['per_network'] = {}
     for k, seed in enumerate(seeds):
-      mine = [{**x, 'levels': levels, 'weights': w} for x in v
-              if network_of(config, x['seq']) == k]  # fmt: skip
+      mine = [x for x in read if network_of(config, x['seq']) == k]
       if mine:
-        sub = summarise(mine, space, bayes=False)
-        s['per_network'][str(seed)] = {
-          'n': sub['n'],
-          **{f: {c: sub[f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS},
-        }
-    s['by_material'] = {}  # how often each fabric's intervals held
-    for m in sorted({x['material'] for x in v}):
-      sub = summarise(
-        [{**x, 'levels': levels} for x in v if x['material'] == m], space, bayes=False
-      )
-      s['by_material'][m] = {
-        'n': sub['n'],
-        **{f: {c: sub[f][c] for c in ('interval_50', 'interval_90')} for f in FIELDS},
-      }
+        s['per_network'][str(seed)] = held(mine)
+    # how often each fabric's intervals held
+    s['by_material'] = {
+      m: held([x for x in read if x['material'] == m])
+      for m in sorted({x['material'] for x in v})
+    }
     ranks = np.stack([x['rank'] for x in v])  # (n, fields)
     for i, f in enumerate(FIELDS):
       r = bo.calibration.unwarp(ranks[:, i], levels[:, i])

@@ -456,12 +456,9 @@ def simulate_candidate(c: Candidate, bending: float, area_weight: float,
   steps of each parameter and at +-``CHAOS_NUDGE`` of log bending
   (``robust_slope``), ``draws`` gusty histories at the truth."""
   m = mesh(c)
-  sim = sim_config(c, config)
-  hem = physsim.hem_mass(m, c.resolution, c.hem / 1000) if c.hem > 0 else None
-  model = physsim.build(m, config.material, sim, extra_mass=hem)
-  frames = round(config.clip * config.fps)
-  common = dict(frames=frames, fps=config.fps, warmup=config.warmup, backend='c',
-                workers=config.workers, space=SPACE)  # fmt: skip
+  model = _model(c, config)
+  sim = model.config
+  common = _steady_kwargs(config)
   steps = [config.step_bending, config.step_area_weight, config.step_wind]
   p = 3 if c.wind > 0 else 2
   base = np.log([bending, area_weight, max(c.wind, 1e-9)])
@@ -548,6 +545,31 @@ def _slope_digest(config: Config) -> str:
   )
 
 
+def _stem(c: Candidate, bending: float, area_weight: float, config: Config) -> str:
+  """A cached file's name for the candidate at a truth, under ``config``."""
+  return (
+    f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}'
+    f'{"" if config.scaled_edges else "_fixed_edges"}{_slope_digest(config)}'
+  )
+
+
+def _model(c: Candidate, config: Config,
+           physics: physsim.Mismatch = physsim.mismatch.OWN) -> physsim.ClothModel:  # fmt: skip
+  """The candidate's compiled cloth under ``physics``, its hem attached."""
+  m = mesh(c)
+  hem = physsim.hem_mass(m, c.resolution, c.hem / 1000) if c.hem > 0 else None
+  return physsim.build(
+    m, config.material, sim_config(c, config, physics), extra_mass=hem
+  )
+
+
+def _steady_kwargs(config: Config) -> dict:
+  """``physsim.simulate``'s clip and backend settings of the study."""
+  return dict(frames=round(config.clip * config.fps), fps=config.fps,
+              warmup=config.warmup, backend='c', workers=config.workers,
+              space=SPACE)  # fmt: skip
+
+
 def candidate_slopes(c: Candidate, bending: float, area_weight: float,
                      config: Config, cache_dir: str, key) -> dict:  # fmt: skip
   """``simulate_candidate``, cached as JSON under ``cache_dir`` (a rerun, or
@@ -555,20 +577,8 @@ def candidate_slopes(c: Candidate, bending: float, area_weight: float,
   changes what is simulated or how its noise is read (``_SLOPE_FIELDS``; a
   short digest of those that differ from the defaults), so that a study of
   other clips never reads another's slopes."""
-  default = Config()
-  changed = {
-    f: getattr(config, f)
-    for f in _SLOPE_FIELDS
-    if getattr(config, f) != getattr(default, f)
-  }
-  digest = (
-    '_' + hashlib.sha1(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:8]
-    if changed else ''
-  )  # fmt: skip
   path = os.path.join(
-    cache_dir,
-    f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}'
-    f'{"" if config.scaled_edges else "_fixed_edges"}{digest}_v{CACHE_VERSION}.json',
+    cache_dir, f'{_stem(c, bending, area_weight, config)}_v{CACHE_VERSION}.json'
   )
   if os.path.exists(path):
     with open(path) as f:
@@ -592,26 +602,21 @@ def world_residual(c: Candidate, bending: float, area_weight: float, config: Con
   estimator's simulator turns into bias (``set_bias``). Cached as JSON beside
   the slopes."""
   name = (
-    f'{config.material}_{c.name}_b{bending:.4g}_w{area_weight:.4g}'
-    f'{_slope_digest(config)}_world{physics.fan_yaw_deg:g}_{physics.air_drag:g}_'
-    f'{physics.bending_damping:g}_{physics.edge_solref_scale:g}_v{WORLD_VERSION}.json'
-  )  # fmt: skip
+    f'{_stem(c, bending, area_weight, config)}_world{physics.fan_yaw_deg:g}_'
+    f'{physics.air_drag:g}_{physics.bending_damping:g}_{physics.edge_solref_scale:g}'
+    f'_v{WORLD_VERSION}.json'
+  )
   path = os.path.join(cache_dir, name)
   if os.path.exists(path):
     with open(path) as f:
       return json.load(f)['residual']
   m = mesh(c)
-  hem = physsim.hem_mass(m, c.resolution, c.hem / 1000) if c.hem > 0 else None
-  common = dict(frames=round(config.clip * config.fps), fps=config.fps,
-                warmup=config.warmup, backend='c', workers=config.workers,
-                space=SPACE)  # fmt: skip
   params = physsim.params.make(bending, c.wind, area_weight)
   stats = []
   for phys in (physsim.mismatch.OWN, physics):
-    model = physsim.build(
-      m, config.material, sim_config(c, config, phys), extra_mass=hem
+    out = physsim.simulate(
+      _model(c, config, phys), params, wind=phys.wind(0.0), **_steady_kwargs(config)
     )
-    out = physsim.simulate(model, params, wind=phys.wind(0.0), **common)
     if not np.all(out.valid):
       raise RuntimeError(f'{c.name}: a steady simulation blew up at bending {bending}')
     stats.append(summaries(out.positions, m.vertices, c.resolution, c.size)[0])
@@ -661,6 +666,16 @@ def _assemble(rows, prior, mode, shared, drag_sd):
   return sd, parts
 
 
+def _information(rows, prior, mode, shared, drag_sd):
+  """``_assemble``'s prior sds and parts, and the set's Fisher information."""
+  sd, parts = _assemble(rows, prior, mode, shared, drag_sd)
+  infos = [
+    design.fisher(j, np.array(r['noise_cov']))
+    for (j, _), r in zip(parts, rows, strict=True)
+  ]
+  return sd, parts, design.combine(infos, [i for _, i in parts], len(sd))
+
+
 def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
                   shared=None, drag_sd: float = 0.0) -> dict:  # fmt: skip
   """Narrowing of log bending and log area weight by the recordings ``rows``
@@ -674,13 +689,8 @@ def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
   world (0: nothing). The force goes as that coefficient times v^2, and the
   slopes are taken in steady wind with the cloth at rest, so a recording's
   slope in it is half its slope in log wind."""
-  sd, parts = _assemble(rows, prior, mode, shared, drag_sd)
+  sd, _, total = _information(rows, prior, mode, shared, drag_sd)
   n = len(sd)
-  infos = [
-    design.fisher(j, np.array(r['noise_cov']))
-    for (j, _), r in zip(parts, rows, strict=True)
-  ]
-  total = design.combine(infos, [i for _, i in parts], n)
   post = design.widths(sd, total)
   no_video = design.widths(sd, np.zeros((n, n)))
   return {
@@ -699,14 +709,12 @@ def set_bias(rows: list[dict], residuals: list, prior: dict[str, float], mode: s
   log area weight) that the statistics' misfit ``residuals`` (per row,
   ``world_residual``) causes, (F + P)^-1 sum_k J_k^T R_k^-1 r_k, beside the
   posterior's sd (``set_narrowing``'s model of the set)."""
-  sd, parts = _assemble(rows, prior, mode, shared, drag_sd)
-  n = len(sd)
-  info = np.zeros((n, n))
-  score = np.zeros(n)
+  sd, parts, info = _information(rows, prior, mode, shared, drag_sd)
+  score = np.zeros(len(sd))
   for (j, index), r, res in zip(parts, rows, residuals, strict=True):
-    w = np.linalg.inv(np.array(r['noise_cov']))
-    info[np.ix_(index, index)] += j.T @ w @ j
-    score[index] += j.T @ w @ np.asarray(res, np.float64)
+    score[index] += j.T @ np.linalg.solve(
+      np.array(r['noise_cov']), np.asarray(res, float)
+    )
   cov = np.linalg.inv(info + np.diag(1.0 / sd**2))
   shift = cov @ score
   post = np.sqrt(np.diag(cov))
