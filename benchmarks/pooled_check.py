@@ -35,6 +35,14 @@ estimate quotes them pooled (``report.quoted_checks``):
     [report.record_check(report.SHAPE_PAPER_CALIBRATION_FILE, \
       c.check_record(json.load(open(f'/tmp/chk{s}/check.json')))) for s in (2, 3, 4)]"
 
+and the pool of those checks fabric by fabric, which an estimate of one
+fabric quotes beside them (``report.fabric_check``: "This fabric alone ...";
+the shipped one is benchmarks/results/pooled_check_h200/pooled_check.json's):
+
+  python -c "import json; from experiments.pipeline import report; \
+    report.record_fabric_checks(report.SHAPE_PAPER_CALIBRATION_FILE, \
+      json.load(open('out/pooled_check/pooled_check.json'))['checks'])"
+
 Nothing is fitted here. The counts are exact (each check's coverage times
 its recordings); a check's 95% intervals (Wilson's) count recordings as
 independent, which for bending and area weight makes them too narrow: a pair's

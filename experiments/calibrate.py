@@ -130,13 +130,18 @@ def main(args: Args) -> None:
         raise ValueError(f'--install_modes: no file at {dest} to install them into')
       new = report.with_modes_of(old, new, modes)
       (keep, moved), drop = report.trimmed_checks(old, new), []
+      fabrics = report.trimmed_checks(old, new, 'fabric_checks')[0]
       if moved:
         print(f'the checks keep their other modes; check {", ".join(moved)} again '
               '(--check ... --install --install_modes=...)')  # fmt: skip
     else:
       keep, drop = report.still_valid_checks(old, new)
+      fabrics = report.still_valid_checks(old, new, 'fabric_checks')[0]
     if keep or modes:  # checks of tables this refit left as they were
       new['checks'] = keep
+      new.pop('fabric_checks', None)
+      if pools := report.pools_of(fabrics, keep):  # by fabric, of checks kept
+        new['fabric_checks'] = pools
       files.write_json(dest, new)
     else:
       files.write_atomic(

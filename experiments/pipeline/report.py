@@ -85,16 +85,19 @@ def _read_cached(path: str, mtime_ns: int, size: int) -> dict:
     return json.load(f)
 
 
-def still_valid_checks(old: dict, new: dict) -> tuple[list[dict], list[dict]]:
+def still_valid_checks(
+  old: dict, new: dict, key: str = 'checks'
+) -> tuple[list[dict], list[dict]]:
   """The checks of calibration ``old`` that hold for ``new`` too (same
   setting and likelihood, and for every mode a check covers the same tables:
   CDF levels and weights), and those that do not: a refit that only adds
-  modes keeps its checks, one that moves any table must be checked again."""
+  modes keeps its checks, one that moves any table must be checked again.
+  ``key``: ``'fabric_checks'`` for the per-fabric pools (``record_fabric_checks``)."""
   same_setting = all(
     old.get(k) == new.get(k) for k in ('setting', 'likelihood', 'sharpness')
   )
   keep, drop = [], []
-  for c in old.get('checks', []):
+  for c in old.get(key, []):
     ok = same_setting and all(_same_tables(old, new, m) for m in c.get('coverage', {}))
     (keep if ok else drop).append(c)
   return keep, drop
@@ -152,14 +155,16 @@ def with_modes_of(old: dict, new: dict, modes: tuple[str, ...]) -> dict:
   return out
 
 
-def trimmed_checks(old: dict, new: dict) -> tuple[list[dict], list[str]]:
+def trimmed_checks(
+  old: dict, new: dict, key: str = 'checks'
+) -> tuple[list[dict], list[str]]:
   """The checks of calibration ``old`` with the coverage of every mode whose
   tables ``new`` changed taken out (a check left with none is dropped), and
   those modes: ``calibrate --install --install_modes`` keeps what a check
   measured of the tables it did not refit, for ``--check --install_modes``
-  to add the refitted modes' coverage back."""
+  to add the refitted modes' coverage back. ``key`` as ``still_valid_checks``'s."""
   out, moved = [], set()
-  for c in old.get('checks', []):
+  for c in old.get(key, []):
     cov = {m: v for m, v in c.get('coverage', {}).items() if _same_tables(old, new, m)}
     moved |= set(c.get('coverage', {})) - set(cov)
     if cov:
@@ -208,6 +213,100 @@ def record_check(path: str, check: dict, modes: tuple[str, ...] = ()) -> dict:
   cal['checks'] = [c for c in cal.get('checks', []) if not same(c)] + [check]
   files.write_json(path, cal)
   return cal
+
+
+def record_fabric_checks(path: str, pooled: dict, mode: str = 'video') -> dict:
+  """Keeps a pool of checks' coverage fabric by fabric
+  (``benchmarks.pooled_check``'s ``checks``: ``mode``'s ``by_material``,
+  counts added over several seeds) in the calibration file at ``path``,
+  where an estimate of one of those fabrics in ``mode`` quotes its own
+  fabric's beside the pooled checks (``quoted_checks``). One seed's 8
+  recordings of a fabric say little; four seeds' 32 can show a fabric whose
+  intervals hold less often than the rest's. The pool must be of the very
+  checks the file keeps of that physics in that mode (the same seeds and
+  recordings), so that the two numbers an estimate prints are of one set of
+  recordings; a pool of the same physics and mode is replaced. Written whole
+  (temporary file, then rename).
+
+  Raises:
+    ValueError: the pool was of another calibration, has no ``mode`` by
+      fabric, or its seeds or recordings are not the file's checks'.
+  """
+  cal = physsim.dataset.read_json(path)
+  if pooled.get('calibration') != cal.get('setting'):
+    raise ValueError(
+      f'{path}: the pool was of {pooled.get("calibration")!r}, this file holds '
+      f'{cal.get("setting")!r}'
+    )
+  by = pooled.get('modes', {}).get(mode, {}).get('by_material')
+  if not by:
+    raise ValueError(f'{path}: the pool has no {mode!r} coverage by fabric')
+  physics = pooled['physics']
+  mine = [c for c in cal.get('checks', [])
+          if c['physics'] == physics and c.get('searched', 'video') == mode
+          and mode in c['coverage']]  # fmt: skip
+  theirs = (sorted(c['seed'] for c in mine), sum(c['n'] for c in mine))
+  if theirs != (sorted(pooled['seeds']), pooled['n']):
+    raise ValueError(
+      f'{path}: the pool is of seeds {sorted(pooled["seeds"])} ({pooled["n"]} '
+      f'recordings), the file keeps checks of {physics} physics searched in {mode!r} '
+      f'of seeds {theirs[0]} ({theirs[1]}): record those checks first'
+    )
+  cells = {
+    m: {
+      'n': int(r['n']),
+      **{
+        q: {
+          k: r[q][f'held_{lv}'][part]
+          for lv in (50, 90)
+          for k, part in ((f'interval_{lv}', 'held'), (f'interval_{lv}_ci', 'ci'))
+        }
+        for q in r
+        if q != 'n'
+      },
+    }
+    for m, r in by.items()
+  }
+  record = {
+    'physics': physics, 'seeds': sorted(pooled['seeds']), 'n': pooled['n'],
+    'searched': mode, 'setting': cal['setting'], 'coverage': {mode: cells},
+  }  # fmt: skip
+  same = lambda c: (c['physics'], c['searched']) == (physics, mode)
+  cal['fabric_checks'] = [c for c in cal.get('fabric_checks', []) if not same(c)] + [
+    record
+  ]
+  files.write_json(path, cal)
+  return cal
+
+
+def pools_of(pools: list[dict], checks: list[dict]) -> list[dict]:
+  """The per-fabric pools (``record_fabric_checks``) every one of whose
+  checks is among ``checks``: a pool outlives its checks in no file."""
+  have = {(c['physics'], c['seed'], c.get('searched', 'video')) for c in checks}
+  return [p for p in pools
+          if all((p['physics'], s, p['searched']) in have for s in p['seeds'])]  # fmt: skip
+
+
+def fabric_check(cal: dict, quoted: dict, mode: str, material: str) -> dict | None:
+  """How often ``material``'s own intervals held among a quoted check's
+  recordings (``quoted_checks``' entry ``quoted``), where the file keeps a
+  pool of exactly those checks by fabric (``record_fabric_checks``):
+  ``{'material', 'n', 'coverage', 'short'}``, ``short`` naming each quantity
+  whose 90% intervals held the truth less often than promised beyond the
+  luck of the draw (the 95% binomial interval of its coverage below 90%)."""
+  for c in cal.get('fabric_checks', []):
+    if (c['physics'], c['seeds'], c['n']) != (
+      quoted['physics'],
+      quoted['seeds'],
+      quoted['n'],
+    ):
+      continue
+    cells = c['coverage'].get(mode, {}).get(material)
+    if cells:
+      cov = {q: v for q, v in cells.items() if q != 'n'}
+      short = [q for q, v in cov.items() if v['interval_90_ci'][1] < 0.9]
+      return {'material': material, 'n': cells['n'], 'coverage': cov, 'short': short}
+  return None
 
 
 def pooled_cells(cells: list[dict], ns: list[int]) -> dict:
@@ -519,6 +618,9 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     else None
   )
   checks = quoted_checks(cal, mode)
+  for c in checks:
+    if mine := fabric_check(cal, c, mode, config.simulation.material):
+      c['this_fabric'] = mine
   return {
     'matches': True, **head, 'mode': mode, 'recalibrated': True,
     **({'weaker_network': weaker} if weaker else {}),
@@ -799,6 +901,17 @@ def calibration_line(cal: dict | None) -> str:
         f' On {c["n"]} recordings of {PHYSICS_WORDS.get(c["physics"], c["physics"])}'
         f' they held it in {_coverage_parts(c["coverage"])}.'
       )
+      if f := c.get('this_fabric'):
+        line += (
+          f' This fabric alone ({f["material"].replace("_", " ")}, {f["n"]} of them): '
+          f'{_coverage_parts(f["coverage"])}.'
+        )
+        if f['short']:
+          line += (
+            f' Its {" and ".join(SHORT.get(q, q) for q in f["short"])} 90% intervals '
+            'held the truth less often than promised there: read them as too narrow '
+            'for this fabric.'
+          )
     if w := cal.get('weaker_network'):
       lo, hi = w['calibrated']
       line += (
