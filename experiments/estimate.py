@@ -200,13 +200,15 @@ def with_fabric_readings(args: Args) -> Args:
 
 def take_settings(args: Args, take: takes.Take):
   """(intake settings, estimate settings) of one recording: the flags'
-  with the recording's own cloth size, up axis and wind reading."""
+  with the recording's own cloth size, hem, up axis and wind reading."""
   ik = args.intake
   if take.world_up:
     ik = dataclasses.replace(ik, world_up=take.world_up)
   config = args.search
   if take.cloth_size:
     config = config.replace(cloth_size=take.cloth_size)
+  if take.hem_mass:
+    config = config.replace(hem_mass=take.hem_mass)
   if take.wind is not None:
     config = config.replace(wind_speed=take.wind[0], wind_speed_sd=take.wind[1])
   config.check()
@@ -415,7 +417,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     result = search.estimate_joint(
       config, recs, args.model, args.workdir,
       winds if any(t.wind for t in recorded) else None, overrides=overrides,
-      pictures=drawings, **kw,
+      fans=takes.fans(recorded), pictures=drawings, **kw,
     )  # fmt: skip
     _record_alignment(os.path.join(args.workdir, search.JOINT_FILE), record)
     print(report.joint_table(result), flush=True)

@@ -335,6 +335,11 @@ class EstimateConfig:
       )
     if sim.garment and sim.garment not in physsim.GARMENTS:
       raise ValueError(f'garment {sim.garment!r} is not one of {physsim.GARMENTS}')
+    if sim.garment and sim.hem_mass:
+      raise ValueError(
+        f"hem_mass={sim.hem_mass} kg hangs along the square cloth's free edge; "
+        f'garment {sim.garment!r} has none'
+      )
     for name, allowed in (
       ('backend', BACKENDS), ('distance', DISTANCES), ('point', POINTS),
       ('likelihood', LIKELIHOODS),
@@ -422,6 +427,7 @@ _TOP_FIELDS = tuple(f.name for f in dataclasses.fields(EstimateConfig))
 # them a search is a typo (or would not fit in memory), never a setting.
 _RANGES = (
   ('sharpness', 1e-6, 1e6), ('model_error', 0.0, 100.0), ('shared_bias', 0.0, 1.0), ('cloth_resolution', 2, 200), ('cloth_size', 0.05, 3.0),
+  ('hem_mass', 0.0, 1.0),
   ('garment_spacing', 0.005, 0.5), ('cameras', 1, 64), ('q', 1, 4096),
   ('n_init', 1, 100_000), ('max_iter', 0, 10_000), ('stop_rel_change', 0.0, 1.0),
   ('stop_window', 1, 10_000), ('min_iter', 0, 10_000), ('replicates', 0, 4096),
@@ -518,6 +524,7 @@ class Problem(NamedTuple):
     return (
       s.garment, s.garment_spacing if s.garment else 0.0,
       0 if s.garment else s.cloth_resolution, 0.0 if s.garment else s.cloth_size,
+      s.hem_mass,
       self.n_frames, s.fps, s.warmup,
       s.gusts, physsim.resolve_backend(h.backend), h.workers, self.intr,
       self.data.poses.position.shape[0], s.sensor_noise, c.scoring.distance,

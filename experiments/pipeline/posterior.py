@@ -472,9 +472,10 @@ def _shifted(ev: np.ndarray, factor: float, area_weight_range) -> np.ndarray:
 
 
 def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
-          shared_bias_sd: float = 0.0, area_weight_range=None) -> dict:  # fmt: skip
+          shared_bias_sd: float = 0.0, area_weight_range=None,
+          fans=None) -> dict:  # fmt: skip
   """The joint posterior of recordings of one fabric: shared bending and area
-  weight, one wind each.
+  weight, one wind each, or one per fan setting (``fans``).
 
   Recordings of one fabric in one room share more than the fabric: where the
   simulator differs from the world (the fan's direction, the air's drag, the
@@ -498,11 +499,21 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     shared_bias_sd: the shared discrepancy's sd in log area weight (0: none).
     area_weight_range: the box's (lo, hi) area weight, kg/m^2 (needed with
       a shared discrepancy: the grid's w cells are linear in it).
+    fans: per recording, its fan setting's label (recordings of one label
+      were blown by one wind: a sheet and its twin with a known mass at the
+      hem, filmed with the fan untouched, share it, and the hem then weighs
+      the cloth whatever the wind); None: every recording its own. The
+      recordings of one fan setting must have one prior (one reading of it).
 
   Returns:
     ``{'samples': [(n, 3) unit draws of (b, v_k, w) per recording],
     'log_post_bw': (nb, nw)}``: each recording's draws share (b, w) from the
-    joint and draw their own wind given them.
+    joint and draw their own wind given them (one for a fan setting's
+    recordings, the same in each).
+
+  Raises:
+    ValueError: priors or fans for another number of recordings, or two
+      recordings of one fan setting with different priors.
   """
   nb, nv, nw = grid
   ll = [np.asarray(x).reshape(nb, nv, nw) for x in log_liks]
@@ -511,12 +522,26 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
   )
   if len(priors) != len(ll):
     raise ValueError(f'{len(priors)} priors for {len(ll)} recordings')
+  fans = list(range(len(ll))) if fans is None else list(fans)
+  if len(fans) != len(ll):
+    raise ValueError(f'{len(fans)} fan settings for {len(ll)} recordings')
   lp = [np.asarray(p).reshape(nb, nv, nw) for p in priors]
+  # One wind per fan setting: its recordings' likelihoods multiply at each v.
+  groups = list(dict.fromkeys(fans))
+  members = [[k for k, f in enumerate(fans) if f == g] for g in groups]
+  for g, ks in zip(groups, members, strict=True):
+    if any(not np.array_equal(lp[k], lp[ks[0]]) for k in ks):
+      raise ValueError(
+        f'recordings {ks} share fan setting {g!r} but not its prior: one '
+        'wind, one reading of it'
+      )
+  ll = [sum(ll[k] for k in ks) for ks in members]
+  lp = [lp[ks[0]] for ks in members]
   # The prior of (b, w) (each recording's wind summed out: the same up to a
-  # constant), and each recording's of v given (b, w).
+  # constant), and each fan setting's of v given (b, w).
   lp_bw = logsumexp(lp[0], axis=1)  # (nb, nw)
   lp_v = [p - logsumexp(p, axis=1)[:, None, :] for p in lp]  # log p(v_k | b, w)
-  # Each recording's evidence for (b, w), its wind integrated out.
+  # Each fan setting's evidence for (b, w), its wind integrated out.
   ev = [np.asarray(logsumexp(x + v, axis=1)) for x, v in zip(ll, lp_v, strict=True)]
   if shared_bias_sd > 0:
     if area_weight_range is None:
@@ -538,13 +563,14 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
   k_bw, k_v, k_jit = jax.random.split(key, 3)
   idx = np.asarray(jax.random.categorical(k_bw, log_bw.ravel(), shape=(n,)))
   ib, iw = np.unravel_index(idx, (nb, nw))
-  out = []
-  for k, x in enumerate(ll):
+  winds = []
+  for k, x in enumerate(ll):  # each fan setting's
     cond = x[ib, :, iw] + lp_v[k][ib, :, iw]  # (n, nv): wind given (b, w)
     iv = np.asarray(jax.random.categorical(jax.random.fold_in(k_v, k), cond, axis=1))
     cells = np.stack([ib, iv, iw], axis=1).astype(np.float64)
     jit = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, k), (n, 3)))
-    out.append(-1.0 + 2.0 * (cells + jit) / np.asarray(grid, np.float64))
+    winds.append(-1.0 + 2.0 * (cells + jit) / np.asarray(grid, np.float64))
+  out = [winds[groups.index(f)] for f in fans]
   return {'samples': out, 'log_post_bw': log_bw}
 
 

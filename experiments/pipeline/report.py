@@ -445,7 +445,7 @@ def covered(result: dict, truth: dict) -> dict:
 # over.
 _CALIBRATED_FIELDS = (
   'likelihood', 'sharpness', 'model_error', 'material', 'garment', 'cloth_resolution',
-  'cloth_size', 'frames',
+  'cloth_size', 'hem_mass', 'frames',
   'fps', 'distance', 'camera_sd_m', 'camera_sd_deg', 'warmup', 'gusts',
   'sensor_noise', 'q', 'n_init', 'max_iter', 'posterior_grid',
 )  # fmt: skip
@@ -464,6 +464,7 @@ def _differing_fields(config, cal: dict) -> list[str]:
     calibrated.setdefault('camera_sd_deg', 0.0)
   if 'cloth_resolution' in calibrated:  # files from before the size was a setting
     calibrated.setdefault('cloth_size', 1.0)
+    calibrated.setdefault('hem_mass', 0.0)  # ... or a hem could be added
   if 'sharpness' in calibrated:  # ... and before the model error was
     calibrated.setdefault('model_error', 0.0)
   mine = config.flat()
@@ -545,7 +546,8 @@ def _same(mine, theirs) -> bool:
 
 
 def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
-                     network: dict | None = None, accuracy: float | None = None):  # fmt: skip
+                     network: dict | None = None, accuracy: float | None = None,
+                     uncalibrated: tuple[str, ...] = ()):  # fmt: skip
   """What the held-out simulations showed about the intervals, for an
   estimate with ``config`` (``calibration_file``); None when no calibration
   has been run.
@@ -561,7 +563,9 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   the recipe whose held-out triplet accuracy (``accuracy``) is below every
   calibration network's is noted (``'weaker_network'``): how often a weaker
   network's intervals hold the truth was not measured, and the two weakest
-  checked so far held it less often.
+  checked so far held it less often. ``uncalibrated``: what the caller
+  knows no calibration measured (recordings sharing a fan setting), each
+  named among the differences.
   """
   path = calibration_file(config)
   if not os.path.isfile(path):
@@ -571,7 +575,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   head['networks'] = len(cal.get('network', {}).get('seeds', [0]))
   if config is None:
     return {'matches': True, **head, 'coverage': cal['coverage']}
-  differs = _differing_fields(config, cal)
+  differs = _differing_fields(config, cal) + list(uncalibrated)
   mode = calibration_mode(config.measured, joint)
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
@@ -862,9 +866,30 @@ def joint_table(joint: dict) -> str:
   lines += [''] + notes(
     "point: the joint posterior's median; narrower: the prior's 90% width over "
     "the interval's; alone: the same recording estimated by itself.",
+    _set_up_note(joint['recordings']),
     calibration_line(joint.get('calibration')),
   )
   return '\n'.join(lines)
+
+
+def _set_up_note(recordings: list[dict]) -> str:
+  """Which recordings shared a fan setting (one wind) and which carried a
+  known mass at the hem, or ''."""
+  parts = []
+  by: dict[str, list[int]] = {}
+  for k, r in enumerate(recordings):
+    by.setdefault(r.get('fan', f'#{k}'), []).append(k)
+  for fan, ks in by.items():
+    if len(ks) > 1:
+      parts.append(
+        f'recordings {", ".join(map(str, ks))} share fan setting {fan!r} (one wind)'
+      )
+  parts += [
+    f'recording {k} carries {1000 * r["hem_mass"]:g} g at its hem'
+    for k, r in enumerate(recordings)
+    if r.get('hem_mass')
+  ]
+  return '; '.join(parts) + '.' if parts else ''
 
 
 def calibration_line(cal: dict | None) -> str:

@@ -51,7 +51,13 @@ _RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias')  # fmt: skip
 
 # The settings a joint estimate's recordings may each have their own of; the
 # rest (material, likelihood, grid, search) they share.
-PER_RECORDING = ('cloth_size', 'cloth_resolution', 'camera_sd_m', 'camera_sd_deg')
+PER_RECORDING = (
+  'cloth_size',
+  'cloth_resolution',
+  'hem_mass',
+  'camera_sd_m',
+  'camera_sd_deg',
+)
 
 
 class Job(NamedTuple):
@@ -854,6 +860,7 @@ def estimate_joint(
   winds: list[tuple[float, float]] | None = None,
   allow_other_material: bool = False,
   overrides: list[dict] | None = None,
+  fans: list[str] | None = None,
   **kw,
 ) -> dict:
   """One fabric seen in several recordings (e.g. two fan settings): a joint
@@ -881,8 +888,12 @@ def estimate_joint(
       shipped one has none: they are reported as indicative).
     allow_other_material: search with a network of other fabrics.
     overrides: per recording, the settings that are its own
-      (``PER_RECORDING``: its cloth's size and mesh, its camera's error), or
-      None; a sheet and a swatch of one fabric share one posterior this way.
+      (``PER_RECORDING``: its cloth's size and mesh, a known mass at its hem,
+      its camera's error), or None; a sheet and a swatch of one fabric share
+      one posterior this way.
+    fans: per recording, its fan setting's label: recordings of one label
+      share one wind (``posterior.joint``), and must have one reading of it
+      or none; None: one wind each.
     **kw: ``estimate_many``'s keywords (``nets`` goes to ``joint_jobs``).
 
   Returns:
@@ -892,15 +903,15 @@ def estimate_joint(
 
   Raises:
     ValueError: fewer than two recordings, ``point='argmin'``, a measured
-      wind in ``config``, readings for another number of recordings, a
-      reading the search box cannot hold, or a recording whose estimate
-      failed (named).
+      wind in ``config``, readings or fans for another number of recordings,
+      two readings of one fan setting, a reading the search box cannot
+      hold, or a recording whose estimate failed (named).
   """
   jobs = joint_jobs(
     config, recordings, model_dir, workdir, winds, allow_other_material, overrides,
-    nets=kw.pop('nets', None),
+    nets=kw.pop('nets', None), fans=fans,
   )  # fmt: skip
-  return combine_joint(jobs, estimate_many(jobs, **kw), workdir)
+  return combine_joint(jobs, estimate_many(jobs, **kw), workdir, fans)
 
 
 def joint_jobs(
@@ -912,6 +923,7 @@ def joint_jobs(
   allow_other_material: bool = False,
   overrides: list[dict] | None = None,
   nets: dict[str, embedding.EmbeddingNet] | None = None,
+  fans: list[str] | None = None,
 ) -> list[Job]:
   """The searches of one fabric's joint estimate (``estimate_joint``'s
   arguments and checks), one per recording under ``<workdir>/recording_<k>``,
@@ -937,6 +949,7 @@ def joint_jobs(
     )
   if winds is not None and len(winds) != len(recordings):
     raise ValueError(f'{len(winds)} wind readings for {len(recordings)} recordings')
+  check_fans(fans, winds, len(recordings))
   configs = [config] * len(recordings)
   if winds is not None:
     configs = [config.replace(wind_speed=v, wind_speed_sd=sd) for v, sd in winds]
@@ -968,12 +981,30 @@ def joint_jobs(
   return resolved
 
 
-def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None
-                    ) -> tuple[dict, list]:  # fmt: skip
+def check_fans(fans, winds, n: int) -> None:
+  """Raises ValueError for fan labels (``estimate_joint``'s ``fans``) of
+  another number of recordings than ``n``, or recordings of one fan setting
+  with different wind readings (``winds``: (m/s, sd) each, (0, 0) none)."""
+  if fans is None:
+    return
+  if len(fans) != n:
+    raise ValueError(f'{len(fans)} fan settings for {n} recordings')
+  for f in dict.fromkeys(fans):
+    read = {tuple(winds[k]) for k, g in enumerate(fans) if g == f} if winds else set()
+    if len(read) > 1:
+      raise ValueError(
+        f'fan setting {f!r}: its recordings were read {sorted(read)}; one wind, '
+        'one reading (give it to each of them, or to none)'
+      )
+
+
+def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None,
+                    fans: list[str] | None = None) -> tuple[dict, list]:  # fmt: skip
   """``posterior.joint`` of finished searches (``joint_jobs``'s, or any
   subset of them) from their saved posteriors, drawing as many samples as
   each kept, with a shared discrepancy of ``shared_bias`` (None: the
-  config's); returns it and the loaded ``posterior.npz`` files."""
+  config's) and the recordings' fan settings (``fans``: one wind each
+  label); returns it and the loaded ``posterior.npz`` files."""
   npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
   grid = tuple(int(g) for g in npz[0]['grid'])
   config = jobs[0].config
@@ -983,13 +1014,16 @@ def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None
     [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
     n=len(npz[0]['samples']), shared_bias_sd=shared_bias,
     area_weight_range=physsim.search_space(config.simulation.material).area_weight,
+    fans=fans,
   )  # fmt: skip
   return combined, npz
 
 
-def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
+def combine_joint(jobs: list[Job], results: list, workdir: str,
+                  fans: list[str] | None = None) -> dict:  # fmt: skip
   """The joint posterior of one fabric's finished searches (``joint_jobs``,
-  then ``estimate_many``: ``results`` in the jobs' order); writes and returns
+  then ``estimate_many``: ``results`` in the jobs' order; ``fans``: their
+  fan settings, ``estimate_joint``'s); writes and returns
   ``estimate_joint``'s ``joint.json``.
 
   Raises:
@@ -1008,14 +1042,20 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
   # The settings the recordings share.
   config = configs[0].replace(wind_speed=0.0, wind_speed_sd=0.0)
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
+  uncalibrated = []
+  if fans is not None and len(set(fans)) < len(fans):
+    uncalibrated.append('recordings sharing one fan setting')
+  if any(c.simulation.hem_mass for c in configs[1:]) and not config.simulation.hem_mass:
+    uncalibrated.append('hem_mass (a recording with a known mass at its hem)')
   note = setup_lib.calibration(
-    configs[0], first.setup.network, joint=True, recordings=len(jobs)
-  )
+    configs[0], first.setup.network, joint=True, recordings=len(jobs),
+    uncalibrated=tuple(uncalibrated),
+  )  # fmt: skip
   # A joint the shipped tables cover was calibrated, and checked on another
   # physics, without a shared discrepancy; elsewhere the discrepancy keeps its
   # recordings from averaging away the simulator's error.
   shared_sd = 0.0 if note and note.get('matches') else config.scoring.shared_bias
-  combined, npz = joint_posterior(jobs, key, shared_sd)
+  combined, npz = joint_posterior(jobs, key, shared_sd, fans)
   space = first.setup.space
   grid = tuple(int(g) for g in npz[0]['grid'])
   combined['samples'] = [  # a bending length places (b, w) within their cells
@@ -1035,6 +1075,9 @@ def combine_joint(jobs: list[Job], results: list, workdir: str) -> dict:
       'wind_speed': s['wind_speed'],
       'load_ratio': s['load_ratio'],
       **({'measured_wind': list(winds[k])} if winds and winds[k][1] > 0 else {}),
+      **({'fan': fans[k]} if fans is not None else {}),
+      **({'hem_mass': job.config.simulation.hem_mass}
+         if job.config.simulation.hem_mass else {}),
       **({'truth': job.recording.truth} if job.recording.truth else {}),
     })  # fmt: skip
     posterior_lib.plot(

@@ -122,12 +122,14 @@ def calibration(
   *,
   joint: bool = False,
   recordings: int = 1,
+  uncalibrated: tuple[str, ...] = (),
 ) -> dict | None:
   """``report.calibration_note`` of these settings, this network's recipe and
-  accuracy, and the mode (a joint estimate of ``recordings`` recordings)."""
+  accuracy, and the mode (a joint estimate of ``recordings`` recordings;
+  ``uncalibrated``: what else about it no calibration has measured)."""
   return report.calibration_note(
     config, joint=joint, recordings=recordings, network=net.recipe,
-    accuracy=net.accuracy,
+    accuracy=net.accuracy, uncalibrated=uncalibrated,
   )  # fmt: skip
 
 

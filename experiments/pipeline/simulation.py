@@ -46,6 +46,12 @@ class Simulation:
     sensor_noise: pass candidates' rendered depth through the depth-sensor
       model (physsim.sensor) before embedding, as the recording went through
       a real sensor.
+    hem_mass: kg of known mass spread along the square cloth's free edge
+      (coins or a rod taped along the hem: ``physsim.hem_mass``), 0 for none.
+      Filmed beside the same cloth without it, the fan untouched (a protocol
+      file's ``"fan"``: one wind for both), it weighs the cloth against a
+      known mass rather than through the simulator's drag law
+      (docs/protocol.md, "A known mass at the hem").
   """
 
   material: str = 'gray_interlock'
@@ -59,6 +65,7 @@ class Simulation:
   gusts: float = 0.2
   cameras: int = 2
   sensor_noise: bool = True
+  hem_mass: float = 0.0
 
 
 def mesh(sim: Simulation) -> physsim.Mesh:
@@ -85,4 +92,8 @@ def cloth(sim: Simulation) -> physsim.ClothModel:
   """The compiled cloth of an estimate's mesh. Worlds name their fabric's
   bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
   model and its compiles."""
-  return physsim.build(mesh(sim), 'gray_interlock', sim_config(sim))
+  m = mesh(sim)
+  extra = (
+    physsim.hem_mass(m, sim.cloth_resolution, sim.hem_mass) if sim.hem_mass else None
+  )
+  return physsim.build(m, 'gray_interlock', sim_config(sim), extra_mass=extra)

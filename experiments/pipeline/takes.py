@@ -16,6 +16,17 @@ as a protocol file (JSON or YAML)::
    "fabric": {"area_weight": 0.212, "area_weight_sd": 0.003,
               "bending_length": 0.021, "bending_length_sd": 0.001}}
 
+A sheet filmed twice at one fan setting, once with a known mass taped along
+its free hem, shares that setting's one wind (``"fan"``: a label; the hem's
+``"hem_mass"`` in kg): the hem then weighs the cloth against a known mass
+rather than through the simulator's drag law (docs/protocol.md)::
+
+  {"recordings": [
+    {"recording": "plain/depth", "camera_json": "cam.json", "fan": "low"},
+    {"recording": "hem/depth", "camera_json": "cam.json", "fan": "low",
+     "hem_mass": 0.3}
+  ]}
+
 Paths in the file are relative to the file's folder. ``"fabric"`` (optional)
 holds the readings of the fabric itself, shared by every recording: a scale's
 area weight and a cantilever test's bending length, each with its
@@ -36,8 +47,9 @@ from typing import NamedTuple
 
 # What a protocol file's entry may say (the rest is the estimate's flags).
 KEYS = ('recording', 'camera_json', 'cloth_size', 'wind_speed', 'wind_speed_sd',
-        'world_up')  # fmt: skip
+        'world_up', 'hem_mass', 'fan')  # fmt: skip
 CLOTH_SIZE_RANGE = (0.05, 3.0)  # metres, as Simulation.cloth_size
+HEM_MASS_RANGE = (0.0, 1.0)  # kg, as Simulation.hem_mass
 UP_AXES = ('x', 'y', 'z', '-x', '-y', '-z')
 
 
@@ -51,6 +63,9 @@ class Take(NamedTuple):
     wind: an anemometer's reading at it, (m/s, its standard uncertainty), or
       None.
     world_up: its camera file's up axis, or '' (the intake's --world_up).
+    hem_mass: kg taped along the cloth's free hem, or 0.
+    fan: its fan setting's label, or '' (its own): recordings of one label
+      share one wind.
   """
 
   path: str
@@ -58,6 +73,8 @@ class Take(NamedTuple):
   cloth_size: float = 0.0
   wind: tuple[float, float] | None = None
   world_up: str = ''
+  hem_mass: float = 0.0
+  fan: str = ''
 
 
 def _number(where: str, key: str, value, lo: float, hi: float) -> float:
@@ -98,7 +115,20 @@ def _take(where: str, entry, base: str) -> Take:
   up = entry.get('world_up', '')
   if up not in ('', *UP_AXES):
     raise ValueError(f'{where}: "world_up"={up!r} must be one of {list(UP_AXES)}')
-  return Take(paths['recording'], paths['camera_json'], size, wind, up)
+  hem = 0.0
+  if 'hem_mass' in entry:
+    hem = _number(where, 'hem_mass', entry['hem_mass'], *HEM_MASS_RANGE)
+  fan = entry.get('fan', '')
+  if not isinstance(fan, str):
+    raise ValueError(f'{where}: "fan" must be a label (a string), got {fan!r}')
+  return Take(paths['recording'], paths['camera_json'], size, wind, up, hem, fan)
+
+
+def fans(recorded: list[Take]) -> list[str] | None:
+  """Each take's fan setting (its own index where it names none), or None
+  where no two share one."""
+  labels = [t.fan or f'#{k}' for k, t in enumerate(recorded)]
+  return labels if len(set(labels)) < len(labels) else None
 
 
 # The fabric's own readings a protocol file may give, as (value, sd) pairs,
@@ -138,7 +168,15 @@ def read(path: str) -> list[Take]:
   if not isinstance(entries, list) or not entries:
     raise ValueError(f'{path}: needs "recordings": a list of one or more entries')
   base = os.path.dirname(os.path.abspath(path))
-  return [_take(f'{path}: recordings[{k}]', e, base) for k, e in enumerate(entries)]
+  out = [_take(f'{path}: recordings[{k}]', e, base) for k, e in enumerate(entries)]
+  for label in {t.fan for t in out if t.fan}:
+    read = {t.wind for t in out if t.fan == label}
+    if len(read) > 1:
+      raise ValueError(
+        f'{path}: the recordings of fan {label!r} were read {sorted(read, key=str)}: '
+        'one wind, one reading (give it to each of them, or to none)'
+      )
+  return out
 
 
 def fabric_readings(path: str) -> dict[str, float]:

@@ -13,7 +13,7 @@ from jax.scipy.special import logsumexp
 
 import physsim
 from experiments import estimate as estimate_script
-from experiments.pipeline import objective, search
+from experiments.pipeline import objective, report, search
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from tests.experiments import estimate_fixtures as fx
@@ -181,3 +181,43 @@ def test_a_bending_length_and_a_scale_give_the_estimate_the_fabrics_bending(tmp_
   assert out['calibration'] is None or 'combination of measurements' in (
     out['calibration'].get('differs', [])
   )
+
+
+def test_a_sheet_and_its_hemmed_twin_at_one_fan_setting_share_one_wind(tmp_path):
+  """Two recordings of one fan setting, the second simulated with 0.3 kg at
+  its hem (``overrides``): its search simulates the hem (its saved config),
+  the joint draws one wind for both (the same interval in each), joint.json
+  names the fan and the hem, and the calibration note says no calibration
+  measured recordings sharing a fan setting."""
+  model_dir = fx.write_hand_made_model(str(tmp_path / 'model'))
+  config = objective.PRESETS['smoke'].replace(backend='c')
+  recs = [
+    recording_lib.load_recording(
+      fx.write_recording(str(tmp_path / f'r{k}'), fx.TRUTH),
+      fps=config.simulation.fps,
+      size=(fx.SIZE, fx.SIZE),
+      frames=config.simulation.frames,
+    )  # fmt: skip
+    for k in range(2)
+  ]
+  workdir = str(tmp_path / 'joint')
+  with pytest.raises(ValueError, match='3 fan settings for 2 recordings'):
+    search.estimate_joint(config, recs, model_dir, workdir, fans=['a', 'a', 'b'])
+  out = search.estimate_joint(
+    config, recs, model_dir, workdir, overrides=[{}, {'hem_mass': 0.3}],
+    fans=['low', 'low'],
+  )  # fmt: skip
+  a, b = out['recordings']
+  assert a['fan'] == b['fan'] == 'low' and 'hem_mass' not in a and b['hem_mass'] == 0.3
+  assert a['wind_speed']['interval_90'] == b['wind_speed']['interval_90']
+  saved = [
+    recording_lib.read_json(
+      os.path.join(workdir, f'recording_{k}', search.ESTIMATE_FILE)
+    )
+    for k in range(2)
+  ]
+  assert [s['config']['hem_mass'] for s in saved] == [0.0, 0.3]
+  note = out['calibration']
+  assert note is None or 'recordings sharing one fan setting' in note['differs']
+  text = report.joint_table(out)
+  assert "share fan setting 'low'" in text and 'recording 1 carries 300 g' in text
