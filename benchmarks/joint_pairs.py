@@ -27,6 +27,15 @@ size:
   python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_shape --pairs=6
   python -m benchmarks.joint_pairs --distance=shape --workdir=/tmp/pairs_mm --pairs=16 \
       --group=3 --fan_winds=1,3.5 --physics=mismatched   # another physics's recordings
+
+``--hem_mass=0.3``: each pair is one sheet filmed twice at one fan setting,
+the second time with that many kg taped along its free hem (a second sweep
+of the same truths with ``datasets.Config.hem_mass``, its own cameras and
+gusts), estimated as a protocol file with ``"fan"`` and ``"hem_mass"`` is:
+one wind for both (``posterior.joint``'s ``fans``), the hem simulated in the
+second's search; ``--reading_sd=0`` gives no anemometer (the video alone).
+Read from the same searches: the pair with a wind each (``fans_apart``) and
+the plain sheet alone.
 """
 
 from __future__ import annotations
@@ -75,6 +84,8 @@ class Args:
       box).
     physics: the recordings' physics: 'own' (the estimator's simulator) or
       'mismatched' (``physsim.mismatch.WORLD``; the estimates keep their own).
+    hem_mass: kg at the hem of each pair's second recording, which shares
+      the first's fan setting (0: pairs of fan settings; needs --group=2).
     estimate: the preset's estimate settings (no flags of their own).
   """
 
@@ -96,6 +107,7 @@ class Args:
   seconds: float = 0.0
   fan_winds: tuple[str, ...] = ()
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
+  hem_mass: float = 0.0
   estimate: objective.EstimateConfig = cli.nested(
     objective.EstimateConfig(), skip=_ESTIMATE_FIELDS
   )
@@ -105,9 +117,10 @@ PRESETS = {k: Args(estimate=v) for k, v in objective.PRESETS.items()}
 NAMES = ('wind_speed', 'area_weight', 'load_ratio')
 FLAG_NAMES = ('model', 'image_size', 'material', 'pairs', 'group', 'seed', 'reading_sd', 'preset',
               'distance', 'likelihood', 'sharpness', 'gusts', 'cloth_resolution', 'backend',
-              'seconds', 'fan_winds', 'physics')  # fmt: skip
+              'seconds', 'fan_winds', 'physics', 'hem_mass')  # fmt: skip
 _LOWER = {'image_size': 16, 'group': 2, 'sharpness': 0.0, 'gusts': 0.0,
-          'cloth_resolution': 0, 'seconds': 0.0}  # fmt: skip
+          'cloth_resolution': 0, 'seconds': 0.0, 'reading_sd': 0.0,
+          'hem_mass': 0.0}  # fmt: skip
 
 
 def _preset(args: Args) -> str:
@@ -123,15 +136,12 @@ def _recordings(args: Args, workdir: str, size: int) -> list[list[dict]]:
     lo, hi = _fan_winds(args)
     rng = np.random.default_rng([args.seed, 11])
     truths = truths._replace(wind_speed=rng.uniform(lo, hi, truths.wind_speed.shape))
+  if args.hem_mass:  # one fan setting a pair: the first's wind for both
+    v = truths.wind_speed.reshape(args.pairs, args.group)
+    truths = truths._replace(wind_speed=np.repeat(v[:, :1], args.group, 1).ravel())
+    return _hem_pairs(args, workdir, size, truths)
   n = args.group * args.pairs
-  cfg = datasets.PRESETS['smoke' if args.smoke else 'eval']
-  cfg = dataclasses.replace(
-    cfg, materials=(args.material,), sequences=n, resolution=size,
-    batch_size=min(n, 64), seed=6000 + args.seed, physics=args.physics,
-    **({'backend': args.backend} if args.backend else {}),
-  )  # fmt: skip
-  if args.seconds:  # a longer (or shorter) clip of the same scenes
-    cfg = dataclasses.replace(cfg, frames=round(args.seconds * cfg.fps))
+  cfg = _sweep(args, size, n)
   root = os.path.join(workdir, 'recordings')
   datasets.run(cfg, root, params={args.material: truths})
   index = physsim.dataset.open_dataset(root)
@@ -144,6 +154,47 @@ def _recordings(args: Args, workdir: str, size: int) -> list[list[dict]]:
     else:
       print(f'group {p}: a recording was not kept (camera coverage); left out')
   return out
+
+
+def _sweep(args: Args, size: int, n: int, **kw) -> datasets.Config:
+  """The recordings' dataset sweep of ``n`` sequences (``kw``: its changes)."""
+  cfg = datasets.PRESETS['smoke' if args.smoke else 'eval']
+  cfg = dataclasses.replace(
+    cfg, materials=(args.material,), sequences=n, resolution=size,
+    batch_size=min(n, 64), physics=args.physics,
+    **({'backend': args.backend} if args.backend else {}),
+    **{'seed': 6000 + args.seed, **kw},
+  )  # fmt: skip
+  if args.seconds:  # a longer (or shorter) clip of the same scenes
+    cfg = dataclasses.replace(cfg, frames=round(args.seconds * cfg.fps))
+  return cfg
+
+
+def _hem_pairs(args: Args, workdir: str, size: int, truths) -> list[list[dict]]:
+  """Each pair's plain sheet and its hemmed twin, of one truth (the pair's
+  first): two sweeps, the second with the hem, another seed (its own cameras
+  and gusts), each resumed where it stands."""
+  first = jax.tree.map(lambda a: a[:: args.group], truths)
+  out = {}
+  for name, kw in (('recordings', {}),
+                   ('recordings_hem', {'hem_mass': args.hem_mass, 'seed': 7000 + args.seed})):  # fmt: skip
+    root = os.path.join(workdir, name)
+    datasets.run(_sweep(args, size, args.pairs, **kw), root,
+                 params={args.material: first})  # fmt: skip
+    index = physsim.dataset.open_dataset(root)
+    out[name] = {int(r['seq_id']): (r, index.path(r))
+                 for r in index.filter(material=args.material).rows}  # fmt: skip
+  groups = []
+  for p in range(args.pairs):
+    pair = [out[name].get(p) for name in ('recordings', 'recordings_hem')]
+    if all(x is not None and x[0]['valid'] for x in pair):
+      # seq: the pair's index in the group-major numbering of the readings
+      groups.append(
+        [{'seq': args.group * p + k, 'path': x[1]} for k, x in enumerate(pair)]
+      )
+    else:
+      print(f'pair {p}: a recording was not kept (camera coverage); left out')
+  return groups
 
 
 def _fan_winds(args: Args) -> tuple[float, float]:
@@ -165,11 +216,13 @@ def _error(est: float, truth: float) -> float:
   return float(100 * abs(est / truth - 1))
 
 
-def _first_k_medians(jobs, k: int, space) -> list[dict]:
+def _first_k_medians(jobs, k: int, space, shared_bias=None) -> list[dict]:
   """Posterior medians of each of the first ``k`` recordings' (wind, area
   weight, load ratio) under their joint posterior (``posterior.joint`` of
-  their saved likelihoods, ``search.joint_posterior``)."""
-  joint, _ = search.joint_posterior(jobs[:k], jax.random.key(jobs[0].config.seed))
+  their saved likelihoods, ``search.joint_posterior``; one wind each)."""
+  joint, _ = search.joint_posterior(
+    jobs[:k], jax.random.key(jobs[0].config.seed), shared_bias
+  )
   out = []
   for u in joint['samples']:
     p = physsim.from_unit(u, space)
@@ -200,6 +253,12 @@ def main(args: Args) -> None:
   config.check()  # e.g. the synthetic likelihood without the shape distance
   if args.fan_winds:
     _fan_winds(args)  # a bad range refused before any work
+  if args.hem_mass and args.group != 2:
+    raise ValueError(
+      f'--hem_mass pairs a sheet with its hemmed twin: --group=2, got {args.group}'
+    )
+  fans = ['pair', 'pair'] if args.hem_mass else None
+  overrides = [{}, {'hem_mass': args.hem_mass}] if args.hem_mass else None
   net = embedding.for_distance(args.model, config.scoring.distance, args.image_size)
   if args.seconds:  # compare the whole clip
     config = config.replace(frames=round(args.seconds * config.simulation.fps))
@@ -223,13 +282,16 @@ def main(args: Args) -> None:
         size=net.image_size,
         frames=config.simulation.frames,
       )
-      m = posterior_lib.simulated_reading(
-        'wind_speed', rec.truth, args.reading_sd, args.seed, r['seq']
-      )
       recs.append(rec)
-      winds.append((m.wind_speed, m.wind_speed_sd))
+      if args.reading_sd:  # one fan setting, one reading: the pair's first's
+        seq = group[0]['seq'] if args.hem_mass else r['seq']
+        m = posterior_lib.simulated_reading(
+          'wind_speed', rec.truth, args.reading_sd, args.seed, seq
+        )
+        winds.append((m.wind_speed, m.wind_speed_sd))
     wd = os.path.join(args.workdir, f'pair_{group[0]["seq"] // args.group:02d}')
-    jobs = search.joint_jobs(config, recs, args.model, wd, winds, nets=nets)
+    jobs = search.joint_jobs(config, recs, args.model, wd, winds or None, nets=nets,
+                             overrides=overrides, fans=fans)  # fmt: skip
     plan.append((group, recs, winds, wd, jobs))
   # Every group's searches in lockstep: one simulation batch for all.
   results = search.estimate_many([j for *_, jobs in plan for j in jobs])
@@ -238,11 +300,13 @@ def main(args: Args) -> None:
   for g, (group, recs, winds, wd, jobs) in enumerate(plan):
     done = results[g * args.group : (g + 1) * args.group]
     try:
-      out = search.combine_joint(jobs, done, wd)
+      out = search.combine_joint(jobs, done, wd, fans)
     except ValueError as e:  # a search failed: the others still count
       print(f'group {g}: left out ({e})')
       continue
     first = {k: _first_k_medians(jobs, k, space) for k in ks}
+    if fans:  # the same searches with a wind each (no fan shared)
+      apart = _first_k_medians(jobs, args.group, space, out['shared_bias'])
     for k, rec in enumerate(recs):
       t = dict(rec.truth)
       t['load_ratio'] = float(physsim.load_ratio(t['wind_speed'], t['area_weight']))
@@ -262,7 +326,7 @@ def main(args: Args) -> None:
       row = {
         'seq': group[k]['seq'],
         'truth': t,
-        'reading': list(winds[k]),
+        'reading': list(winds[k]) if winds else None,
         **{f'{who}_point': p for who, p in points.items()},
         **{who: {n: _error(p[n], t[n]) for n in NAMES} for who, p in points.items()},
         'joint_median': {n: _error(joint[n]['median'], t[n]) for n in NAMES},
@@ -280,6 +344,9 @@ def main(args: Args) -> None:
       for j in ks:  # the group's first j recordings, jointly
         if k < j:
           row[f'first_{j}'] = {n: _error(first[j][k][n], t[n]) for n in NAMES}
+      if fans:
+        row['fans_apart'] = {n: _error(apart[k][n], t[n]) for n in NAMES}
+        row['hem_mass'] = out['recordings'][k].get('hem_mass', 0.0)
       rows.append(row)
   if not rows:
     raise ValueError('every group failed')
@@ -287,6 +354,8 @@ def main(args: Args) -> None:
   labels.update(
     {f'first_{j}': f'the first {j}, jointly (posterior median)' for j in ks}
   )
+  if fans:
+    labels['fans_apart'] = 'the pair, a wind each (posterior median)'
   labels.update({
     'joint_median': f'all {args.group}, jointly (posterior median)',
     'joint': f'all {args.group}, jointly (reported point)',
@@ -301,8 +370,12 @@ def main(args: Args) -> None:
     n: float(np.mean([r['joint_covered_90'][n] for r in rows])) for n in NAMES
   }
   print(f'{len(rows)} recordings in {len(groups)} groups of {args.group}, '
-        f'{args.material}, distance {config.scoring.distance}, readings with '
-        f'{100 * args.reading_sd:g}% error; mean errors')  # fmt: skip
+        f'{args.material}, distance {config.scoring.distance}, '
+        + (f'readings with {100 * args.reading_sd:g}% error' if args.reading_sd
+           else 'no readings')
+        + (f'; each pair one fan setting, the second with {1000 * args.hem_mass:g} g '
+           'at its hem' if args.hem_mass else '')
+        + '; mean errors')  # fmt: skip
   print('| estimate | recordings | wind | area weight | load ratio |')
   print('|---|---:|---|---|---|')
   for who, label in labels.items():

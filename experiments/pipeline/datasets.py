@@ -86,6 +86,10 @@ class Config:
       ``physsim.EDGE_SOLREF_SPACING`` (``physsim.config_for_mesh``: the same
       stretch stiffness on every mesh); off: the fixed one of datasets made
       before (only meshes finer than that differ).
+    hem_mass: kg of known mass along the square cloth's free edge in every
+      sequence (``physsim.hem_mass``: coins taped along the hem; 0: none),
+      for recordings of a protocol's hemmed sheet (``benchmarks.joint_pairs
+      --hem_mass``).
   """
 
   materials: tuple[str, ...] = tuple(physsim.FABRICS)
@@ -113,6 +117,7 @@ class Config:
   pose_draws: int = 8
   scaled_edges: bool = True
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
+  hem_mass: float = 0.0
 
 
 PRESETS = {
@@ -260,6 +265,11 @@ def _check_config(config: Config) -> None:
     raise ValueError(
       f'physics must be one of {tuple(physsim.MISMATCHES)}, got {config.physics!r}'
     )
+  if not 0.0 <= config.hem_mass <= 1.0 or (config.garment and config.hem_mass):
+    raise ValueError(
+      f'hem_mass must be in [0, 1] kg on the square cloth, got {config.hem_mass}'
+      + (f' on garment {config.garment!r}' if config.garment else '')
+    )
   if not 0.0 <= config.min_coverage < 1.0 or config.pose_draws < 1:
     raise ValueError(
       f'need 0 <= min_coverage < 1 and pose_draws >= 1, got {config.min_coverage} '
@@ -282,6 +292,8 @@ def _identity(config: Config, backend: str) -> dict:
     d.pop('cloth_size')
   if config.physics == 'own':  # ... and before recordings of another physics
     d.pop('physics')
+  if not config.hem_mass:  # ... and before a hem could be added
+    d.pop('hem_mass')
   if physsim.scaled_edge_solref(_mesh(config).shortest_edge, 1.0) == 1.0:
     d.pop('scaled_edges')  # the same edges either way, as before the setting
   return d
@@ -507,7 +519,12 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   root_key = jax.random.key(config.seed)
   # One compiled model for every material (bending is scaled per world), so
   # batches run across materials: jobs are (material index, sequence index).
-  model = physsim.build(mesh, config.materials[0], sim_config)
+  hem = (
+    physsim.hem_mass(mesh, config.cloth_resolution, config.hem_mass)
+    if config.hem_mass
+    else None
+  )
+  model = physsim.build(mesh, config.materials[0], sim_config, extra_mass=hem)
   params = {m: given[m] if given else material_params(config, m)
             for m in config.materials}  # fmt: skip
   cam_keys = {
@@ -652,6 +669,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
           'backend': backend,
           'gust_intensity': config.gust_intensity,
           **({'physics': config.physics} if config.physics != 'own' else {}),
+          **({'hem_mass': config.hem_mass} if config.hem_mass else {}),
           'noise': config.noise,
           **({'rgb_color': list(embedding.rgb_color(material))} if config.rgb else {}),
           'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))

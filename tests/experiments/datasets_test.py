@@ -43,3 +43,19 @@ def test_materials_draw_from_their_own_streams():
 def test_bad_configs_are_refused_by_name(field, value, word):
   with pytest.raises(ValueError, match=word):
     datasets._check_config(dataclasses.replace(SMOKE, **{field: value}))
+
+
+def test_a_hem_is_part_of_a_sweeps_identity_and_refused_out_of_range():
+  """A sweep with a hem is another dataset (a resume of the plain one into
+  its folder is refused); without one, its identity is the one datasets made
+  before the setting had (they resume); a hem out of [0, 1] kg, NaN, or on a
+  garment is refused by name."""
+  plain = datasets.PRESETS['smoke']
+  assert 'hem_mass' not in datasets._identity(plain, 'c')
+  hemmed = datasets._identity(dataclasses.replace(plain, hem_mass=0.3), 'c')
+  assert hemmed['hem_mass'] == 0.3
+  for bad in (-0.1, 1.5, float('nan')):
+    with pytest.raises(ValueError, match='hem_mass must be in'):
+      datasets._check_config(dataclasses.replace(plain, hem_mass=bad))
+  with pytest.raises(ValueError, match="on garment 'tshirt'"):
+    datasets._check_config(dataclasses.replace(plain, hem_mass=0.1, garment='tshirt'))

@@ -110,3 +110,44 @@ def test_fan_winds_outside_the_box_are_refused_before_any_work(tmp_path, winds):
   assert proc.returncode != 0
   assert f'--fan_winds={winds}: need lo,hi m/s with 1 <= lo < hi <= 6' in proc.stderr
   assert not (tmp_path / 'w').exists()
+
+
+@pytest.mark.slow
+def test_a_sheet_and_its_hemmed_twin_share_their_fan_and_the_hem_is_simulated(tmp_path):
+  """``--hem_mass``: a pair is one truth filmed twice, the second sweep with
+  the hem (its recordings say so) and its own cameras; with no anemometer
+  (``--reading_sd=0``) the two share one wind in the joint (the same wind
+  point), and the same searches with a wind each are read beside it."""
+  work = tmp_path / 'work'
+  proc = _run(
+    f'--image_size={fx.SIZE}', f'--workdir={work}', '--smoke', '--backend=c',
+    '--preset=smoke', '--pairs=1', '--group=2', '--distance=shape',
+    '--cloth_resolution=8', '--fan_winds=2,3', '--physics=mismatched',
+    '--hem_mass=0.3', '--reading_sd=0',
+  )  # fmt: skip
+  assert proc.returncode == 0, proc.stderr[-3000:]
+  out = json.loads((work / 'joint_pairs.json').read_text())
+  plain, hem = out['rows']
+  assert plain['truth'] == hem['truth'] and plain['reading'] is None
+  assert (plain['hem_mass'], hem['hem_mass']) == (0.0, 0.3)
+  assert plain['joint_point']['wind_speed'] == hem['joint_point']['wind_speed']
+  assert 'fans_apart' in plain and out['summary']['fans_apart']['n'] == 2
+  metas = [
+    json.loads(m.read_text()) for m in (work / 'recordings_hem').rglob('meta.json')
+  ]
+  assert metas and all(m['hem_mass'] == 0.3 for m in metas)
+  assert all('hem_mass' not in json.loads(m.read_text())
+             for m in (work / 'recordings').rglob('meta.json'))  # fmt: skip
+  saved = json.loads((work / 'pair_00' / 'recording_1' / 'estimate.json').read_text())
+  assert saved['config']['hem_mass'] == 0.3
+  assert 'no readings; each pair one fan setting, the second with 300 g' in proc.stdout
+
+
+def test_a_hem_pairs_two_recordings(tmp_path):
+  proc = _run(f'--workdir={tmp_path / "w"}', '--distance=shape', '--hem_mass=0.3',
+              '--group=3')  # fmt: skip
+  assert proc.returncode != 0
+  assert (
+    '--hem_mass pairs a sheet with its hemmed twin: --group=2, got 3' in proc.stderr
+  )
+  assert not (tmp_path / 'w').exists()
