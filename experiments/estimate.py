@@ -226,6 +226,13 @@ def _take_in(args: Args, take: takes.Take, workdir: str, frames: bool = True):
   return ik
 
 
+def own_settings(config) -> dict:
+  """A recording's own settings in a joint estimate (``search.PER_RECORDING``
+  that its config writes: a config without a hem writes none)."""
+  flat = config.flat()
+  return {k: flat[k] for k in search.PER_RECORDING if k in flat}
+
+
 def with_alignment_error(args: Args, config, intakes: list):
   """``config`` with the intakes' own alignment error as its camera error
   (the largest of them) where ``args.alignment_sd`` and the user gave none;
@@ -412,8 +419,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   drawings = []  # the pictures, drawn once the answer is printed
   if n > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
-    flats = [c.flat() for c in configs]
-    overrides = [{k: f[k] for k in search.PER_RECORDING} for f in flats]
+    overrides = [own_settings(c) for c in configs]
     result = search.estimate_joint(
       config, recs, args.model, args.workdir,
       winds if any(t.wind for t in recorded) else None, overrides=overrides,

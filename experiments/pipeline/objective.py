@@ -292,6 +292,8 @@ class EstimateConfig:
         out.update(dataclasses.asdict(getattr(self, section)))
     if out['shared_bias'] == Scoring.shared_bias:  # files as before it was a setting
       del out['shared_bias']
+    if not out['hem_mass']:  # ... and before a hem could be simulated
+      del out['hem_mass']
     return out
 
   @classmethod
@@ -388,6 +390,7 @@ class EstimateConfig:
         f'need 0 <= gusts <= 1 and max_iter >= 0, got {sim.gusts}, {se.max_iter}'
       )
     flat.setdefault('shared_bias', sc.shared_bias)  # flat() leaves out its default
+    flat.setdefault('hem_mass', sim.hem_mass)  # ... and a hem's
     for name, lo, hi in _RANGES:
       v = flat[name]
       if not lo <= v <= hi:

@@ -467,7 +467,7 @@ def _differing_fields(config, cal: dict) -> list[str]:
     calibrated.setdefault('hem_mass', 0.0)  # ... or a hem could be added
   if 'sharpness' in calibrated:  # ... and before the model error was
     calibrated.setdefault('model_error', 0.0)
-  mine = config.flat()
+  mine = {'hem_mass': 0.0, **config.flat()}  # flat() leaves out no hem
   if 'materials' in cal:
     calibrated['material'] = (
       mine['material'] if mine['material'] in cal['materials'] else cal['materials']

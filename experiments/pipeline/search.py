@@ -464,7 +464,9 @@ def estimate(
     if mine != theirs:
       raise ValueError(
         'the setup was resolved for other settings than the estimate is given: '
-        + ', '.join(k for k, v in mine.items() if theirs[k] != v)
+        + ', '.join(
+          sorted(k for k in mine.keys() | theirs.keys() if mine.get(k) != theirs.get(k))
+        )  # fmt: skip
       )
   (out,) = estimate_many(
     [Job(config, recording, model_dir, workdir, allow_other_material, setup)],

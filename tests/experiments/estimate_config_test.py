@@ -23,23 +23,23 @@ from experiments.studies import tables
 
 # The flags of the flat EstimateConfig before the split (``--fps`` of the
 # config was always ``--sim_fps``), with the bending-length reading (and its law) and the
-# joint's shared discrepancy added since.
+# joint's shared discrepancy and a hem's known mass added since.
 FLAT_FLAGS = [
   'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
-  'garment', 'garment_spacing', 'gusts', 'likelihood', 'material', 'max_iter',
+  'garment', 'garment_spacing', 'gusts', 'hem_mass', 'likelihood', 'material', 'max_iter',
   'min_iter', 'model_error', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
   'sensor_noise', 'shared_bias', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
   'wind_speed', 'wind_speed_sd', 'workers',
 ]  # fmt: skip
-# experiments.estimate's flags before the split (and the bending length's).
+# experiments.estimate's flags before the split (and the bending length's, the hem's).
 ESTIMATE_FLAGS = [
   'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
   'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd',
   'calibration', 'camera_json',
   'camera_sd_deg', 'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size',
   'cloth_sizes', 'depth_range', 'depth_scale', 'depth_topic', 'distance', 'fps',
-  'frame_glob', 'frames', 'garment', 'garment_spacing', 'gusts', 'image_size',
+  'frame_glob', 'frames', 'garment', 'garment_spacing', 'gusts', 'hem_mass', 'image_size',
   'imu_topic', 'info_topic', 'intake_only', 'likelihood', 'mask', 'material',
   'max_iter', 'min_iter', 'min_overlap', 'model', 'model_error', 'n_init', 'pins', 'plane_tol',
   'point', 'posterior_grid', 'protocol', 'q', 'recording', 'remove_planes',
@@ -125,6 +125,10 @@ def test_the_flat_form_is_the_old_files():
   assert json.loads(json.dumps(SMOKE.flat())) == TODAYS_SMOKE
   assert objective.EstimateConfig.from_flat(TODAYS_SMOKE) == SMOKE
   assert objective.EstimateConfig.from_flat(OLD_SMOKE) == OLD_SMOKE_CONFIG
+  # a hem is written where there is one, and read back
+  hemmed = json.loads(json.dumps(SMOKE.replace(hem_mass=0.3).flat()))
+  assert hemmed == {**TODAYS_SMOKE, 'hem_mass': 0.3}
+  assert objective.EstimateConfig.from_flat(hemmed) == SMOKE.replace(hem_mass=0.3)
   # a file from before cloth_size and the camera's error were settings
   older = {
     k: v for k, v in OLD_SMOKE.items()

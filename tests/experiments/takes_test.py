@@ -101,6 +101,11 @@ def test_estimate_takes_a_protocol_or_recordings_not_both(folder):
     estimate.Args(), take._replace(world_up='-y', wind=(2.0, 0.1))
   )
   assert ik.world_up == '-y' and config.measured.wind_speed == 2.0
+  _, config = estimate.take_settings(estimate.Args(), take._replace(hem_mass=0.3))
+  assert config.simulation.hem_mass == 0.3
+  # the joint's per-recording settings: a hem is one of them, no hem none
+  assert estimate.own_settings(config)['hem_mass'] == 0.3
+  assert 'hem_mass' not in estimate.own_settings(estimate.Args().search)
 
 
 def test_a_protocol_file_gives_the_fabrics_own_readings(folder):
