@@ -16,8 +16,14 @@ noise): the prior's 90% width of log area weight over the posterior's, for
 sets with and without a hem, with the drag law trusted (``--drag_sds`` 0) and
 uncertain (a shared factor on the wind force, log sd 0.2: the bound's
 ``drag_sd``), the video alone and with every wind read to 2%. A bound, not
-an estimate: the estimate does not yet simulate a hem (the closing note of
-the session that added this says what is left).
+an estimate: ``benchmarks.joint_pairs --hem_mass`` runs the estimate itself
+on hemmed recordings (it narrowed area weight far less). ``--stats``
+reads the bound on fewer statistics, e.g. the sheet's mean position alone
+as the estimate's shape distance does, and ``--clip`` at the
+estimate's 3 s:
+
+  python -m benchmarks.hem_weight --workdir=out/hem_weight_3s --clip=3 \
+      --stats=centroid_out,centroid_up
 
   python -m benchmarks.hem_weight --workdir=out/hem_weight --workers=16
   python -m benchmarks.hem_weight --workdir=out/hem_weight --world=air_drag=0.1  # one part
@@ -140,7 +146,9 @@ def biases(result: dict, config: protocol.Config, workdir: str, drag: float,
           )
           for n in names
         ]
-        cells.append(protocol.set_bias(rows, res, prior, mode, shared, drag))
+        cells.append(
+          protocol.set_bias(rows, res, prior, mode, shared, drag, config.stats)
+        )
       out[(label, mode)] = cells
   return out
 

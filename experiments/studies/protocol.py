@@ -298,6 +298,10 @@ class Config:
     scaled_edges: the edges' time constant shrinks with the spacing
       (``physsim.config_for_mesh``: the same stretch stiffness on every mesh
       and cloth size; the default); off: the fixed one of the first study.
+    stats: the statistics the bound reads (names of ``STATS``,
+      comma-separated; empty: all six). The estimate's shape distance reads
+      the sheet's mean position alone (``centroid_out,centroid_up``); the
+      slopes are simulated for all of them either way (one cache).
   """
 
   material: str = 'gray_interlock'
@@ -345,6 +349,7 @@ class Config:
   workers: int = 1
   seed: int = 0
   scaled_edges: bool = True
+  stats: tuple[str, ...] = ()
 
 
 PRESETS = {
@@ -638,6 +643,15 @@ def priors(material: str, reading: float) -> dict[str, float]:
   }
 
 
+def stat_index(stats) -> list[int] | slice:
+  """Indices into ``STATS`` of the statistics ``stats`` names (every row:
+  none named); a ValueError naming an unknown or repeated one."""
+  unknown = [x for x in stats if x not in STATS]
+  if unknown or len(set(stats)) < len(stats):
+    raise ValueError(f'--stats={",".join(stats)}: need distinct names of {list(STATS)}')
+  return [STATS.index(x) for x in stats] if stats else slice(None)
+
+
 def _assemble(rows, prior, mode, shared, drag_sd):
   """The set's parameters and each recording's slopes on them: (the prior
   sds (n,), per recording (slopes (m, p_k), its parameters' indices))."""
@@ -666,18 +680,22 @@ def _assemble(rows, prior, mode, shared, drag_sd):
   return sd, parts
 
 
-def _information(rows, prior, mode, shared, drag_sd):
-  """``_assemble``'s prior sds and parts, and the set's Fisher information."""
+def _information(rows, prior, mode, shared, drag_sd, stats=()):
+  """``_assemble``'s prior sds and parts (each recording's slopes on the
+  statistics ``stats`` read, ``stat_index``), and the set's Fisher
+  information."""
   sd, parts = _assemble(rows, prior, mode, shared, drag_sd)
+  idx = stat_index(stats)
+  parts = [(j[idx], i) for j, i in parts]
   infos = [
-    design.fisher(j, np.array(r['noise_cov']))
+    design.fisher(j, np.array(r['noise_cov'])[idx][:, idx])
     for (j, _), r in zip(parts, rows, strict=True)
   ]
   return sd, parts, design.combine(infos, [i for _, i in parts], len(sd))
 
 
 def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
-                  shared=None, drag_sd: float = 0.0) -> dict:  # fmt: skip
+                  shared=None, drag_sd: float = 0.0, stats=()) -> dict:  # fmt: skip
   """Narrowing of log bending and log area weight by the recordings ``rows``
   (each ``simulate_candidate``'s dict) together, in ``mode``: ``'video'``,
   ``'anemometer'`` (every wind read) or ``'scale'`` (area weight read).
@@ -688,8 +706,9 @@ def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
   recording in the fan: what the simulator's drag law gets wrong about the
   world (0: nothing). The force goes as that coefficient times v^2, and the
   slopes are taken in steady wind with the cloth at rest, so a recording's
-  slope in it is half its slope in log wind."""
-  sd, _, total = _information(rows, prior, mode, shared, drag_sd)
+  slope in it is half its slope in log wind. ``stats``: the statistics read
+  (``stat_index``; all by default)."""
+  sd, _, total = _information(rows, prior, mode, shared, drag_sd, stats)
   n = len(sd)
   post = design.widths(sd, total)
   no_video = design.widths(sd, np.zeros((n, n)))
@@ -703,17 +722,18 @@ def set_narrowing(rows: list[dict], prior: dict[str, float], mode: str,
 
 
 def set_bias(rows: list[dict], residuals: list, prior: dict[str, float], mode: str,
-             shared=None, drag_sd: float = 0.0) -> dict:  # fmt: skip
+             shared=None, drag_sd: float = 0.0, stats=()) -> dict:  # fmt: skip
   """What a fit with the estimator's simulator makes of recordings of another
   physics, to first order: the shift of the posterior mean of (log bending,
   log area weight) that the statistics' misfit ``residuals`` (per row,
   ``world_residual``) causes, (F + P)^-1 sum_k J_k^T R_k^-1 r_k, beside the
-  posterior's sd (``set_narrowing``'s model of the set)."""
-  sd, parts, info = _information(rows, prior, mode, shared, drag_sd)
+  posterior's sd (``set_narrowing``'s model of the set, on ``stats``)."""
+  sd, parts, info = _information(rows, prior, mode, shared, drag_sd, stats)
+  idx = stat_index(stats)
   score = np.zeros(len(sd))
   for (j, index), r, res in zip(parts, rows, residuals, strict=True):
     score[index] += j.T @ np.linalg.solve(
-      np.array(r['noise_cov']), np.asarray(res, float)
+      np.array(r['noise_cov'])[idx][:, idx], np.asarray(res, float)[idx]
     )
   cov = np.linalg.inv(info + np.diag(1.0 / sd**2))
   shift = cov @ score
@@ -736,6 +756,7 @@ def run(config: Config, workdir: str) -> dict:
     )
   if not (np.isfinite(config.drag_sd) and config.drag_sd >= 0):
     raise ValueError(f'--drag_sd={config.drag_sd}: need a number >= 0 (0: trusted)')
+  stat_index(config.stats)  # an unknown name refused before any simulation
   cands = [parse(n) for n in config.candidates]
   conv = [parse(n) for n in config.convergence]
   sets = parse_sets(config.sets, list(config.candidates))
@@ -759,7 +780,9 @@ def run(config: Config, workdir: str) -> dict:
       rows = [slopes[(n, b)] for n in names]
       entry = {'set': label, 'members': members, 'bending_truth': b}
       for mode in MODES:
-        entry[mode] = set_narrowing(rows, prior, mode, shared, config.drag_sd)
+        entry[mode] = set_narrowing(
+          rows, prior, mode, shared, config.drag_sd, config.stats
+        )
       table.append(entry)
   convergence = []
   for c in conv:
@@ -771,13 +794,14 @@ def run(config: Config, workdir: str) -> dict:
       for name in (n, c.name):
         r = slopes[(name, bendings[0])]
         pair[name] = {
-          mode: set_narrowing([r], prior, mode) for mode in MODES
+          mode: set_narrowing([r], prior, mode, stats=config.stats) for mode in MODES
         } | {'slope_log_bending': [s[0] for s in r['slopes']],
              'noise_sd': np.sqrt(np.diag(r['noise_cov'])).tolist()}  # fmt: skip
       convergence.append(pair)
   result = {
     'material': config.material, 'area_weight': w, 'bendings': bendings,
-    'priors_sd_log': prior, 'stats': list(STATS), 'table': table,
+    'priors_sd_log': prior, 'stats': list(config.stats or STATS),
+    'table': table,
     'convergence': convergence,
     'overhang_vs_elastica': against_elastica(
       [r for r in slopes.values() if parse(r['candidate']).overhang], config.material

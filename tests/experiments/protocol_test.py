@@ -274,3 +274,29 @@ def test_the_bias_another_physics_causes_by_hand():
 def test_a_bad_drag_law_sd_is_refused_by_name(tmp_path, drag):
   with pytest.raises(ValueError, match='--drag_sd'):
     protocol.run(protocol.Config(drag_sd=drag), str(tmp_path))
+
+
+def test_the_bound_on_fewer_statistics_reads_only_those():
+  """``stats``: the statistics the bound reads. A recording whose first
+  statistic sees log bending (sd 0.5) and whose third sees log area weight
+  (sd 0.05), the two uncorrelated: reading the first alone narrows bending
+  and leaves area weight at the prior's, by hand; unknown or repeated names
+  are refused by name."""
+  prior = protocol.priors('gray_interlock', 0.02)
+  n = len(protocol.STATS)
+  slopes = np.zeros((n, 2))
+  slopes[0, 0], slopes[2, 1] = 1.0, 1.0
+  cov = np.diag([0.25, 1.0, 0.0025, 1.0, 1.0, 1.0])
+  row = {'wind': 0.0, 'slopes': slopes.tolist(), 'noise_cov': cov.tolist()}
+  sb, sw = prior['log_bending'], prior['log_area_weight']
+  first = protocol.set_narrowing([row], prior, 'video', stats=('centroid_out',))
+  assert first['bending'] == pytest.approx(sb * np.sqrt(1 / sb**2 + 4), rel=1e-9)
+  assert first['area_weight'] == pytest.approx(1.0, rel=1e-12)
+  both = protocol.set_narrowing([row], prior, 'video')
+  assert both['area_weight'] == pytest.approx(sw * np.sqrt(1 / sw**2 + 400), rel=1e-9)
+  bias = protocol.set_bias([row], [[0.0, 0.0, 0.01, 0, 0, 0]], prior, 'video',
+                           stats=('centroid_out',))  # fmt: skip
+  assert bias['area_weight_bias_log'] == 0.0  # the misfit is on a statistic not read
+  for bad in (('centroid',), ('centroid_out', 'centroid_out')):
+    with pytest.raises(ValueError, match='--stats='):
+      protocol.stat_index(bad)
