@@ -294,12 +294,9 @@ def fabric_check(cal: dict, quoted: dict, mode: str, material: str) -> dict | No
   ``{'material', 'n', 'coverage', 'short'}``, ``short`` naming each quantity
   whose 90% intervals held the truth less often than promised beyond the
   luck of the draw (the 95% binomial interval of its coverage below 90%)."""
+  recordings = lambda c: (c['physics'], c['seeds'], c['n'])
   for c in cal.get('fabric_checks', []):
-    if (c['physics'], c['seeds'], c['n']) != (
-      quoted['physics'],
-      quoted['seeds'],
-      quoted['n'],
-    ):
+    if recordings(c) != recordings(quoted):
       continue
     cells = c['coverage'].get(mode, {}).get(material)
     if cells:

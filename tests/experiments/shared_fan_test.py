@@ -73,6 +73,22 @@ def test_recordings_of_one_fan_setting_share_one_wind_as_enumeration_says():
     np.testing.assert_array_equal(p, q)
 
 
+def _ridge_pair(nv: int, nw: int, true_cell: int):
+  """Two recordings' log likelihoods on a (1, nv, nw) grid of wind 1-4 m/s
+  and area weight 0.1-0.4 kg/m^2, each reading only a load ratio to 2%:
+  log v^2/w, and with 0.3 kg/m^2 of known mass added, log v^2/(w + 0.3); the
+  truth at wind cell 150 and area-weight cell ``true_cell``. Returns them
+  (raveled) and the (nw,) area weights."""
+  v = np.linspace(1, 4, nv)[None, :, None]
+  w = np.linspace(0.1, 0.4, nw)[None, None, :]
+  w_true, v_true = w[0, 0, true_cell], v[0, 150, 0]
+  ridge = lambda extra: (
+    -0.5
+    * ((np.log(v**2 / (w + extra)) - np.log(v_true**2 / (w_true + extra))) / 0.02) ** 2
+  )
+  return [ridge(0.0).ravel(), ridge(0.3).ravel()], w[0, 0]
+
+
 def test_a_shared_wind_weighs_the_cloth_that_two_winds_cannot():
   """Two recordings each measuring only a load ratio (a ridge in wind and
   area weight: log v^2/w to 2%), one with 0.3 kg/m^2 of known mass added
@@ -80,14 +96,7 @@ def test_a_shared_wind_weighs_the_cloth_that_two_winds_cannot():
   winds that fit both and its posterior stays near the prior's (the ridges'
   own Jacobian tilts it); with one wind, the ridges cross at the true cell."""
   nb, nv, nw = 1, 300, 12
-  v = np.linspace(1, 4, nv)[None, :, None]
-  w = np.linspace(0.1, 0.4, nw)[None, None, :]
-  w_true, v_true = w[0, 0, 7], v[0, 150, 0]
-  ridge = lambda extra: (
-    -0.5
-    * ((np.log(v**2 / (w + extra)) - np.log(v_true**2 / (w_true + extra))) / 0.02) ** 2
-  )
-  lls = [ridge(0.0).ravel(), ridge(0.3).ravel()]
+  lls, _ = _ridge_pair(nv, nw, 7)
   prior = np.zeros(nb * nv * nw)
   apart = posterior_lib.joint(lls, (nb, nv, nw), prior, jax.random.key(0), n=10)
   shared = posterior_lib.joint(
@@ -197,16 +206,9 @@ def test_the_joints_shared_discrepancy_caps_what_a_hem_pair_says_of_area_weight(
   sqrt(0.1^2 + s0^2), never under 0.1 (docs/protocol.md: why a hem pair
   narrows area weight so little in an uncalibrated joint)."""
   nb, nv, nw = 1, 300, 40
-  v = np.linspace(1, 4, nv)[None, :, None]
-  w = np.linspace(0.1, 0.4, nw)[None, None, :]
-  w_true, v_true = w[0, 0, 20], v[0, 150, 0]
-  ridge = lambda extra: (
-    -0.5
-    * ((np.log(v**2 / (w + extra)) - np.log(v_true**2 / (w_true + extra))) / 0.02) ** 2
-  )
-  lls = [ridge(0.0).ravel(), ridge(0.3).ravel()]
+  lls, w = _ridge_pair(nv, nw, 20)
   prior = np.zeros(nb * nv * nw)
-  log_w = np.log(w[0, 0])
+  log_w = np.log(w)
 
   def sd(bias):
     out = posterior_lib.joint(
