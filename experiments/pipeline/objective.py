@@ -658,10 +658,13 @@ class Scores(NamedTuple):
 
 class Objective:
   """The fused program of one ``Problem.structure``, compiled once per
-  (P, q) shape and kept by this object (no global caches).
+  (P, q) shape (and count of distinct simulations, where worlds repeat:
+  ``distinct_worlds``) and kept by this object (no global caches).
 
   Call it with stacked ``ProblemData`` of P problems of that structure,
-  candidates ``u (P, q, 3)`` and per-candidate keys ``(P, q)``.
+  candidates ``u (P, q, 3)`` and per-candidate keys ``(P, q)``. Worlds whose
+  simulations are the same are simulated once and scored each against its own
+  recording.
   """
 
   def __init__(self, problem: Problem):
@@ -706,6 +709,7 @@ class Objective:
     self._program = jax.jit(
       self._fused, static_argnames=('with_frames', 'with_positions', 'worlds_on')
     )
+    self.simulated = 0  # simulations run by the calls so far (``distinct_worlds``)
 
   def _frames(self, positions, poses, noise_keys, colors):
     """Worlds' frames as their network sees them: (B, C, T, H, W) depth after
@@ -720,18 +724,20 @@ class Objective:
       )
     return frames
 
-  def _worlds(self, data: ProblemData, x, ratio, gust_keys, owner, noise_keys):
-    """One device's worlds: simulate, render, sense, embed and score each
-    against its problem's recording. Returns PSDs (B,), the shape summaries'
-    residuals to the recording's (B, 2) (zeros without a shape distance),
-    validity (B,) and positions (B, T, V, 3) (the rest mesh where a world
-    blew up)."""
+  def _simulate(self, x, ratio, gust_keys):
+    """One device's worlds simulated: positions (B, T, V, 3) (the rest mesh
+    where a world blew up) and validity (B,)."""
     w = physsim.world_inputs(
       self.cloth, x[:, 0], x[:, 1], x[:, 2], gust_keys, self._wind, ratio
     )
     positions, valid = self._rollout(w)  # (B, T, V, 3), (B,)
     rest = jnp.asarray(self.mesh.vertices, positions.dtype)
-    positions = jnp.where(valid[:, None, None, None], positions, rest)
+    return jnp.where(valid[:, None, None, None], positions, rest), valid
+
+  def _score(self, data: ProblemData, positions, owner, noise_keys):
+    """One device's simulated worlds rendered, sensed, embedded and scored,
+    each against its problem's recording: PSDs (B,) and the shape summaries'
+    residuals to the recording's (B, 2) (zeros without a shape distance)."""
     net = self._net
 
     kind = self._distance
@@ -768,13 +774,19 @@ class Objective:
 
     # Worlds in chunks sized from free memory: the network's activations of
     # every frame at once would not fit (paper size: ~8 MB per frame).
-    d, resid = jax.lax.map(
-      score, (owner, positions, noise_keys), batch_size=self._chunk
-    )
+    return jax.lax.map(score, (owner, positions, noise_keys), batch_size=self._chunk)
+
+  def _worlds(self, data: ProblemData, x, ratio, gust_keys, owner, noise_keys):
+    """One device's worlds: simulate, render, sense, embed and score each
+    against its problem's recording (``_simulate``, then ``_score``, on the
+    device that simulated them). Returns PSDs (B,), residuals (B, 2), validity
+    (B,) and positions (B, T, V, 3)."""
+    positions, valid = self._simulate(x, ratio, gust_keys)
+    d, resid = self._score(data, positions, owner, noise_keys)
     return d, resid, valid, positions
 
-  def _fused(self, data: ProblemData, u, gust_keys, noise_keys, *, with_frames,
-             with_positions, worlds_on=None):  # fmt: skip
+  def _fused(self, data: ProblemData, u, gust_keys, noise_keys, sims=None, *,
+             with_frames, with_positions, worlds_on=None):  # fmt: skip
     p, q = u.shape[:2]
     x = physsim.params.from_unit_traced(
       u, data.lo[:, None], data.hi[:, None], data.log[:, None]
@@ -782,11 +794,18 @@ class Objective:
     ratio = jnp.repeat(data.rigidity_ratio, q)
     owner = jnp.arange(p * q) // q  # each world's problem
     noise_keys = noise_keys.reshape(-1)
+    gust_keys = gust_keys.reshape(-1)
     # worlds_on: the mesh this call's worlds split over (``__call__``)
-    worlds = physsim.devices.shard_worlds(self._worlds, worlds_on, replicated=(0,))
-    d, resid, valid, positions = worlds(
-      data, x, ratio, gust_keys.reshape(-1), owner, noise_keys
-    )
+    if sims is None:  # every world its own simulation, scored where it ran
+      worlds = physsim.devices.shard_worlds(self._worlds, worlds_on, replicated=(0,))
+      d, resid, valid, positions = worlds(data, x, ratio, gust_keys, owner, noise_keys)
+    else:  # the distinct simulations once (``distinct_worlds``), then every world
+      rows, inverse = sims
+      simulate = physsim.devices.shard_worlds(self._simulate, worlds_on)
+      positions, valid = simulate(x[rows], ratio[rows], gust_keys[rows])
+      positions, valid = positions[inverse], valid[inverse]
+      score = physsim.devices.shard_worlds(self._score, worlds_on, replicated=(0,))
+      d, resid = score(data, positions, owner, noise_keys)
     d = d.reshape(p, q)
     ok = valid.reshape(p, q) & jnp.isfinite(d)
     d = jnp.where(ok, d, jnp.nan)
@@ -834,10 +853,11 @@ class Objective:
       raise ValueError(
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
+    u = u.astype(np.float32)
+    sims = distinct_worlds(data, u, gust_keys)
+    self.simulated += u.shape[0] * u.shape[1] if sims is None else len(sims[0])
     mesh = physsim.devices.mesh_for(self.world_mesh, u.shape[0] * u.shape[1])
-    args = physsim.devices.place(
-      (data, jnp.asarray(u, jnp.float32), gust_keys, noise_keys), mesh
-    )
+    args = physsim.devices.place((data, u, gust_keys, noise_keys, sims), mesh)
     out = self._program(
       *args, with_frames=frames, with_positions=positions, worlds_on=mesh
     )
@@ -855,6 +875,63 @@ def camera_key(noise_key: jax.Array) -> jax.Array:
   """The key of a candidate's camera error (``Scoring.camera_sd_m``),
   drawn from its sensor-noise key."""
   return jax.random.fold_in(noise_key, 7)
+
+
+# A call that simulates only its distinct worlds pads their count up to a
+# multiple of 1/SIM_BUCKETS of its worlds: a few program shapes per call
+# shape, not one for every count. It does so only where that at least halves
+# its simulations: each count is a program of its own to compile (seconds on
+# a CPU, where a small cloth simulates in milliseconds).
+SIM_BUCKETS = 16
+
+
+def distinct_worlds(data: ProblemData, u: np.ndarray, gust_keys: jax.Array):
+  """The simulations a call of candidates ``u (P, q, 3)`` needs: one per set of
+  worlds with equal inputs (the same unit-cube point in the same search box
+  and fabric, with the same gust key), which then differ only in how they are
+  seen and scored.
+
+  Searches of one fabric with one seed share their initial design and its
+  keys (a calibration's recordings, several recordings of one fabric), and a
+  call's padding rows repeat a problem: without this every such world would
+  be simulated again.
+
+  Returns:
+    None when fewer than half of the worlds would be saved (the call then
+    simulates every world, as one program), else ``(rows, inverse)`` int32: the worlds to simulate (the first of each
+    set, in call order, the last repeated to the padded count) and, for each
+    of the P*q worlds, its simulation's index in ``rows``.
+  """
+  p, q = u.shape[:2]
+  per_problem = np.concatenate(
+    [
+      np.asarray(data.lo, np.float32),
+      np.asarray(data.hi, np.float32),
+      np.asarray(data.log, np.float32),
+      np.asarray(data.rigidity_ratio, np.float32).reshape(p, 1),
+    ],
+    axis=1,
+  )  # (P, 10): what maps a problem's unit point to its simulation
+  owner = np.repeat(np.arange(p), q)
+  keys = np.asarray(jax.random.key_data(gust_keys), np.uint32).reshape(p * q, -1)
+  inputs = np.concatenate(
+    [
+      np.ascontiguousarray(u, np.float32).reshape(p * q, 3).view(np.uint32),
+      per_problem[owner].view(np.uint32),
+      keys,
+    ],
+    axis=1,
+  )  # bit patterns: equal rows simulate alike
+  _, first, inverse = np.unique(inputs, axis=0, return_index=True, return_inverse=True)
+  order = np.argsort(first)  # the sets in call order
+  rank = np.empty_like(order)
+  rank[order] = np.arange(len(order))
+  n = physsim.devices.padded(len(first), max(1, (p * q) // SIM_BUCKETS))
+  if 2 * n > p * q:
+    return None
+  rows = first[order]
+  rows = np.concatenate([rows, np.repeat(rows[-1:], n - len(rows))])
+  return rows.astype(np.int32), rank[inverse.reshape(-1)].astype(np.int32)
 
 
 def _bytes_per_pixel(params) -> int:

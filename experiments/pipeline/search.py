@@ -330,6 +330,12 @@ class Evaluator:
     self.objectives: dict[tuple, obj_lib.Objective] = {}
     self.seconds = 0.0  # wall time inside the fused calls
 
+  @property
+  def simulated(self) -> int:
+    """Simulations run so far (worlds that simulate alike run once:
+    ``objective.distinct_worlds``)."""
+    return sum(o.simulated for o in self.objectives.values())
+
   def objective(self, problem: obj_lib.Problem) -> obj_lib.Objective:
     k = problem.structure()
     if k not in self.objectives:
@@ -593,11 +599,16 @@ def estimate_many(
     if os.path.isfile(path):
       out[s.index] = read_json(path)
   finish([s for s in ended if out[s.index] is None])
-  step, last_step_s = 0, 0.0
+  step, last_step_s, last_asked, last_run = 0, 0.0, 0, 0
   while active := [s for s in live if not s.done()]:
     # --time_limit: not a step that would end after it (the first is
-    # forecast as free: it compiles, and nothing says how long it takes)
-    deadline.check(last_step_s, f'step {step} of {len(active)} searches')
+    # forecast as free: it compiles, and nothing says how long it takes).
+    # A step after one whose worlds were mostly simulated once for several
+    # searches (a shared design) is forecast as simulating them all.
+    deadline.check(
+      last_step_s * max(1.0, last_asked / max(last_run, 1)),
+      f'step {step} of {len(active)} searches',
+    )
     t0 = time.perf_counter()
     got = bo.batched.ask_many(
       [s.opt for s in active], [s.state for s in active], devices=gp_devices,
@@ -623,10 +634,12 @@ def estimate_many(
       if step == 0 and not _on_mujoco_c([s.problem.config for s in active])
       else None
     )
+    run_before = evaluate.simulated
     scores = evaluate(
       [s.problem for s in active], asked, [len(s.state.Y) for s in active],
       frames=True,
     )  # fmt: skip
+    last_asked, last_run = sum(map(len, asked)), evaluate.simulated - run_before
     if warm is not None:
       warm.join()
     t2 = time.perf_counter()
@@ -645,9 +658,10 @@ def estimate_many(
       else:
         head = f'step {step:3d}'
         what = f'{len(active)} searches, {len(active) - len(ended)} still searching'
+      shared = f'; {last_asked} candidates' if last_run < last_asked else ''
       print(
-        f'{head}: {what} ({sum(map(len, asked))} simulations {t2 - t1:.1f} s, '
-        f'search {t1 - t0:.1f} s)',
+        f'{head}: {what} ({min(last_run, last_asked)} simulations {t2 - t1:.1f} s, '
+        f'search {t1 - t0:.1f} s{shared})',
         flush=True,
       )
     finish(ended)

@@ -184,6 +184,31 @@ def test_one_compile_per_shape_and_repeats_score_alike(env):
   np.testing.assert_allclose(again.psd[0], first.psd[0, ::-1], rtol=_REPEAT_TOLERANCE)
 
 
+def test_worlds_simulating_alike_run_once_and_score_as_alone(env):
+  # Two recordings of one fabric given the same candidates and keys (as a
+  # calibration's searches share their design): one simulation per candidate,
+  # each scored against its own recording as it would be alone.
+  rec2 = env['rec']._replace(depth=env['rec'].depth * np.float32(1.03))
+  other = obj_lib.make_problem(CONFIG, env['net'], rec2)
+  u = np.stack([_u_truth(), np.zeros(3), np.array([0.5, -0.7, 0.9])])
+  gust, noise = obj_lib.candidate_keys(CONFIG, 0, len(u))
+  objective = env['objective']
+  alone = [
+    objective(obj_lib.stack([p.data]), u[None], gust[None], noise[None], positions=True)
+    for p in (env['problem'], other)
+  ]
+  before = objective.simulated
+  both = objective(
+    obj_lib.stack([env['problem'].data, other.data]), np.stack([u, u]),
+    jax.numpy.stack([gust, gust]), jax.numpy.stack([noise, noise]), positions=True,
+  )  # fmt: skip
+  assert objective.simulated - before == len(u)  # not 2 x 3
+  for i in range(2):
+    np.testing.assert_allclose(both.psd[i], alone[i].psd[0], rtol=_REPEAT_TOLERANCE)
+    np.testing.assert_array_equal(both.positions[i], alone[i].positions[0])
+  assert np.all(np.abs(both.psd[1] - both.psd[0]) > 10 * _REPEAT_TOLERANCE)
+
+
 def test_fresh_keys_draw_other_gusts(env):
   # Without common random numbers, evaluations draw their own gusts: the same
   # candidate scores differently (the simulator's noise a posterior needs).
