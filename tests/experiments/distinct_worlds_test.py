@@ -1,16 +1,32 @@
 """Tests of ``objective.distinct_worlds``: which of a call's candidate worlds
-simulate alike, derived by hand from small calls (no simulation)."""
+simulate alike, derived by hand from small calls; and the fused objective
+around it, with a stand-in rollout, against each problem scored alone."""
 
 from __future__ import annotations
 
+import os
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import physsim
+from experiments.pipeline import embedding
 from experiments.pipeline import objective as obj_lib
+from tests.experiments.estimate_fixtures import CONFIG as FIXTURE_CONFIG
+from tests.experiments.estimate_fixtures import (
+  TRUTH,
+  load,
+  write_hand_made_model,
+  write_recording,
+)
 
 # A posterior search: every evaluation its own gust key.
 CONFIG = obj_lib.EstimateConfig().replace(material='gray_interlock', seed=0)
+# The same worlds scored in another call shape or split over devices: float32
+# rendering and the network's sums, in another batch.
+_SAME = 1e-6
 
 
 def _data(ratios, boxes=None) -> obj_lib.ProblemData:
@@ -108,3 +124,70 @@ def test_counts_are_padded_to_a_bucket_and_kept_only_where_they_halve_the_call()
   u[5, 0] += 0.5  # 13 distinct, padded to 14 with the last
   rows, _ = obj_lib.distinct_worlds(_data([1] * 8), u, _keys([0] * 8, 4))
   np.testing.assert_array_equal(rows, [0, 1, 2, 3, 20, *range(24, 32), 31])
+
+
+# ------------------------------------------- the fused objective around them
+
+
+def _stand_in_rollout(n_frames: int, rest: np.ndarray):
+  """A deterministic traced rollout in place of the simulator: the rest mesh
+  carried towards the camera by an amount each world's inputs set (wind,
+  bending, masses, gusts), growing over the clip. Pure JAX, so it splits over
+  devices like MuJoCo Warp does (MuJoCo C's callback does not split)."""
+
+  def rollout(w):
+    b = w.speed.shape[0]
+    gust = sum(leaf.reshape(b, -1).sum(1) for leaf in jax.tree.leaves(w.gusts))
+    amount = (
+      0.02 * w.speed
+      + 0.03 * jnp.log(w.bending)
+      + 0.5 * w.body_mass.sum(1)
+      + 0.01 * gust
+    )
+    t = jnp.linspace(0.0, 1.0, n_frames)
+    shift = (
+      amount[:, None, None, None] * t[None, :, None, None] * jnp.array([0, 0, 1.0])
+    )
+    return jnp.asarray(rest, jnp.float32)[None, None] + shift, jnp.ones(b, bool)
+
+  return rollout
+
+
+@pytest.fixture(scope='module')
+def problems(tmp_path_factory):
+  root = str(tmp_path_factory.mktemp('distinct'))
+  net = embedding.load_embedding(write_hand_made_model(os.path.join(root, 'model')))
+  rec = load(write_recording(root, TRUTH))
+  moved = rec._replace(depth=rec.depth * np.float32(1.03))  # another recording
+  return [obj_lib.make_problem(FIXTURE_CONFIG, net, r) for r in (rec, moved)]
+
+
+def test_shared_worlds_score_as_alone_on_one_device_and_split_over_two(
+  problems, monkeypatch
+):
+  objective = obj_lib.Objective(problems[0])
+  objective._rollout = _stand_in_rollout(problems[0].n_frames, objective.mesh.vertices)
+  u = np.stack([np.zeros(3), np.array([0.5, -0.7, 0.9]), np.array([-0.3, 0.2, 0.1])])
+  gust, noise = obj_lib.candidate_keys(FIXTURE_CONFIG, 0, len(u))
+
+  def call(ps):
+    return objective(
+      obj_lib.stack([p.data for p in ps]), np.stack([u] * len(ps)),
+      jnp.stack([gust] * len(ps)), jnp.stack([noise] * len(ps)), positions=True,
+    )  # fmt: skip
+
+  alone = [call([p]) for p in problems]
+  assert objective.simulated == 6
+  both = call(problems)
+  assert objective.simulated == 9  # one simulation per candidate, not two
+  monkeypatch.setattr(physsim.devices, 'FLAT_WORLDS', 0)
+  objective.world_mesh = physsim.devices.world_mesh()  # conftest: two CPU devices
+  assert objective.world_mesh.devices.size == 2
+  split = call(problems)
+  assert objective.simulated == 12
+  for got in (both, split):
+    for i in range(2):
+      np.testing.assert_allclose(got.psd[i], alone[i].psd[0], rtol=_SAME)
+      np.testing.assert_array_equal(got.positions[i], alone[i].positions[0])
+  assert np.all(np.abs(both.psd[1] - both.psd[0]) > 1e-3)  # scored apart
+  assert len(set(np.round(both.psd[0], 6))) == 3  # candidates differ
