@@ -854,7 +854,13 @@ class Objective:
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
     u = u.astype(np.float32)
-    sims = distinct_worlds(data, u, gust_keys)
+    # On a device a call of up to FLAT_WORLDS worlds costs one step's fixed
+    # time however many it simulates: fewer would only compile another
+    # program (a padded call runs the design's; ``search._call_size``).
+    flat = self.world_mesh is not None and u.shape[0] * u.shape[1] <= (
+      physsim.devices.FLAT_WORLDS
+    )
+    sims = None if flat else distinct_worlds(data, u, gust_keys)
     self.simulated += u.shape[0] * u.shape[1] if sims is None else len(sims[0])
     mesh = physsim.devices.mesh_for(self.world_mesh, u.shape[0] * u.shape[1])
     args = physsim.devices.place((data, u, gust_keys, noise_keys, sims), mesh)
