@@ -854,13 +854,14 @@ class Objective:
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
     u = u.astype(np.float32)
-    # On a device a call of up to FLAT_WORLDS worlds costs one step's fixed
-    # time however many it simulates: fewer would only compile another
-    # program (a padded call runs the design's; ``search._call_size``).
-    flat = self.world_mesh is not None and u.shape[0] * u.shape[1] <= (
-      physsim.devices.FLAT_WORLDS
-    )
-    sims = None if flat else distinct_worlds(data, u, gust_keys)
+    sims = distinct_worlds(data, u, gust_keys)
+    if (
+      sims is not None
+      and self.world_mesh is not None
+      and u.shape[0] * u.shape[1] - len(sims[0])
+      < DEVICE_SAVED_CALLS * physsim.devices.FLAT_WORLDS
+    ):
+      sims = None  # too few saved to repay another program on a device
     self.simulated += u.shape[0] * u.shape[1] if sims is None else len(sims[0])
     mesh = physsim.devices.mesh_for(self.world_mesh, u.shape[0] * u.shape[1])
     args = physsim.devices.place((data, u, gust_keys, noise_keys, sims), mesh)
@@ -889,6 +890,16 @@ def camera_key(noise_key: jax.Array) -> jax.Array:
 # its simulations: each count is a program of its own to compile (seconds on
 # a CPU, where a small cloth simulates in milliseconds).
 SIM_BUCKETS = 16
+
+
+# On a device a call simulates its distinct worlds alone only where that saves
+# at least this many times FLAT_WORLDS worlds: a call of up to FLAT_WORLDS costs
+# one step's fixed time however many it simulates (a padded call runs the
+# design's program, ``search._call_size``), and a new program shape costs its
+# compile and the simulator's graph, about 6 s on an H200 (an estimate's first
+# step against its later ones, BENCHMARKS.md), what some 200 worlds take to
+# simulate there at scale (28 a second).
+DEVICE_SAVED_CALLS = 4
 
 
 def distinct_worlds(data: ProblemData, u: np.ndarray, gust_keys: jax.Array):

@@ -602,11 +602,9 @@ def estimate_many(
   step, last_step_s, last_asked, last_run = 0, 0.0, 0, 0
   while active := [s for s in live if not s.done()]:
     # --time_limit: not a step that would end after it (the first is
-    # forecast as free: it compiles, and nothing says how long it takes).
-    # A step after one whose worlds were mostly simulated once for several
-    # searches (a shared design) is forecast as simulating them all.
+    # forecast as free: it compiles, and nothing says how long it takes)
     deadline.check(
-      last_step_s * max(1.0, last_asked / max(last_run, 1)),
+      step_forecast(last_step_s, last_asked, last_run),
       f'step {step} of {len(active)} searches',
     )
     t0 = time.perf_counter()
@@ -668,6 +666,16 @@ def estimate_many(
     step += 1
     last_step_s = time.perf_counter() - t0
   return out
+
+
+def step_forecast(last_s: float, asked: int, simulated: int) -> float:
+  """Seconds a lockstep step is forecast to take from the last one, which
+  took ``last_s`` for ``asked`` candidates in ``simulated`` simulations: as
+  long, or, where searches shared worlds (a design: ``distinct_worlds``) and
+  the next step will not, as long as if it had simulated all of them. An
+  overestimate (its rendering and compile do not grow so): a stop too early
+  costs a resume, one too late the step."""
+  return last_s * max(1.0, asked / max(simulated, 1))
 
 
 def write_result(
