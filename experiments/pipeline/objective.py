@@ -915,9 +915,10 @@ def distinct_worlds(data: ProblemData, u: np.ndarray, gust_keys: jax.Array):
 
   Returns:
     None when fewer than half of the worlds would be saved (the call then
-    simulates every world, as one program), else ``(rows, inverse)`` int32: the worlds to simulate (the first of each
-    set, in call order, the last repeated to the padded count) and, for each
-    of the P*q worlds, its simulation's index in ``rows``.
+    simulates every world, as one program), else ``(rows, inverse)`` int32:
+    the worlds to simulate (the first of each set, in call order, the last
+    repeated to the padded count) and, for each of the P*q worlds, its
+    simulation's index in ``rows``.
   """
   p, q = u.shape[:2]
   per_problem = np.concatenate(
