@@ -323,7 +323,8 @@ class Evaluator:
   (BENCHMARKS.md: two calls were slower there) and a small call is padded to
   the design's size instead (``FLAT_WORLDS``): one program shape there too.
   Each candidate keeps its own keys (its evaluation number), so the scores are
-  those of one call.
+  those of one call; worlds that repeat across rows (searches sharing a
+  design, padding rows) are simulated once (``objective.distinct_worlds``).
   """
 
   def __init__(self):
