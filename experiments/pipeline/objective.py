@@ -853,17 +853,12 @@ class Objective:
       raise ValueError(
         f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
       )
-    u = u.astype(np.float32)
-    sims = distinct_worlds(data, u, gust_keys)
-    if (
-      sims is not None
-      and self.world_mesh is not None
-      and u.shape[0] * u.shape[1] - len(sims[0])
-      < DEVICE_SAVED_CALLS * physsim.devices.FLAT_WORLDS
-    ):
-      sims = None  # too few saved to repay another program on a device
-    self.simulated += u.shape[0] * u.shape[1] if sims is None else len(sims[0])
-    mesh = physsim.devices.mesh_for(self.world_mesh, u.shape[0] * u.shape[1])
+    u, n = u.astype(np.float32), u.shape[0] * u.shape[1]
+    on_device = self.world_mesh is not None
+    min_saved = DEVICE_SAVED_CALLS * physsim.devices.FLAT_WORLDS if on_device else 0
+    sims = distinct_worlds(data, u, gust_keys, min_saved=min_saved)
+    self.simulated += n if sims is None else len(sims[0])
+    mesh = physsim.devices.mesh_for(self.world_mesh, n)
     args = physsim.devices.place((data, u, gust_keys, noise_keys, sims), mesh)
     out = self._program(
       *args, with_frames=frames, with_positions=positions, worlds_on=mesh
@@ -902,7 +897,9 @@ SIM_BUCKETS = 16
 DEVICE_SAVED_CALLS = 4
 
 
-def distinct_worlds(data: ProblemData, u: np.ndarray, gust_keys: jax.Array):
+def distinct_worlds(
+  data: ProblemData, u: np.ndarray, gust_keys: jax.Array, *, min_saved: int = 0
+):
   """The simulations a call of candidates ``u (P, q, 3)`` needs: one per set of
   worlds with equal inputs (the same unit-cube point in the same search box
   and fabric, with the same gust key), which then differ only in how they are
@@ -913,9 +910,16 @@ def distinct_worlds(data: ProblemData, u: np.ndarray, gust_keys: jax.Array):
   call's padding rows repeat a problem: without this every such world would
   be simulated again.
 
+  Args:
+    data: the call's stacked ``ProblemData``.
+    u: (P, q, 3) float32 unit-cube candidates.
+    gust_keys: (P, q) their gust keys.
+    min_saved: fewest worlds sharing must save (on a device:
+      ``DEVICE_SAVED_CALLS`` x ``FLAT_WORLDS``).
+
   Returns:
-    None when fewer than half of the worlds would be saved (the call then
-    simulates every world, as one program), else ``(rows, inverse)`` int32:
+    None when fewer than half of the worlds, or than ``min_saved``, would be
+    saved (the call then simulates every world, as one program), else ``(rows, inverse)`` int32:
     the worlds to simulate (the first of each set, in call order, the last
     repeated to the padded count) and, for each of the P*q worlds, its
     simulation's index in ``rows``.
@@ -945,7 +949,7 @@ def distinct_worlds(data: ProblemData, u: np.ndarray, gust_keys: jax.Array):
   rank = np.empty_like(order)
   rank[order] = np.arange(len(order))
   n = physsim.devices.padded(len(first), max(1, (p * q) // SIM_BUCKETS))
-  if 2 * n > p * q:
+  if 2 * n > p * q or p * q - n < min_saved:
     return None
   rows = first[order]
   rows = np.concatenate([rows, np.repeat(rows[-1:], n - len(rows))])
