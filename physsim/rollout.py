@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from physsim import forces
+from physsim import forces, interrupt
 from physsim import params as params_lib
 from physsim.cloth import ClothModel, build, reference_rigidity
 from physsim.devices import mesh_key, shard_worlds, world_mesh
@@ -416,6 +416,9 @@ def _c_world(model: ClothModel, w: dict, frames: int, substeps: int, warm_frames
     # dof_M0, not body_mass; MuJoCo Warp recomputes it from body_mass.
     m.dof_M0[c.qidx] = w['body_mass'][c.body][:, None]
     for i in range(warm_frames + frames):
+      if interrupt.pending():  # Ctrl-C inside the callback (physsim.interrupt)
+        out[max(i - warm_frames, 0) :] = np.nan
+        break
       for s in range(substeps):
         f = _applied_forces_np(c, model, d.qpos, d.qvel, (i * substeps + s) * dt, w)
         d.xfrc_applied[c.body, :3] = f
@@ -495,9 +498,13 @@ def _c_callback_rollout(
   v = model.n_vertices
 
   def host(w):
-    w = jax.tree.map(np.asarray, w)._asdict()
-    xs, valid = _c_rollout(model, w, frames, substeps, warm_frames, workers)
-    return xs.astype(np.float32), valid
+    with interrupt.deferred():  # Ctrl-C here cannot unwind (physsim.interrupt)
+      w = jax.tree.map(np.asarray, w)._asdict()
+      xs, valid = _c_rollout(model, w, frames, substeps, warm_frames, workers)
+      return xs.astype(np.float32), valid
+
+  interrupt.defer_in(jax.pure_callback)  # JAX's wrapper runs the host rollout
+  interrupt.install()
 
   def run(w: WorldInputs):
     b = w.speed.shape[0]
@@ -692,7 +699,9 @@ def simulate(
   if backend != 'c':
     w = world_inputs(model, *params, keys, wind, ratio)
     xs, valid = jit_program(model, frames, fps, warmup, devices, backend)(w)
-    return Rollout(np.asarray(xs), np.asarray(valid), times)
+    xs, valid = np.asarray(xs), np.asarray(valid)
+    interrupt.raise_if_pending()  # a Ctrl-C during it: the result is not kept
+    return Rollout(xs, valid, times)
   # The oracle keeps float64 parameters and masses (the gusts are float32).
   w = world_inputs(model, *params, keys, wind, ratio)._asdict()
   w = jax.tree.map(np.asarray, w)

@@ -34,6 +34,7 @@ import numpy as np
 import warp as wp
 from mujoco.mjx.third_party import mujoco_warp as mjw
 
+from physsim import interrupt
 from physsim.cloth import ClothModel
 
 _LOCK = threading.Lock()
@@ -314,18 +315,22 @@ def _frame_callable(model: ClothModel, substeps: int):
     phase: wp.array2d(dtype=float),
     body_mass: wp.array2d(dtype=float),
   ):
-    # One set of buffers per device and batch shape; calls are serialised
-    # (Warp's FFI lock), so shards of one device may share it.
-    device, nworld, modes = qpos.device, qpos.shape[0], wavevector.shape[1]
-    key = (device.alias, nworld, modes)
-    with _LOCK:
-      if key not in worlds:
-        worlds[key] = _Worlds(model, nworld, modes, substeps, device)
-    st = worlds[key]
-    st.load(qpos, qvel, warmstart, time, speed, direction, bending, wavevector,
-            gust_direction, amplitude, phase, body_mass)  # fmt: skip
-    st.run()
-    st.store(qpos, qvel, warmstart)
+    with interrupt.deferred():  # Ctrl-C here cannot unwind (physsim.interrupt)
+      if interrupt.pending():  # the run is stopping: NaN worlds, at once
+        qpos.fill_(float('nan'))
+        return
+      # One set of buffers per device and batch shape; calls are serialised
+      # (Warp's FFI lock), so shards of one device may share it.
+      device, nworld, modes = qpos.device, qpos.shape[0], wavevector.shape[1]
+      key = (device.alias, nworld, modes)
+      with _LOCK:
+        if key not in worlds:
+          worlds[key] = _Worlds(model, nworld, modes, substeps, device)
+      st = worlds[key]
+      st.load(qpos, qvel, warmstart, time, speed, direction, bending, wavevector,
+              gust_direction, amplitude, phase, body_mass)  # fmt: skip
+      st.run()
+      st.store(qpos, qvel, warmstart)
 
   # The state is updated in place (aliased buffers); the graph is Warp's own,
   # over persistent buffers, so JAX's buffer addresses never matter.
@@ -341,6 +346,8 @@ def frame_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: in
   """A traceable ``(WorldInputs) -> positions (B, T, V, 3)`` on MuJoCo Warp a
   frame at a time (module doc)."""
   step = _frame_callable(model, substeps)
+  interrupt.defer_in(wp.jax_callable)  # Warp's FFI wrapper runs the frame
+  interrupt.install()
   mjm = model.mj_model
   rest = jnp.asarray(model.mesh.vertices, jnp.float32)
   moving = np.flatnonzero(model.vert_qadr >= 0)

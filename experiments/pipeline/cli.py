@@ -344,11 +344,13 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
   line naming the command that resumes (exit status 130). Under a
   multi-process launch (``distributed``) the processes are joined first."""
   from experiments.pipeline import distributed, jax_cache  # noqa: PLC0415 - imports jax
+  from physsim import interrupt  # noqa: PLC0415 - imports jax
 
   host_devices()
   # SIGTERM (a batch system's time limit, a launcher stopping its processes,
-  # whose SIGINT a background job ignores) ends the run as Ctrl-C does.
-  signal.signal(signal.SIGTERM, _interrupted)
+  # whose SIGINT a background job ignores) ends the run as Ctrl-C does; both
+  # wait for the simulator's callback to return (physsim.interrupt).
+  interrupt.install((signal.SIGINT, signal.SIGTERM))
   jax_cache.enable()  # a later process loads what this one compiles
   distributed.initialize()
   define_flags(cls, presets, module_name=sys.argv[0])
@@ -383,10 +385,6 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
     if e.code == 1 and _HELP_FLAGS & set(sys.argv[1:]):
       sys.exit(0)
     raise
-
-
-def _interrupted(signum, frame):
-  raise KeyboardInterrupt
 
 
 _HELP_FLAGS = {'--help', '-h', '-?', '--helpshort', '--helpfull'}

@@ -864,6 +864,8 @@ class Objective:
       *args, with_frames=frames, with_positions=positions, worlds_on=mesh
     )
     out = jax.device_get(out)
+    # A Ctrl-C during the simulator's callbacks left NaN worlds: not scores.
+    physsim.interrupt.raise_if_pending()
     return Scores(
       np.asarray(out['psd'], np.float64),
       np.asarray(out['valid']),

@@ -127,3 +127,43 @@ def test_a_network_problem_made_beside_an_accelerator_enters_its_program(tmp_pat
   for leaf in jax.tree.leaves(placed):
     assert leaf.devices() == {accelerator}
   np.testing.assert_array_equal(placed.rec_shape[0], problem.data.rec_shape)
+
+
+def test_ctrl_c_during_the_simulators_callback_is_an_interrupt_not_scores(
+  tmp_path, monkeypatch
+):
+  """A Ctrl-C while MuJoCo C runs inside the fused program (a host callback):
+  the call raises ``KeyboardInterrupt`` once the program returns, where it
+  used to raise a ``JaxRuntimeError`` (a traceback, not the CLI's one line);
+  the NaN worlds of the stopped rollout are never returned as scores."""
+  import os  # noqa: PLC0415
+  import signal  # noqa: PLC0415
+
+  from physsim import interrupt  # noqa: PLC0415
+
+  config = CONFIG.replace(distance='shape', backend='c', workers=1)
+  rec = load(write_recording(str(tmp_path), TRUTH))
+  problem = obj.make_problem(config, embedding.no_network(rec.depth.shape[1:]), rec)
+  objective = obj.Objective(problem)
+  u = np.zeros((1, 1, 3))
+  gust, noise = obj.candidate_keys(config, 0, 1)
+  keys = (gust[None], noise[None])
+  data = obj.stack([problem.data])
+  assert np.all(objective(data, u, *keys).valid)  # compiled, whole
+  real, calls = physsim.rollout._applied_forces_np, [0]
+
+  def forces(*args):
+    calls[0] += 1
+    if calls[0] == 2:
+      os.kill(os.getpid(), signal.SIGINT)
+    return real(*args)
+
+  monkeypatch.setattr(physsim.rollout, '_applied_forces_np', forces)
+  monkeypatch.setattr(interrupt, '_state', interrupt._State())
+  before = signal.signal(signal.SIGINT, interrupt.handler)
+  try:
+    with pytest.raises(KeyboardInterrupt):
+      objective(data, u, *keys)
+  finally:
+    signal.signal(signal.SIGINT, before)
+  assert not interrupt.pending()
