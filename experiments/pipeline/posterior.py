@@ -320,15 +320,24 @@ def prior_points(space: physsim.SearchSpace, measured: Measured, n: int = 2001) 
     nodes.append(physical(pts, space)[:, i])
     weights.append(np.exp(lp - lp.max()))
   if measured.bending_length_sd > 0:  # bending and area weight read together
+    # On the (bending x area weight) grid the prior is the area weight's own
+    # terms times the strip's reading, which alone couples the two: the 1-D
+    # terms once per line, the reading by broadcasting (the log prior of the
+    # m x m points, without mapping each of them to physical values).
     m = min(n, 601)
-    um = -1.0 + (2.0 * np.arange(m) + 1.0) / m
-    b, w = np.meshgrid(um, um, indexing='ij')
-    pts = np.stack([b.ravel(), np.zeros(m * m), w.ravel()], axis=1)
-    lp = log_prior(pts, space, measured).reshape(m, m)
+    line = np.zeros((m, 3))
+    line[:, 0] = line[:, 2] = -1.0 + (2.0 * np.arange(m) + 1.0) / m
+    phys = physical(line, space)
+    unread = dataclasses.replace(
+      measured, bending_length=0.0, bending_length_sd=0.0, bending_length_dof=0.0
+    )
+    _reading_range(space, 'bending_length')  # as log_prior: the box's fabric
+    lp = log_prior(line * [0.0, 0.0, 1.0], space, unread)[None, :] + _length_term(
+      phys[:, :1], phys[None, :, 2], space, measured
+    )
     joint_w = np.exp(lp - lp.max())
-    phys = physical(pts, space)
-    nodes[0], weights[0] = phys[::m, 0], joint_w.sum(axis=1)
-    nodes[2], weights[2] = phys[:m, 2], joint_w.sum(axis=0)
+    nodes[0], weights[0] = phys[:, 0], joint_w.sum(axis=1)
+    nodes[2], weights[2] = phys[:, 2], joint_w.sum(axis=0)
   out = {
     name: bo.calibration.bayes_point(nodes[i], ERROR_LOSS[name], weights=weights[i])
     for i, name in enumerate(FIELDS)

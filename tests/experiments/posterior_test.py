@@ -125,6 +125,29 @@ def test_a_bending_length_reads_bending_from_the_area_weight_by_peirces_formula(
   assert np.all(np.abs(np.log(ratio / (b / w))) < np.log(1.25)), ratio
 
 
+def test_prior_points_factor_a_bending_length_as_the_full_grid_does():
+  """``prior_points`` takes the (bending x area weight) prior apart (each
+  one's own terms on a line, the strip's reading by broadcasting): its points
+  are those of ``log_prior`` on every point of the grid, to rounding."""
+  n = 201
+  m = posterior.Measured(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2,
+                         area_weight_sd=0.01, bending_length=0.02,
+                         bending_length_sd=0.0006, bending_length_dof=10.0)  # fmt: skip
+  got = posterior.prior_points(FABRIC, m, n=n)
+  u = -1.0 + (2.0 * np.arange(n) + 1.0) / n
+  b, w = np.meshgrid(u, u, indexing='ij')
+  pts = np.stack([b.ravel(), np.zeros(n * n), w.ravel()], axis=1)
+  lp = posterior.log_prior(pts, FABRIC, m).reshape(n, n)
+  weight = np.exp(lp - lp.max())
+  phys = posterior.physical(pts, FABRIC)
+  for i, axis, nodes in ((0, 1, phys[::n, 0]), (2, 0, phys[:n, 2])):
+    name = posterior.FIELDS[i]
+    want = bo.calibration.bayes_point(
+      nodes, posterior.ERROR_LOSS[name], weights=weight.sum(axis=axis)
+    )
+    assert got[name] == pytest.approx(want, rel=1e-12), name
+
+
 # Quantiles of 20,000 draws against quadrature: about 1% in the median of a
 # 6% wide distribution, and the cells' x1.47 would be off by up to x1.21.
 _QUANTILE_TOL = 0.015
