@@ -14,6 +14,7 @@ import atexit
 import gc
 import os
 import shutil
+import signal
 import tempfile
 
 # Quiet and small: no TF-style logging, no preallocation if a GPU is present.
@@ -54,3 +55,15 @@ def _free_compiled_programs():
   yield
   jax.clear_caches()
   gc.collect()
+
+
+@pytest.fixture
+def deferring_sigint(monkeypatch):
+  """``physsim.interrupt``'s handler on SIGINT for one test, fresh state (no
+  resend left from an earlier test), then the handler before it again."""
+  from physsim import interrupt  # noqa: PLC0415 - imports jax, MuJoCo
+
+  monkeypatch.setattr(interrupt, '_state', interrupt._State())
+  before = signal.signal(signal.SIGINT, interrupt.handler)
+  yield interrupt
+  signal.signal(signal.SIGINT, before)

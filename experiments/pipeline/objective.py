@@ -921,10 +921,10 @@ def distinct_worlds(
 
   Returns:
     None when fewer than half of the worlds, or than ``min_saved``, would be
-    saved (the call then simulates every world, as one program), else ``(rows, inverse)`` int32:
-    the worlds to simulate (the first of each set, in call order, the last
-    repeated to the padded count) and, for each of the P*q worlds, its
-    simulation's index in ``rows``.
+    saved (the call then simulates every world, as one program), else
+    ``(rows, inverse)`` int32: the worlds to simulate (the first of each set,
+    in call order, the last repeated to the padded count) and, for each of the
+    P*q worlds, its simulation's index in ``rows``.
   """
   p, q = u.shape[:2]
   per_problem = np.concatenate(

@@ -6,6 +6,9 @@ end to end in estimate_test, estimate_methods_test and joint_test.
 
 from __future__ import annotations
 
+import os
+import signal
+
 import jax
 import numpy as np
 import pytest
@@ -130,17 +133,12 @@ def test_a_network_problem_made_beside_an_accelerator_enters_its_program(tmp_pat
 
 
 def test_ctrl_c_during_the_simulators_callback_is_an_interrupt_not_scores(
-  tmp_path, monkeypatch
+  tmp_path, monkeypatch, deferring_sigint
 ):
   """A Ctrl-C while MuJoCo C runs inside the fused program (a host callback):
   the call raises ``KeyboardInterrupt`` once the program returns, where it
   used to raise a ``JaxRuntimeError`` (a traceback, not the CLI's one line);
   the NaN worlds of the stopped rollout are never returned as scores."""
-  import os  # noqa: PLC0415
-  import signal  # noqa: PLC0415
-
-  from physsim import interrupt  # noqa: PLC0415
-
   config = CONFIG.replace(distance='shape', backend='c', workers=1)
   rec = load(write_recording(str(tmp_path), TRUTH))
   problem = obj.make_problem(config, embedding.no_network(rec.depth.shape[1:]), rec)
@@ -159,11 +157,6 @@ def test_ctrl_c_during_the_simulators_callback_is_an_interrupt_not_scores(
     return real(*args)
 
   monkeypatch.setattr(physsim.rollout, '_applied_forces_np', forces)
-  monkeypatch.setattr(interrupt, '_state', interrupt._State())
-  before = signal.signal(signal.SIGINT, interrupt.handler)
-  try:
-    with pytest.raises(KeyboardInterrupt):
-      objective(data, u, *keys)
-  finally:
-    signal.signal(signal.SIGINT, before)
-  assert not interrupt.pending()
+  with pytest.raises(KeyboardInterrupt):
+    objective(data, u, *keys)
+  assert not deferring_sigint.pending()

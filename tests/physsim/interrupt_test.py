@@ -22,17 +22,6 @@ import physsim
 from physsim import interrupt
 from physsim import rollout as rollout_lib
 
-
-@pytest.fixture
-def handler(monkeypatch):
-  """The module's handler on SIGINT for one test, then Python's own again;
-  no resend from an earlier test left over."""
-  monkeypatch.setattr(interrupt, '_state', interrupt._State())
-  before = signal.signal(signal.SIGINT, interrupt.handler)
-  yield
-  signal.signal(signal.SIGINT, before)
-
-
 _CMP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int),
                         ctypes.POINTER(ctypes.c_int))  # fmt: skip
 
@@ -58,7 +47,7 @@ def _sort_with_ctrl_c(values: list[int]) -> tuple[list[int], int]:
   return list(arr), calls[0]
 
 
-def test_a_signal_inside_a_callback_is_raised_by_the_caller(handler):
+def test_a_signal_inside_a_callback_is_raised_by_the_caller(deferring_sigint):
   values = list(range(64))[::-1]
   out, calls = _sort_with_ctrl_c(values)
   # The comparator was never interrupted: qsort finished its work.
@@ -72,7 +61,7 @@ def test_a_signal_inside_a_callback_is_raised_by_the_caller(handler):
   time.sleep(interrupt.RESEND_S + 0.2)  # the resend finds nothing pending
 
 
-def test_unclaimed_it_is_sent_again_outside(handler, monkeypatch):
+def test_unclaimed_it_is_sent_again_outside(deferring_sigint, monkeypatch):
   monkeypatch.setattr(interrupt, 'RESEND_S', 0.05)
   _sort_with_ctrl_c(list(range(16)))
   t0 = time.monotonic()
@@ -83,7 +72,7 @@ def test_unclaimed_it_is_sent_again_outside(handler, monkeypatch):
   assert not interrupt.pending()
 
 
-def test_outside_a_callback_it_raises_at_once(handler):
+def test_outside_a_callback_it_raises_at_once(deferring_sigint):
   with pytest.raises(KeyboardInterrupt):
     signal.raise_signal(signal.SIGINT)
     for _ in range(1000):
@@ -91,7 +80,7 @@ def test_outside_a_callback_it_raises_at_once(handler):
   assert not interrupt.pending()
 
 
-def test_install_keeps_a_handler_that_is_not_pythons_own(monkeypatch):
+def test_install_keeps_a_handler_that_is_not_pythons_own():
   own = signal.getsignal(signal.SIGINT)
   try:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a background job's
@@ -104,14 +93,16 @@ def test_install_keeps_a_handler_that_is_not_pythons_own(monkeypatch):
     signal.signal(signal.SIGINT, own)
 
 
-def test_mujoco_c_behind_a_pure_callback_stops_and_raises_after(handler, monkeypatch):
+def test_mujoco_c_behind_a_pure_callback_stops_and_raises_after(
+  deferring_sigint, monkeypatch
+):
   """A Ctrl-C during MuJoCo C's rollout inside a jitted program: before,
   a ``JaxRuntimeError`` wrapping the interrupt (two logged tracebacks); now
   the program returns, its worlds NaN from the frame the signal came in, and
   ``raise_if_pending`` raises the interrupt."""
   model = physsim.build(physsim.square(6), 'gray_interlock')
   frames, fps = 40, 20.0
-  substeps, warm = rollout_lib._frame_plan(model, frames, fps, 0.0)
+  substeps, _ = rollout_lib._frame_plan(model, frames, fps, 0.0)
   fn = jax.jit(rollout_lib.rollout_fn(
     model, frames=frames, fps=fps, warmup=0.0, backend='c', workers=1
   ))  # fmt: skip
