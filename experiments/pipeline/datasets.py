@@ -57,12 +57,13 @@ class Config:
     seed: the only seed.
     backend: ``'auto'`` (MuJoCo Warp a frame at a time on a GPU, else MuJoCo
       C), ``'warp'``, ``'mjx'`` or ``'c'`` (``physsim.rollout``).
-    batch_size: worlds simulated at once, split over every local device
-      (``physsim.devices``: with N GPUs give N times the one-GPU batch);
-      rendering goes in chunks that fit free device memory. The sequences of
-      all materials, in order, are grouped in fixed chunks of this size (one
-      compiled model serves every material), and gusts are drawn per chunk,
-      so a resume must use the same batch size (checked).
+    batch_size: worlds whose gusts and sensor noise are drawn from one
+      key: the sequences of all materials, in order, are grouped in fixed
+      chunks of this size (one compiled model serves every material), so a
+      resume must use the same batch size (checked). A device call simulates
+      one chunk per local device, split over them (``physsim.devices``), each
+      world with its chunk's keys: the recordings are the same on any number
+      of devices. Rendering goes in chunks that fit free device memory.
     workers: threads for the C backend (0: all cores).
     gust_intensity: RMS relative wind fluctuation.
     rgb: also write shaded colour frames, each material in its
@@ -431,6 +432,41 @@ def _chunked(render, chunk: int):
   return run
 
 
+def _batches_per_call(backend: str, n_devices: int) -> int:
+  """Batches a simulation call takes: one per local device on a device
+  backend, so that a batch under a GPU step's fixed cost (``physsim.devices.
+  FLAT_WORLDS``) still splits over the devices (each world keeps its batch's
+  keys: the recordings do not depend on the device count); one on MuJoCo C,
+  which simulates world after world (a padded call would cost its padding)."""
+  return 1 if backend == 'c' else n_devices
+
+
+def _call_worlds(jobs: list, batches: list[int], bs: int, per_call: int):
+  """A device call's worlds: each of ``batches``' chunk of ``jobs`` padded to
+  ``bs`` with its last, then the call to ``per_call`` chunks with the last
+  world (so one program shape serves every call); and each batch's first
+  world in the call."""
+  worlds, first = [], {}
+  for b in batches:
+    chunk = jobs[b * bs : (b + 1) * bs]
+    first[b] = len(worlds)
+    worlds += chunk + [chunk[-1]] * (bs - len(chunk))
+  return worlds + [worlds[-1]] * (per_call * bs - len(worlds)), first
+
+
+def _call_keys(root_key, batches: list[int], bs: int, n: int):
+  """(gust keys, sensor-noise keys), each (n,), of a call's worlds: batch
+  ``b``'s two keys from ``fold_in(root_key, 2 + b)``, split over its ``bs``
+  worlds, the call's padding repeating the last (``_call_worlds``)."""
+  wind, noise = [], []
+  for b in batches:
+    k_wind, k_noise = jax.random.split(jax.random.fold_in(root_key, 2 + b))
+    wind.append(jax.random.split(k_wind, bs))
+    noise.append(jax.random.split(k_noise, bs))
+  idx = np.minimum(np.arange(n), len(batches) * bs - 1)
+  return jnp.concatenate(wind)[idx], jnp.concatenate(noise)[idx]
+
+
 def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str | None:
   """A grid of camera-0 frames (rows: sequences, columns: time), read from disk."""
   rows = [r for r in rows if r['valid']][:n]
@@ -513,7 +549,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   bs = config.batch_size
   render = _chunked(
     _renderer(mesh.faces, intrinsics, config, world_mesh),
-    _render_chunk(config, bs, world_mesh.devices.size),
+    _render_chunk(config, bs * world_mesh.devices.size, world_mesh.devices.size),
   )
   wind = physics.wind(config.gust_intensity)
   root_key = jax.random.key(config.seed)
@@ -535,7 +571,11 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   }
   jobs = [(k, i) for k in range(len(config.materials)) for i in range(config.sequences)]
   n_batches = -(-len(jobs) // bs)
-  # The first batch's calls include compiles (MJX model and renderer).
+  per_call = _batches_per_call(backend, world_mesh.devices.size)
+  calls = [
+    list(range(c, min(c + per_call, n_batches))) for c in range(0, n_batches, per_call)
+  ]
+  # The first call includes compiles (the simulator and the renderer).
   seconds = {
     'simulate': 0.0,
     'simulate_first_batches': 0.0,
@@ -545,44 +585,52 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     'redraw': 0.0,
   }
   frames_simulated = 0
-  n_sim_batches = 0
+  n_sim_calls = 0
   counts = {
     m: {'existing': 0, 'written': 0, 'valid': 0, 'invalid': 0} for m in config.materials
   }
   frames_rendered = 0
   cameras_redrawn = 0
-  mine = distributed.share(list(range(n_batches)))
+  mine = distributed.share(list(range(len(calls))))
   bar = progress.Bar(
-    sum(len(jobs[b * bs : (b + 1) * bs]) for b in mine), 'simulate + render', 'seq'
+    sum(len(jobs[b * bs : (b + 1) * bs]) for c in mine for b in calls[c]),
+    'simulate + render',
+    'seq',
   )
-  last_batch_s = 0.0  # --time_limit's forecast of the next batch
+  last_call_s = 0.0  # --time_limit's forecast of the next call
   with concurrent.futures.ThreadPoolExecutor(_WRITERS) as writers:
-    for b in mine:
-      chunk = jobs[b * bs : (b + 1) * bs]
-      todo = [
-        (k, i)
-        for k, i in chunk
-        if not dataset.is_complete(workdir, config.materials[k], f'{i:04d}')
-      ]
-      for k, _ in set(chunk) - set(todo):
-        counts[config.materials[k]]['existing'] += 1
-      bar.skip(len(chunk) - len(todo))
+    for c in mine:
+      todo = {}  # batch -> its sequences not yet written
+      for b in calls[c]:
+        chunk = jobs[b * bs : (b + 1) * bs]
+        left = [
+          (k, i)
+          for k, i in chunk
+          if not dataset.is_complete(workdir, config.materials[k], f'{i:04d}')
+        ]
+        for k, _ in set(chunk) - set(left):
+          counts[config.materials[k]]['existing'] += 1
+        bar.skip(len(chunk) - len(left))
+        if left:
+          todo[b] = left
       if not todo:
         continue
-      deadline.check(last_batch_s, f'batch {b + 1} of {n_batches}')
-      t_batch = time.perf_counter()
-      # Pad the last chunk to the full batch so nothing recompiles.
-      padded = chunk + [chunk[-1]] * (bs - len(chunk))
-      names = [config.materials[k] for k, _ in padded]
+      deadline.check(last_call_s, f'call {c + 1} of {len(calls)}')
+      t_call = time.perf_counter()
+      world_jobs, first_world = _call_worlds(jobs, list(todo), bs, per_call)
+      names = [config.materials[k] for k, _ in world_jobs]
       p = physsim.Params(
         *(
           np.array(
-            [getattr(params[n], f)[i] for n, (_, i) in zip(names, padded, strict=True)]
+            [
+              getattr(params[n], f)[i]
+              for n, (_, i) in zip(names, world_jobs, strict=True)
+            ]
           )
           for f in physsim.Params._fields
         )
       )
-      k_wind, k_noise = jax.random.split(jax.random.fold_in(root_key, 2 + b))
+      wind_keys, noise_keys = _call_keys(root_key, list(todo), bs, len(world_jobs))
       t0 = time.perf_counter()
       out = physsim.simulate(
         model,
@@ -591,24 +639,24 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
         fps=config.fps,
         warmup=config.warmup,
         wind=wind,
-        key=k_wind,
+        key=wind_keys,
         backend=backend,
         workers=config.workers or None,
         material=names,
       )
       dt = time.perf_counter() - t0
-      n_sim_batches += 1
-      if b == 0:
+      n_sim_calls += 1
+      if c == 0:
         seconds['simulate_first_batches'] += dt
       else:
         seconds['simulate'] += dt
-        frames_simulated += bs * config.frames
+        frames_simulated += len(world_jobs) * config.frames
       # Cameras per sequence, independent of batching.
       draw = functools.partial(
         _draw_poses,
         config,
         jnp.stack([cam_keys[n] for n in names]),
-        jnp.asarray([i for _, i in padded]),
+        jnp.asarray([i for _, i in world_jobs]),
       )
       poses = draw(0)  # (B, C)
       # Blown-up worlds render the rest mesh: same shapes, frames discarded.
@@ -617,7 +665,6 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       )
       t0 = time.perf_counter()
       colors = jnp.asarray([embedding.rgb_color(n) for n in names], jnp.float32)
-      noise_keys = jax.random.split(k_noise, len(padded))
       depth, rgb = render(positions, poses, noise_keys, colors)
       dt = time.perf_counter() - t0
       if seconds['first_render_call'] is None:
@@ -637,71 +684,75 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       seconds['redraw'] += time.perf_counter() - t0
       t0 = time.perf_counter()
       pending = []
-      for j, (k, i) in enumerate(chunk):
-        if (k, i) not in todo:
-          continue
-        material = config.materials[k]
-        valid = bool(out.valid[j])
-        row = dataset.make_row(
-          f'{i:04d}',
-          material,
-          k * config.sequences + int(i),
-          physsim.Params(*(f[i] for f in params[material])),
-          physsim.search_space(material),
-          valid=valid,
-          n_cameras=config.cameras,
-          n_frames=config.frames,
-        )
-        meta = {
-          **row,
-          'fps': config.fps,
-          'warmup_s': config.warmup,
-          'intrinsics': intrinsics.to_dict(),
-          'extrinsics': [
-            physsim.pose_to_dict(
-              physsim.Pose(poses.rotation[j, c], poses.position[j, c])
-            )
-            for c in range(config.cameras)
-          ],
-          'mesh': mesh.name,
-          'garment': config.garment,
-          'seed': config.seed,
-          'backend': backend,
-          'gust_intensity': config.gust_intensity,
-          **({'physics': config.physics} if config.physics != 'own' else {}),
-          **({'hem_mass': config.hem_mass} if config.hem_mass else {}),
-          'noise': config.noise,
-          **({'rgb_color': list(embedding.rgb_color(material))} if config.rgb else {}),
-          'empty_frames': int(np.sum(~(depth[j] > 0).any(axis=(-1, -2))))
-          if valid
-          else None,
-        }
-        if coverage is not None and valid:  # min_coverage is on
-          meta['pose_draws'] = draws[j].tolist()
-          meta['coverage_min'] = [round(float(x), 5) for x in coverage[j]]
-          cameras_redrawn += int((draws[j] > 1).sum())
-          if coverage[j].min() < config.min_coverage:
-            logging.warning(
-              '%s/%04d: the best of %d camera poses sees the cloth on %.4f of a frame',
-              material, i, config.pose_draws, coverage[j].min(),
-            )  # fmt: skip
-        pending.append(
-          writers.submit(
-            dataset.write_sequence,
-            workdir,
-            meta,
-            depth[j] if valid else None,
-            rgb[j] if valid and rgb is not None else None,
+      for b, left in todo.items():
+        for j, (k, i) in enumerate(jobs[b * bs : (b + 1) * bs]):
+          if (k, i) not in left:
+            continue
+          w = first_world[b] + j  # its world in the call
+          material = config.materials[k]
+          valid = bool(out.valid[w])
+          row = dataset.make_row(
+            f'{i:04d}',
+            material,
+            k * config.sequences + int(i),
+            physsim.Params(*(f[i] for f in params[material])),
+            physsim.search_space(material),
+            valid=valid,
+            n_cameras=config.cameras,
+            n_frames=config.frames,
           )
-        )
-        counts[material]['written'] += 1
+          meta = {
+            **row,
+            'fps': config.fps,
+            'warmup_s': config.warmup,
+            'intrinsics': intrinsics.to_dict(),
+            'extrinsics': [
+              physsim.pose_to_dict(
+                physsim.Pose(poses.rotation[w, cam], poses.position[w, cam])
+              )
+              for cam in range(config.cameras)
+            ],
+            'mesh': mesh.name,
+            'garment': config.garment,
+            'seed': config.seed,
+            'backend': backend,
+            'gust_intensity': config.gust_intensity,
+            **({'physics': config.physics} if config.physics != 'own' else {}),
+            **({'hem_mass': config.hem_mass} if config.hem_mass else {}),
+            'noise': config.noise,
+            **(
+              {'rgb_color': list(embedding.rgb_color(material))} if config.rgb else {}
+            ),
+            'empty_frames': int(np.sum(~(depth[w] > 0).any(axis=(-1, -2))))
+            if valid
+            else None,
+          }
+          if coverage is not None and valid:  # min_coverage is on
+            meta['pose_draws'] = draws[w].tolist()
+            meta['coverage_min'] = [round(float(x), 5) for x in coverage[w]]
+            cameras_redrawn += int((draws[w] > 1).sum())
+            if coverage[w].min() < config.min_coverage:
+              logging.warning(
+                '%s/%04d: the best of %d camera poses sees the cloth on %.4f of a frame',
+                material, i, config.pose_draws, coverage[w].min(),
+              )  # fmt: skip
+          pending.append(
+            writers.submit(
+              dataset.write_sequence,
+              workdir,
+              meta,
+              depth[w] if valid else None,
+              rgb[w] if valid and rgb is not None else None,
+            )
+          )
+          counts[material]['written'] += 1
       for f in concurrent.futures.as_completed(pending):
         f.result()  # re-raises a failed write
       bar.done(len(pending))
-      if not many:  # one process: the index follows every batch
+      if not many:  # one process: the index follows every call
         dataset.rebuild_index(workdir)
       seconds['write'] += time.perf_counter() - t0
-      last_batch_s = time.perf_counter() - t_batch
+      last_call_s = time.perf_counter() - t_call
   bar.close()
   if many:  # each process's counts, for process 0's summary
     dataset.write_json_atomic(
@@ -733,7 +784,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     else None,
     'frames_simulated_after_first_batches': frames_simulated,
     'simulated_world_frames_per_s_with_compile': (
-      n_sim_batches * bs * config.frames / sim_total if sim_total else None
+      n_sim_calls * per_call * bs * config.frames / sim_total if sim_total else None
     ),
     'simulated_world_frames_per_s': (
       frames_simulated / seconds['simulate'] if seconds['simulate'] else None

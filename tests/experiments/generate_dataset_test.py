@@ -234,3 +234,46 @@ def test_rendering_split_over_devices_and_chunks_equals_one_call():
   np.testing.assert_allclose(split[0], np.asarray(whole[0]), atol=1e-6)
   np.testing.assert_array_equal(split[1], np.asarray(whole[1]))
   assert gd._render_chunk(config, 30, 2) % 2 == 0
+
+
+def _sequences(root):
+  """{(material, seq): (depth, meta without paths)} of a finished sweep."""
+  out = {}
+  for p in dataset.finished_sequences(root):
+    s = dataset.read_sequence(p)
+    key = tuple(os.path.normpath(p).split(os.sep)[-2:])
+    out[key] = (s.depth, s.meta)
+  return out
+
+
+def test_batches_per_call_leave_the_recordings_as_they_are(tmp_path, monkeypatch):
+  # A device call takes one batch per device (on a GPU: so that a batch under
+  # a step's fixed cost still splits); every world keeps its batch's gusts,
+  # noise and cameras, so two batches a call (the last call padded) give the
+  # recordings of one a call, to the bit, and a resume of a call with one
+  # batch left writes that batch as it was.
+  config = dataclasses.replace(
+    _SMOKE, sequences=3, gust_intensity=0.3, noise=True, batch_size=2
+  )  # 6 sequences: batches 0-2, calls [0, 1] and [2] (padded)
+  one = str(tmp_path / 'one')
+  gd.run(config, one)
+  per_call = []
+  monkeypatch.setattr(
+    gd, '_batches_per_call', lambda backend, n: per_call.append(n) or 2
+  )
+  two = str(tmp_path / 'two')
+  gd.run(config, two)
+  a, b = _sequences(one), _sequences(two)
+  assert len(a) == 6 and a.keys() == b.keys()
+  for k in a:
+    np.testing.assert_array_equal(a[k][0], b[k][0], err_msg=str(k))
+    assert a[k][1]['extrinsics'] == b[k][1]['extrinsics']
+  # batch 1 (gray_interlock 0002, black_denim 0000) loses one: call 0 holds it alone
+  gone = os.path.join(two, 'gray_interlock', '0002')
+  shutil.rmtree(gone)
+  s = gd.run(config, two)
+  assert sum(c['written'] for c in s['counts'].values()) == 1
+  np.testing.assert_array_equal(
+    dataset.read_sequence(gone).depth, a[('gray_interlock', '0002')][0]
+  )
+  assert per_call  # the seam was asked
