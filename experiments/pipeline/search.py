@@ -268,9 +268,17 @@ class _Search:
 
 
 def _pad(n: int) -> int:
-  """Rows for ``n`` problems: the next power of two, so that a shrinking set
-  of searches recompiles O(log n) times."""
-  return 1 << max(0, int(np.ceil(np.log2(max(n, 1)))))
+  """Rows for ``n`` problems: up to 16 the next power of two, beyond it ``n``
+  rounded up to three significant binary digits (at most 1/8 more), so that
+  a shrinking set of searches compiles a few program shapes per doubling.
+  A power of two wasted up to half of a large call: 210 searches ran as 256
+  rows, 22% more worlds simulated, rendered and scored in every step, where
+  this gives 224."""
+  n = max(n, 1)
+  if n <= 16:
+    return 1 << (n - 1).bit_length()
+  step = 1 << (n.bit_length() - 4)
+  return -(-n // step) * step
 
 
 # On a GPU a fused call of up to this many worlds (rows x candidates) costs

@@ -136,6 +136,19 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
   assert out[1]['evaluations'] == config.search.n_init + config.search.q
 
 
+def test_lockstep_rows_pad_by_at_most_an_eighth_beyond_sixteen():
+  # Up to 16 searches: the next power of two (few shapes where a compile costs
+  # more than the padding); beyond, at most 1/8 more rows and at most eight
+  # shapes per doubling (210 -> 224, where a power of two gave 256).
+  assert [em._pad(n) for n in (1, 2, 3, 5, 9, 16)] == [1, 2, 4, 8, 16, 16]
+  assert em._pad(210) == 224 and em._pad(17) == 18 and em._pad(256) == 256
+  for lo in (16, 32, 64, 128, 256):
+    ns = np.arange(lo + 1, 2 * lo + 1)
+    rows = np.array([em._pad(int(n)) for n in ns])
+    assert (rows >= ns).all() and (rows / ns).max() <= 1.125
+    assert len(set(rows)) <= 8
+
+
 def test_one_structure_is_one_call(env, monkeypatch):
   # The two recordings of one structure (same mesh, clock, camera model,
   # network) are scored in one fused call per step, the gusty one in another.
