@@ -196,7 +196,9 @@ def _frame_cameras(config: Config, draw, render, poses, frames, valid):
   than ``config.min_coverage`` of some frame, until none does or a camera has
   had ``config.pose_draws`` poses, and keeps each camera's best-covered pose
   (a sheet blown flat can stay grazing from every pose); only those cameras'
-  frames change.
+  frames change. ``render(worlds, poses)`` renders those worlds alone: a few
+  worlds of a call are redrawn, and rendering the call's every world for
+  each draw cost more than its simulation on a GPU.
 
   Returns:
     (poses, depth, rgb or None, (B, C) poses drawn per camera, (B, C) coverage,
@@ -205,23 +207,30 @@ def _frame_cameras(config: Config, draw, render, poses, frames, valid):
   depth, rgb = frames
   if not config.min_coverage:
     return poses, depth, rgb, None, None
+  poses = jax.tree.map(np.array, poses)  # host copies, updated in place
   cover = _coverage(depth)
   draws = np.ones(cover.shape, np.int64)
   for attempt in range(1, config.pose_draws):
     low = (cover < config.min_coverage) & np.asarray(valid)[:, None]
     if not low.any():
       break
+    worlds = np.flatnonzero(low.any(axis=1))
+    some = low[worlds]
+    old = jax.tree.map(lambda a: a[worlds], poses)  # noqa: B023 - used at once
     new_poses = jax.tree.map(
-      functools.partial(_where_cameras, low), draw(attempt), poses
+      lambda a, o: _where_cameras(some, np.asarray(a)[worlds], o),  # noqa: B023
+      draw(attempt),
+      old,
     )
-    new_depth, new_rgb = render(new_poses)
+    new_depth, new_rgb = render(worlds, new_poses)
     new_cover = _coverage(new_depth)
-    better = low & (new_cover > cover)
-    pick = functools.partial(_where_cameras, better)
-    poses = jax.tree.map(pick, new_poses, poses)
-    depth, cover = pick(new_depth, depth), pick(new_cover, cover)
+    pick = functools.partial(_where_cameras, some & (new_cover > cover[worlds]))
+    for a, new in zip(poses, jax.tree.map(pick, new_poses, old), strict=True):
+      a[worlds] = new
+    depth[worlds] = pick(new_depth, depth[worlds])
+    cover[worlds] = pick(new_cover, cover[worlds])
     if rgb is not None:
-      rgb = pick(new_rgb, rgb)
+      rgb[worlds] = pick(new_rgb, rgb[worlds])
     draws += low
   return poses, depth, rgb, draws, cover
 
@@ -412,18 +421,31 @@ def _render_chunk(config: Config, batch: int, n_devices: int) -> int:
   return max(n_devices, n // n_devices * n_devices)
 
 
+def _some_worlds(render, positions, keys, colors):
+  """``(worlds, poses) -> render`` of those worlds of a call (indices), seen
+  from ``poses``, each with its own noise key and colour."""
+  return lambda w, poses: render(positions[w], poses, keys[w], colors[w])
+
+
 def _chunked(render, chunk: int):
   """``render(positions, poses, keys, colors)`` over the worlds in chunks of
   ``chunk`` (the last one padded with its last world, so one compile serves
-  every call); depth and colour come back as host arrays."""
+  every call); its arguments are host arrays, the keys as their key data
+  (gathered on the host: a device gather compiles for every count of worlds),
+  and depth and colour come back as host arrays."""
 
   def run(positions, poses, keys, colors):
     b = positions.shape[0]
     depth, rgb = [], []
     for start in range(0, b, chunk):
       idx = np.minimum(np.arange(start, start + chunk), b - 1)
-      take = lambda a: a[idx]  # noqa: B023 - used at once
-      d, c = render(take(positions), jax.tree.map(take, poses), keys[idx], colors[idx])
+      take = lambda a: np.asarray(a)[idx]  # noqa: B023 - used at once
+      d, c = render(
+        take(positions),
+        jax.tree.map(take, poses),
+        jax.random.wrap_key_data(take(keys)),
+        take(colors),
+      )
       n = min(chunk, b - start)
       depth.append(np.asarray(d)[:n])
       rgb.append(None if c is None else np.asarray(c)[:n])
@@ -455,7 +477,7 @@ def _call_worlds(jobs: list, batches: list[int], bs: int, per_call: int):
 
 
 def _call_keys(root_key, batches: list[int], bs: int, n: int):
-  """(gust keys, sensor-noise keys), each (n,), of a call's worlds: batch
+  """(gust keys, sensor-noise key data), each for n worlds, of a call: batch
   ``b``'s two keys from ``fold_in(root_key, 2 + b)``, split over its ``bs``
   worlds, the call's padding repeating the last (``_call_worlds``)."""
   wind, noise = [], []
@@ -464,7 +486,8 @@ def _call_keys(root_key, batches: list[int], bs: int, n: int):
     wind.append(jax.random.split(k_wind, bs))
     noise.append(jax.random.split(k_noise, bs))
   idx = np.minimum(np.arange(n), len(batches) * bs - 1)
-  return jnp.concatenate(wind)[idx], jnp.concatenate(noise)[idx]
+  noise = np.asarray(jax.random.key_data(jnp.concatenate(noise)))
+  return jnp.concatenate(wind)[idx], noise[idx]
 
 
 def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str | None:
@@ -547,10 +570,13 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   )  # fmt: skip
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size
-  render = _chunked(
-    _renderer(mesh.faces, intrinsics, config, world_mesh),
-    _render_chunk(config, bs * world_mesh.devices.size, world_mesh.devices.size),
-  )
+  n_dev = world_mesh.devices.size
+  renderer = _renderer(mesh.faces, intrinsics, config, world_mesh)
+  chunk = _render_chunk(config, bs * n_dev, n_dev)
+  render = _chunked(renderer, chunk)
+  # Cameras drawn again (min_coverage) are few: their worlds go in chunks of
+  # an eighth, one more program shape, where that is at least a world a device.
+  redraw = _chunked(renderer, chunk // 8 // n_dev * n_dev or chunk)
   wind = physics.wind(config.gust_intensity)
   root_key = jax.random.key(config.seed)
   # One compiled model for every material (bending is scaled per world), so
@@ -615,7 +641,13 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
           todo[b] = left
       if not todo:
         continue
-      deadline.check(last_call_s, f'call {c + 1} of {len(calls)}')
+      first, last = calls[c][0] + 1, calls[c][-1] + 1
+      deadline.check(
+        last_call_s,
+        f'batch {first} of {n_batches}'
+        if first == last
+        else f'batches {first}-{last} of {n_batches}',
+      )
       t_call = time.perf_counter()
       world_jobs, first_world = _call_worlds(jobs, list(todo), bs, per_call)
       names = [config.materials[k] for k, _ in world_jobs]
@@ -664,7 +696,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
         out.valid[:, None, None, None], out.positions, mesh.vertices.astype(np.float32)
       )
       t0 = time.perf_counter()
-      colors = jnp.asarray([embedding.rgb_color(n) for n in names], jnp.float32)
+      colors = np.array([embedding.rgb_color(n) for n in names], np.float32)
       depth, rgb = render(positions, poses, noise_keys, colors)
       dt = time.perf_counter() - t0
       if seconds['first_render_call'] is None:
@@ -676,7 +708,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       poses, depth, rgb, draws, coverage = _frame_cameras(
         config,
         draw,
-        functools.partial(render, positions, keys=noise_keys, colors=colors),
+        _some_worlds(redraw, positions, noise_keys, colors),
         poses,
         (depth, rgb),
         out.valid,

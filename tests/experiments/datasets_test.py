@@ -59,3 +59,62 @@ def test_a_hem_is_part_of_a_sweeps_identity_and_refused_out_of_range():
       datasets._check_config(dataclasses.replace(plain, hem_mass=bad))
   with pytest.raises(ValueError, match="on garment 'tshirt'"):
     datasets._check_config(dataclasses.replace(plain, hem_mass=0.1, garment='tshirt'))
+
+
+def _seen(world, position, pixels: int = 16) -> np.ndarray:
+  """A stand-in camera: a (T=2, 4, 4) frame whose cloth share is a fixed
+  function of the world and the pose (its first few pixels set)."""
+  share = (np.sin(1000.0 * position.sum() + 7.0 * world) + 1.0) / 2.0
+  frame = (np.arange(pixels) < round(share * pixels)).astype(np.float32)
+  return np.broadcast_to(frame.reshape(4, 4), (2, 4, 4))
+
+
+def test_cameras_drawn_again_render_only_their_worlds():
+  # Against the rule as it was written first (every world rendered at every
+  # draw, cameras picked among them): the same poses, frames, draws and
+  # coverage, while only the worlds with a poorly framed camera are rendered.
+  b, c = 6, 2
+  config = dataclasses.replace(SMOKE, cameras=c, min_coverage=0.6, pose_draws=6)
+  rng = np.random.default_rng(0)
+  drawn = [rng.normal(size=(b, c, 3)) for _ in range(config.pose_draws)]
+  rot = np.broadcast_to(np.eye(3), (b, c, 3, 3))
+
+  def draw(attempt):
+    return physsim.Pose(rot, drawn[attempt])
+
+  def frames(worlds, poses):
+    return np.stack([[_seen(w, poses.position[i, k]) for k in range(c)]
+                     for i, w in enumerate(worlds)]), None  # fmt: skip
+
+  valid = np.array([True, True, True, True, False, True])
+  first = frames(np.arange(b), draw(0))
+  rendered = []
+
+  def some(worlds, poses):
+    rendered.append(len(worlds))
+    return frames(worlds, poses)
+
+  got = datasets._frame_cameras(
+    config, draw, some, draw(0), (first[0].copy(), None), valid
+  )
+  # the first rule, written out: every world rendered at each draw
+  poses, depth = draw(0), first[0].copy()
+  cover = datasets._coverage(depth)
+  draws = np.ones((b, c), int)
+  for attempt in range(1, config.pose_draws):
+    low = (cover < config.min_coverage) & valid[:, None]
+    if not low.any():
+      break
+    new = physsim.Pose(rot, np.where(low[..., None], drawn[attempt], poses.position))
+    new_depth = frames(np.arange(b), new)[0]
+    new_cover = datasets._coverage(new_depth)
+    better = low & (new_cover > cover)
+    poses = physsim.Pose(rot, np.where(better[..., None], new.position, poses.position))
+    depth = np.where(better[..., None, None, None], new_depth, depth)
+    cover = np.where(better, new_cover, cover)
+    draws += low
+  np.testing.assert_array_equal(got[0].position, poses.position)
+  np.testing.assert_array_equal(got[1], depth)
+  np.testing.assert_array_equal(got[3], draws)
+  np.testing.assert_array_equal(got[4], cover)
+  assert draws.max() > 2 and 0 < min(rendered) < b  # some worlds, not all

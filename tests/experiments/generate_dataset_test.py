@@ -229,7 +229,7 @@ def test_rendering_split_over_devices_and_chunks_equals_one_call():
   whole = gd._renderer(mesh.faces, intr, config)(positions, poses, keys, colors)
   split = gd._chunked(
     gd._renderer(mesh.faces, intr, config, physsim.devices.world_mesh()), 2
-  )(positions, poses, keys, colors)
+  )(positions, poses, np.asarray(jax.random.key_data(keys)), colors)  # host data
   assert split[0].shape == (b, 2, 3, 24, 24) and split[1].shape == (b, 2, 3, 24, 24, 3)
   np.testing.assert_allclose(split[0], np.asarray(whole[0]), atol=1e-6)
   np.testing.assert_array_equal(split[1], np.asarray(whole[1]))
@@ -253,8 +253,10 @@ def test_batches_per_call_leave_the_recordings_as_they_are(tmp_path, monkeypatch
   # recordings of one a call, to the bit, and a resume of a call with one
   # batch left writes that batch as it was.
   config = dataclasses.replace(
-    _SMOKE, sequences=3, gust_intensity=0.3, noise=True, batch_size=2
-  )  # 6 sequences: batches 0-2, calls [0, 1] and [2] (padded)
+    _SMOKE, sequences=3, gust_intensity=0.3, noise=True, batch_size=2,
+    min_coverage=0.25, pose_draws=5,
+  )  # fmt: skip  # 6 sequences: batches 0-2, calls [0, 1] and [2] (padded);
+  # cameras drawn again (rendered alone) in most of them
   one = str(tmp_path / 'one')
   gd.run(config, one)
   per_call = []
@@ -268,6 +270,8 @@ def test_batches_per_call_leave_the_recordings_as_they_are(tmp_path, monkeypatch
   for k in a:
     np.testing.assert_array_equal(a[k][0], b[k][0], err_msg=str(k))
     assert a[k][1]['extrinsics'] == b[k][1]['extrinsics']
+    assert a[k][1]['pose_draws'] == b[k][1]['pose_draws']
+  assert sum(max(a[k][1]['pose_draws']) > 1 for k in a) >= 3
   # batch 1 (gray_interlock 0002, black_denim 0000) loses one: call 0 holds it alone
   gone = os.path.join(two, 'gray_interlock', '0002')
   shutil.rmtree(gone)
