@@ -62,8 +62,12 @@ class Config:
       chunks of this size (one compiled model serves every material), so a
       resume must use the same batch size (checked). A device call simulates
       one chunk per local device, split over them (``physsim.devices``), each
-      world with its chunk's keys: the recordings are the same on any number
-      of devices. Rendering goes in chunks that fit free device memory.
+      world with its chunk's keys: every world gets the same inputs on any
+      number of devices (on MuJoCo C the same recordings to the bit). MuJoCo
+      Warp on a GPU is not bit-reproducible from run to run (its kernels sum
+      with atomics and a gusty sheet drifts apart): two runs of one sweep on
+      one GPU differ as much as one GPU against two (BENCHMARKS.md).
+      Rendering goes in chunks that fit free device memory.
     workers: threads for the C backend (0: all cores).
     gust_intensity: RMS relative wind fluctuation.
     rgb: also write shaded colour frames, each material in its
