@@ -201,3 +201,19 @@ def test_the_warm_start_stages_are_read_from_the_estimates_stamped_lines():
   assert j['tracing'] == 1.5 and j['lowering'] == 0.5 and j['cache_hits'] == 1
   assert j['compile_or_load'] == pytest.approx(0.45)
   assert j['top'][0] == ['_fused', 2.4] and j['top'][1] == ['add', 0.05]
+
+
+def test_the_determinism_benchmark_finds_mujoco_c_the_same_to_the_bit(tmp_path):
+  # MuJoCo C is deterministic: every run of the batch equals the first. Warp's
+  # mode is refused once MuJoCo Warp is loaded (its kernels keep their mode).
+  import json
+
+  from benchmarks import warp_determinism as wd
+
+  out = tmp_path / 'wd.json'
+  wd.main(dataclasses.replace(wd.PRESETS['smoke'], out=str(out)))
+  got = json.loads(out.read_text())
+  assert got['identical'] and got['max_apart_m'] == 0.0 and len(got['seconds']) == 2
+  with mock.patch.dict(sys.modules, {'mujoco.mjx.third_party.mujoco_warp': object()}):
+    with pytest.raises(ValueError, match='already imported'):
+      wd.set_mode('run_to_run')
