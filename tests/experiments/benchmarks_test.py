@@ -217,3 +217,19 @@ def test_the_determinism_benchmark_finds_mujoco_c_the_same_to_the_bit(tmp_path):
   with mock.patch.dict(sys.modules, {'mujoco.mjx.third_party.mujoco_warp': object()}):
     with pytest.raises(ValueError, match='already imported'):
       wd.set_mode('run_to_run')
+
+
+def test_the_determinism_benchmark_names_the_kernel_warp_refused():
+  # Warp's deterministic mode refuses a kernel in a long FFI error; the result
+  # keeps the function, the line and the cause, not the traceback.
+  from benchmarks import warp_determinism as wd
+
+  message = (
+    'Traceback ...\njax.errors.JaxRuntimeError: UNKNOWN: FFI callback error: '
+    'WarpDeterminismError: Error while parsing function "_qLD_acc" at smooth.py:1174:\n'
+    '    wp.atomic_sub(L_out[worldid], j, x)\n;Deterministic mode cannot compile this '
+    "kernel. Cause: array 'L_out' is also read directly. Fix: use separate arrays."
+  )
+  got = wd._refusal(message)
+  assert got.startswith('Error while parsing function "_qLD_acc"')
+  assert "Cause: array 'L_out'" in got and 'Fix' not in got and 'Traceback' not in got
