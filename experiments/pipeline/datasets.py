@@ -575,8 +575,9 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size
   n_dev = world_mesh.devices.size
+  per_call = _batches_per_call(backend, n_dev)
   renderer = _renderer(mesh.faces, intrinsics, config, world_mesh)
-  chunk = _render_chunk(config, bs * n_dev, n_dev)
+  chunk = _render_chunk(config, bs * per_call, n_dev)
   render = _chunked(renderer, chunk)
   # Cameras drawn again (min_coverage) are few: their worlds go in chunks of
   # an eighth, one more program shape, where that is at least a world a device.
@@ -601,7 +602,6 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   }
   jobs = [(k, i) for k in range(len(config.materials)) for i in range(config.sequences)]
   n_batches = -(-len(jobs) // bs)
-  per_call = _batches_per_call(backend, world_mesh.devices.size)
   calls = [
     list(range(c, min(c + per_call, n_batches))) for c in range(0, n_batches, per_call)
   ]
