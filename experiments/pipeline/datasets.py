@@ -458,6 +458,35 @@ def _chunked(render, chunk: int):
   return run
 
 
+def _sequence_meta(config: Config, row: dict, intrinsics, mesh_name: str,
+                   backend: str, poses, depth) -> dict:  # fmt: skip
+  """A written sequence's ``meta.json``: its index row, the sweep's settings,
+  its (C,) camera ``poses`` and, for a valid world (``depth`` (C, T, H, W);
+  None for one that blew up), how many of its frames show no cloth."""
+  return {
+    **row,
+    'fps': config.fps,
+    'warmup_s': config.warmup,
+    'intrinsics': intrinsics.to_dict(),
+    'extrinsics': [
+      physsim.pose_to_dict(physsim.Pose(poses.rotation[c], poses.position[c]))
+      for c in range(config.cameras)
+    ],
+    'mesh': mesh_name,
+    'garment': config.garment,
+    'seed': config.seed,
+    'backend': backend,
+    'gust_intensity': config.gust_intensity,
+    **({'physics': config.physics} if config.physics != 'own' else {}),
+    **({'hem_mass': config.hem_mass} if config.hem_mass else {}),
+    'noise': config.noise,
+    **({'rgb_color': list(embedding.rgb_color(row['material']))} if config.rgb else {}),
+    'empty_frames': None
+    if depth is None
+    else int(np.sum(~(depth > 0).any(axis=(-1, -2)))),
+  }
+
+
 def _batches_per_call(backend: str, n_devices: int) -> int:
   """Batches a simulation call takes: one per local device on a device
   backend, so that a batch under a GPU step's fixed cost (``physsim.devices.
@@ -717,6 +746,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
         (depth, rgb),
         out.valid,
       )
+      poses = jax.tree.map(np.asarray, poses)  # read per sequence below
       seconds['redraw'] += time.perf_counter() - t0
       t0 = time.perf_counter()
       pending = []
@@ -737,32 +767,11 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
             n_cameras=config.cameras,
             n_frames=config.frames,
           )
-          meta = {
-            **row,
-            'fps': config.fps,
-            'warmup_s': config.warmup,
-            'intrinsics': intrinsics.to_dict(),
-            'extrinsics': [
-              physsim.pose_to_dict(
-                physsim.Pose(poses.rotation[w, cam], poses.position[w, cam])
-              )
-              for cam in range(config.cameras)
-            ],
-            'mesh': mesh.name,
-            'garment': config.garment,
-            'seed': config.seed,
-            'backend': backend,
-            'gust_intensity': config.gust_intensity,
-            **({'physics': config.physics} if config.physics != 'own' else {}),
-            **({'hem_mass': config.hem_mass} if config.hem_mass else {}),
-            'noise': config.noise,
-            **(
-              {'rgb_color': list(embedding.rgb_color(material))} if config.rgb else {}
-            ),
-            'empty_frames': int(np.sum(~(depth[w] > 0).any(axis=(-1, -2))))
-            if valid
-            else None,
-          }
+          meta = _sequence_meta(
+            config, row, intrinsics, mesh.name, backend,
+            jax.tree.map(lambda a: a[w], poses),  # noqa: B023 - used at once
+            depth[w] if valid else None,
+          )  # fmt: skip
           if coverage is not None and valid:  # min_coverage is on
             meta['pose_draws'] = draws[w].tolist()
             meta['coverage_min'] = [round(float(x), 5) for x in coverage[w]]
