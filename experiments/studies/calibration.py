@@ -546,10 +546,15 @@ def _truth_row(t: dict) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4096)
+@functools.lru_cache(maxsize=8192)
 def _prior_point(material: str, measured: posterior_lib.Measured) -> np.ndarray:
-  """The prior's own least-error points in ``FIELDS`` order (quadrature)."""
+  """The prior's own least-error points in ``FIELDS`` order (quadrature;
+  read-only). Kept per fabric and reading: the analysis asks again for each
+  likelihood and sharpness, and for every recording read without a reading."""
   p = posterior_lib.prior_points(physsim.search_space(material), measured, n=1001)
-  return np.array([p[f] for f in FIELDS])
+  out = np.array([p[f] for f in FIELDS])
+  out.flags.writeable = False
+  return out
 
 
 def _score(draws_phys: np.ndarray, prior_phys: np.ndarray, truth_row: np.ndarray,
