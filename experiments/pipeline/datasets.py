@@ -14,6 +14,7 @@ fixed, and those frames are discarded.
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import dataclasses
 import functools
@@ -604,7 +605,10 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
   world_mesh = physsim.devices.world_mesh()
   bs = config.batch_size
   n_dev = world_mesh.devices.size
-  per_call = _batches_per_call(backend, n_dev)
+  # Every process groups the batches alike (they share the calls by index):
+  # by the fewest devices any process has.
+  fewest = min(collections.Counter(d.process_index for d in jax.devices()).values())
+  per_call = _batches_per_call(backend, min(n_dev, fewest))
   renderer = _renderer(mesh.faces, intrinsics, config, world_mesh)
   chunk = _render_chunk(config, bs * per_call, n_dev)
   render = _chunked(renderer, chunk)
