@@ -492,7 +492,7 @@ def _batches_per_call(backend: str, n_devices: int) -> int:
   """Batches a simulation call takes: one per local device on a device
   backend, so that a batch under a GPU step's fixed cost (``physsim.devices.
   FLAT_WORLDS``) still splits over the devices (each world keeps its batch's
-  keys: the recordings do not depend on the device count); one on MuJoCo C,
+  keys: its inputs do not depend on the device count); one on MuJoCo C,
   which simulates world after world (a padded call would cost its padding)."""
   return 1 if backend == 'c' else n_devices
 
@@ -750,7 +750,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
         (depth, rgb),
         out.valid,
       )
-      poses = jax.tree.map(np.asarray, poses)  # read per sequence below
+      poses = jax.tree.map(np.asarray, poses)  # on the host (min_coverage off)
       seconds['redraw'] += time.perf_counter() - t0
       t0 = time.perf_counter()
       pending = []
