@@ -111,6 +111,10 @@ def _refusal(message: str) -> str:
 def main(args: Args) -> None:
   if args.worlds < 1 or args.repeats < 2 or args.frames < 1:
     raise ValueError('need --worlds >= 1, --frames >= 1 and --repeats >= 2')
+  if args.backend == 'c' and args.mode != 'off':
+    raise ValueError(
+      f'--mode={args.mode} is a mode of Warp: give it with --backend=warp'
+    )
   if args.backend == 'warp':
     set_mode(args.mode)
   mesh = physsim.square(args.cloth_resolution)

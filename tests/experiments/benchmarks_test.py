@@ -214,6 +214,8 @@ def test_the_determinism_benchmark_finds_mujoco_c_the_same_to_the_bit(tmp_path):
   wd.main(dataclasses.replace(wd.PRESETS['smoke'], out=str(out)))
   got = json.loads(out.read_text())
   assert got['identical'] and got['max_apart_m'] == 0.0 and len(got['seconds']) == 2
+  with pytest.raises(ValueError, match='--backend=warp'):
+    wd.main(dataclasses.replace(wd.PRESETS['smoke'], mode='run_to_run', out=str(out)))
   with mock.patch.dict(sys.modules, {'mujoco.mjx.third_party.mujoco_warp': object()}):
     with pytest.raises(ValueError, match='already imported'):
       wd.set_mode('run_to_run')
