@@ -9,7 +9,11 @@ the horizontal at arc length s from the edge,
   D theta''(s) = -w g (L - s) cos theta(s),   theta(0) = 0,   theta'(L) = 0,
 
 so its shape over L depends on L / c alone, c = (D / (w g))^(1/3) the bending
-length. ``tip`` solves it in float64 (RK4 from the free end, bisection on the
+length. A small mass m taped to the strip (a coin: ``load``) adds its weight
+to the shear inboard of where it sits, and stiffens the span it covers (the
+strip does not bend under a coin): the shape then depends on L / c and
+m / (w b c) too, b the strip's width, so a coin of known mass reads the area
+weight w (``physsim.overhang_depth``, the coin's reading). ``tip`` solves it in float64 (RK4 from the free end, bisection on the
 tip's angle; NumPy, vectorised over ratios): the reference the simulator's
 overhang is checked against (``experiments.studies.protocol``), and, inverted
 (``bending_length``), what a measured overhang says about D.
@@ -17,6 +21,7 @@ overhang is checked against (``experiments.studies.protocol``), and, inverted
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -32,16 +37,42 @@ MAX_RATIO = 5.0
 MIN_RATIO = 0.05
 
 
-def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False):
+@dataclasses.dataclass(frozen=True)
+class Load:
+  """A small mass taped to the strip near its free end, in units of the
+  bending length c (each a float or an array broadcasting with the ratios).
+
+  Attributes:
+    mass: m / (w b c), the mass over that of a bending length of strip.
+    at: its centre's distance from the free end, over c.
+    span: the length of strip it stiffens (a coin's diameter), from the free
+      end, over c; 0 for a point mass.
+  """
+
+  mass: float | np.ndarray = 0.0
+  at: float | np.ndarray = 0.0
+  span: float | np.ndarray = 0.0
+
+
+NO_LOAD = Load()
+
+
+def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False,
+           load: Load = NO_LOAD):  # fmt: skip
   """From the free end (s = L, angle ``alpha``, no moment) back to the edge,
   in units of c: (theta(0), reach, droop), the last two over L; with
   ``path``, also the (steps + 1, ..., 2) centre line (reach, droop) over L
-  from the edge (s = 0) to the free end (s = L)."""
+  from the edge (s = 0) to the free end (s = L). ``y[1]`` is the moment over
+  D: it sets the curvature except under the load's span, where the strip
+  stays straight."""
   h = ratio / _STEPS
+  mass, at, span = (np.asarray(v, np.float64) for v in (load.mass, load.at, load.span))
 
   def f(s, y):
-    th, dth = y[0], y[1]
-    return np.stack([dth, -(ratio - s) * np.cos(th), np.cos(th), np.sin(th)])
+    th, moment = y[0], y[1]
+    shear = (ratio - s) + np.where(s < ratio - at, mass, 0.0)
+    bend = np.where(s < ratio - span, moment, 0.0)
+    return np.stack([bend, -shear * np.cos(th), np.cos(th), np.sin(th)])
 
   y = np.stack(
     [alpha, np.zeros_like(alpha), np.zeros_like(alpha), np.zeros_like(alpha)]
@@ -66,51 +97,102 @@ def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False):
   return (*out, np.moveaxis((xz - xz[:1]) / ratio, 1, -1))
 
 
-def _tip_angle(ratio: np.ndarray) -> np.ndarray:
+# A load's shot from a free end this close to vertical (rad) has lost its
+# root to float64, as an unloaded strip's does beyond MAX_RATIO.
+_VERTICAL_MARGIN = 1e-7
+
+
+def _tip_angle(ratio: np.ndarray, load: Load = NO_LOAD) -> np.ndarray:
   """The free end's angle below the horizontal whose shot leaves the edge
   flat (bisection: theta(0) rises with it).
 
   Raises:
-    ValueError: a ratio that is not positive and finite.
+    ValueError: a ratio that is not positive and finite, a load that is
+      negative or not finite, or a loaded strip that hangs too nearly
+      straight down for its shape to be solved.
   """
   if not np.all(np.isfinite(ratio) & (ratio > 0) & (ratio <= MAX_RATIO)):
     raise ValueError(
       f'need overhangs of 0 to {MAX_RATIO:g} bending lengths, got {ratio}'
     )
+  loaded = any(np.any(np.asarray(v) != 0) for v in (load.mass, load.at, load.span))
+  if loaded:
+    mass, at, span = (
+      np.asarray(v, np.float64) for v in (load.mass, load.at, load.span)
+    )
+    if not (np.all(np.isfinite(mass) & (mass >= 0)) and np.all(np.isfinite(at) & (at >= 0))
+            and np.all(np.isfinite(span) & (span >= 0) & (span < ratio))):  # fmt: skip
+      raise ValueError(
+        f'a load needs a finite mass >= 0, a place >= 0 from the free end and '
+        f'a span shorter than the overhang (units of c), got {load}'
+      )
   lo, hi = np.zeros_like(ratio), np.full_like(ratio, np.pi / 2)
   for _ in range(_BISECTIONS):
     mid = (lo + hi) / 2
-    above = _shoot(ratio, mid)[0] > 0
+    above = _shoot(ratio, mid, load=load)[0] > 0
     hi = np.where(above, mid, hi)
     lo = np.where(above, lo, mid)
-  return (lo + hi) / 2
+  alpha = (lo + hi) / 2
+  if loaded:
+    # a heavy load's shot can also leave the edge flat after a loop: the
+    # strip's root is the one whose every point lies out and down from the
+    # last (its angle within [0, pi / 2] all along)
+    xz = _shoot(ratio, alpha, path=True, load=load)[3]
+    step = np.diff(xz, axis=0)
+    looped = np.any(step < -1e-9, axis=(0, 2))
+    if np.any(looped | (alpha > np.pi / 2 - _VERTICAL_MARGIN)):
+      raise ValueError(
+        f'a strip of {np.max(ratio):.3g} bending lengths under a load of '
+        f'{np.max(load.mass):.3g} hangs too nearly straight down to be solved: '
+        'a shorter overhang or a lighter load'
+      )
+  return alpha
 
 
-def tip(ratio) -> tuple[np.ndarray, np.ndarray]:
+def tip(ratio, load: Load = NO_LOAD) -> tuple[np.ndarray, np.ndarray]:
   """The free end of a strip overhanging by ``ratio`` = L / c bending lengths:
   its horizontal reach from the edge and its drop below the table, each over
-  L (``ratio`` -> 0: reach 1, drop (L/c)^3 / 8; large: reach 0, drop 1).
+  L (``ratio`` -> 0: reach 1, drop (L/c)^3 / 8; large: reach 0, drop 1);
+  under ``load`` (its fields broadcasting with ``ratio``), a coin's.
 
   Raises:
-    ValueError: a ratio that is not positive and finite.
+    ValueError: a ratio that is not positive and finite, or a load
+      ``_tip_angle`` refuses.
   """
-  ratio = np.atleast_1d(np.asarray(ratio, np.float64))
-  _, reach, droop = _shoot(ratio, _tip_angle(ratio))
+  ratio, load = _broadcast(ratio, load)
+  _, reach, droop = _shoot(ratio, _tip_angle(ratio, load), load=load)
   return reach, droop
 
 
-def shape(ratio) -> np.ndarray:
+def shape(ratio, load: Load = NO_LOAD) -> np.ndarray:
   """The strip's centre line: (..., _STEPS + 1, 2) points (reach, drop), each
   over L, at equal steps of arc length from the edge (0, 0) to the free end
-  (``tip``), for overhangs of ``ratio`` = L / c bending lengths (any shape).
+  (``tip``), for overhangs of ``ratio`` = L / c bending lengths under
+  ``load`` (any shape; the load's fields broadcast with it).
 
   Raises:
-    ValueError: a ratio that is not positive and finite.
+    ValueError: a ratio that is not positive and finite, or a load
+      ``_tip_angle`` refuses.
   """
-  r = np.asarray(ratio, np.float64)
-  flat = np.atleast_1d(r).ravel()
-  xz = _shoot(flat, _tip_angle(flat), path=True)[3]  # (steps + 1, R, 2)
-  return np.moveaxis(xz, 0, 1).reshape(*r.shape, _STEPS + 1, 2)
+  shape_ = np.broadcast_shapes(
+    np.shape(ratio), *(np.shape(v) for v in dataclasses.astuple(load))
+  )
+  flat, load = _broadcast(ratio, load)
+  xz = _shoot(flat, _tip_angle(flat, load), path=True, load=load)[
+    3
+  ]  # (steps + 1, R, 2)
+  return np.moveaxis(xz, 0, 1).reshape(*shape_, _STEPS + 1, 2)
+
+
+def _broadcast(ratio, load: Load) -> tuple[np.ndarray, Load]:
+  """The ratios and the load's fields broadcast together, flattened to 1-D
+  float64 (at least one element)."""
+  arrays = np.broadcast_arrays(
+    np.asarray(ratio, np.float64),
+    *(np.asarray(v, np.float64) for v in dataclasses.astuple(load)),
+  )
+  flat = [np.atleast_1d(a).ravel().copy() for a in arrays]
+  return flat[0], Load(*flat[1:])
 
 
 @functools.cache

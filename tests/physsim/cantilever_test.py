@@ -112,3 +112,62 @@ def test_the_shape_runs_from_the_edge_to_the_tip_along_its_length():
   step = np.diff(line[:, :3], axis=1)
   slope = step[..., 1] / step[..., 0]
   assert np.all(slope[:, 0] < 0.5 * slope[:, 1]), slope
+
+
+# The loaded elastica's RK4 steps straddle the load's place and its span's
+# end (a jump in shear or curvature): first order there, so the hand-derived
+# beam is met to this relative tolerance at 200 steps.
+_LOAD_TOL = 2e-3
+
+
+def test_a_coin_at_the_tip_of_a_short_overhang_is_the_beam_with_an_end_load():
+  # Euler-Bernoulli, units of c (D = w g c^3): self-weight and an end load
+  # p = m / (w b c) drop the tip r^4 / 8 + p r^3 / 3, over L: r^3 / 8 + p r^2 / 3
+  ratio, mass = 0.1, np.array([0.0, 0.5, 3.0])
+  reach, droop = cantilever.tip(ratio, cantilever.Load(mass=mass))
+  np.testing.assert_allclose(droop, ratio**3 / 8 + mass * ratio**2 / 3, rtol=_LOAD_TOL)
+  np.testing.assert_allclose(reach, 1.0, atol=1e-4)
+
+
+def test_a_coin_inboard_of_the_tip_and_the_span_it_stiffens():
+  ratio, mass = 0.1, 2.0
+  # the load a from the edge (at = r - a from the tip): its own deflection
+  # p a^2 (3 r - a) / 6 at the tip, plus the self-weight's r^4 / 8
+  at = 0.03
+  a = ratio - at
+  _, droop = cantilever.tip(ratio, cantilever.Load(mass=mass, at=at))
+  want = (ratio**4 / 8 + mass * a**2 * (3 * ratio - a) / 6) / ratio
+  assert droop[0] == pytest.approx(want, rel=_LOAD_TOL)
+  # the end load with the last s of the strip rigid: by unit load, the tip
+  # drops int_s^r (p u^2 + u^3 / 2) du = p (r^3 - s^3) / 3 + (r^4 - s^4) / 8
+  s = 0.04
+  _, droop = cantilever.tip(ratio, cantilever.Load(mass=mass, span=s))
+  want = (mass * (ratio**3 - s**3) / 3 + (ratio**4 - s**4) / 8) / ratio
+  assert droop[0] == pytest.approx(want, rel=_LOAD_TOL)
+
+
+def test_a_load_broadcasts_and_a_heavier_one_hangs_further_down():
+  ratio = np.array([[1.0], [2.0]])
+  mass = np.array([0.0, 0.5, 1.5])
+  span = np.array([0.0, 0.2, 0.2])  # nothing taped to the first
+  line = cantilever.shape(ratio, cantilever.Load(mass=mass, at=0.1, span=span))
+  assert line.shape == (2, 3, cantilever._STEPS + 1, 2)
+  np.testing.assert_allclose(line[:, 0], cantilever.shape(ratio[:, 0]), atol=1e-12)
+  drop = line[..., -1, 1]
+  assert np.all(np.diff(drop, axis=1) > 0)
+  # the stiffened span is straight: its points on one line
+  tail = line[1, 2, -int(0.2 / 2.0 * cantilever._STEPS) :]
+  d = np.diff(tail, axis=0)
+  cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
+  assert np.max(np.abs(cross)) < 1e-9
+
+
+def test_a_load_out_of_range_is_refused():
+  with pytest.raises(ValueError, match='load needs'):
+    cantilever.tip(1.0, cantilever.Load(mass=-0.1))
+  with pytest.raises(ValueError, match='load needs'):
+    cantilever.tip(1.0, cantilever.Load(mass=1.0, span=1.0))
+  with pytest.raises(ValueError, match='straight down'):
+    cantilever.tip(3.0, cantilever.Load(mass=1e4))
+  with pytest.raises(ValueError, match='straight down'):  # the looped root
+    cantilever.tip(4.0, cantilever.Load(mass=200.0))
