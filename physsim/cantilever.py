@@ -68,8 +68,12 @@ def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False,
   h = ratio / _STEPS
   mass, at, span = (np.asarray(v, np.float64) for v in (load.mass, load.at, load.span))
 
+  loaded = bool(np.any(mass) or np.any(span))
+
   def f(s, y):
     th, moment = y[0], y[1]
+    if not loaded:  # the plain strip (the readers' many shots): no masks
+      return np.stack([moment, -(ratio - s) * np.cos(th), np.cos(th), np.sin(th)])
     shear = (ratio - s) + np.where(s < ratio - at, mass, 0.0)
     bend = np.where(s < ratio - span, moment, 0.0)
     return np.stack([bend, -shear * np.cos(th), np.cos(th), np.sin(th)])
