@@ -71,12 +71,15 @@ def seed_scores(folder: str, shipped: dict) -> tuple[int, list[dict]]:
   likelihood) of a check folder."""
   check = physsim.dataset.read_json(os.path.join(folder, cal_lib.CHECK_FILE))
   seed = int(check['seed'])
+  made = check['config']  # the check's own settings, as it ran
+  if made.get('physics') != 'mismatched':
+    raise ValueError(
+      f'{folder}: a check of {made.get("physics")!r} physics, not mismatched'
+    )
   config = dataclasses.replace(
-    cal_lib.PRESETS['paper'],
-    physics='mismatched',
-    seed=seed,
-    pairs=int(check['n']) // 14,
-  )
+    cal_lib.PRESETS['paper'], physics='mismatched', seed=seed,
+    pairs=int(made['pairs']), materials=tuple(made['materials']),
+  )  # fmt: skip
   runs = cal_lib.saved_runs(folder)
   scores = cal_lib.posteriors(
     config, runs, shipped['likelihood'], float(shipped['sharpness']),
