@@ -118,9 +118,8 @@ def overhang_curves(
   return cantilever.shape(length / c, load) * length
 
 
-def _steps_of(x: np.ndarray, eps: float) -> np.ndarray:
-  """Base, then +-eps along each log parameter: (1 + 2 P, P) log offsets."""
-  p = len(x)
+def _steps_of(p: int, eps: float) -> np.ndarray:
+  """Base, then +-eps along each of ``p`` parameters: (1 + 2 p, p) offsets."""
   out = [np.zeros(p)]
   for i in range(p):
     e = np.zeros(p)
@@ -134,7 +133,7 @@ def overhang_information(
 ) -> np.ndarray:
   """(2, 2) information about (log c, log q) of an overhang (q = 0: no coin;
   its log q row and column zero)."""
-  off = _steps_of(np.zeros(2), _EPS)
+  off = _steps_of(2, _EPS)
   if not q:
     off[:, 1] = 0.0
   curves = overhang_curves(length, c * np.exp(off[:, 0]), q * np.exp(off[:, 1]), coin_d)
@@ -204,7 +203,7 @@ def hanging_curve(a, span, samples: int = 201) -> np.ndarray:
 def hanging_information(a: float, span: float, length: float) -> np.ndarray:
   """(3, 3) information about (log a, the pins' spacing (m), log l) of the
   hanging strip's profile: the spacing and length are the fit's nuisances."""
-  off = _steps_of(np.zeros(3), _EPS)
+  off = _steps_of(3, _EPS)
   ls = length * np.exp(off[:, 2])
   curves = (
     hanging_curve(a * np.exp(off[:, 0]), (span * length + off[:, 1]) / ls)

@@ -54,6 +54,11 @@ class Load:
   at: float | np.ndarray = 0.0
   span: float | np.ndarray = 0.0
 
+  def carried(self) -> bool:
+    """Whether any strip carries a mass or a stiffened span (a place alone
+    changes nothing)."""
+    return bool(np.any(np.asarray(self.mass)) or np.any(np.asarray(self.span)))
+
 
 NO_LOAD = Load()
 
@@ -69,7 +74,7 @@ def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False,
   h = ratio / _STEPS
   mass, at, span = (np.asarray(v, np.float64) for v in (load.mass, load.at, load.span))
 
-  loaded = bool(np.any(mass) or np.any(span))
+  loaded = load.carried()
 
   def f(s, y):
     th, moment = y[0], y[1]
@@ -120,7 +125,7 @@ def _tip_angle(ratio: np.ndarray, load: Load = NO_LOAD) -> np.ndarray:
     raise ValueError(
       f'need overhangs of 0 to {MAX_RATIO:g} bending lengths, got {ratio}'
     )
-  loaded = any(np.any(np.asarray(v) != 0) for v in (load.mass, load.at, load.span))
+  loaded = load.carried()
   if loaded:
     mass, at, span = (
       np.asarray(v, np.float64) for v in (load.mass, load.at, load.span)
