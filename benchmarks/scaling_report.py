@@ -54,7 +54,7 @@ PRESETS = {'default': Args()}
 _WALL = re.compile(r'^wall ([\d.]+) s, exit (-?\d+)$', re.M)
 _STEP = re.compile(
   r'^(?:\[(\d+)\] )?(?:step|iteration) +(\d+): .*\((\d+) simulations ([\d.]+) s, '
-  r'search ([\d.]+) s\)$',
+  r'search ([\d.]+) s(?:; [^)]*)?\)$',
   re.M,
 )
 _LOG = re.compile(r'^(sweep|lockstep|calibrate|calsharded)_(\d+)gpu\.log$')

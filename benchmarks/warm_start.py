@@ -42,7 +42,7 @@ import time
 from experiments.pipeline import cli, files
 
 _STEP = re.compile(
-  r'^iteration +(\d+): .*\((\d+) simulations ([\d.]+) s, search ([\d.]+) s\)'
+  r'^iteration +(\d+): .*\((\d+) simulations ([\d.]+) s, search ([\d.]+) s(?:; [^)]*)?\)'
 )
 _FIRST = re.compile(r': \d+ recordings? into ')
 _TABLE = re.compile(r'^\| quantity ')

@@ -25,6 +25,7 @@ beyond ``frame_rollout``.
 from __future__ import annotations
 
 import threading
+import time
 from typing import NamedTuple
 
 import jax
@@ -34,7 +35,7 @@ import numpy as np
 import warp as wp
 from mujoco.mjx.third_party import mujoco_warp as mjw
 
-from physsim import interrupt
+from physsim import interrupt, one_off
 from physsim.cloth import ClothModel
 
 _LOCK = threading.Lock()
@@ -300,6 +301,7 @@ class _Worlds:
 def _frame_callable(model: ClothModel, substeps: int):
   """The FFI call that advances a batch by one frame (see module doc)."""
   worlds: dict = {}
+  clock = time.perf_counter  # ``time`` is a frame's argument below
 
   def frame(
     qpos: wp.array2d(dtype=float),
@@ -323,13 +325,17 @@ def _frame_callable(model: ClothModel, substeps: int):
       # (Warp's FFI lock), so shards of one device may share it.
       device, nworld, modes = qpos.device, qpos.shape[0], wavevector.shape[1]
       key = (device.alias, nworld, modes)
+      t0 = clock()
       with _LOCK:
-        if key not in worlds:
+        first = key not in worlds
+        if first:
           worlds[key] = _Worlds(model, nworld, modes, substeps, device)
       st = worlds[key]
       st.load(qpos, qvel, warmstart, time, speed, direction, bending, wavevector,
               gust_direction, amplitude, phase, body_mass)  # fmt: skip
       st.run()
+      if first:  # buffers, kernels and the graph: once per device and batch
+        one_off.add_setup(device.alias, clock() - t0)
       st.store(qpos, qvel, warmstart)
 
   # The state is updated in place (aliased buffers); the graph is Warp's own,

@@ -660,7 +660,9 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     'simulate + render',
     'seq',
   )
-  last_call_s = 0.0  # --time_limit's forecast of the next call
+  # --time_limit's forecast of the next call: the last one's time, less its
+  # compile and set-up (the calls of a sweep run one program shape)
+  last_call_s, one_off = 0.0, physsim.one_off.Meter()
   with concurrent.futures.ThreadPoolExecutor(_WRITERS) as writers:
     for c in mine:
       todo = {}  # batch -> its sequences not yet written
@@ -686,6 +688,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
         else f'batches {first}-{last} of {n_batches}',
       )
       t_call = time.perf_counter()
+      one_off.mark()
       world_jobs, first_world = _call_worlds(jobs, list(todo), bs, per_call)
       names = [config.materials[k] for k, _ in world_jobs]
       p = physsim.Params(
@@ -801,7 +804,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
       if not many:  # one process: the index follows every call
         dataset.rebuild_index(workdir)
       seconds['write'] += time.perf_counter() - t0
-      last_call_s = time.perf_counter() - t_call
+      last_call_s = max(time.perf_counter() - t_call - one_off.seconds(), 0.0)
   bar.close()
   if many:  # each process's counts, for process 0's summary
     dataset.write_json_atomic(

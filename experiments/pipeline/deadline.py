@@ -5,8 +5,10 @@ time, usually in the middle of a step whose work is then lost. A script run
 with ``--time_limit=S`` (``cli.run`` sets it, counting from the process's
 start) instead stops *before* a step that would not finish in time: the
 lockstep estimate (``search.estimate_many``) checks before each step, with the
-last step's duration as the forecast (scaled by its candidates over its
-simulations where searches shared worlds: ``objective.distinct_worlds``), a dataset sweep before each batch, and
+last step's duration as the forecast (its compile and set-up, ``physsim.one_off``,
+paid again only for a new program; the rest scaled by its candidates over its
+simulations where searches shared worlds: ``objective.distinct_worlds``), a
+dataset sweep before each batch, and
 a network's training before each epoch (``model.fit``'s ``after_epoch``).
 Everything finished so far is on disk (each search saves its state every
 step), so the same command resumes where it stopped. The script ends with one

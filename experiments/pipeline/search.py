@@ -608,15 +608,21 @@ def estimate_many(
     if os.path.isfile(path):
       out[s.index] = read_json(path)
   finish([s for s in ended if out[s.index] is None])
-  step, last_step_s, last_asked, last_run = 0, 0.0, 0, 0
+  step, last_step_s, last_asked, last_run, last_rows = 0, 0.0, 0, 0, 0
+  one_off = physsim.one_off.Meter()  # compiles and set-ups of each step
+  last_one_off = 0.0
   while active := [s for s in live if not s.done()]:
     # --time_limit: not a step that would end after it (the first is
     # forecast as free: it compiles, and nothing says how long it takes)
     deadline.check(
-      step_forecast(last_step_s, last_asked, last_run),
+      step_forecast(
+        last_step_s, last_asked, last_run, one_off_s=last_one_off,
+        same_program=last_run >= last_asked and _pad(len(active)) == last_rows,
+      ),
       f'step {step} of {len(active)} searches',
-    )
+    )  # fmt: skip
     t0 = time.perf_counter()
+    one_off.mark()
     got = bo.batched.ask_many(
       [s.opt for s in active], [s.state for s in active], devices=gp_devices,
       min_rows=len(live),
@@ -668,23 +674,37 @@ def estimate_many(
       shared = f'; {last_asked} candidates' if last_run < last_asked else ''
       print(
         f'{head}: {what} ({min(last_run, last_asked)} simulations {t2 - t1:.1f} s, '
-        f'search {t1 - t0:.1f} s{shared})',
+        f'search {t1 - t0:.1f} s{shared}; compile and set-up {one_off.seconds():.1f} s)',
         flush=True,
       )
     finish(ended)
     step += 1
-    last_step_s = time.perf_counter() - t0
+    last_step_s, last_one_off = time.perf_counter() - t0, one_off.seconds()
+    last_rows = _pad(len(active))
   return out
 
 
-def step_forecast(last_s: float, asked: int, simulated: int) -> float:
+def step_forecast(
+  last_s: float,
+  asked: int,
+  simulated: int,
+  one_off_s: float = 0.0,
+  same_program: bool = False,
+) -> float:
   """Seconds a lockstep step is forecast to take from the last one, which
-  took ``last_s`` for ``asked`` candidates in ``simulated`` simulations: as
-  long, or, where searches shared worlds (a design: ``distinct_worlds``) and
-  the next step will not, as long as if it had simulated all of them. An
-  overestimate (its rendering and compile do not grow so): a stop too early
-  costs a resume, one too late the step."""
-  return last_s * max(1.0, asked / max(simulated, 1))
+  took ``last_s`` for ``asked`` candidates in ``simulated`` simulations, of
+  which ``one_off_s`` compiling and setting up (``physsim.one_off``).
+
+  The rest is scaled by ``asked / simulated`` where searches shared worlds
+  (a design: ``distinct_worlds``) and the next step will not; the one-off
+  part is paid again unless the next step runs the last one's program
+  (``same_program``: no sharing before, the same padded rows). Still an
+  overestimate after a shared design (its rendering and scoring, already
+  done for every candidate, are scaled too): a stop too early costs a
+  resume, one too late the step."""
+  one_off_s = min(max(one_off_s, 0.0), last_s)
+  rest = (last_s - one_off_s) * max(1.0, asked / max(simulated, 1))
+  return rest + (0.0 if same_program else one_off_s)
 
 
 def write_result(

@@ -205,3 +205,15 @@ def test_a_step_after_a_shared_one_is_forecast_as_simulating_everything():
   assert search.step_forecast(368.0, 8400, 10240) == 368.0  # padding: as long
   assert search.step_forecast(10.0, 40, 40) == 10.0
   assert search.step_forecast(0.0, 0, 0) == 0.0  # the first step: free
+
+
+def test_a_steps_compile_and_set_up_are_not_scaled_and_not_paid_twice():
+  # by hand: 58 s of which 40 compiling; the next step, a new program, is
+  # 18 s x 8400 / 640 of work and compiles again
+  got = search.step_forecast(58.0, 8400, 640, one_off_s=40.0)
+  assert got == pytest.approx(18.0 * 8400 / 640 + 40.0)
+  # a step of the same program: its compile is not paid again
+  assert search.step_forecast(190.0, 8400, 8960, 40.0, same_program=True) == 150.0
+  assert search.step_forecast(190.0, 8400, 8960, 40.0) == 190.0  # a new program
+  # a one-off longer than the step (a clock's rounding) is the whole step
+  assert search.step_forecast(10.0, 40, 40, 12.0, same_program=True) == 0.0
