@@ -561,7 +561,7 @@ def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str |
         )
   fig.colorbar(im, ax=axes, shrink=0.6, label='depth, m (white: invalid)')
   fig.suptitle(f'{material}, camera 0', fontsize=9)
-  path = os.path.join(workdir, f'montage_{material}.png')
+  path = os.path.join(workdir, f'montage_{material}.png')  # run() reads it too
   files.savefig(fig, path, dpi=110)
   plt.close(fig)
   return path
@@ -820,7 +820,13 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     mrows = [r for r in rows if r['material'] == material]
     counts[material]['valid'] = sum(r['valid'] for r in mrows)
     counts[material]['invalid'] = sum(not r['valid'] for r in mrows)
-    montages[material] = _montage(workdir, material, mrows) if main else None
+    drawn = os.path.join(workdir, f'montage_{material}.png')
+    if not main:
+      montages[material] = None
+    elif counts[material]['written'] == 0 and os.path.isfile(drawn):
+      montages[material] = drawn  # a resumed sweep: the same sequences as drawn
+    else:
+      montages[material] = _montage(workdir, material, mrows)
   total = sum(c['written'] for c in counts.values())
   sim_total = seconds['simulate'] + seconds['simulate_first_batches']
   summary = {

@@ -14,6 +14,7 @@ recording's pins to the simulated ones) does not import the objective:
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -91,7 +92,19 @@ def pin_centre(sim: Simulation) -> np.ndarray:
 def cloth(sim: Simulation) -> physsim.ClothModel:
   """The compiled cloth of an estimate's mesh. Worlds name their fabric's
   bending reference (``rigidity_ratio``), so every fabric of a mesh shares one
-  model and its compiles."""
+  model and its compiles; built once per process for each mesh, step and hem
+  (a calibration sets up hundreds of recordings of one mesh; the model is
+  only read)."""
+  mesh_only = dataclasses.replace(
+    Simulation(), garment=sim.garment, garment_spacing=sim.garment_spacing,
+    cloth_resolution=sim.cloth_resolution, cloth_size=sim.cloth_size,
+    fps=sim.fps, hem_mass=sim.hem_mass,
+  )  # fmt: skip
+  return _cloth(mesh_only)
+
+
+@functools.lru_cache(maxsize=8)
+def _cloth(sim: Simulation) -> physsim.ClothModel:
   m = mesh(sim)
   extra = (
     physsim.hem_mass(m, sim.cloth_resolution, sim.hem_mass) if sim.hem_mass else None

@@ -68,7 +68,18 @@ def test_smoke_sweep_then_resume(tmp_path):
   tmp = os.path.join(root, 'gray_interlock', '.tmp-0001-abcd1234')
   os.makedirs(os.path.join(tmp, 'cam0'))
   kept = _mtimes(root)
+  # Montages: drawn again where a sequence was written, else kept as they are
+  # (marked here, so that a redraw shows).
+  montage = {m: os.path.join(root, f'montage_{m}.png') for m in _SMOKE.materials}
+  for path in montage.values():
+    with open(path, 'wb') as f:
+      f.write(b'kept')
   s2 = gd.run(_SMOKE, root)
+  with open(montage['gray_interlock'], 'rb') as f:
+    assert f.read(8) == b'\x89PNG\r\n\x1a\n'  # a sequence written: redrawn
+  with open(montage['black_denim'], 'rb') as f:
+    assert f.read() == b'kept'  # nothing written: not drawn again
+  assert s2['montages']['black_denim'] == montage['black_denim']
   assert s2['sequences_written'] == 1
   assert s2['counts']['gray_interlock'] == {
     'existing': 1,

@@ -73,6 +73,29 @@ def test_presets_are_reachable_from_the_library():
     obj.EstimateConfig.preset('tiny')
 
 
+def test_one_cloth_model_per_mesh_step_and_hem_is_built_once():
+  from experiments.pipeline import simulation
+
+  base = simulation.Simulation(cloth_resolution=6)
+  model = simulation.cloth(base)
+  # what the model does not depend on: the fabric, clip, gusts, cameras
+  other = simulation.Simulation(
+    material='black_denim', cloth_resolution=6, frames=7, gusts=0.5, cameras=1
+  )
+  assert simulation.cloth(other) is model
+  # what it does: another mesh, size, frame rate (the step) or hem
+  for changed in (
+    dict(cloth_resolution=7), dict(cloth_size=0.3), dict(fps=40.0),
+    dict(hem_mass=0.05),
+  ):  # fmt: skip
+    got = simulation.cloth(simulation.Simulation(**{'cloth_resolution': 6, **changed}))
+    assert got is not model, changed
+  assert simulation.cloth(
+    simulation.Simulation(cloth_resolution=7)
+  ).mesh.vertices.shape == (49, 3)
+  assert model.mesh.vertices.shape == (36, 3)
+
+
 @pytest.mark.parametrize('distance', ['energy', 'shape'])
 def test_an_objective_is_built_from_each_section_of_its_config(tmp_path, distance):
   """Objective.__init__ reads the simulation, scoring and hardware sections
