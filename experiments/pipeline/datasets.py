@@ -524,6 +524,10 @@ def _call_keys(root_key, batches: list[int], bs: int, n: int):
   return jnp.concatenate(wind)[idx], noise[idx]
 
 
+def _montage_path(workdir: str, material: str) -> str:
+  return os.path.join(workdir, f'montage_{material}.png')
+
+
 def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str | None:
   """A grid of camera-0 frames (rows: sequences, columns: time), read from disk."""
   rows = [r for r in rows if r['valid']][:n]
@@ -561,7 +565,7 @@ def _montage(workdir: str, material: str, rows: list[dict], n: int = 6) -> str |
         )
   fig.colorbar(im, ax=axes, shrink=0.6, label='depth, m (white: invalid)')
   fig.suptitle(f'{material}, camera 0', fontsize=9)
-  path = os.path.join(workdir, f'montage_{material}.png')  # run() reads it too
+  path = _montage_path(workdir, material)
   files.savefig(fig, path, dpi=110)
   plt.close(fig)
   return path
@@ -820,7 +824,7 @@ def run(config: Config, workdir: str, params: dict | None = None) -> dict:
     mrows = [r for r in rows if r['material'] == material]
     counts[material]['valid'] = sum(r['valid'] for r in mrows)
     counts[material]['invalid'] = sum(not r['valid'] for r in mrows)
-    drawn = os.path.join(workdir, f'montage_{material}.png')
+    drawn = _montage_path(workdir, material)
     if not main:
       montages[material] = None
     elif counts[material]['written'] == 0 and os.path.isfile(drawn):
