@@ -8,8 +8,10 @@ truth.
 
 from __future__ import annotations
 
+import concurrent.futures
 import json
 import os
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -152,3 +154,22 @@ def load_recording(
       f'{path}: {len(colour)} colour frames but {len(vid.depth)} depth frames'
     )
   return Recording(vid.depth, fps, intr, pose, path, truth, colour)
+
+
+# Threads that read a study's recordings at once (``load_recordings``).
+READERS = 8
+
+
+def load_recordings(
+  paths: Sequence[str], *, workers: int | None = None, **kw
+) -> list[Recording]:
+  """``load_recording(path, **kw)`` of every path, in order, read by
+  ``workers`` threads (default ``READERS``, at most the cores): decoding a
+  PNG frame releases Python's lock, and a study reads hundreds of recordings
+  of dozens of frames each before its first simulation. The first path that
+  fails raises, as one by one."""
+  workers = max(1, min(workers or READERS, os.cpu_count() or 1, len(paths) or 1))
+  if workers == 1:
+    return [load_recording(p, **kw) for p in paths]
+  with concurrent.futures.ThreadPoolExecutor(workers) as pool:
+    return list(pool.map(lambda p: load_recording(p, **kw), paths))

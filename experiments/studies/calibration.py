@@ -432,25 +432,28 @@ def simulate_and_estimate(
   distributed.barrier('calibration: network and recordings made')
   index = physsim.dataset.open_dataset(rec_root)
   size = (rec_cfg.resolution,) * 2 if config.size == 'paper' else demo_lib.IMAGE_SIZE
+  rows = [
+    (material, r)
+    for material in mats
+    for r in sorted(index.filter(material=material).rows, key=lambda r: r['seq_id'])
+    if r['valid']
+  ]
+  recordings = recording_lib.load_recordings(
+    [index.path(r) for _, r in rows], fps=est.simulation.fps, size=size,
+    frames=est.simulation.frames,
+  )  # fmt: skip
   jobs, meta = [], []
-  for material in mats:
-    rows = sorted(index.filter(material=material).rows, key=lambda r: r['seq_id'])
-    for r in rows:
-      if not r['valid']:
-        continue
-      rec = recording_lib.load_recording(
-        index.path(r), fps=est.simulation.fps, size=size, frames=est.simulation.frames
-      )
-      seq = first_seq(config, material) + int(r['seq_id'])
-      wd = os.path.join(workdir, 'estimates', f'{seq:04d}')
-      k = network_of(config, seq)
-      # '' : no network (search.estimate_many compares depth frames directly)
-      model_dir = os.path.join(model_roots[k], material) if model_roots else ''
-      job_est = with_reading(config, est.replace(material=material), reading,
-                             rec.truth, seq)  # fmt: skip
-      jobs.append(search.Job(job_est, rec, model_dir, wd))
-      meta.append({'seq': seq, 'material': material, 'truth': rec.truth,
-                   'workdir': wd, 'network': seeds[k] if seeds else None})  # fmt: skip
+  for (material, r), rec in zip(rows, recordings, strict=True):
+    seq = first_seq(config, material) + int(r['seq_id'])
+    wd = os.path.join(workdir, 'estimates', f'{seq:04d}')
+    k = network_of(config, seq)
+    # '' : no network (search.estimate_many compares depth frames directly)
+    model_dir = os.path.join(model_roots[k], material) if model_roots else ''
+    job_est = with_reading(config, est.replace(material=material), reading,
+                           rec.truth, seq)  # fmt: skip
+    jobs.append(search.Job(job_est, rec, model_dir, wd))
+    meta.append({'seq': seq, 'material': material, 'truth': rec.truth,
+                 'workdir': wd, 'network': seeds[k] if seeds else None})  # fmt: skip
   if jax.process_count() > 1:
     mine = distributed.share(jobs)
     print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)

@@ -52,3 +52,39 @@ def test_truth_of_reads_the_three_parameters_or_none():
     'bending_scale': 2.0, 'wind_speed': 3.5, 'area_weight': 0.2
   }  # fmt: skip
   assert recording.truth_of({'fps': 24}) is None
+
+
+def _folder(root, name, offset, frames=6):
+  """A folder of 16-bit mm PNGs, each frame its own depth."""
+  import cv2  # noqa: PLC0415
+
+  folder = root / name
+  folder.mkdir()
+  for t in range(frames):
+    cv2.imwrite(
+      str(folder / f'{t:04d}.png'), np.full((8, 8), 1000 + offset + t, np.uint16)
+    )
+  (folder / 'fps.txt').write_text('10')
+  return str(folder)
+
+
+def test_many_recordings_read_by_threads_come_in_order_as_one_by_one(tmp_path):
+  paths = [_folder(tmp_path, f'r{i}', 10 * i) for i in range(5)]
+  kw = dict(fps=10.0, size=(8, 8))
+  alone = [recording.load_recording(p, **kw) for p in paths]
+  many = recording.load_recordings(paths, workers=4, **kw)
+  assert [r.source for r in many] == paths
+  for a, b in zip(alone, many, strict=True):
+    np.testing.assert_array_equal(a.depth, b.depth)
+  # frame t of recording i is 1 m + (10 i + t) mm
+  np.testing.assert_allclose(many[3].depth[2], 1.032, atol=1e-6)
+
+
+def test_the_first_bad_recording_of_many_is_named(tmp_path):
+  paths = [
+    _folder(tmp_path, 'good', 0),
+    str(tmp_path / 'missing'),
+    str(tmp_path / 'gone'),
+  ]
+  with pytest.raises(ValueError, match=r'missing: no such file or folder'):
+    recording.load_recordings(paths, workers=3, fps=10.0, size=(8, 8))
