@@ -432,11 +432,12 @@ def simulate_and_estimate(
   distributed.barrier('calibration: network and recordings made')
   index = physsim.dataset.open_dataset(rec_root)
   size = (rec_cfg.resolution,) * 2 if config.size == 'paper' else demo_lib.IMAGE_SIZE
-  rows = [
-    (material, r)
+  rows = [  # (fabric, index row) of every valid recording, by fabric then sequence
+    (material, row)
     for material in mats
-    for r in sorted(index.filter(material=material).rows, key=lambda r: r['seq_id'])
-    if r['valid']
+    for row in sorted(
+      index.filter(material=material, valid=True).rows, key=lambda r: r['seq_id']
+    )
   ]
   recordings = recording_lib.load_recordings(
     [index.path(r) for _, r in rows], fps=est.simulation.fps, size=size,
