@@ -157,11 +157,26 @@ def place(tree, mesh: Mesh | None):
   of those devices, which then computes everything on each and runs host
   callbacks on one while the others wait at a collective (XLA's CPU client
   aborts a collective kept waiting 40 s)."""
+  return jax.device_put(tree, placement(mesh))
+
+
+def placement(mesh: Mesh | None) -> jax.sharding.Sharding:
+  """The sharding ``place`` gives every array of a tree for ``mesh``."""
   if mesh is None:
-    return jax.device_put(tree, jax.local_devices()[0])
+    return jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
   if mesh.devices.size == 1:
-    return jax.device_put(tree, mesh.devices.flat[0])
-  return jax.device_put(tree, NamedSharding(mesh, P()))
+    return jax.sharding.SingleDeviceSharding(mesh.devices.flat[0])
+  return NamedSharding(mesh, P())
+
+
+def abstract(tree, mesh: Mesh | None):
+  """``tree``'s shapes and dtypes as ``place`` would put them on ``mesh``, and
+  no device memory: what ``jax.jit(...).lower`` takes to compile a program
+  before its arguments exist (``None`` leaves stay None)."""
+  where = placement(mesh)
+  return jax.tree.map(
+    lambda a: jax.ShapeDtypeStruct(np.shape(a), a.dtype, sharding=where), tree
+  )
 
 
 def free_bytes(device: jax.Device | None = None) -> int:

@@ -821,6 +821,41 @@ class Objective:
       out['positions'] = positions.reshape(p, q, *positions.shape[1:])
     return out
 
+  def _arguments(self, data: ProblemData, u, gust_keys, noise_keys):
+    """A call's program arguments, checked, on the host, and the mesh its
+    worlds split over."""
+    u = np.asarray(u, np.float64)
+    p = data.lo.shape[0]
+    if u.ndim != 3 or u.shape[0] != p or u.shape[2] != 3:
+      raise ValueError(f'candidates must be (P={p}, q, 3), got {u.shape}')
+    if not np.all(np.isfinite(u)) or np.any(np.abs(u) > 1 + 1e-9):
+      raise ValueError('candidates must be finite and inside [-1, 1]^3')
+    if gust_keys.shape != u.shape[:2] or noise_keys.shape != u.shape[:2]:
+      raise ValueError(
+        f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
+      )
+    u, n = u.astype(np.float32), u.shape[0] * u.shape[1]
+    on_device = self.world_mesh is not None
+    min_saved = DEVICE_SAVED_CALLS * physsim.devices.FLAT_WORLDS if on_device else 0
+    sims = distinct_worlds(data, u, gust_keys, min_saved=min_saved)
+    mesh = physsim.devices.mesh_for(self.world_mesh, n)
+    return (data, u, gust_keys, noise_keys, sims), mesh
+
+  def compile(self, data: ProblemData, u, gust_keys: jax.Array,
+              noise_keys: jax.Array, *, frames: bool = False,
+              positions: bool = False) -> None:  # fmt: skip
+    """Compiles the program that ``__call__`` with these arguments runs,
+    without running it: only their shapes, and whether their worlds repeat
+    (``distinct_worlds``), matter. A driver calls it in a thread while an
+    earlier call of another shape runs; the call then finds the program
+    compiled (JAX's caches). MuJoCo Warp's own set-up for a batch size
+    (buffers, the frame's graph) still happens on the first call."""
+    args, mesh = self._arguments(data, u, gust_keys, noise_keys)
+    self._program.lower(
+      *physsim.devices.abstract(args, mesh), with_frames=frames,
+      with_positions=positions, worlds_on=mesh,
+    ).compile()  # fmt: skip
+
   def __call__(
     self,
     data: ProblemData,
@@ -843,26 +878,15 @@ class Objective:
     Raises:
       ValueError: ``u`` of the wrong shape, not finite or outside the cube.
     """
-    u = np.asarray(u, np.float64)
-    p = data.lo.shape[0]
-    if u.ndim != 3 or u.shape[0] != p or u.shape[2] != 3:
-      raise ValueError(f'candidates must be (P={p}, q, 3), got {u.shape}')
-    if not np.all(np.isfinite(u)) or np.any(np.abs(u) > 1 + 1e-9):
-      raise ValueError('candidates must be finite and inside [-1, 1]^3')
-    if gust_keys.shape != u.shape[:2] or noise_keys.shape != u.shape[:2]:
-      raise ValueError(
-        f'need (P, q) = {u.shape[:2]} keys, got {gust_keys.shape}, {noise_keys.shape}'
-      )
-    u, n = u.astype(np.float32), u.shape[0] * u.shape[1]
-    on_device = self.world_mesh is not None
-    min_saved = DEVICE_SAVED_CALLS * physsim.devices.FLAT_WORLDS if on_device else 0
-    sims = distinct_worlds(data, u, gust_keys, min_saved=min_saved)
-    self.simulated += n if sims is None else len(sims[0])
-    mesh = physsim.devices.mesh_for(self.world_mesh, n)
-    args = physsim.devices.place((data, u, gust_keys, noise_keys, sims), mesh)
-    out = self._program(
-      *args, with_frames=frames, with_positions=positions, worlds_on=mesh
+    args, mesh = self._arguments(data, u, gust_keys, noise_keys)
+    sims = args[-1]
+    self.simulated += (
+      args[1].shape[0] * args[1].shape[1] if sims is None else len(sims[0])
     )
+    out = self._program(
+      *physsim.devices.place(args, mesh), with_frames=frames,
+      with_positions=positions, worlds_on=mesh,
+    )  # fmt: skip
     out = jax.device_get(out)
     # A Ctrl-C during the simulator's callbacks left NaN worlds: not scores.
     physsim.interrupt.raise_if_pending()

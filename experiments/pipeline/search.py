@@ -338,6 +338,7 @@ class Evaluator:
   def __init__(self):
     self.objectives: dict[tuple, obj_lib.Objective] = {}
     self.seconds = 0.0  # wall time inside the fused calls
+    self._lock = threading.Lock()  # one Objective per structure (``compile``)
 
   @property
   def simulated(self) -> int:
@@ -347,23 +348,17 @@ class Evaluator:
 
   def objective(self, problem: obj_lib.Problem) -> obj_lib.Objective:
     k = problem.structure()
-    if k not in self.objectives:
-      self.objectives[k] = obj_lib.Objective(problem)
-    return self.objectives[k]
+    with self._lock:
+      if k not in self.objectives:
+        self.objectives[k] = obj_lib.Objective(problem)
+      return self.objectives[k]
 
   def __call__(self, problems, us, firsts, *, frames: bool = False,
                positions: bool = False) -> list[obj_lib.Scores]:  # fmt: skip
     """Per problem, the ``Scores`` of its candidates ``us[i] (q_i, 3)`` (its
     evaluations ``firsts[i] ..`` for the keys)."""
-    groups: dict[tuple, list[int]] = {}
-    for i, p in enumerate(problems):
-      if len(us[i]):
-        groups.setdefault(p.structure(), []).append(i)
     out: list = [None] * len(problems)
-    for members in groups.values():
-      rows = members + [members[0]] * (_pad(len(members)) - len(members))
-      n_max = max(len(us[i]) for i in members)
-      q = _call_size([problems[i].config for i in members], n_max, len(rows))
+    for members, rows, n_max, q in self._groups(problems, us):
       chunks = [
         self._call(problems, us, firsts, rows, lo, q, frames, positions)
         for lo in range(0, n_max, q)
@@ -379,9 +374,37 @@ class Evaluator:
         )
     return out
 
-  def _call(self, problems, us, firsts, rows, lo, q, frames, positions):
+  def compile(self, problems, sizes, *, frames: bool = False,
+              positions: bool = False) -> None:  # fmt: skip
+    """Compiles the programs that scoring ``sizes[i]`` candidates of each
+    problem runs, without running them (``Objective.compile``): the
+    candidates are taken distinct, as a search's proposals are, so a call
+    whose worlds repeat (searches sharing an initial design) compiles another
+    program. A lockstep driver calls it in a thread while the design runs;
+    its steps then find their program compiled."""
+    rng = np.random.default_rng(0)
+    us = [rng.uniform(-1.0, 1.0, (n, 3)) for n in sizes]
+    for _, rows, _, q in self._groups(problems, us):
+      self._call(problems, us, [0] * len(problems), rows, 0, q, frames, positions,
+                 compile_only=True)  # fmt: skip
+
+  def _groups(self, problems, us):
+    """The fused calls' groups: per structure, its members, their rows
+    (padded), the most candidates of a member and the candidates a call."""
+    groups: dict[tuple, list[int]] = {}
+    for i, p in enumerate(problems):
+      if len(us[i]):
+        groups.setdefault(p.structure(), []).append(i)
+    for members in groups.values():
+      rows = members + [members[0]] * (_pad(len(members)) - len(members))
+      n_max = max(len(us[i]) for i in members)
+      q = _call_size([problems[i].config for i in members], n_max, len(rows))
+      yield members, rows, n_max, q
+
+  def _call(self, problems, us, firsts, rows, lo, q, frames, positions,
+            compile_only=False):  # fmt: skip
     """One fused call: candidates ``lo .. lo + q - 1`` of each row's problem
-    (a row with fewer repeats its first)."""
+    (a row with fewer repeats its first); ``compile_only``: compiled, not run."""
     part = []
     for i in rows:
       u = us[i][lo : lo + q]
@@ -395,10 +418,14 @@ class Evaluator:
       gust = jax.numpy.stack([k[0] for k in keys])
       noise = jax.numpy.stack([k[1] for k in keys])
       data = obj_lib.stack([problems[i].data for i in rows])
+    objective = self.objective(problems[rows[0]])
+    if compile_only:
+      objective.compile(
+        data, np.stack(part), gust, noise, frames=frames, positions=positions
+      )
+      return None
     t0 = time.perf_counter()
-    s = self.objective(problems[rows[0]])(
-      data, np.stack(part), gust, noise, frames=frames, positions=positions
-    )
+    s = objective(data, np.stack(part), gust, noise, frames=frames, positions=positions)
     self.seconds += time.perf_counter() - t0
     return s
 
@@ -633,28 +660,29 @@ def estimate_many(
       asked.append(x)
     t1 = time.perf_counter()
     gp_seconds += t1 - t0
-    # The next step's GP program is traced while this one's simulations run
-    # (a GPU's: on MuJoCo C they hold the host's cores and Python's lock).
-    warm = (
-      _in_background(
-        bo.batched.warm_ask,
-        [s.opt for s in active],
-        [s.state for s in active],
-        asked,
-        devices=gp_devices,
-        min_rows=len(live),
-      )  # fmt: skip
-      if step == 0 and not _on_mujoco_c([s.problem.config for s in active])
-      else None
-    )
+    # While the design's simulations run (a GPU's: on MuJoCo C they hold the
+    # host's cores and Python's lock), the next step's GP program is traced
+    # and, in a lockstep, its fused program compiled: searches that share
+    # their design simulate it as a program of its own (distinct_worlds).
+    warm = []
+    if step == 0 and not _on_mujoco_c([s.problem.config for s in active]):
+      warm.append(_in_background(
+        bo.batched.warm_ask, [s.opt for s in active], [s.state for s in active],
+        asked, devices=gp_devices, min_rows=len(live),
+      ))  # fmt: skip
+      if len(active) > 1:
+        warm.append(_in_background(
+          evaluate.compile, [s.problem for s in active],
+          [s.problem.config.search.q for s in active], frames=True,
+        ))  # fmt: skip
     run_before = evaluate.simulated
     scores = evaluate(
       [s.problem for s in active], asked, [len(s.state.Y) for s in active],
       frames=True,
     )  # fmt: skip
     last_asked, last_run = sum(map(len, asked)), evaluate.simulated - run_before
-    if warm is not None:
-      warm.join()
+    for t in warm:
+      t.join()
     t2 = time.perf_counter()
     for s, x, sc in zip(active, asked, scores, strict=True):
       s.best.update(x, sc.psd, sc.frames)

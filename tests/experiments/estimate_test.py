@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import threading
 
 import cv2
 import jax
@@ -608,3 +609,33 @@ def test_fused_objective_on_mjx_matches_mujoco_c(env):
     split = _score(env, u, config, problem, objective)
   np.testing.assert_allclose(split.psd, mjx.psd, rtol=0.05, atol=2e-3)
   assert split.psd[0, 0] < 0.5 * split.psd[0, 1]
+
+
+def test_a_program_compiled_ahead_is_the_one_the_call_runs(env):
+  # Evaluator.compile in a thread, as a lockstep's design does for its steps:
+  # the call afterwards compiles nothing on its own thread (physsim.one_off's
+  # count of JAX's compile events) and scores bit for bit as an evaluator that
+  # compiled at the call. (Split over several devices: devices_test.)
+  problems = [
+    env['problem'],
+    obj_lib.make_problem(CONFIG.replace(seed=1), env['net'], env['rec']),
+  ]
+  us = [
+    np.stack([_u_truth(), np.zeros(3)]),
+    np.array([[0.3, -0.2, 0.1], [-0.5, 0.4, 0.6]]),
+  ]
+  ahead, late = search.Evaluator(), search.Evaluator()
+  t = threading.Thread(
+    target=ahead.compile, args=(problems, [2, 2]), kwargs=dict(frames=True)
+  )
+  t.start()
+  t.join()
+  meter = physsim.one_off.Meter()
+  got = ahead(problems, us, [0, 0], frames=True)
+  assert meter.seconds() == 0.0
+  meter.mark()
+  want = late(problems, us, [0, 0], frames=True)
+  assert meter.seconds() > 0.0  # the meter sees a compile where there is one
+  for g, w in zip(got, want, strict=True):
+    np.testing.assert_array_equal(g.psd, w.psd)
+    np.testing.assert_array_equal(g.frames, w.frames)

@@ -10,6 +10,7 @@ import os
 import numpy as np
 import pytest
 
+import physsim
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import search as em
 from tests.experiments.estimate_fixtures import (
@@ -134,6 +135,43 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
   # then the long one alone, with the short one's result already written
   assert seen == [(2, False), (2, False), (1, True), (1, True)]
   assert out[1]['evaluations'] == config.search.n_init + config.search.q
+
+
+def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
+  env, tmp_path, monkeypatch
+):
+  # Off MuJoCo C (here: made to look so) two searches sharing their design
+  # simulate it as a program of its own (distinct worlds once); a thread
+  # compiles their steps' program meanwhile, so step 1 compiles nothing on the
+  # driver's thread (physsim.one_off) and scores as before.
+  config, rec = env['recs'][0]
+  config = config.replace(max_iter=1)
+  jobs = [em.Job(config, rec, env['model'], str(tmp_path / f'w{i}')) for i in (0, 1)]
+  monkeypatch.setattr(em, '_on_mujoco_c', lambda configs: False)
+  compiled, compiles_in_call = [], []
+  real_compile, real_call = em.Evaluator.compile, em.Evaluator.__call__
+
+  def compile_(self, problems, sizes, **kw):
+    try:
+      real_compile(self, problems, sizes, **kw)
+      compiled.append(list(sizes))
+    except Exception as e:  # the driver's thread drops it: keep it to fail on
+      compiled.append(e)
+
+  def call(self, *a, **kw):
+    meter = physsim.one_off.Meter()
+    out = real_call(self, *a, **kw)
+    compiles_in_call.append(meter.seconds())
+    return out
+
+  monkeypatch.setattr(em.Evaluator, 'compile', compile_)
+  monkeypatch.setattr(em.Evaluator, '__call__', call)
+  out = em.estimate_many(jobs, progress=False)
+  assert compiled == [[config.search.q] * 2]
+  assert len(compiles_in_call) == 2  # the design, then step 1
+  assert compiles_in_call[0] > 0.0 and compiles_in_call[1] == 0.0
+  for o in out:
+    assert o['evaluations'] == config.search.n_init + config.search.q
 
 
 def test_lockstep_rows_pad_by_at_most_an_eighth_beyond_sixteen():

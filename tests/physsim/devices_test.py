@@ -1,12 +1,14 @@
 """Tests of physsim.devices: the world axis split over two CPU devices (as
 conftest makes them) against the same function on one, and memory budgets."""
 
+import threading
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from physsim import devices
+from physsim import devices, one_off
 
 _TOL = 1e-6
 
@@ -101,6 +103,29 @@ def test_without_a_mesh_a_program_runs_on_one_device():
   np.testing.assert_allclose(one['y'], spread['y'], atol=_TOL)
   single = devices.world_mesh(jax.local_devices()[1:])
   assert devices.place(scale, single).devices() == {jax.local_devices()[1]}
+
+
+@pytest.mark.parametrize('where', ['none', 'one', 'both'])
+def test_a_program_compiled_from_shapes_is_the_one_placed_arrays_run(where):
+  # abstract() describes a tree as place() puts it (shapes, dtypes, typed PRNG
+  # keys, a None leaf, the sharding): a program lowered from it in a thread
+  # is the one the placed arrays then call, with nothing compiled again.
+  mesh = {'none': None, 'one': devices.world_mesh(jax.local_devices()[1:]),
+          'both': devices.world_mesh()}[where]  # fmt: skip
+  fn = jax.jit(devices.shard_worlds(lambda x, k, s, _: _per_world(x, k, s), mesh,
+                                    replicated=(2, 3)))  # fmt: skip
+  tree = (np.ones((4, 4), np.float32), jax.random.split(jax.random.key(2), 4),
+          np.eye(4, 3, dtype=np.float32), None)  # fmt: skip
+  shapes = devices.abstract(tree, mesh)
+  assert shapes[3] is None and shapes[1].dtype == tree[1].dtype
+  t = threading.Thread(target=lambda: fn.lower(*shapes).compile())
+  t.start()
+  t.join()
+  meter = one_off.Meter()
+  got = fn(*devices.place(tree, mesh))
+  assert meter.seconds() == 0.0
+  want = _per_world(*tree[:3])
+  np.testing.assert_allclose(got['y'], want['y'], atol=_TOL)
 
 
 def test_on_host_puts_new_arrays_on_the_hosts_first_cpu():
