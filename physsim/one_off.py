@@ -78,8 +78,12 @@ class Meter:
     """Starts counting from now."""
     self._compile0, self._setup0 = self._now()
 
-  def seconds(self) -> float:
-    """One-off seconds since the last ``mark()``."""
+  def parts(self) -> tuple[float, float]:
+    """(compile, set-up) seconds since the last ``mark()``."""
     compile_s, setup = self._now()
     grown = [s - self._setup0.get(d, 0.0) for d, s in setup.items()]
-    return compile_s - self._compile0 + max(grown, default=0.0)
+    return compile_s - self._compile0, max(grown, default=0.0)
+
+  def seconds(self) -> float:
+    """One-off seconds since the last ``mark()``."""
+    return sum(self.parts())

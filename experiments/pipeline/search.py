@@ -702,7 +702,8 @@ def estimate_many(
       shared = f'; {last_asked} candidates' if last_run < last_asked else ''
       print(
         f'{head}: {what} ({min(last_run, last_asked)} simulations {t2 - t1:.1f} s, '
-        f'search {t1 - t0:.1f} s{shared}; compile and set-up {one_off.seconds():.1f} s)',
+        f'search {t1 - t0:.1f} s{shared}; compile and set-up {one_off.seconds():.1f} s'
+        f'{_compile_part(one_off)})',
         flush=True,
       )
     finish(ended)
@@ -710,6 +711,14 @@ def estimate_many(
     last_step_s, last_one_off = time.perf_counter() - t0, one_off.seconds()
     last_rows = _pad(len(active))
   return out
+
+
+def _compile_part(meter: physsim.one_off.Meter) -> str:
+  """', of which compile N s' where a step both compiled and set up."""
+  compile_s, setup_s = meter.parts()
+  return (
+    f', of which compile {compile_s:.1f} s' if compile_s > 0 and setup_s > 0 else ''
+  )
 
 
 def step_forecast(

@@ -39,5 +39,6 @@ def test_set_ups_count_the_longest_device_since_the_mark():
   one_off.add_setup('dev-a', 2.0)
   one_off.add_setup('dev-b', 3.0)  # devices set up at once: the longest
   assert meter.seconds() == pytest.approx(3.0)
+  assert meter.parts() == pytest.approx((0.0, 3.0))  # (compile, set-up)
   meter.mark()
   assert meter.seconds() == 0.0
