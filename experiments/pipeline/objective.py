@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 import jax
@@ -865,6 +865,7 @@ class Objective:
     *,
     frames: bool = False,
     positions: bool = False,
+    dispatched: Callable[[], object] | None = None,
   ) -> Scores:
     """Scores candidates ``u (P, q, 3)`` of the P stacked problems in ``data``.
 
@@ -874,6 +875,9 @@ class Objective:
       gust_keys, noise_keys: (P, q) typed PRNG keys, one per candidate.
       frames: also return each problem's best candidate's camera-0 frames.
       positions: also return every candidate's vertex positions.
+      dispatched: called once the program is compiled and running, before
+        its results are awaited (a driver starts work there that should not
+        contend with the compile for Python's lock).
 
     Raises:
       ValueError: ``u`` of the wrong shape, not finite or outside the cube.
@@ -887,6 +891,8 @@ class Objective:
       *physsim.devices.place(args, mesh), with_frames=frames,
       with_positions=positions, worlds_on=mesh,
     )  # fmt: skip
+    if dispatched is not None:
+      dispatched()
     out = jax.device_get(out)
     # A Ctrl-C during the simulator's callbacks left NaN worlds: not scores.
     physsim.interrupt.raise_if_pending()

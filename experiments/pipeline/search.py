@@ -25,6 +25,7 @@ import json
 import os
 import threading
 import time
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
@@ -287,6 +288,12 @@ def _pad(n: int) -> int:
 FLAT_WORLDS = physsim.devices.FLAT_WORLDS
 
 
+def _compile_in_background(threads: list, evaluate, problems, sizes) -> None:
+  """``evaluate.compile`` of ``sizes`` candidates a problem, in a thread
+  appended to ``threads`` (a lockstep's steps, compiled during its design)."""
+  threads.append(_in_background(evaluate.compile, problems, sizes, frames=True))
+
+
 def _on_mujoco_c(configs) -> bool:
   return all(physsim.resolve_backend(c.hardware.backend) == 'c' for c in configs)
 
@@ -354,13 +361,32 @@ class Evaluator:
       return self.objectives[k]
 
   def __call__(self, problems, us, firsts, *, frames: bool = False,
-               positions: bool = False) -> list[obj_lib.Scores]:  # fmt: skip
+               positions: bool = False,
+               dispatched: Callable[[], object] | None = None,
+               ) -> list[obj_lib.Scores]:  # fmt: skip
     """Per problem, the ``Scores`` of its candidates ``us[i] (q_i, 3)`` (its
-    evaluations ``firsts[i] ..`` for the keys)."""
+    evaluations ``firsts[i] ..`` for the keys); ``dispatched()`` once the
+    first fused call is compiled and running (``Objective``)."""
     out: list = [None] * len(problems)
+    pending = [dispatched] if dispatched is not None else []
+
+    def first_dispatched():
+      while pending:
+        pending.pop()()
+
     for members, rows, n_max, q in self._groups(problems, us):
       chunks = [
-        self._call(problems, us, firsts, rows, lo, q, frames, positions)
+        self._call(
+          problems,
+          us,
+          firsts,
+          rows,
+          lo,
+          q,
+          frames,
+          positions,
+          dispatched=first_dispatched,
+        )  # fmt: skip
         for lo in range(0, n_max, q)
       ]
       for r, i in enumerate(members):
@@ -402,7 +428,7 @@ class Evaluator:
       yield members, rows, n_max, q
 
   def _call(self, problems, us, firsts, rows, lo, q, frames, positions,
-            compile_only=False):  # fmt: skip
+            compile_only=False, dispatched=None):  # fmt: skip
     """One fused call: candidates ``lo .. lo + q - 1`` of each row's problem
     (a row with fewer repeats its first); ``compile_only``: compiled, not run."""
     part = []
@@ -425,7 +451,10 @@ class Evaluator:
       )
       return None
     t0 = time.perf_counter()
-    s = objective(data, np.stack(part), gust, noise, frames=frames, positions=positions)
+    s = objective(
+      data, np.stack(part), gust, noise, frames=frames, positions=positions,
+      dispatched=dispatched,
+    )  # fmt: skip
     self.seconds += time.perf_counter() - t0
     return s
 
@@ -664,21 +693,25 @@ def estimate_many(
     # host's cores and Python's lock), the next step's GP program is traced
     # and, in a lockstep, its fused program compiled: searches that share
     # their design simulate it as a program of its own (distinct_worlds).
-    warm = []
+    # The latter starts once the design's own program is compiled and
+    # running: two traces at once share Python's lock, and the design's is
+    # the one waited for.
+    warm, dispatched = [], None
     if step == 0 and not _on_mujoco_c([s.problem.config for s in active]):
       warm.append(_in_background(
         bo.batched.warm_ask, [s.opt for s in active], [s.state for s in active],
         asked, devices=gp_devices, min_rows=len(live),
       ))  # fmt: skip
       if len(active) > 1:
-        warm.append(_in_background(
-          evaluate.compile, [s.problem for s in active],
-          [s.problem.config.search.q for s in active], frames=True,
-        ))  # fmt: skip
+        dispatched = functools.partial(
+          _compile_in_background, warm, evaluate, [s.problem for s in active],
+          [s.problem.config.search.q for s in active],
+        )  # fmt: skip
+
     run_before = evaluate.simulated
     scores = evaluate(
       [s.problem for s in active], asked, [len(s.state.Y) for s in active],
-      frames=True,
+      frames=True, dispatched=dispatched,
     )  # fmt: skip
     last_asked, last_run = sum(map(len, asked)), evaluate.simulated - run_before
     for t in warm:
