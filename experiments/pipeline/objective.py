@@ -865,7 +865,7 @@ class Objective:
     *,
     frames: bool = False,
     positions: bool = False,
-    dispatched: Callable[[], object] | None = None,
+    compiled: Callable[[], object] | None = None,
   ) -> Scores:
     """Scores candidates ``u (P, q, 3)`` of the P stacked problems in ``data``.
 
@@ -875,9 +875,9 @@ class Objective:
       gust_keys, noise_keys: (P, q) typed PRNG keys, one per candidate.
       frames: also return each problem's best candidate's camera-0 frames.
       positions: also return every candidate's vertex positions.
-      dispatched: called once the program is compiled and running, before
-        its results are awaited (a driver starts work there that should not
-        contend with the compile for Python's lock).
+      compiled: called once the program is compiled, before it runs (a
+        driver starts work there that should not contend with the compile
+        for Python's lock, whether or not the run blocks this thread).
 
     Raises:
       ValueError: ``u`` of the wrong shape, not finite or outside the cube.
@@ -887,13 +887,12 @@ class Objective:
     self.simulated += (
       args[1].shape[0] * args[1].shape[1] if sims is None else len(sims[0])
     )
-    out = self._program(
-      *physsim.devices.place(args, mesh), with_frames=frames,
-      with_positions=positions, worlds_on=mesh,
-    )  # fmt: skip
-    if dispatched is not None:
-      dispatched()
-    out = jax.device_get(out)
+    placed = physsim.devices.place(args, mesh)
+    options = dict(with_frames=frames, with_positions=positions, worlds_on=mesh)
+    if compiled is not None:
+      self._program.lower(*placed, **options).compile()  # the call finds it
+      compiled()
+    out = jax.device_get(self._program(*placed, **options))
     # A Ctrl-C during the simulator's callbacks left NaN worlds: not scores.
     physsim.interrupt.raise_if_pending()
     return Scores(

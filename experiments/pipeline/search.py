@@ -362,15 +362,15 @@ class Evaluator:
 
   def __call__(self, problems, us, firsts, *, frames: bool = False,
                positions: bool = False,
-               dispatched: Callable[[], object] | None = None,
+               compiled: Callable[[], object] | None = None,
                ) -> list[obj_lib.Scores]:  # fmt: skip
     """Per problem, the ``Scores`` of its candidates ``us[i] (q_i, 3)`` (its
-    evaluations ``firsts[i] ..`` for the keys); ``dispatched()`` once the
-    first fused call is compiled and running (``Objective``)."""
+    evaluations ``firsts[i] ..`` for the keys); ``compiled()`` once the
+    first fused call is compiled, before it runs (``Objective``)."""
     out: list = [None] * len(problems)
-    pending = [dispatched] if dispatched is not None else []
+    pending = [compiled] if compiled is not None else []
 
-    def first_dispatched():
+    def first_compiled():
       while pending:
         pending.pop()()
 
@@ -385,7 +385,7 @@ class Evaluator:
           q,
           frames,
           positions,
-          dispatched=first_dispatched,
+          compiled=first_compiled,
         )  # fmt: skip
         for lo in range(0, n_max, q)
       ]
@@ -428,7 +428,7 @@ class Evaluator:
       yield members, rows, n_max, q
 
   def _call(self, problems, us, firsts, rows, lo, q, frames, positions,
-            compile_only=False, dispatched=None):  # fmt: skip
+            compile_only=False, compiled=None):  # fmt: skip
     """One fused call: candidates ``lo .. lo + q - 1`` of each row's problem
     (a row with fewer repeats its first); ``compile_only``: compiled, not run."""
     part = []
@@ -453,7 +453,7 @@ class Evaluator:
     t0 = time.perf_counter()
     s = objective(
       data, np.stack(part), gust, noise, frames=frames, positions=positions,
-      dispatched=dispatched,
+      compiled=compiled,
     )  # fmt: skip
     self.seconds += time.perf_counter() - t0
     return s
@@ -693,17 +693,16 @@ def estimate_many(
     # host's cores and Python's lock), the next step's GP program is traced
     # and, in a lockstep, its fused program compiled: searches that share
     # their design simulate it as a program of its own (distinct_worlds).
-    # The latter starts once the design's own program is compiled and
-    # running: two traces at once share Python's lock, and the design's is
-    # the one waited for.
-    warm, dispatched = [], None
+    # The latter starts once the design's own program is compiled: two
+    # traces at once share Python's lock, and the design's is waited for.
+    warm, compiled = [], None
     if step == 0 and not _on_mujoco_c([s.problem.config for s in active]):
       warm.append(_in_background(
         bo.batched.warm_ask, [s.opt for s in active], [s.state for s in active],
         asked, devices=gp_devices, min_rows=len(live),
       ))  # fmt: skip
       if len(active) > 1:
-        dispatched = functools.partial(
+        compiled = functools.partial(
           _compile_in_background, warm, evaluate, [s.problem for s in active],
           [s.problem.config.search.q for s in active],
         )  # fmt: skip
@@ -711,7 +710,7 @@ def estimate_many(
     run_before = evaluate.simulated
     scores = evaluate(
       [s.problem for s in active], asked, [len(s.state.Y) for s in active],
-      frames=True, dispatched=dispatched,
+      frames=True, compiled=compiled,
     )  # fmt: skip
     last_asked, last_run = sum(map(len, asked)), evaluate.simulated - run_before
     for t in warm:

@@ -142,16 +142,34 @@ def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
 ):
   # Off MuJoCo C (here: made to look so) two searches sharing their design
   # simulate it as a program of its own (distinct worlds once); a thread
-  # compiles their steps' program meanwhile, so step 1 compiles nothing on the
-  # driver's thread (physsim.one_off) and scores as before.
+  # compiles their steps' program meanwhile (started once the design's own
+  # program is compiled), so step 1 compiles nothing on the driver's thread
+  # (physsim.one_off) and scores as before.
   config, rec = env['recs'][0]
   config = config.replace(max_iter=1)
   jobs = [em.Job(config, rec, env['model'], str(tmp_path / f'w{i}')) for i in (0, 1)]
   monkeypatch.setattr(em, '_on_mujoco_c', lambda configs: False)
-  compiled, compiles_in_call = [], []
+  compiled, compiles_in_call, lowered, design_first = [], [], [], []
   real_compile, real_call = em.Evaluator.compile, em.Evaluator.__call__
+  real_init = obj_lib.Objective.__init__
+
+  class Lowering:  # an objective's program, its lowerings counted
+    def __init__(self, program):
+      self.program = program
+
+    def lower(self, *a, **kw):
+      lowered.append(1)
+      return self.program.lower(*a, **kw)
+
+    def __call__(self, *a, **kw):
+      return self.program(*a, **kw)
+
+  def init(self, problem):
+    real_init(self, problem)
+    self._program = Lowering(self._program)
 
   def compile_(self, problems, sizes, **kw):
+    design_first.append(len(lowered) == 1)  # the design's, on the driver's thread
     try:
       real_compile(self, problems, sizes, **kw)
       compiled.append(list(sizes))
@@ -164,10 +182,11 @@ def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
     compiles_in_call.append(meter.seconds())
     return out
 
+  monkeypatch.setattr(obj_lib.Objective, '__init__', init)
   monkeypatch.setattr(em.Evaluator, 'compile', compile_)
   monkeypatch.setattr(em.Evaluator, '__call__', call)
   out = em.estimate_many(jobs, progress=False)
-  assert compiled == [[config.search.q] * 2]
+  assert compiled == [[config.search.q] * 2] and design_first == [True]
   assert len(compiles_in_call) == 2  # the design, then step 1
   assert compiles_in_call[0] > 0.0 and compiles_in_call[1] == 0.0
   for o in out:
