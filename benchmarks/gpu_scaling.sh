@@ -16,7 +16,11 @@
 #             processes of one GPU each (experiments.launch; each estimates its
 #             share of the recordings in its own lockstep), after a tiny run
 #             that fills Warp's kernel cache; SHARDED=1 runs one process over
-#             the N GPUs instead (its worlds split by jax.sharding).
+#             the N GPUs instead (its worlds split by jax.sharding; logs
+#             calsharded_<N>gpu.log, read against calibrate_1gpu.log). Each run starts
+#             with its own empty JAX cache ($R/jax_cache_<N>), so neither
+#             loads what the other compiled, whatever the order: GPUS="2 1"
+#             PAIRS=15 SHARDED=1 is issue 41's 210-recording comparison.
 # Usage: OUT=/path bash benchmarks/gpu_scaling.sh STAGE [RUN_DIR] (OUT default
 # out/gpu_scaling, scaling_report's default, outside git; not benchmarks/results); then
 #   python -m benchmarks.scaling_report --logs=$OUT   (the table and JSON).
@@ -93,7 +97,8 @@ case "$stage" in
     devices 1
     timed calibrate_warmup python -m experiments.generate_dataset --out="$R/warm" $WARM
     for g in ${G:-$GPUS}; do
-      rm -rf "$R/cal_$g"
+      rm -rf "$R/cal_$g" "$R/jax_cache_$g"
+      export PHYSNET_JAX_CACHE=$R/jax_cache_$g
       if [ "$g" = 1 ]; then
         devices 1
         timed calibrate_1gpu python -m experiments.calibrate $CAL --workdir="$R/cal_1"
