@@ -375,20 +375,11 @@ class Evaluator:
         pending.pop()()
 
     for members, rows, n_max, q in self._groups(problems, us):
-      chunks = [
-        self._call(
-          problems,
-          us,
-          firsts,
-          rows,
-          lo,
-          q,
-          frames,
-          positions,
-          compiled=first_compiled,
-        )  # fmt: skip
-        for lo in range(0, n_max, q)
-      ]
+      call = functools.partial(
+        self._call, problems, us, firsts, rows, q=q, frames=frames,
+        positions=positions, compiled=first_compiled,
+      )  # fmt: skip
+      chunks = [call(lo=lo) for lo in range(0, n_max, q)]
       for r, i in enumerate(members):
         n = len(us[i])
         psd, valid, pos, res = (
