@@ -851,10 +851,14 @@ class Objective:
     compiled (JAX's caches). MuJoCo Warp's own set-up for a batch size
     (buffers, the frame's graph) still happens on the first call."""
     args, mesh = self._arguments(data, u, gust_keys, noise_keys)
+    self._compile(physsim.devices.abstract(args, mesh), mesh, frames, positions)
+
+  def _compile(self, args, mesh, frames: bool, positions: bool) -> None:
+    """The program for ``args`` (arrays, or their ``abstract`` shapes) lowered
+    and compiled into JAX's caches, where its call finds it."""
     self._program.lower(
-      *physsim.devices.abstract(args, mesh), with_frames=frames,
-      with_positions=positions, worlds_on=mesh,
-    ).compile()  # fmt: skip
+      *args, with_frames=frames, with_positions=positions, worlds_on=mesh
+    ).compile()
 
   def __call__(
     self,
@@ -884,15 +888,15 @@ class Objective:
     """
     args, mesh = self._arguments(data, u, gust_keys, noise_keys)
     sims = args[-1]
-    self.simulated += (
-      args[1].shape[0] * args[1].shape[1] if sims is None else len(sims[0])
-    )
+    self.simulated += args[1].size // 3 if sims is None else len(sims[0])
     placed = physsim.devices.place(args, mesh)
-    options = dict(with_frames=frames, with_positions=positions, worlds_on=mesh)
     if compiled is not None:
-      self._program.lower(*placed, **options).compile()  # the call finds it
+      self._compile(placed, mesh, frames, positions)
       compiled()
-    out = jax.device_get(self._program(*placed, **options))
+    out = self._program(
+      *placed, with_frames=frames, with_positions=positions, worlds_on=mesh
+    )
+    out = jax.device_get(out)
     # A Ctrl-C during the simulator's callbacks left NaN worlds: not scores.
     physsim.interrupt.raise_if_pending()
     return Scores(

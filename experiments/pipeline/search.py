@@ -368,18 +368,13 @@ class Evaluator:
     evaluations ``firsts[i] ..`` for the keys); ``compiled()`` once the
     first fused call is compiled, before it runs (``Objective``)."""
     out: list = [None] * len(problems)
-    pending = [compiled] if compiled is not None else []
-
-    def first_compiled():
-      while pending:
-        pending.pop()()
-
     for members, rows, n_max, q in self._groups(problems, us):
-      call = functools.partial(
-        self._call, problems, us, firsts, rows, q=q, frames=frames,
-        positions=positions, compiled=first_compiled,
-      )  # fmt: skip
-      chunks = [call(lo=lo) for lo in range(0, n_max, q)]
+      chunks = []
+      for lo in range(0, n_max, q):
+        chunks.append(self._call(
+          problems, us, firsts, rows, lo, q, frames, positions, compiled=compiled
+        ))  # fmt: skip
+        compiled = None  # the first fused call's alone
       for r, i in enumerate(members):
         n = len(us[i])
         psd, valid, pos, res = (
