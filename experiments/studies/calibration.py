@@ -439,39 +439,66 @@ def simulate_and_estimate(
       index.filter(material=material, valid=True).rows, key=lambda r: r['seq_id']
     )
   ]
-  recordings = recording_lib.load_recordings(
-    [index.path(r) for _, r in rows], fps=est.simulation.fps, size=size,
+  # Under several processes each reads and estimates its share alone; the
+  # others' rows need only their truth (meta.json), for process 0's gather.
+  paths = [index.path(r) for _, r in rows]
+  mine = list(range(len(rows)))
+  if jax.process_count() > 1:
+    mine = distributed.share(mine)
+  loaded = dict(zip(mine, recording_lib.load_recordings(
+    [paths[i] for i in mine], fps=est.simulation.fps, size=size,
     frames=est.simulation.frames,
-  )  # fmt: skip
-  jobs, meta = [], []
-  for (material, r), rec in zip(rows, recordings, strict=True):
+  ), strict=True))  # fmt: skip
+  jobs, meta = {}, []
+  for i, (material, r) in enumerate(rows):
     seq = first_seq(config, material) + int(r['seq_id'])
     wd = os.path.join(workdir, 'estimates', f'{seq:04d}')
     k = network_of(config, seq)
-    # '' : no network (search.estimate_many compares depth frames directly)
-    model_dir = os.path.join(model_roots[k], material) if model_roots else ''
-    job_est = with_reading(config, est.replace(material=material), reading,
-                           rec.truth, seq)  # fmt: skip
-    jobs.append(search.Job(job_est, rec, model_dir, wd))
-    meta.append({'seq': seq, 'material': material, 'truth': rec.truth,
+    rec = loaded.get(i)
+    truth = rec.truth if rec is not None else recording_truth(paths[i])
+    if rec is not None:
+      # '' : no network (search.estimate_many compares depth frames directly)
+      model_dir = os.path.join(model_roots[k], material) if model_roots else ''
+      job_est = with_reading(config, est.replace(material=material), reading,
+                             truth, seq)  # fmt: skip
+      jobs[i] = search.Job(job_est, rec, model_dir, wd)
+    meta.append({'seq': seq, 'material': material, 'truth': truth,
                  'workdir': wd, 'network': seeds[k] if seeds else None})  # fmt: skip
+  shared = f'{len(mine)} of ' if jax.process_count() > 1 else ''
+  print(f'{shared}{len(rows)} recordings in lockstep', flush=True)
+  ran = search.estimate_many([jobs[i] for i in mine], figures=False)  # finished: read
+  results = dict(zip(mine, ran, strict=True))
   if jax.process_count() > 1:
-    mine = distributed.share(jobs)
-    print(f'{len(mine)} of {len(jobs)} recordings in lockstep', flush=True)
-    search.estimate_many(mine, figures=False)
     distributed.barrier('calibration: estimates done')
     if not distributed.is_main():
       return []
-  else:
-    print(f'{len(jobs)} recordings in lockstep', flush=True)
-  results = search.estimate_many(jobs, figures=False)  # finished ones read back
+    for i, m in enumerate(meta):  # the others' estimates, from their files
+      if i not in results:
+        results[i] = read_estimate(m['workdir'])
   out = []
-  for m, res in zip(meta, results, strict=True):
+  for i, m in enumerate(meta):
+    res = results[i]
     if isinstance(res, Exception):
       print(f'recording {m["seq"]}: {res}', flush=True)
       continue
     out.append({**m, 'result': res})
   return out
+
+
+def recording_truth(path: str) -> dict | None:
+  """A dataset sequence's ground truth, from its ``meta.json`` alone (no frames)."""
+  return recording_lib.truth_of(
+    physsim.dataset.read_json(os.path.join(path, 'meta.json'))
+  )
+
+
+def read_estimate(workdir: str) -> dict | Exception:
+  """The ``estimate.json`` another process wrote in ``workdir``, or the error
+  that says it is missing (that process printed why)."""
+  path = os.path.join(workdir, search.ESTIMATE_FILE)
+  if not os.path.isfile(path):
+    return FileNotFoundError(f'{path}: no estimate (its process printed why)')
+  return physsim.dataset.read_json(path)
 
 
 # ------------------------------------------------------------------ analysis

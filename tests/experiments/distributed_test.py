@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from experiments.pipeline import distributed
+from experiments.studies import calibration
 
 pytestmark = pytest.mark.slow  # several processes simulate and train
 
@@ -160,6 +161,12 @@ def test_calibration_as_two_processes_estimates_as_one(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0, out[-3000:]
     assert (workdir / 'packed' / 'runs-000.npz').is_file()
+    # process 0 packed both, the other's gathered from its files (each
+    # process read and set up its own share alone)
+    packed = calibration.packed_runs(str(workdir))
+    assert sorted(r['seq'] for r in packed) == [0, 1]
+    if n == 2:
+      assert out.count('1 of 2 recordings in lockstep') == 2, out[-3000:]
     runs[n] = {
       s: json.loads((workdir / 'estimates' / s / 'estimate.json').read_text())
       for s in ('0000', '0001')
