@@ -114,6 +114,9 @@ class Args:
 
 PRESETS = {k: Args(search=v) for k, v in objective_lib.PRESETS.items()}
 
+# What a joint estimate's recordings share (joint.json's entries).
+JOINT_SHARED = ('bending_scale', 'area_weight')
+
 
 def joint_winds(args: Args) -> list[tuple[float, float]] | None:
   """The per-recording wind readings of a joint estimate, or None.
@@ -440,10 +443,12 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
       print(f'note: {line}')
   for note in (
     report.fan_setting_note(ratios, config.simulation.material),
-    # experiments.plan reads one recording's posterior
-    report.next_recording_note(result['estimate'], configs[0], args.workdir)
-    if n == 1
-    else None,
+    # experiments.plan reads the posterior: one recording's, or the joint's
+    report.next_recording_note(
+      result['estimate'] if n == 1 else {k: result[k] for k in JOINT_SHARED},
+      configs[0],
+      args.workdir,
+    ),  # fmt: skip
   ):
     if note:
       print(note)

@@ -1,6 +1,7 @@
 """What to record next, from an estimate's posterior (issue 39, item 4).
 
   python -m experiments.plan --workdir=out/estimate           # its posterior.npz
+  python -m experiments.plan --workdir=out/joint   # a joint's joint_posterior.npz
   python -m experiments.plan --workdir=out/estimate --reading=0.02 \
       --candidates=sheet_100cm_2ms_r9,swatch_20cm_2ms_r9
 
@@ -27,7 +28,8 @@ class Args:
   """The next recording for an estimate.
 
   Attributes:
-    workdir: an estimate's workdir (its ``posterior.npz`` and ``estimate.json``).
+    workdir: an estimate's workdir (its ``posterior.npz`` and ``estimate.json``,
+      or a joint estimate's ``joint_posterior.npz`` and ``joint.json``).
     candidates: recordings to rank (``protocol.Candidate`` names, e.g.
       ``swatch_20cm_2ms_r9``: size, fan m/s or ``still``, mesh; comma-separated).
     nodes: posterior points where slopes are simulated (quantiles of bending).

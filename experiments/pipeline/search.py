@@ -958,6 +958,9 @@ def _weights(note: dict | None) -> dict | None:
 
 
 JOINT_FILE = 'joint.json'
+# The joint's shared draws, as POSTERIOR_FILE keeps one recording's (what
+# experiments.plan reads): recording 0's (b, v_0, w) unit draws and the box.
+JOINT_POSTERIOR_FILE = 'joint_posterior.npz'
 
 
 def estimate_joint(
@@ -1197,6 +1200,10 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
     combined['samples'][0], space, npz[0]['prior_samples'], levels, _weights(note),
     configs[0].measured,
   )  # fmt: skip
+  files.write_atomic(
+    os.path.join(workdir, JOINT_POSTERIOR_FILE),
+    lambda p: np.savez(p, samples=combined['samples'][0], bounds=space.bounds()),
+  )
   out = {
     'material': config.simulation.material,
     'recordings': per,

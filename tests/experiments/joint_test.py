@@ -16,6 +16,7 @@ from experiments import estimate as estimate_script
 from experiments.pipeline import objective, report, search
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
+from experiments.studies import protocol
 from tests.experiments import estimate_fixtures as fx
 
 pytestmark = pytest.mark.slow  # joint searches over several recordings
@@ -139,6 +140,16 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   # no table covers it: the recordings share the simulator's error
   assert out['shared_bias'] == config.scoring.shared_bias > 0
   assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
+  # experiments.plan reads the joint's shared draws: the fabric the
+  # recordings told of together, its median the joint's own
+  material, draws, _ = protocol.read_posterior(workdir)
+  assert material == config.simulation.material
+  assert np.exp(np.median(draws[:, 1])) == pytest.approx(
+    out['area_weight']['median'], rel=0.02
+  )
+  assert np.exp(np.median(draws[:, 0])) == pytest.approx(
+    out['bending_scale']['median'], rel=0.05
+  )
   # the joint's settings are the shared ones (no one recording's reading)
   assert out['config']['measured']['wind_speed_sd'] == 0.0
   # the same searches run for many fabrics at once (joint_jobs, one

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import intake, objective, rig
+from experiments.pipeline import intake, objective, report, rig
+from experiments.studies import protocol as protocol_study
 from physsim import camera, dataset
 
 _CONFIG = objective.PRESETS['smoke'].replace(distance='shape')
@@ -250,6 +251,19 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   lo, hi = joint['bending_scale']['interval_90']
   assert lo < truth.bending_scale < hi and hi / lo < 3, (lo, hi)
   assert own[0]['config']['measured']['bending_length'] == pytest.approx(c, rel=0.05)
+  # one line after every estimate, a joint's too, where the area weight was
+  # left near its prior (the bending was measured: not named), and the
+  # planner it names reads the joint's shared posterior
+  told = joint['area_weight']['narrowing_90'] < report.LITTLE_NARROWING
+  lines = [ln for ln in done.stdout.splitlines() if ln.startswith('next:')]
+  assert len(lines) == int(told), done.stdout[-2000:]
+  if told:
+    assert 'about area weight;' in lines[0], lines[0]
+    assert f'experiments.plan --workdir={tmp_path / "w"}' in lines[0], lines[0]
+  material, draws, _ = protocol_study.read_posterior(str(tmp_path / 'w'))
+  assert material == truth.material and draws.shape[1] == 2
+  lo, hi = joint['area_weight']['interval_90']
+  assert lo <= np.exp(np.median(draws[:, 1])) <= hi
 
 
 def test_the_mismatched_recipe_changes_the_physics_and_stays_a_cloth():
