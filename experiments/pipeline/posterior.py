@@ -12,7 +12,9 @@ and area weight, one wind per recording).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
 
 import jax
 import numpy as np
@@ -678,3 +680,39 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
     fig.suptitle(title)
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
+
+
+def read_draws(workdir: str) -> tuple[str, np.ndarray, np.ndarray]:
+  """An estimate's fabric, its posterior draws as (S, 2) (log bending scale,
+  log area weight) and their (S,) weights (equal: the draws are samples).
+  A joint estimate's workdir gives its shared draws (``joint_posterior.npz``
+  beside ``joint.json``): what its recordings together say of the fabric.
+
+  Raises:
+    ValueError: no ``posterior.npz`` (an argmin estimate keeps none) nor a
+      joint's, or draws that are not (S, 3).
+  """
+  from experiments.pipeline import search  # the estimate's file names
+
+  path, about = os.path.join(workdir, search.POSTERIOR_FILE), 'estimate.json'
+  joint = os.path.join(workdir, search.JOINT_POSTERIOR_FILE)
+  if not os.path.exists(path) and os.path.exists(joint):
+    path, about = joint, search.JOINT_FILE
+  if not os.path.exists(path):
+    raise ValueError(
+      f'{path}: no posterior draws (run the estimate with a posterior; a joint '
+      f"estimate's are its {search.JOINT_POSTERIOR_FILE})"
+    )
+  with np.load(path) as z:
+    samples, bounds = np.asarray(z['samples'], np.float64), np.asarray(z['bounds'])
+  if samples.ndim != 2 or samples.shape[1] != 3 or bounds.shape != (3, 2):
+    raise ValueError(f'{path}: need (S, 3) draws, got {samples.shape}')
+  material = 'gray_interlock'
+  est = os.path.join(workdir, about)
+  if os.path.exists(est):
+    with open(est) as f:
+      material = json.load(f).get('material', material)
+  space = physsim.SearchSpace(*(tuple(b) for b in bounds))
+  p = physsim.params.from_unit(np.clip(samples, -1, 1), space)
+  draws = np.stack([np.log(p.bending_scale), np.log(p.area_weight)], axis=1)
+  return material, draws, np.ones(len(draws))

@@ -58,6 +58,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import physsim  # noqa: E402
 from bo import design  # noqa: E402
 from experiments.pipeline import files  # noqa: E402
+from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from physsim import cantilever  # noqa: E402
 
 RESULT_FILE = 'protocol.json'
@@ -944,42 +945,6 @@ PLAN_CANDIDATES = (
 )  # fmt: skip
 
 
-def read_posterior(workdir: str) -> tuple[str, np.ndarray, np.ndarray]:
-  """An estimate's fabric, its posterior draws as (S, 2) (log bending scale,
-  log area weight) and their (S,) weights (equal: the draws are samples).
-  A joint estimate's workdir gives its shared draws (``joint_posterior.npz``
-  beside ``joint.json``): what its recordings together say of the fabric.
-
-  Raises:
-    ValueError: no ``posterior.npz`` (an argmin estimate keeps none) nor a
-      joint's, or draws that are not (S, 3).
-  """
-  from experiments.pipeline import search  # the estimate's file names
-
-  path, about = os.path.join(workdir, search.POSTERIOR_FILE), 'estimate.json'
-  joint = os.path.join(workdir, search.JOINT_POSTERIOR_FILE)
-  if not os.path.exists(path) and os.path.exists(joint):
-    path, about = joint, search.JOINT_FILE
-  if not os.path.exists(path):
-    raise ValueError(
-      f'{path}: no posterior draws (run the estimate with a posterior; a joint '
-      f"estimate's are its {search.JOINT_POSTERIOR_FILE})"
-    )
-  with np.load(path) as z:
-    samples, bounds = np.asarray(z['samples'], np.float64), np.asarray(z['bounds'])
-  if samples.ndim != 2 or samples.shape[1] != 3 or bounds.shape != (3, 2):
-    raise ValueError(f'{path}: need (S, 3) draws, got {samples.shape}')
-  material = 'gray_interlock'
-  est = os.path.join(workdir, about)
-  if os.path.exists(est):
-    with open(est) as f:
-      material = json.load(f).get('material', material)
-  space = physsim.SearchSpace(*(tuple(b) for b in bounds))
-  p = physsim.params.from_unit(np.clip(samples, -1, 1), space)
-  draws = np.stack([np.log(p.bending_scale), np.log(p.area_weight)], axis=1)
-  return material, draws, np.ones(len(draws))
-
-
 def node_values(draws: np.ndarray, nodes: int) -> np.ndarray:
   """(K, 2) points where slopes are simulated: the posterior median of log
   area weight and K quantiles of log bending (its effect is the most
@@ -1050,13 +1015,13 @@ def describe(name: str, clip: float) -> str:
 
 def plan(workdir: str, candidates=PLAN_CANDIDATES, nodes: int = 1,
          reading: float = 0.0, config: Config | None = None) -> dict:  # fmt: skip
-  """Ranks ``candidates`` for the estimate in ``workdir`` (``read_posterior``);
+  """Ranks ``candidates`` for the estimate in ``workdir`` (``posterior.read_draws``);
   slopes simulated at ``nodes`` posterior points with ``config``'s settings,
   cached in ``<workdir>/plan_slopes/``; writes ``plan.json``."""
   config = config or Config()
   if nodes < 1:
     raise ValueError(f'--nodes={nodes}: need at least 1')
-  material, draws, weights = read_posterior(workdir)
+  material, draws, weights = posterior_lib.read_draws(workdir)
   config = dataclasses.replace(config, material=material)
   points = node_values(draws, nodes)
   cache = os.path.join(

@@ -16,7 +16,6 @@ from experiments import estimate as estimate_script
 from experiments.pipeline import objective, report, search
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
-from experiments.studies import protocol
 from tests.experiments import estimate_fixtures as fx
 
 pytestmark = pytest.mark.slow  # joint searches over several recordings
@@ -142,7 +141,7 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
   # experiments.plan reads the joint's shared draws: the fabric the
   # recordings told of together, its median the joint's own
-  material, draws, _ = protocol.read_posterior(workdir)
+  material, draws, _ = posterior_lib.read_draws(workdir)
   assert material == config.simulation.material
   assert np.exp(np.median(draws[:, 1])) == pytest.approx(
     out['area_weight']['median'], rel=0.02

@@ -14,7 +14,7 @@ import pytest
 
 import physsim
 from experiments.pipeline import intake, objective, report, rig
-from experiments.studies import protocol as protocol_study
+from experiments.pipeline import posterior as posterior_lib
 from physsim import camera, dataset
 
 _CONFIG = objective.PRESETS['smoke'].replace(distance='shape')
@@ -260,7 +260,7 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   if told:
     assert 'about area weight;' in lines[0], lines[0]
     assert f'experiments.plan --workdir={tmp_path / "w"}' in lines[0], lines[0]
-  material, draws, _ = protocol_study.read_posterior(str(tmp_path / 'w'))
+  material, draws, _ = posterior_lib.read_draws(str(tmp_path / 'w'))
   assert material == truth.material and draws.shape[1] == 2
   lo, hi = joint['area_weight']['interval_90']
   assert lo <= np.exp(np.median(draws[:, 1])) <= hi
