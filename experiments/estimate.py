@@ -470,6 +470,10 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
       f"{where}/{search.JOINT_FILE}; each recording's estimate.json and pictures: "
       f'{where}/recording_<k>/'
     )
+  print(
+    f'the fabric for your simulator (MuJoCo MJCF, ArcSim material, posterior draws): '
+    f'python -m experiments.export --workdir={args.workdir}'
+  )
 
 
 if __name__ == '__main__':

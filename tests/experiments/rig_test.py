@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import intake, objective, report, rig
+from experiments.pipeline import fabric_files, intake, objective, report, rig
 from experiments.pipeline import posterior as posterior_lib
 from physsim import camera, dataset
 
@@ -260,6 +260,11 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   if told:
     assert 'about area weight;' in lines[0], lines[0]
     assert f'experiments.plan --workdir={tmp_path / "w"}' in lines[0], lines[0]
+  assert f'experiments.export --workdir={tmp_path / "w"}' in done.stdout
+  # and the export it names writes the joint's fabric
+  record = fabric_files.write(str(tmp_path / 'w'), str(tmp_path / 'fabric'), draws=10)
+  assert record['point']['area_weight'] == pytest.approx(joint['area_weight']['median'])
+  assert set(record['files']) == {'mujoco', 'arcsim', 'draws'}
   material, draws, _ = posterior_lib.read_draws(str(tmp_path / 'w'))
   assert material == truth.material and draws.shape[1] == 2
   lo, hi = joint['area_weight']['interval_90']
