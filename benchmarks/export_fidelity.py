@@ -52,6 +52,13 @@ class Args:
   out: str = ''
 
 
+PRESETS = {
+  'default': Args(),
+  # the path end to end in seconds on a CPU
+  'smoke': Args(resolution=8, warmup=0.25, clip=0.5),
+}
+
+
 def _estimator(model, args: Args, s: float, w: float, v: float) -> np.ndarray:
   """(V, 3) the estimator's mean position over the clip (MuJoCo C, steady)."""
   ro = physsim.simulate(
@@ -138,4 +145,4 @@ def main(args: Args) -> None:
 
 
 if __name__ == '__main__':
-  cli.run(Args, {'default': Args()}, main)
+  cli.run(Args, PRESETS, main)
