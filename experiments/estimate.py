@@ -31,9 +31,17 @@ import sys
 from absl import logging
 
 import physsim
-from experiments.pipeline import cli, files, intake, report, search, setup, takes
+from experiments.pipeline import (
+  cli,
+  files,
+  intake,
+  report,
+  search,
+  setup,
+  takes,
+  user_recordings,
+)
 from experiments.pipeline import objective as objective_lib
-from experiments.pipeline import recording as recording_lib
 from physsim import overhang_depth
 
 
@@ -201,96 +209,6 @@ def with_fabric_readings(args: Args) -> Args:
   return dataclasses.replace(args, search=args.search.replace(**readings))
 
 
-def take_settings(args: Args, take: takes.Take):
-  """(intake settings, estimate settings) of one recording: the flags'
-  with the recording's own cloth size, hem, up axis and wind reading."""
-  ik = args.intake
-  if take.world_up:
-    ik = dataclasses.replace(ik, world_up=take.world_up)
-  config = args.search
-  if take.cloth_size:
-    config = config.replace(cloth_size=take.cloth_size)
-  if take.hem_mass:
-    config = config.replace(hem_mass=take.hem_mass)
-  if take.wind is not None:
-    config = config.replace(wind_speed=take.wind[0], wind_speed_sd=take.wind[1])
-  config.check()
-  return ik, config
-
-
-def _take_in(args: Args, take: takes.Take, workdir: str, frames: bool = True):
-  """One recording taken in; its summary printed and its files written."""
-  ik_config, config = take_settings(args, take)
-  ik = intake.take_in(
-    take.path, ik_config, take.camera_json, config.simulation, workdir=workdir
-  )
-  print(intake.summary(ik))
-  intake.write(ik, workdir, config.simulation, frames=frames)
-  return ik
-
-
-def own_settings(config) -> dict:
-  """A recording's own settings in a joint estimate (``search.PER_RECORDING``
-  that its config writes: a config without a hem writes none)."""
-  flat = config.flat()
-  return {k: flat[k] for k in search.PER_RECORDING if k in flat}
-
-
-def with_alignment_error(args: Args, config, intakes: list):
-  """``config`` with the intakes' own alignment error as its camera error
-  (the largest of them) where ``args.alignment_sd`` and the user gave none;
-  and the line that says so, or None."""
-  sds = [ik.alignment_sd for ik in intakes if ik is not None and any(ik.alignment_sd)]
-  if (
-    not (args.alignment_sd and sds)
-    or config.scoring.camera_sd_m
-    or config.scoring.camera_sd_deg
-  ):
-    return config, None
-  m, deg = max(s[0] for s in sds), max(s[1] for s in sds)
-  config = config.replace(camera_sd_m=m, camera_sd_deg=deg)
-  config.check()
-  return config, (
-    f"the posterior carries the alignment's own error: the camera placed to "
-    f'{100 * m:.1f} cm and {deg:g} degrees (1 sd; --camera_sd_m and '
-    '--camera_sd_deg set it, --noalignment_sd trusts the placement exactly)'
-  )
-
-
-def alignment_record(intakes: list, config) -> dict | None:
-  """What estimate.json says of the recordings' alignment, or None (none
-  taken in)."""
-  taken = [ik for ik in intakes if ik is not None]
-  if not taken:
-    return None
-  guesses = [intake.guess_note(ik) for ik in taken if ik.up_is_guess]
-  return {
-    'up_from': [ik.up_from for ik in taken],
-    'up_is_guess': bool(guesses),
-    'intake_alignment_sd': [
-      {'m': ik.alignment_sd[0], 'deg': ik.alignment_sd[1]} for ik in taken
-    ],
-    'camera_sd_m': config.scoring.camera_sd_m,
-    'camera_sd_deg': config.scoring.camera_sd_deg,
-    'warnings': guesses + [w for ik in taken for w in ik.warnings],
-  }
-
-
-def _record_alignment(path: str, record: dict | None) -> None:
-  """Adds ``record`` to the result JSON the search wrote at ``path``."""
-  if record is None or not os.path.isfile(path):
-    return
-  data = recording_lib.read_json(path)
-  data['alignment'] = record
-  files.write_json(path, data)
-
-
-def _needs_intake(take: takes.Take) -> bool:
-  """Everything but this project's own simulated sequences without a camera
-  file is taken in."""
-  return bool(take.camera_json) or not intake.is_sequence(take.path)
-
-
 def network(args: Args) -> setup.Network:
   """The estimate's network (``--model``) with its record, or none for
   ``--distance=shape`` (``setup.network``: the library's own checks).
@@ -318,11 +236,6 @@ def model_note(args: Args) -> str:
   )
 
 
-def _intake_dir(args: Args, i: int, n: int) -> str:
-  """Where recording ``i`` of ``n``'s intake goes."""
-  return args.workdir if n == 1 else f'{args.workdir}/intake_{i}'
-
-
 def main(args: Args) -> None:
   """Checks every setting, then holds the workdir (one process at a time;
   ``files.locked``) for the intake and the search."""
@@ -332,22 +245,12 @@ def main(args: Args) -> None:
   args.search.check()
   args.intake.check()
   recorded = recording_takes(args)  # checked before anything is read
-  for take in recorded:
-    take_settings(args, take)
+  for take in recorded:  # each recording's own settings checked
+    user_recordings.take_settings(args.intake, args.search, take)
   if not args.intake_only:  # the simulator's modules load while the intake runs
     physsim.rollout.prefetch(args.search.hardware.backend)
   with files.locked(args.workdir):
     _main(args, recorded)
-
-
-def _guess_refused(path: str) -> ValueError:
-  return ValueError(
-    f"{path}: up is a guess from the cloth's own plane (no floor in view), "
-    'which a cloth swung by the wind tilts, and the camera and the answer '
-    "with it; give --world_up=AXIS (the camera file's world axis that points "
-    'up), "gravity" in the camera file, or --up; or --allow_guessed_up to '
-    'estimate anyway with a 20-degree tilt uncertainty'
-  )
 
 
 def _main(args: Args, recorded: list[takes.Take]) -> None:
@@ -359,85 +262,41 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     flush=True,
   )  # a line within seconds: the first step's output comes much later
   # Before any intake writes: no workdir may hold another recording's run.
-  for i, take in enumerate(recorded):
-    if args.intake_only or _needs_intake(take):
-      intake.check_workdir(
-        _intake_dir(args, i, n), take.path, take.camera_json, search.RUN_FILE
-      )
+  user_recordings.check_workdirs(recorded, args.workdir, args.intake_only)
   if args.intake_only:
     for i, take in enumerate(recorded):
-      _take_in(args, take, _intake_dir(args, i, n))
+      user_recordings.take_in(
+        take, args.intake, config, user_recordings.intake_dir(args.workdir, i, n)
+      )
     print(f'intake.json, overlay.png and the cleaned frames in {args.workdir}')
     return
   loaded = network(args)
-  net = loaded.embedding
   if note := model_note(args):
     print(note, flush=True)
-  # The network restored here is the one the search uses (not restored twice).
-  kw = dict(
-    allow_other_material=args.allow_other_material,
-    nets={args.model: net} if args.model else None,
-  )
-  recs, intakes, configs, carried = [], [], [], []
-  for i, take in enumerate(recorded):
-    _, own = take_settings(args, take)
-    if _needs_intake(take):
-      if net.modality == 'rgb':
-        raise ValueError(
-          f'{take.path}: an RGB network needs a dataset sequence with colour '
-          'frames; the intake reads depth only'
-        )
-      ik = _take_in(args, take, _intake_dir(args, i, n))
-      if ik.up_is_guess and not args.allow_guessed_up:
-        raise _guess_refused(take.path)
-      intakes.append(ik)
-      recs.append(
-        intake.to_recording(
-          ik, own.simulation.fps, net.image_size, own.simulation.frames
-        )
-      )
-    else:
-      intakes.append(None)
-      recs.append(
-        recording_lib.load_recording(
-          take.path,
-          fps=own.simulation.fps,
-          size=net.image_size,
-          frames=own.simulation.frames,
-          rgb=net.modality == 'rgb',
-        )  # fmt: skip
-      )
-    # each recording carries its own intake's alignment error
-    own, line = with_alignment_error(args, own, intakes[-1:])
-    configs.append(own)
-    if line:
-      carried.append(f'{take.path}: {line}' if n > 1 else line)
+  prepared = user_recordings.prepare(
+    recorded, args.intake, config, loaded, args.workdir,
+    carry_alignment=args.alignment_sd, allow_guessed_up=args.allow_guessed_up,
+  )  # fmt: skip
   warning = report.shape_camera_warning(
-    configs[0], any(_needs_intake(t) for t in recorded)
+    prepared.configs[0], any(user_recordings.needs_intake(t) for t in recorded)
   )
-  for line in (warning, report.synthetic_warning(configs[0]), *carried):
+  for line in (warning, report.synthetic_warning(prepared.configs[0]), *prepared.lines):
     if line:
       print(line)
-  record = alignment_record(intakes, configs[0])
   drawings = []  # the pictures, drawn once the answer is printed
+  # The network restored here is the one the search uses (not restored twice).
+  nets = {args.model: loaded.embedding} if args.model else None
+  result = user_recordings.estimate(
+    recorded, prepared, config, args.model, args.workdir, pictures=drawings,
+    allow_other_material=args.allow_other_material, nets=nets,
+  )  # fmt: skip
   if n > 1:
-    winds = [t.wind or (0.0, 0.0) for t in recorded]
-    overrides = [own_settings(c) for c in configs]
-    result = search.estimate_joint(
-      config, recs, args.model, args.workdir,
-      winds if any(t.wind for t in recorded) else None, overrides=overrides,
-      fans=takes.fans(recorded), pictures=drawings, **kw,
-    )  # fmt: skip
-    _record_alignment(os.path.join(args.workdir, search.JOINT_FILE), record)
     print(report.joint_table(result), flush=True)
     ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
   else:
-    result = search.estimate(
-      configs[0], recs[0], args.model, args.workdir, pictures=drawings, **kw
-    )
-    _record_alignment(os.path.join(args.workdir, search.ESTIMATE_FILE), record)
     print(report.report_table(result), flush=True)
     ratios = [report.point_of(result['load_ratio'])]
+  record = user_recordings.alignment_record(prepared.intakes, prepared.configs[0])
   for line in (record or {}).get('warnings', []):
     if 'up is a guess' in line:
       print(f'note: {line}')
@@ -446,7 +305,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     # experiments.plan reads the posterior: one recording's, or the joint's
     report.next_recording_note(
       result['estimate'] if n == 1 else {k: result[k] for k in JOINT_SHARED},
-      configs[0],
+      prepared.configs[0],
       args.workdir,
     ),  # fmt: skip
   ):
@@ -459,7 +318,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   if n == 1:
     pictures = (
       ('posterior.png', 'trace.png', 'montage.png')
-      if configs[0].posterior
+      if prepared.configs[0].posterior
       else ('trace.png', 'montage.png')
     )
     print(

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from experiments import estimate
-from experiments.pipeline import takes
+from experiments.pipeline import takes, user_recordings
 from physsim import overhang_depth
 from tests.experiments import overhang_fixtures
 
@@ -95,17 +95,17 @@ def test_estimate_takes_a_protocol_or_recordings_not_both(folder):
   with pytest.raises(ValueError, match=r'--cloth_sizes is for several recordings'):
     estimate.recording_takes(estimate.Args(recording=('a',), cloth_sizes=(0.3,)))
   (take,) = estimate.recording_takes(estimate.Args(protocol=path))
-  ik, config = estimate.take_settings(estimate.Args(), take._replace(cloth_size=0.3))
-  assert config.simulation.cloth_size == 0.3 and ik == estimate.Args().intake
-  ik, config = estimate.take_settings(
-    estimate.Args(), take._replace(world_up='-y', wind=(2.0, 0.1))
-  )
+  flags = estimate.Args()
+  settings = lambda t: user_recordings.take_settings(flags.intake, flags.search, t)
+  ik, config = settings(take._replace(cloth_size=0.3))
+  assert config.simulation.cloth_size == 0.3 and ik == flags.intake
+  ik, config = settings(take._replace(world_up='-y', wind=(2.0, 0.1)))
   assert ik.world_up == '-y' and config.measured.wind_speed == 2.0
-  _, config = estimate.take_settings(estimate.Args(), take._replace(hem_mass=0.3))
+  _, config = settings(take._replace(hem_mass=0.3))
   assert config.simulation.hem_mass == 0.3
   # the joint's per-recording settings: a hem is one of them, no hem none
-  assert estimate.own_settings(config)['hem_mass'] == 0.3
-  assert 'hem_mass' not in estimate.own_settings(estimate.Args().search)
+  assert user_recordings.own_settings(config)['hem_mass'] == 0.3
+  assert 'hem_mass' not in user_recordings.own_settings(flags.search)
 
 
 def test_a_protocol_file_gives_the_fabrics_own_readings(folder):

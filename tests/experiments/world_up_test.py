@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from experiments import estimate
-from experiments.pipeline import intake, objective
+from experiments.pipeline import intake, objective, user_recordings
 from physsim import alignment, camera, camera_files, scene
 from tests.physsim.alignment_test import _INTR, _PINS_WORLD, _pose, _scene_depth
 
@@ -164,24 +164,23 @@ def test_the_alignment_error_follows_where_up_came_from(recording):
   assert 'up is a guess' not in intake.summary(rigged)
   assert intake.to_json(guessed)['up_is_guess'] is True
   # The estimate carries it unless the user gave a camera error or said no.
-  args = estimate.Args(recording=(path,), search=_CONFIG)
-  carried, line = estimate.with_alignment_error(args, _CONFIG, [guessed, None])
+  carried, line = user_recordings.with_alignment_error(_CONFIG, [guessed, None])
   assert (
     carried.scoring.camera_sd_m,
     carried.scoring.camera_sd_deg,
   ) == guessed.alignment_sd
   assert 'alignment' in line and '20 degrees' in line
   mine = _CONFIG.replace(camera_sd_m=0.05)
-  assert estimate.with_alignment_error(args, mine, [guessed]) == (mine, None)
-  off = dataclasses.replace(args, alignment_sd=False)
-  assert estimate.with_alignment_error(off, _CONFIG, [guessed]) == (_CONFIG, None)
-  record = estimate.alignment_record([guessed], carried)
+  assert user_recordings.with_alignment_error(mine, [guessed]) == (mine, None)
+  off = user_recordings.with_alignment_error(_CONFIG, [guessed], carry=False)
+  assert off == (_CONFIG, None)  # --noalignment_sd
+  record = user_recordings.alignment_record([guessed], carried)
   assert record['up_is_guess'] and record['camera_sd_deg'] == 20.0
   assert (
     record['up_from'] == ['cloth plane'] and 'up is a guess' in record['warnings'][0]
   )
-  assert not estimate.alignment_record([rigged], _CONFIG)['up_is_guess']
-  assert estimate.alignment_record([None], _CONFIG) is None
+  assert not user_recordings.alignment_record([rigged], _CONFIG)['up_is_guess']
+  assert user_recordings.alignment_record([None], _CONFIG) is None
 
 
 @pytest.fixture(scope='module')
