@@ -40,6 +40,7 @@ import bo
 import physsim
 from experiments.pipeline import cli, files, report
 from experiments.studies import calibration as cal_lib
+from experiments.studies import calibration_check as check_lib
 
 MODE = 'video'
 RULES = ('shipped', 'every fabric', 'short fabrics')
@@ -69,7 +70,7 @@ PRESETS = {'default': Args()}
 def seed_scores(folder: str, shipped: dict) -> tuple[int, list[dict]]:
   """(the check's seed, its recordings' video scores under the shipped
   likelihood) of a check folder."""
-  check = physsim.dataset.read_json(os.path.join(folder, cal_lib.CHECK_FILE))
+  check = physsim.dataset.read_json(os.path.join(folder, check_lib.CHECK_FILE))
   seed = int(check['seed'])
   made = check['config']  # the check's own settings, as it ran
   if made.get('physics') != 'mismatched':

@@ -31,7 +31,7 @@ The shipped calibration file keeps each seed's check (the device's
 estimate quotes them pooled (``report.quoted_checks``):
 
   python -c "import json; from experiments.pipeline import report; \
-    from experiments.studies import calibration as c; \
+    from experiments.studies import calibration_check as c; \
     [report.record_check(report.SHAPE_PAPER_CALIBRATION_FILE, \
       c.check_record(json.load(open(f'/tmp/chk{s}/check.json')))) for s in (2, 3, 4)]"
 

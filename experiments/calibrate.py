@@ -25,7 +25,7 @@ calibration.json``), where every estimate's report quotes it. With
 ``--check`` nothing is fitted: new recordings (another seed) are estimated
 with the estimate's defaults and the shipped tables (``--network_seed``:
 with another network too), and the study reports
-how often their intervals held the truth (``calibration.check``).
+how often their intervals held the truth (``calibration_check.check``).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from absl import logging
 import bo
 import physsim
 from experiments.pipeline import cli, distributed, files, report
-from experiments.studies import calibration
+from experiments.studies import calibration, calibration_check
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,13 +104,13 @@ def main(args: Args) -> None:
   if args.check:
     if args.simulate_only:
       raise ValueError('--check analyses what it simulates: drop --simulate_only')
-    done = os.path.join(args.workdir, calibration.CHECK_FILE)
+    done = os.path.join(args.workdir, calibration_check.CHECK_FILE)
     if not (args.install and args.analyse_only and os.path.isfile(done)):
-      calibration.check(args.study, args.workdir, analyse_only=args.analyse_only)
+      calibration_check.check(args.study, args.workdir, analyse_only=args.analyse_only)
     if args.install and distributed.is_main():
-      dest = calibration.checked_file(args.study)
+      dest = calibration_check.checked_file(args.study)
       report.record_check(
-        dest, calibration.check_record(physsim.dataset.read_json(done)), modes
+        dest, calibration_check.check_record(physsim.dataset.read_json(done)), modes
       )
       print(f'check recorded in {dest}')
     return

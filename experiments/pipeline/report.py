@@ -173,7 +173,7 @@ def trimmed_checks(
 
 
 def record_check(path: str, check: dict, modes: tuple[str, ...] = ()) -> dict:
-  """Keeps ``check`` (``calibration.check_record``: the calibration's tables
+  """Keeps ``check`` (``calibration_check.check_record``: the calibration's tables
   on recordings they never saw) in the calibration file at ``path``, where
   every estimate that applies those tables quotes it; a check of the same
   physics, seed and searches (steered by the same reading) is replaced.

@@ -42,7 +42,8 @@ folds of pairs, so each recording is read with a sharpness and tables chosen
 without it.
 ``experiments/calibrate.py`` is its command line; ``--install`` ships the
 tables with the package, where estimates with the calibrated settings apply
-them.
+them. The shipped tables on recordings they never saw, nothing fitted:
+``calibration_check``.
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, distributed, embedding, files, report, search  # noqa: E402
+from experiments.pipeline import cli, distributed, embedding, files, search  # noqa: E402
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo as demo_lib  # noqa: E402
 from experiments.pipeline import objective as objective_lib  # noqa: E402
@@ -85,7 +86,6 @@ LENGTH_MODES = ('bending length', 'known wind, bending length',
 MODES = ('video', 'known wind', 'known area weight', 'joint pair',
          'joint pair, known winds', *LENGTH_MODES)  # fmt: skip
 RESULT_FILE = 'calibration.json'
-CHECK_FILE = 'check.json'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -279,7 +279,7 @@ def network_dirs(config: Config, workdir: str, k: int) -> tuple[str, str]:
 NETWORKS_FILE = 'networks.json'
 
 
-def _recorded_networks(workdir: str) -> dict | None:
+def recorded_networks(workdir: str) -> dict | None:
   """The ``networks_record`` a study's workdir holds (written by its searches,
   else packed with its runs: ``pack_runs``), or None (older workdirs)."""
   for path in (os.path.join(workdir, NETWORKS_FILE),
@@ -305,7 +305,7 @@ def networks_record(config: Config, workdir: str) -> dict:
   }
 
 
-def _configs(config: Config, point: str = 'median', network: int = 0):
+def study_configs(config: Config, point: str = 'median', network: int = 0):
   """(training set, recordings, training, estimate) configs; the first two
   and the estimate's are every network's, ``network`` picks the seeds of the
   training set and training. At the paper's size there is no network (the
@@ -411,13 +411,13 @@ def simulate_and_estimate(
     Per recording: ``{'seq', 'truth', 'workdir', 'network', 'result'}``
     (``network``: its network's seed).
   """
-  _, rec_cfg, _, est = _configs(config, point)
+  _, rec_cfg, _, est = study_configs(config, point)
   rec_root = os.path.join(workdir, 'recordings')
   # Every process simulates its share of the data and of the recordings;
   # process 0 trains the networks in between.
   seeds, model_roots = network_seeds(config), []
   for k in range(len(seeds)):
-    data_cfg, _, train_cfg, _ = _configs(config, point, k)
+    data_cfg, _, train_cfg, _ = study_configs(config, point, k)
     data_dir, model_root = network_dirs(config, workdir, k)
     gen.run(data_cfg, data_dir)
     if distributed.is_main():
@@ -1037,7 +1037,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
             held[m].append({**s, 'levels': recal_k[m], 'weights': w_k})
     cross[form] = {m: summarise(v, space) for m, v in held.items()}
     by_fold[form] = [
-      _coverage_of(summarise([s for s in held['video'] if fold_of(s['seq'], folds) == k],
+      coverage_of(summarise([s for s in held['video'] if fold_of(s['seq'], folds) == k],
                              space, bayes=False))
       for k in range(folds)
     ]  # fmt: skip
@@ -1054,7 +1054,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   }  # fmt: skip
 
 
-def _coverage_of(summary: dict) -> dict:
+def coverage_of(summary: dict) -> dict:
   return {
     f: {f'interval_{lv}': summary[f][f'interval_{lv}'] for lv in LEVELS} for f in FIELDS
   } if summary else {}  # fmt: skip
@@ -1086,7 +1086,7 @@ def pack_runs(runs: list[dict], workdir: str) -> list[str]:
     path = os.path.join(workdir, PACKED_DIR, f'runs-{i // _PER_PACK:03d}.npz')
     files.write_atomic(path, lambda p, a=arrays: np.savez(p, **a))
     out.append(path)
-  record = _recorded_networks(workdir)
+  record = recorded_networks(workdir)
   if record is not None:
     files.write_json(os.path.join(workdir, PACKED_DIR, NETWORKS_FILE), record)
   return out
@@ -1168,7 +1168,7 @@ def run(config: Config, workdir: str, analyse_only: bool = False,
     return {}
   analysis = analyse(config, runs)
   out = result(
-    config, analysis, seconds=time.time() - t0, network=_recorded_networks(workdir)
+    config, analysis, seconds=time.time() - t0, network=recorded_networks(workdir)
   )
   files.write_json(os.path.join(workdir, RESULT_FILE), out)
   text = table(out)
@@ -1206,8 +1206,8 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'likelihood': form,
     'sharpness': c,
     'model_error': config.estimate.scoring.model_error,
-    'coverage': _coverage_of(held['video']),
-    'coverage_uncalibrated': _coverage_of(raw['video']),
+    'coverage': coverage_of(held['video']),
+    'coverage_uncalibrated': coverage_of(raw['video']),
     'recalibration': {
       'probs': list(bo.calibration.PROBS),
       'fields': list(FIELDS),
@@ -1226,12 +1226,12 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'analysis': analysis,
     # the settings the searches ran with (the demo's cloth and clock), which
     # an estimate must share for these tables to apply
-    'config': _record(config, _configs(config)[3]),
+    'config': estimate_record(config, study_configs(config)[3]),
     'seconds': seconds,
   }
 
 
-def _record(config: Config, estimate: EstimateConfig) -> dict:
+def estimate_record(config: Config, estimate: EstimateConfig) -> dict:
   """The study's settings as its files hold them: ``estimate``'s flat
   (``EstimateConfig.flat``), the form ``report.calibration_note`` matches."""
   return {**dataclasses.asdict(config), 'estimate': estimate.flat()}
@@ -1247,12 +1247,12 @@ def _networks_text(config: Config) -> str:
   )
 
 
-def _pair(cell: dict) -> str:
+def pair_text(cell: dict) -> str:
   """A quantity's 50% / 90% coverage, in percent."""
   return f'{100 * cell["interval_50"]:.0f}% / {100 * cell["interval_90"]:.0f}%'
 
 
-def _err(f: str, v: float) -> str:
+def error_text(f: str, v: float) -> str:
   """A mean error as the tables print it: bending a factor, the rest percent."""
   return f'x{v:.2f}' if f == 'bending_scale' else f'{v:.1f}%'
 
@@ -1260,7 +1260,7 @@ def _err(f: str, v: float) -> str:
 def _cell(s: dict, raw: dict, f: str) -> str:
   if not s:
     return '- | - | - | - | - | - | - | - | -'
-  fmt = functools.partial(_err, f)
+  fmt = functools.partial(error_text, f)
   key = 'factor' if f == 'bending_scale' else 'pct'
   err = (f'{fmt(s[f].get("point_error_" + key, float("nan")))} (weight '
          f'{s[f].get("weight", float("nan")):.2f}) | {fmt(s[f]["median_error_" + key])} | '
@@ -1269,9 +1269,7 @@ def _cell(s: dict, raw: dict, f: str) -> str:
          f'{fmt(s[f]["centre_error_" + key])}')  # fmt: skip
   width = raw[f].get('width_ratio')
   width = '-' if width is None else f'{width:.2f}'
-  return (
-    f'{_pair(s[f])} | {_pair(raw[f])} | {err} | {raw[f]["rank_chi2"]:.1f} | {width}'
-  )
+  return f'{pair_text(s[f])} | {pair_text(raw[f])} | {err} | {raw[f]["rank_chi2"]:.1f} | {width}'
 
 
 def table(out: dict) -> str:
@@ -1334,7 +1332,7 @@ def _material_lines(analysis: dict) -> list[str]:
       key = 'factor' if f == 'bending_scale' else 'pct'
       err = sm[f].get(f'point_error_{key}', sm[f][f'median_error_{key}'])
       cells.append(
-        f'{_pair(sm[f])}; {_err(f, err)} ({_err(f, sm[f][f"centre_error_{key}"])})'
+        f'{pair_text(sm[f])}; {error_text(f, err)} ({error_text(f, sm[f][f"centre_error_{key}"])})'
       )
     lines.append(f'| {m} | {sm["n"]} | ' + ' | '.join(cells) + ' |')
   return lines
@@ -1357,7 +1355,7 @@ def _network_lines(network: dict | None, analysis: dict) -> list[str]:
               '| network seed | ' + ' | '.join(FIELDS) + ' |',
               '|---' * (len(FIELDS) + 1) + '|']  # fmt: skip
     for seed, cov in zip(seeds, folds, strict=True):
-      cells = ' | '.join(_pair(cov[f]) if f in cov else '-' for f in FIELDS)
+      cells = ' | '.join(pair_text(cov[f]) if f in cov else '-' for f in FIELDS)
       lines.append(f'| {seed} | {cells} |')
   return lines
 
@@ -1416,376 +1414,3 @@ def plot_sweep(analysis: dict, path: str) -> None:
                title='recalibrated (red: chosen)')  # fmt: skip
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
-
-
-# ------------------------------------------- the shipped tables, held out
-
-
-def check_analysis(config: Config, runs: list[dict], shipped: dict) -> dict:
-  """How often a calibration's intervals hold the truth on ``runs``, recordings
-  it never saw: per mode, each recording's posterior formed from its saved GP
-  at the calibration's likelihood and sharpness and read at its CDF levels
-  with its weights, as an estimate reads it. Nothing is fitted here.
-
-  Returns:
-    ``{mode: summarise(...)}``, each coverage with its 95% binomial interval
-    (``'interval_50_ci'``, ``'interval_90_ci'``), and per fabric
-    (``'by_material'``: its recordings and how often their intervals held).
-
-  Raises:
-    ValueError: the calibration has no tables, or for other quantities.
-  """
-  rc = shipped.get('recalibration')
-  if not rc or tuple(rc['fields']) != FIELDS:
-    raise ValueError(f'the calibration has no recalibration tables for {FIELDS}')
-  space = physsim.search_space(config.material)
-  scores = posteriors(
-    config, runs, shipped['likelihood'], float(shipped['sharpness']),
-    model_error=float(shipped.get('model_error', 0.0)),
-  )  # fmt: skip
-  out = {}
-  for mode, v in scores.items():
-    if mode not in rc['modes'] or not v:
-      continue
-    levels = np.asarray(rc['modes'][mode])
-    w = rc.get('weights', {}).get(mode, {})
-    s = summarise([{**x, 'levels': levels, 'weights': w} for x in v], space)
-    seeds = network_seeds(config)
-    read = [{**x, 'levels': levels, 'weights': w} for x in v]
-    held = lambda rows: {  # noqa: E731
-      'n': len(rows),
-      **_coverage_of(summarise(rows, space, bayes=False)),
-    }
-    s['per_network'] = {}
-    for k, seed in enumerate(seeds):
-      mine = [x for x in read if network_of(config, x['seq']) == k]
-      if mine:
-        s['per_network'][str(seed)] = held(mine)
-    # how often each fabric's intervals held
-    s['by_material'] = {
-      m: held([x for x in read if x['material'] == m])
-      for m in sorted({x['material'] for x in v})
-    }
-    ranks = np.stack([x['rank'] for x in v])  # (n, fields)
-    for i, f in enumerate(FIELDS):
-      r = bo.calibration.unwarp(ranks[:, i], levels[:, i])
-      hist, _ = np.histogram(r, bins=10, range=(0, 1))
-      s[f]['recalibrated_rank_histogram'] = hist.tolist()
-      for lv in LEVELS:
-        k = round(s[f][f'interval_{lv}'] * s['n'])
-        s[f][f'interval_{lv}_ci'] = list(bo.calibration.binomial_interval(k, s['n']))
-    out[mode] = s
-  return out
-
-
-# estimate.json's error keys, per field
-_ERROR_KEY = {'bending_scale': 'bending_factor', 'wind_speed': 'wind_speed_pct',
-              'area_weight': 'area_weight_pct', 'load_ratio': 'load_ratio_pct'}  # fmt: skip
-
-
-def printed(runs: list[dict]) -> dict:
-  """What the estimates themselves printed (the video alone, or with the
-  reading they were given): how often their
-  50% and 90% intervals held the truth (with 95% binomial intervals), their
-  points' mean errors beside the range centre's, and how many of them applied
-  the shipped tables (an estimate whose settings differ does not).
-
-  Raises:
-    ValueError: no runs, or an estimate without intervals (``--point=argmin``).
-  """
-  if not runs:
-    raise ValueError('no finished estimates to check')
-  rows = []
-  for r in runs:
-    path = os.path.join(r['workdir'], search.ESTIMATE_FILE)
-    e = recording_lib.read_json(path)
-    if 'covered' not in e or 'interval_50' not in e['covered']['wind_speed']:
-      raise ValueError(f'{path}: no credible intervals with a truth to check')
-    rows.append(e)
-  note = lambda e: e.get('calibration') or {}
-  out = {
-    **_printed_cells(rows),
-    'recalibrated': sum(
-      bool(note(e).get('matches') and note(e).get('recalibrated')) for e in rows
-    ),
-  }
-  out['confident_misses'] = [
-    {
-      'recording': e.get('recording', ''),
-      'material': e.get('material'),
-      'wind_error_pct': e['errors']['estimate']['wind_speed_pct'],
-      'interval_90': e['estimate']['wind_speed']['interval_90'],
-      'truth': e['truth']['wind_speed'],
-    }
-    for e in rows
-    if e['errors']['estimate']['wind_speed_pct'] > CONFIDENT_MISS_PCT
-    and not e['covered']['wind_speed']['interval_90']
-  ]  # fmt: skip
-  mats = sorted({e.get('material') for e in rows} - {None})
-  if len(mats) > 1:
-    out['per_material'] = {
-      m: _printed_cells([e for e in rows if e.get('material') == m]) for m in mats
-    }
-  return out
-
-
-def _printed_cells(rows: list[dict]) -> dict:
-  """``printed``'s numbers for some estimates' ``estimate.json`` rows."""
-  n = len(rows)
-  out = {'n': n}
-  for f in FIELDS:
-    cell = {}
-    for lv in LEVELS:
-      k = sum(bool(e['covered'][f][f'interval_{lv}']) for e in rows)
-      cell[f'interval_{lv}'] = k / n
-      cell[f'interval_{lv}_ci'] = list(bo.calibration.binomial_interval(k, n))
-    for who in ('estimate', 'range_centre'):
-      cell[f'{who}_error'] = float(
-        np.mean([e['errors'][who][_ERROR_KEY[f]] for e in rows])
-      )
-    out[f] = cell
-  return out
-
-
-def checked_file(config: Config) -> str:
-  """The calibration file ``check`` checks with ``config``: the estimate's
-  own (``--calibration``), else the one shipped for its settings."""
-  return report.calibration_file(_configs(config)[3])
-
-
-def check(
-  config: Config, workdir: str, shipped_file: str | None = None,
-  analyse_only: bool = False,
-) -> dict:  # fmt: skip
-  """Checks a calibration on recordings it never saw: ``shipped_file``, else
-  ``config.estimate.scoring.calibration``, else the one shipped for its distance.
-
-  Makes and estimates ``2 * config.pairs`` new recordings as the study does,
-  with ``config.seed`` other than the calibration's (so the truths, recordings
-  and searches are all new; network seeds other than the calibration's train
-  networks it never saw) and the estimate's own defaults (the Bayes point;
-  that calibration's tables applied where the settings match), then
-  reports how often the intervals hold the truth: those the estimates printed
-  (video alone, or with ``config.check_reading`` the mode of that reading)
-  and every mode's, read from the saved GPs with the calibration's
-  sharpness, levels and weights (``check_analysis``; with a reading only its
-  mode, as the searches were steered by it). Writes ``check.json``,
-  ``check.md`` and ``check_ranks.png`` in ``workdir``.
-
-  Raises:
-    ValueError: no calibration there, or ``config.seed`` is its own.
-  """
-  check_config(config)
-  path = shipped_file or checked_file(config)
-  if not os.path.isfile(path):
-    raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
-  # the estimates apply the tables being checked
-  config = dataclasses.replace(
-    config, estimate=config.estimate.replace(calibration=path)
-  )
-  shipped = recording_lib.read_json(path)
-  if shipped.get('config', {}).get('seed') == config.seed:
-    raise ValueError(
-      f"seed {config.seed} is the calibration's own ({path}): its recordings "
-      'are not held out; pass another --seed'
-    )
-  t0 = time.time()
-  os.makedirs(workdir, exist_ok=True)
-  if analyse_only:
-    runs = saved_runs(workdir)
-  else:
-    runs = simulate_and_estimate(
-      config, workdir, point='bayes', reading=config.check_reading
-    )
-  if not distributed.is_main():
-    return {}
-  mode = MODE_OF_READING[config.check_reading]
-  modes = check_analysis(config, runs, shipped)
-  if config.check_reading != 'none':
-    modes = {m: v for m, v in modes.items() if m == mode}
-  held = shipped.get('held_out', {})
-  network = _recorded_networks(workdir)
-  theirs = set(shipped.get('network', {}).get('seeds', [0]))
-  out = {
-    'material': config.material,
-    'seed': config.seed,
-    'physics': config.physics,
-    'n': len(runs),
-    'network': network,
-    # the checked networks the calibration never saw (its seeds: 0 if unrecorded)
-    'held_out_networks': sorted(set(network_seeds(config)) - theirs),
-    'shipped_file': path,
-    'shipped': {
-      **{k: shipped.get(k) for k in ('setting', 'n', 'likelihood', 'sharpness')},
-      'held_out': {m: _coverage_of(v) for m, v in held.items()},
-    },
-    # packed runs (an analysis elsewhere) keep no estimate.json to read
-    'printed': printed(runs) if all(r.get('workdir') for r in runs) else None,
-    'printed_mode': mode,
-    'modes': modes,
-    'config': _record(config, config.estimate),
-    'seconds': time.time() - t0,
-  }
-  files.write_json(os.path.join(workdir, CHECK_FILE), out)
-  text = check_table(out)
-  files.write_text(os.path.join(workdir, 'check.md'), text + '\n')
-  plot_ranks(
-    out['modes'], os.path.join(workdir, 'check_ranks.png'),
-    key='recalibrated_rank_histogram', xlabel='rank, recalibrated',
-  )  # fmt: skip
-  print(text)
-  return out
-
-
-def check_record(out: dict) -> dict:
-  """What a calibration file keeps of a check (``check``'s ``out``, e.g. read
-  from its ``check.json``), for estimates to quote beside the calibration's
-  own coverage: the recordings' physics, seed and count, and per mode and
-  quantity how often the 50% and 90% intervals held the truth (those the
-  estimates printed as the video's, read from their own files)."""
-  modes = {m: _coverage_of(v) for m, v in out['modes'].items()}
-  printed_mode = out.get('printed_mode', 'video')
-  if out.get('printed'):
-    modes[printed_mode] = {
-      f: {c: out['printed'][f][c] for c in ('interval_50', 'interval_90')}
-      for f in FIELDS
-    }
-  return {
-    'physics': out.get('physics', 'own'),
-    'seed': out['seed'],
-    # the mode whose searches were steered by a reading (else 'video')
-    'searched': printed_mode,
-    'n': out['n'],
-    'setting': out['shipped']['setting'],
-    'coverage': modes,
-  }
-
-
-def _pct_ci(cell: dict, lv: int) -> str:
-  lo, hi = cell[f'interval_{lv}_ci']
-  return f'{100 * cell[f"interval_{lv}"]:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]'
-
-
-def _seeds(out: dict) -> str:
-  """The checked networks' seeds, those the calibration never saw marked."""
-  distance = out['config'].get('estimate', {}).get('distance', 'energy')
-  if distance not in objective_lib.EMBEDDING_DISTANCES:
-    return 'none'
-  seeds = (out.get('network') or {}).get('seeds') or [out['config']['network_seed']]
-  held = set(out.get('held_out_networks', []))
-  return ', '.join(f'{s}{" (held out)" if s in held else ""}' for s in seeds)
-
-
-def check_table(out: dict) -> str:
-  """Markdown: per mode and quantity, how often the 50% and 90% intervals held
-  the truth on the new recordings (95% binomial intervals in brackets), how
-  often the prior's own central intervals held these truths (what an interval
-  that knows nothing scores here: the luck of the draw), what the
-  calibration's own cross-fitted coverage promised, and the mean error of the
-  point beside the range centre's; the estimates' printed intervals first;
-  then the 90% intervals network by network."""
-  sh, pr = out['shipped'], out['printed']
-  lines = [
-    f'Calibration checked: {sh["setting"]} (sharpness {sh["sharpness"]:g}, '
-    f'{sh["n"]} calibration recordings) on {out["n"]} recordings it never saw '
-    f'(seed {out["seed"]}; {out.get("physics", "own")} physics; networks '
-    f'{_seeds(out)})'
-    + (
-      f'; {pr["recalibrated"]} of {pr["n"]} estimates applied its tables'
-      if pr
-      else ' (read from packed posteriors: what the estimates printed is not here)'
-    )
-    + '. Brackets: 95% binomial intervals. '
-    "The prior's own: how often the prior's central 50%/90% intervals held "
-    'the same truths.',
-    '',
-    '| mode | quantity | 50% hold the truth | 90% hold the truth | '
-    "the prior's own | promised (cross-fitted) | mean error: point | range centre |",
-    '|---|---|---|---|---|---|---|---|',
-  ]
-  promised = lambda m, f: (
-    _pair(sh['held_out'][m][f]) if f in sh['held_out'].get(m, {}) else '-'
-  )
-
-  def prior(cell):
-    if 'prior_interval_90' not in cell:
-      return '-'
-    return (
-      f'{100 * cell["prior_interval_50"]:.0f}% / {100 * cell["prior_interval_90"]:.0f}%'
-    )
-
-  mode = out.get('printed_mode', 'video')
-  video = out['modes'].get(mode, {})
-  for f in FIELDS if pr else ():
-    c = pr[f]
-    lines.append(
-      f'| {mode}, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
-      f'{prior(video.get(f, {}))} | {promised(mode, f)} | '
-      f'{_err(f, c["estimate_error"])} | {_err(f, c["range_centre_error"])} |'
-    )
-  for mode, s in out['modes'].items():
-    for f in FIELDS:
-      c = s[f]
-      key = 'factor' if f == 'bending_scale' else 'pct'
-      lines.append(
-        f'| {mode} | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | {prior(c)} | '
-        f'{promised(mode, f)} | {_err(f, c["point_error_" + key])} | '
-        f'{_err(f, c["centre_error_" + key])} |'
-      )
-  if pr and 'confident_misses' in pr:
-    misses = pr['confident_misses']
-    lines += [
-      '',
-      f'Wind off by more than {CONFIDENT_MISS_PCT:g}% with the truth outside its 90% '
-      f'interval, as printed: {len(misses)} of {pr["n"]}'
-      + ''.join(
-        f'; {m["material"]} ({os.path.basename(m["recording"].rstrip("/"))}): '
-        f'{m["wind_error_pct"]:.1f}% off, [{m["interval_90"][0]:.2f}, '
-        f'{m["interval_90"][1]:.2f}] against {m["truth"]:.2f} m/s'
-        for m in misses
-      ),
-    ]
-  conf = [
-    (m, s['wind_speed']) for m, s in out['modes'].items()
-    if 'confident_misses' in s.get('wind_speed', {})
-  ]  # fmt: skip
-  if conf:
-    lines += [
-      '',
-      f'Wind off by more than {CONFIDENT_MISS_PCT:g}% outside its 90% interval, '
-      'each mode read again from the saved posteriors, beside how many the '
-      'posteriors themselves expect (calibrated intervals expect some): '
-      + '; '.join(
-        f'{m} {c["confident_misses"]} ({c["confident_misses_expected"]:.1f})'
-        for m, c in conf
-      ),
-    ]
-  if per := (pr or {}).get('per_material'):
-    lines += [
-      '',
-      f'{mode.capitalize()}, as printed, fabric by fabric (50% / 90% intervals '
-      'that held the truth; each pair shares bending and area weight):',
-      '',
-      '| fabric | recordings | ' + ' | '.join(FIELDS) + ' | mean error: wind |',
-      '|---|---:|' + '---|' * (len(FIELDS) + 1),
-    ]
-    for m, c in per.items():
-      lines.append(
-        f'| {m} | {c["n"]} | ' + ' | '.join(_pair(c[f]) for f in FIELDS)
-        + f' | {_err("wind_speed", c["wind_speed"]["estimate_error"])} |'
-      )  # fmt: skip
-  nets = video.get('per_network', {})
-  if len(nets) > 1:
-    lines += [
-      '',
-      f'{mode.capitalize()}, network by network (50% / 90% intervals that held '
-      'the truth):',
-      '',
-      '| network seed | recordings | ' + ' | '.join(FIELDS) + ' |',
-      '|---|---:|' + '---|' * len(FIELDS),
-    ]
-    for seed, c in nets.items():
-      lines.append(
-        f'| {seed} | {c["n"]} | ' + ' | '.join(_pair(c[f]) for f in FIELDS) + ' |'
-      )
-  return '\n'.join(lines)

@@ -22,7 +22,7 @@ import physsim
 from experiments.pipeline import datasets as gen
 from experiments.pipeline import report
 from experiments.pipeline.objective import EstimateConfig
-from experiments.studies import calibration
+from experiments.studies import calibration, calibration_check
 from physsim.overhang_depth import DOF
 
 FABRICS = ('gray_interlock', 'black_denim')
@@ -91,19 +91,19 @@ def test_the_paper_preset_is_every_fabric_at_the_estimates_own_size():
   p = calibration.PRESETS['paper']
   calibration.check_config(p)
   assert set(calibration.study_materials(p)) == set(physsim.FABRICS)
-  est = calibration._configs(p)[3]
+  est = calibration.study_configs(p)[3]
   default = EstimateConfig()
   for f in ('cloth_resolution', 'frames', 'warmup', 'q', 'n_init', 'max_iter',
             'posterior_grid', 'sharpness', 'fps', 'gusts'):  # fmt: skip
     assert est.flat()[f] == default.flat()[f], f
-  rec = calibration._configs(p)[1]
+  rec = calibration.study_configs(p)[1]
   assert rec.cloth_resolution == gen.PRESETS['eval'].cloth_resolution
   assert rec.sequences == 2 * p.pairs and rec.materials == p.materials
   assert rec.physics == 'own'
   # recordings unlike the estimator's simulator; the estimates keep their own
   other = dataclasses.replace(p, physics='mismatched')
-  assert calibration._configs(other)[1].physics == 'mismatched'
-  assert calibration._configs(other)[3] == est
+  assert calibration.study_configs(other)[1].physics == 'mismatched'
+  assert calibration.study_configs(other)[3] == est
 
 
 @pytest.fixture(scope='module')
@@ -168,7 +168,7 @@ def test_paper_estimates_of_its_fabrics_quote_it_and_demo_ones_do_not(
     calibration.PRESETS['smoke'], estimate=TINY.estimate.replace(
       q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24))
   )  # fmt: skip
-  demo_cfg = calibration._configs(demo_study)[3]
+  demo_cfg = calibration.study_configs(demo_study)[3]
   demo.write_text(json.dumps({
     'n': 1, 'setting': 'demo', 'sharpness': 0.5, 'coverage': {},
     'config': {'estimate': demo_cfg.flat()},
@@ -176,7 +176,7 @@ def test_paper_estimates_of_its_fabrics_quote_it_and_demo_ones_do_not(
   with open(os.path.join(workdir, calibration.RESULT_FILE)) as f:
     paper.write_text(f.read())  # what --install --size=paper does
   assert report.shipped_calibration('shape', 'paper') == str(paper)
-  searched = calibration._configs(TINY)[3].replace(point='bayes')
+  searched = calibration.study_configs(TINY)[3].replace(point='bayes')
   for m in FABRICS:
     mine = searched.replace(material=m)
     assert report.calibration_file(mine) == str(paper)
@@ -329,7 +329,7 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
     'printed': {f: {**c, 'interval_90': 0.7} for f, c in cells.items()},
     'modes': {'video': {f: dict(c) for f, c in cells.items()}},
   }  # fmt: skip
-  record = calibration.check_record(out)
+  record = calibration_check.check_record(out)
   # the video's coverage is what the estimates printed
   assert record['coverage']['video']['wind_speed']['interval_90'] == 0.7
   report.record_check(path, record)

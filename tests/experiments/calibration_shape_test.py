@@ -79,7 +79,7 @@ def test_shape_estimates_quote_the_shape_calibration(study, tmp_path, monkeypatc
     report, 'SHAPE_PAPER_CALIBRATION_FILE', str(tmp_path / 'none.json')
   )
   # the settings the study searched with, read at the sharpness it chose
-  searched = calibration._configs(SMOKE)[3].replace(sharpness=out['sharpness'])
+  searched = calibration.study_configs(SMOKE)[3].replace(sharpness=out['sharpness'])
   # None shipped for the shape yet: the default file, whose note names the distance.
   assert report.calibration_file(searched) == str(default)
   assert report.shipped_calibration('shape') == str(shape_file)
@@ -106,7 +106,7 @@ def test_the_shipped_shape_calibration_holds_for_demo_size_shape_estimates():
     calibration.Config(),
     estimate=calibration.Config().estimate.replace(distance='shape'),
   )
-  searched = calibration._configs(config)[3].replace(point='bayes')
+  searched = calibration.study_configs(config)[3].replace(point='bayes')
   assert report.calibration_file(searched) == report.SHAPE_CALIBRATION_FILE
   note = report.calibration_note(searched)
   assert note['matches'] and note['recalibrated'], note

@@ -23,7 +23,7 @@ import physsim
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import report, search
 from experiments.pipeline.objective import EstimateConfig
-from experiments.studies import calibration
+from experiments.studies import calibration, calibration_check
 
 # These tests calibrate and quote the estimates of networks (the PSD); the
 # estimate's default distance is the shape.
@@ -423,8 +423,8 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
     pairs=60, seed=1, estimate=PSD_ESTIMATE.replace(posterior_grid=GRID)
   )  # fmt: skip
   runs = _fake_runs(config, str(tmp_path), noise_seed=2)
-  good = calibration.check_analysis(config, runs, _tables(C_TRUE))
-  bad = calibration.check_analysis(config, runs, _tables(4.0))
+  good = calibration_check.check_analysis(config, runs, _tables(C_TRUE))
+  bad = calibration_check.check_analysis(config, runs, _tables(4.0))
   # 120 recordings in 60 pairs: binomial sd 0.027 at 90%, 0.046 at 50%; the
   # pairs' shared parameters add to it; 3.5 sd.
   for mode in calibration.MODES:
@@ -455,7 +455,7 @@ def test_check_holds_an_exact_calibration_and_catches_a_too_sharp_one(tmp_path):
     if c['n'] == 120:
       for f in calibration.FIELDS:
         assert c[f]['interval_90'] == good['video'][f]['interval_90'], (m, f)
-  assert 'network by network' in calibration.check_table({
+  assert 'network by network' in calibration_check.check_table({
     'shipped': {**_tables(C_TRUE), 'held_out': {}}, 'n': 120, 'seed': 1,
     'printed': {'n': 120, 'recalibrated': 120, **{f: {
       'interval_50': 0.5, 'interval_50_ci': [0.4, 0.6], 'interval_90': 0.9,
@@ -472,7 +472,9 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   shipped = tmp_path / 'calibration.json'
   shipped.write_text(json.dumps(_tables(C_TRUE, seed=3)))
   with pytest.raises(ValueError, match="seed 3 is the calibration's own"):
-    calibration.check(config, str(tmp_path / 'w'), str(shipped), analyse_only=True)
+    calibration_check.check(
+      config, str(tmp_path / 'w'), str(shipped), analyse_only=True
+    )
   shipped.write_text(json.dumps(_tables(C_TRUE, seed=0)))
   runs = _fake_runs(config, str(tmp_path / 'w' / 'estimates'))
   # What the estimates printed, by hand: 9 of 10 90% intervals and 4 of 10 50%
@@ -492,7 +494,9 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
            'estimate': {'wind_speed': {'interval_90': [1.0, 2.0]}}}  # fmt: skip
     with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
       json.dump(est, f)
-  out = calibration.check(config, str(tmp_path / 'w'), str(shipped), analyse_only=True)
+  out = calibration_check.check(
+    config, str(tmp_path / 'w'), str(shipped), analyse_only=True
+  )
   pr = out['printed']
   assert pr['n'] == 10 and pr['recalibrated'] == 8
   assert (
@@ -506,7 +510,7 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
     pr['bending_scale']['interval_90_ci'], bo.calibration.binomial_interval(9, 10)
   )
   assert set(out['modes']) == set(calibration.MODES)
-  saved = json.loads((tmp_path / 'w' / calibration.CHECK_FILE).read_text())
+  saved = json.loads((tmp_path / 'w' / calibration_check.CHECK_FILE).read_text())
   assert saved['printed'] == pr and saved['n'] == 10
   text = (tmp_path / 'w' / 'check.md').read_text()
   assert '| video, as printed | wind_speed | 40% [' in text
@@ -516,7 +520,7 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   calibration.pack_runs(
     calibration.saved_runs(str(tmp_path / 'w')), str(tmp_path / 'p')
   )
-  packed = calibration.check(
+  packed = calibration_check.check(
     config, str(tmp_path / 'p'), str(shipped), analyse_only=True
   )
   assert packed['printed'] is None and set(packed['modes']) == set(out['modes'])
@@ -525,7 +529,9 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   # intervals are that mode's, and only that mode is read from the GPs (the
   # searches were steered by the reading).
   knw = dataclasses.replace(config, check_reading='wind_speed')
-  out_w = calibration.check(knw, str(tmp_path / 'w'), str(shipped), analyse_only=True)
+  out_w = calibration_check.check(
+    knw, str(tmp_path / 'w'), str(shipped), analyse_only=True
+  )
   assert set(out_w['modes']) == {'known wind'} and out_w['printed'] == pr
   assert out_w['printed_mode'] == 'known wind'
   assert (
@@ -547,7 +553,7 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   with open(os.path.join(runs[0]['workdir'], search.ESTIMATE_FILE), 'w') as f:
     json.dump(est, f)
   with pytest.raises(ValueError, match='no credible intervals'):
-    calibration.printed(calibration.saved_runs(str(tmp_path / 'w')))
+    calibration_check.printed(calibration.saved_runs(str(tmp_path / 'w')))
 
 
 # ------------------------------------------------- networks and their recipe
