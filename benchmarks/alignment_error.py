@@ -99,7 +99,12 @@ def main(args: Args) -> None:
       for mode in args.modes:
         ik_config = intake.IntakeConfig(world_up='z' if mode == 'world_up' else '')
         cam = paths['camera'] if mode == 'world_up' else paths['camera_imu']
-        ik = intake.take_in(paths['depth'], ik_config, cam, sim)
+        try:
+          ik = intake.take_in(paths['depth'], ik_config, cam, sim)
+        except ValueError as e:  # a refusal is a result: counted, not a crash
+          rows.append({'wind': wind, 'seed': seed, 'mode': mode, 'refused': str(e)})
+          print(f'{wind:g} m/s seed {seed} {mode}: refused: {e}', flush=True)
+          continue
         shift, deg = placement_error(ik.pose, true, centre)
         sd_m, sd_deg = ik.alignment_sd
         rows.append({
@@ -114,11 +119,16 @@ def main(args: Args) -> None:
         )
   summary = {}
   for mode in args.modes:
-    mine = [r for r in rows if r['mode'] == mode]
+    mine = [r for r in rows if r['mode'] == mode and 'refused' not in r]
+    refused = sum(1 for r in rows if r['mode'] == mode and 'refused' in r)
+    if not mine:
+      summary[mode] = {'recordings': 0, 'refused': refused}
+      continue
     s = np.array([r['shift_in_sd'] for r in mine])
     d = np.array([r['rotation_in_sd'] for r in mine])
     summary[mode] = {
       'recordings': len(mine),
+      'refused': refused,
       'shift_within_90': float(np.mean(s <= CHI3_90)),
       'rotation_within_90': float(np.mean(d <= CHI3_90)),
       'median_shift_in_sd': float(np.median(s)),
@@ -130,11 +140,14 @@ def main(args: Args) -> None:
         float(np.median([r['sd_deg'] for r in mine])),
       ],
     }
-  print('| mode | recordings | shift: median (cm), in claimed sd, within 90% | '
+  print('| mode | placed (refused) | shift: median (cm), in claimed sd, within 90% | '
         'rotation: median (deg), in claimed sd, within 90% |\n|---|---:|---|---|')  # fmt: skip
   for mode, c in summary.items():
+    if not c['recordings']:
+      print(f'| {mode} | 0 ({c["refused"]}) | - | - |')
+      continue
     print(
-      f'| {mode} | {c["recordings"]} | {c["median_shift_cm"]:.1f}, '
+      f'| {mode} | {c["recordings"]} ({c["refused"]}) | {c["median_shift_cm"]:.1f}, '
       f'{c["median_shift_in_sd"]:.2f}, {100 * c["shift_within_90"]:.0f}% | '
       f'{c["median_rotation_deg"]:.2f}, {c["median_rotation_in_sd"]:.2f}, '
       f'{100 * c["rotation_within_90"]:.0f}% |'
