@@ -52,7 +52,17 @@ import numpy as np
 from physsim import materials
 from physsim.mesh import Mesh
 
-_THICKNESS = 1e-3  # m; only the product E t^3 matters for bending.
+THICKNESS = 1e-3  # m; only the product E t^3 matters for bending.
+FLEX_RADIUS = 0.002  # m, the flex's collision radius (no collisions: a formality)
+EDGE_SOLIMP = '0.95 0.99 0.001'  # the edge equality constraints' impedance
+
+
+def young_modulus(rigidity: float) -> float:
+  """Pa: MuJoCo's ``young`` at ``THICKNESS`` for a plate rigidity in N*m
+  (D = E t^3 / 12 with poisson 0)."""
+  return rigidity * 12.0 / THICKNESS**3
+
+
 GRAPH_MODES = ('auto', 'jax', 'warp')
 
 
@@ -186,7 +196,7 @@ def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
       f'need timestep > 0 and edge_solref >= 2 * timestep, got '
       f'{config.timestep} and {config.edge_solref}'
     )
-  young = rigidity * 12.0 / _THICKNESS**3  # D = E t^3 / 12 with poisson 0
+  young = young_modulus(rigidity)
   points = ' '.join(f'{v:.9g}' for v in mesh.vertices.ravel())
   elements = ' '.join(str(i) for i in mesh.faces.ravel())
   pins = ' '.join(str(i) for i in mesh.pinned)
@@ -197,10 +207,10 @@ def mjcf(mesh: Mesh, config: SimConfig, rigidity: float = 1e-5) -> str:
     <flag spring="disable" damper="disable"/>
   </option>
   <worldbody>
-    <flexcomp name="cloth" type="direct" dim="2" radius="0.002" mass="{mesh.area * 0.2}"
+    <flexcomp name="cloth" type="direct" dim="2" radius="{FLEX_RADIUS}" mass="{mesh.area * 0.2}"
               point="{points}" element="{elements}">
-      <edge equality="true" solref="{config.edge_solref} 1" solimp="0.95 0.99 0.001"/>
-      <elasticity young="{young:.9g}" poisson="0" thickness="{_THICKNESS}" elastic2d="bend"/>
+      <edge equality="true" solref="{config.edge_solref} 1" solimp="{EDGE_SOLIMP}"/>
+      <elasticity young="{young:.9g}" poisson="0" thickness="{THICKNESS}" elastic2d="bend"/>
       <contact selfcollide="none" contype="0" conaffinity="0"/>
       <pin id="{pins}"/>
     </flexcomp>

@@ -24,8 +24,6 @@ import numpy as np
 from physsim import cloth, materials
 from physsim.mesh import Mesh
 
-_RADIUS = 0.002  # m, the flex's collision radius (``cloth.mjcf``'s)
-
 
 def check(bending_scale: float, area_weight: float) -> None:
   """Raises ValueError unless both are finite and > 0 (named)."""
@@ -35,9 +33,9 @@ def check(bending_scale: float, area_weight: float) -> None:
 
 
 def young_modulus(bending_scale: float, material: str) -> float:
-  """Pa: MuJoCo's ``young`` at ``cloth``'s thickness for a rigidity of
-  ``bending_scale`` times the material's reference (D = E t^3 / 12)."""
-  return bending_scale * cloth.reference_rigidity(material) * 12.0 / cloth._THICKNESS**3
+  """Pa: MuJoCo's ``young`` (``cloth.young_modulus``) for a rigidity of
+  ``bending_scale`` times the material's reference."""
+  return cloth.young_modulus(bending_scale * cloth.reference_rigidity(material))
 
 
 # Custom numeric of an exported model: the estimator's edge weights (``load``).
@@ -103,7 +101,7 @@ def mujoco_xml(
     name = f'cloth_{v}'
     names.append(name)
     vertex.append(np.zeros(3))
-    inertia = 0.4 * m * _RADIUS**2  # a solid ball of the flex's radius
+    inertia = 0.4 * m * cloth.FLEX_RADIUS**2  # a solid ball of the flex's radius
     bodies.append(
       f'    <body name="{name}" pos="{_num(x, _GEOMETRY_DIGITS)}">\n'
       f'      <inertial pos="0 0 0" mass="{_num(m)}" diaginertia="{_num([inertia] * 3)}"/>\n'
@@ -127,15 +125,15 @@ def mujoco_xml(
 {chr(10).join(bodies)}
   </worldbody>
   <deformable>
-    <flex name="cloth" dim="2" radius="{_RADIUS}" body="{' '.join(names)}"
+    <flex name="cloth" dim="2" radius="{cloth.FLEX_RADIUS}" body="{' '.join(names)}"
           vertex="{_num(vertex, _GEOMETRY_DIGITS)}" element="{' '.join(str(i) for i in mesh.faces.ravel())}">
       <contact contype="0" conaffinity="0" selfcollide="none"/>
       <elasticity young="{_num(young, _GEOMETRY_DIGITS)}" poisson="0"
-                  thickness="{_num(cloth._THICKNESS)}" elastic2d="bend"/>
+                  thickness="{_num(cloth.THICKNESS)}" elastic2d="bend"/>
     </flex>
   </deformable>
   <equality>
-    <flex flex="cloth" solref="{_num(c.edge_solref)} 1" solimp="0.95 0.99 0.001"/>
+    <flex flex="cloth" solref="{_num(c.edge_solref)} 1" solimp="{cloth.EDGE_SOLIMP}"/>
   </equality>
 </mujoco>
 """
