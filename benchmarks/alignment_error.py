@@ -5,10 +5,10 @@ off that placement may be (``intake.alignment_error``: a tilt by where up came
 from and the pins' spread, a shift of pixels at the pins' depth, the pins'
 scatter); the estimate then renders its candidates from cameras moved by
 that much (``physsim.shape.misplaced_pose``: a rotation of ``sd_deg`` per axis
-about the cloth, then a shift of ``sd_m`` per axis). On windy-rig recordings
+about the pins' centre, then a shift of ``sd_m`` per axis). On windy-rig recordings
 (``experiments.pipeline.rig``: floor out of view, up from ``--world_up`` or
 the IMU) the true camera is known, so the placement's actual error is split
-the same way, a rotation about the cloth's centre and the shift left, and each
+the same way, a rotation about the pins' centre and the shift left, and each
 is compared with its claim: for a per-axis Gaussian error, the length of the
 error vector lies within 2.50 sd (chi with 3 degrees of freedom) 90% of the
 time. Recordings are kept in ``--workdir`` (a rerun reads them). Prints a table
@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from experiments.pipeline import cli, files, intake, objective, rig
+from experiments.pipeline import cli, files, intake, objective, rig, simulation
 from physsim import camera
 
 CHI3_90 = 2.5003  # the 90% quantile of a chi distribution of 3 degrees of freedom
@@ -87,7 +87,7 @@ def main(args: Args) -> None:
     raise ValueError(f'--modes: no {unknown}; world_up and/or imu')
   base = rig.RECIPES[args.recipe]
   sim = objective.EstimateConfig().simulation
-  centre = np.array([0.0, 0.0, 1.0])  # the 1 m sheet's middle, pins at 1.5 m
+  centre = simulation.pin_centre(sim)  # what the estimate rotates its cameras about
   rows, t0 = [], time.perf_counter()
   for wind in args.winds:
     for seed in args.seeds:
