@@ -296,7 +296,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   else:
     print(report.report_table(result), flush=True)
     ratios = [report.point_of(result['load_ratio'])]
-  record = user_recordings.alignment_record(prepared.intakes, prepared.configs[0])
+  record = prepared.record
   for line in (record or {}).get('warnings', []):
     if 'up is a guess' in line:
       print(f'note: {line}')

@@ -142,6 +142,11 @@ class Prepared(NamedTuple):
       error carried into a posterior).
   """
 
+  @property
+  def record(self) -> dict | None:
+    """What the estimate's JSON says of the alignment (``alignment_record``)."""
+    return alignment_record(self.intakes, self.configs[0])
+
   recordings: list
   configs: list
   intakes: list
@@ -217,7 +222,7 @@ def estimate(
   (``estimate.json``), or several's jointly (``joint.json``), each file with
   the recordings' alignment record (``alignment_record``). ``kw``: the
   search's (``allow_other_material``, ``nets``)."""
-  record = alignment_record(prepared.intakes, prepared.configs[0])
+  record = prepared.record
   if len(recorded) > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
     result = search.estimate_joint(
