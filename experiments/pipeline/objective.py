@@ -48,7 +48,7 @@ import bo
 import model as model_lib
 import physsim
 from experiments.pipeline import cli, embedding
-from experiments.pipeline.posterior import Measured
+from experiments.pipeline.measurements import Measured
 from experiments.pipeline.recording import Recording
 
 # The simulation section and its cloth, re-exported (objective.mesh, ...).

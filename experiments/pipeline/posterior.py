@@ -1,20 +1,17 @@
-"""Posteriors of (bending, wind, area weight) in physical units: priors, summaries, joints.
+"""Posteriors of (bending, wind, area weight) in physical units: summaries, joints.
 
-The search (``bo.PosteriorSearch``) works in the unit cube of the material's
-search box; this module supplies its prior on the grid (uniform in the box,
-bending log-uniform, times what the user measured: an anemometer's wind, a
-scale's area weight), turns its draws into physical summaries (posterior
-median, 50% and 90% central intervals, the load ratio rho v^2 / (w g)), and
-combines several recordings of one fabric into a joint posterior (one bending
-and area weight, one wind per recording).
+The stage after the search: the search (``bo.PosteriorSearch``) works in the
+unit cube of the material's search box with the prior of
+``measurements.log_prior``; this module turns its draws into physical
+summaries (posterior median, 50% and 90% central intervals, the load ratio
+rho v^2 / (w g)), places draws within their grid cells by a bending length's
+reading, and combines several recordings of one fabric into a joint
+posterior (one bending and area weight, one wind per recording).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
-import os
 
 import jax
 import numpy as np
@@ -24,7 +21,21 @@ import bo
 import physsim
 from experiments.pipeline import files
 
-FIELDS = physsim.params.FIELDS  # bending_scale, wind_speed, area_weight
+# Moved to the stages they belong to; still reachable here for the benchmarks
+# and studies that name them so (``layout``, ``measurements``).
+from experiments.pipeline.layout import read_draws  # noqa: E402, F401
+from experiments.pipeline.measurements import (  # noqa: E402, F401
+  FIELDS,
+  Measured,
+  cell_offsets,
+  check_dof,
+  length_term,
+  log_prior,
+  physical,
+  reading_range,
+  simulated_reading,
+)
+
 LEVELS = (50, 90)
 # The error each quantity is judged by (tables, calibrations): bending as a
 # factor, the rest in percent. The prior's own point minimises it (the prior
@@ -39,216 +50,6 @@ ERROR_LOSS = {'bending_scale': 'factor', 'wind_speed': 'relative',
 # point"); on the estimator's own physics the two tie.
 POINT_LOSS = {**ERROR_LOSS, 'wind_speed': 'log', 'load_ratio': 'log'}
 LOG_SCALED = ('bending_scale', 'load_ratio')  # widths compared on a log scale
-
-
-@dataclasses.dataclass(frozen=True)
-class Measured:
-  """What the user measured besides the video (0: not measured).
-
-  Attributes:
-    wind_speed: an anemometer's reading at the cloth, m/s.
-    wind_speed_sd: its standard uncertainty, m/s.
-    area_weight: a scale and a ruler's reading, kg/m^2.
-    area_weight_sd: its standard uncertainty, kg/m^2.
-    bending_length: a cantilever test's bending length c, m (Peirce: half the
-      overhang at which a strip's tip reaches a 41.5-degree slope below the
-      table's edge; or ``physsim.cantilever.bending_length`` of an overhang
-      and its tip's reach). It reads bending and area weight together,
-      c = (bending x D0 / (w g))^(1/3) (``physsim.params.bending_length``).
-    bending_length_sd: its standard uncertainty, m.
-    bending_length_dof: the law of its error: 0, Gaussian (a ruler's
-      reading); more than 2, Student's t of that many degrees of freedom
-      with standard deviation ``bending_length_sd`` (a depth camera's
-      reading, ``physsim.overhang_depth.DOF``: most readings closer than a
-      Gaussian of that sd would put them, a few further off).
-  """
-
-  wind_speed: float = 0.0
-  wind_speed_sd: float = 0.0
-  area_weight: float = 0.0
-  area_weight_sd: float = 0.0
-  bending_length: float = 0.0
-  bending_length_sd: float = 0.0
-  bending_length_dof: float = 0.0
-
-  def to_dict(self) -> dict:
-    """The readings as files hold them: a bending length only when given, so
-    that files without one (and runs to resume) stay as they were written
-    before it was a reading."""
-    out = dataclasses.asdict(self)
-    if not (self.bending_length or self.bending_length_sd):
-      del out['bending_length'], out['bending_length_sd']
-    if not self.bending_length_dof:  # a Gaussian reading, as files held it
-      del out['bending_length_dof']
-    return out
-
-  def check(self, space: physsim.SearchSpace) -> None:
-    """Raises ValueError on a reading without uncertainty, or far outside the
-    box, or a bending length's error law that is neither Gaussian nor a t
-    with a finite variance."""
-    check_dof(self.bending_length_dof, 'bending_length_dof')
-    for name in ('wind_speed', 'area_weight', 'bending_length'):
-      v, sd = getattr(self, name), getattr(self, f'{name}_sd')
-      if v == 0 and sd == 0:
-        continue
-      if v == 0:
-        raise ValueError(
-          f'--{name}_sd={sd} was given without --{name} (the reading it is the '
-          'uncertainty of)'
-        )
-      lo, hi = _reading_range(space, name)
-      if not sd > 0:
-        raise ValueError(
-          f'--{name}={v} needs --{name}_sd > 0 (its uncertainty), got {sd}'
-        )
-      if not v > 0:
-        raise ValueError(f'--{name}={v}: a reading must be > 0')
-      if v + 3 * sd < lo or v - 3 * sd > hi:
-        raise ValueError(
-          f'--{name}={v} +- {sd} lies outside the search range [{lo}, {hi}]'
-        )
-
-
-def _reading_range(space: physsim.SearchSpace, name: str) -> tuple[float, float]:
-  """The range of reading ``name`` over the search box (a bending length's
-  from its bending and area weight ranges and the fabric's rigidity).
-
-  Raises:
-    ValueError: a bending length for a box of no fabric (its rigidity 0).
-  """
-  if name != 'bending_length':
-    return getattr(space, name)
-  if not space.rigidity > 0:
-    raise ValueError(
-      '--bending_length: the search box has no reference rigidity to read it '
-      "against (physsim.search_space gives each fabric's)"
-    )
-  (b0, b1), (w0, w1) = space.bending_scale, space.area_weight
-  lo = physsim.params.bending_length(b0, w1, space.rigidity)
-  hi = physsim.params.bending_length(b1, w0, space.rigidity)
-  return float(lo), float(hi)
-
-
-def simulated_reading(
-  name: str, truth: dict, rel_sd: float, seed: int, seq: int,
-  space: physsim.SearchSpace | None = None, dof: float = 0.0,
-) -> Measured:  # fmt: skip
-  """A simulated instrument's reading of ``name`` ('wind_speed': an
-  anemometer; 'area_weight': a scale and a ruler; 'bending_length': an
-  overhang, Peirce's c of the truth's bending and area weight against
-  ``space``'s rigidity) for a recording with known ``truth``: the truth times
-  ``1 + rel_sd * z``, ``z`` standard normal drawn from ``(seed, seq)`` alone,
-  so recording ``seq`` gets the same reading in every study that uses the
-  same seed (the calibration's post-hoc modes and a search run with the
-  reading as its prior). Its uncertainty is ``rel_sd`` times the truth. A
-  bending length with ``dof`` > 2 errs as Student's t of that many degrees
-  of freedom scaled to the same standard deviation (``Measured``), as the
-  depth reader does; ``dof`` 0 keeps the Gaussian draw, the same number."""
-  names = (*FIELDS[1:], 'bending_length')
-  if name not in names:
-    raise ValueError(f'no instrument reads {name!r}: one of {names}')
-  if dof and name != 'bending_length':
-    raise ValueError(f'{name}: only a bending length has a t law, got dof={dof}')
-  if name == 'bending_length':
-    _reading_range(space, name)  # the box knows its fabric's rigidity
-    value = float(
-      physsim.params.bending_length(
-        truth['bending_scale'], truth['area_weight'], space.rigidity
-      )
-    )  # fmt: skip
-  else:
-    value = truth[name]
-  stream = FIELDS.index(name) if name in FIELDS else len(FIELDS)
-  rng = np.random.default_rng([seed, 13, seq, stream])
-  z = rng.standard_t(dof) * math.sqrt((dof - 2) / dof) if dof else rng.standard_normal()
-  v = value * (1.0 + rel_sd * z)
-  out = Measured(**{name: v, f'{name}_sd': rel_sd * value})
-  return dataclasses.replace(out, bending_length_dof=dof) if dof else out
-
-
-SUB_CELLS = (32, 4)  # a bending length's term averaged over (bending, area weight)
-
-
-MAX_DOF = 1000.0  # a bending length's t law (beyond it, say 0: the Gaussian)
-
-
-def check_dof(dof: float, flag: str) -> None:
-  """Raises ValueError naming ``--flag`` unless ``dof`` is 0 (a Gaussian
-  reading) or a t law with a finite variance (more than 2, at most
-  ``MAX_DOF``)."""
-  if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= MAX_DOF)):
-    raise ValueError(
-      f'--{flag}={dof}: 0 (a Gaussian reading) or a Student-t of more than 2 '
-      f'and at most {MAX_DOF:g} degrees of freedom'
-    )
-
-
-def _length_term(b, w, space: physsim.SearchSpace, measured: Measured):
-  """The bending-length reading's log likelihood at physical (b, w), up to
-  a constant: Gaussian, or Student's t with the reading's standard deviation
-  (``Measured.bending_length_dof``)."""
-  c = physsim.params.bending_length(b, w, space.rigidity)
-  dof = measured.bending_length_dof
-  if not dof:
-    return -0.5 * ((c - measured.bending_length) / measured.bending_length_sd) ** 2
-  scale = measured.bending_length_sd * math.sqrt((dof - 2) / dof)
-  r = (c - measured.bending_length) / scale
-  return -0.5 * (dof + 1) * np.log1p(r**2 / dof)
-
-
-def _cell_offsets(grid, sub=SUB_CELLS) -> np.ndarray:
-  """(K, 3) unit offsets of a cell's sub-points (bending x area weight, the
-  wind at the centre) from its centre, for a grid of ``grid`` cells."""
-  width = 2.0 / np.asarray(grid, np.float64)
-  ub = ((np.arange(sub[0]) + 0.5) / sub[0] - 0.5) * width[0]
-  uw = ((np.arange(sub[1]) + 0.5) / sub[1] - 0.5) * width[2]
-  bb, ww = np.meshgrid(ub, uw, indexing='ij')
-  return np.stack([bb.ravel(), np.zeros(bb.size), ww.ravel()], axis=1)
-
-
-def log_prior(points, space: physsim.SearchSpace, measured: Measured,
-              grid=None) -> np.ndarray:  # fmt: skip
-  """(G,) log prior at unit-cube ``points (G, 3)``: uniform in the box (so
-  bending log-uniform), times a Gaussian for each measured quantity (a
-  bending length's in the c that each point's bending and area weight give).
-
-  With ``grid`` (the cells per dimension whose centres ``points`` are), a
-  bending length's term is the cell's mean over ``SUB_CELLS`` sub-points
-  rather than its centre's value: a strip reads c to a few percent, b to
-  three times that, narrower than a cell of the search's grid (x1.47 in
-  bending at the paper's 12), whose centres alone would put the posterior
-  on whichever centre lies nearest the reading. ``refine_draws`` then places
-  the draws within their cells by the same term.
-  """
-  out = np.zeros(len(points))
-  phys = physsim.params.from_unit(np.clip(points, -1, 1), space)
-  for i, name in enumerate(FIELDS):
-    if name == 'bending_scale':
-      continue
-    v, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
-    if sd > 0:
-      out += -0.5 * ((np.ravel(phys[i]) - v) / sd) ** 2
-  if measured.bending_length_sd > 0:
-    _reading_range(space, 'bending_length')  # the box knows its fabric
-    if grid is None:
-      out += _length_term(
-        np.ravel(phys.bending_scale), np.ravel(phys.area_weight), space, measured
-      )
-    else:
-      offsets = _cell_offsets(grid)
-      # the term is the same for every wind: once per (bending, area weight)
-      bw, which = np.unique(
-        np.asarray(points, np.float64)[:, [0, 2]], axis=0, return_inverse=True
-      )
-      centres = np.stack([bw[:, 0], np.zeros(len(bw)), bw[:, 1]], axis=1)
-      sub = np.clip(centres[:, None, :] + offsets[None], -1.0, 1.0)
-      p = physsim.params.from_unit(sub.reshape(-1, 3), space)
-      term = _length_term(p.bending_scale, p.area_weight, space, measured)
-      term = term.reshape(len(bw), -1)
-      top = term.max(axis=1)  # NumPy: the cells' count varies, nothing to compile
-      cell = top + np.log(np.exp(term - top[:, None]).sum(axis=1))
-      out += cell[np.ravel(which)] - np.log(len(offsets))
-  return out
 
 
 def refine_draws(samples_unit, grid, space: physsim.SearchSpace, measured: Measured,
@@ -276,13 +77,13 @@ def refine_draws(samples_unit, grid, space: physsim.SearchSpace, measured: Measu
   cells, which = np.unique(cell[:, [0, 2]], axis=0, return_inverse=True)
   which = np.ravel(which)
   centre = -1.0 + (2.0 * cells + 1.0) / g[[0, 2]]
-  offsets = _cell_offsets(grid, sub)[:, [0, 2]]
+  offsets = cell_offsets(grid, sub)[:, [0, 2]]
   pts = np.clip(centre[:, None, :] + offsets[None], -1.0, 1.0)  # (U, K, 2)
   flat = pts.reshape(-1, 2)
   p = physsim.params.from_unit(
     np.stack([flat[:, 0], np.zeros(len(flat)), flat[:, 1]], axis=1), space
   )
-  term = _length_term(p.bending_scale, p.area_weight, space, measured)
+  term = length_term(p.bending_scale, p.area_weight, space, measured)
   term = term.reshape(len(cells), -1)
   cdf = np.cumsum(np.exp(term - term.max(axis=1, keepdims=True)), axis=1)
   width = 2.0 / g
@@ -333,8 +134,8 @@ def prior_points(space: physsim.SearchSpace, measured: Measured, n: int = 2001) 
     unread = dataclasses.replace(
       measured, bending_length=0.0, bending_length_sd=0.0, bending_length_dof=0.0
     )
-    _reading_range(space, 'bending_length')  # as log_prior: the box's fabric
-    lp = log_prior(line * [0.0, 0.0, 1.0], space, unread)[None, :] + _length_term(
+    reading_range(space, 'bending_length')  # as log_prior: the box's fabric
+    lp = log_prior(line * [0.0, 0.0, 1.0], space, unread)[None, :] + length_term(
       phys[:, :1], phys[None, :, 2], space, measured
     )
     joint_w = np.exp(lp - lp.max())
@@ -351,12 +152,6 @@ def prior_points(space: physsim.SearchSpace, measured: Measured, n: int = 2001) 
     physsim.load_ratio(v, w).ravel(), ERROR_LOSS['load_ratio'], weights=wt.ravel()
   )
   return out
-
-
-def physical(samples_unit, space: physsim.SearchSpace) -> np.ndarray:
-  """(S, 3) unit-cube draws -> (S, 3) physical values in ``FIELDS`` order."""
-  p = physsim.params.from_unit(np.clip(samples_unit, -1, 1), space)
-  return np.stack([np.ravel(a) for a in p], axis=1)
 
 
 _U = (np.arange(400) + 0.5) / 400  # shares of the calibrated distribution
@@ -680,39 +475,3 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
     fig.suptitle(title)
   files.savefig(fig, path, dpi=80)
   plt.close(fig)
-
-
-def read_draws(workdir: str) -> tuple[str, np.ndarray, np.ndarray]:
-  """An estimate's fabric, its posterior draws as (S, 2) (log bending scale,
-  log area weight) and their (S,) weights (equal: the draws are samples).
-  A joint estimate's workdir gives its shared draws (``joint_posterior.npz``
-  beside ``joint.json``): what its recordings together say of the fabric.
-
-  Raises:
-    ValueError: no ``posterior.npz`` (an argmin estimate keeps none) nor a
-      joint's, or draws that are not (S, 3).
-  """
-  from experiments.pipeline import search  # the estimate's file names
-
-  path, about = os.path.join(workdir, search.POSTERIOR_FILE), 'estimate.json'
-  joint = os.path.join(workdir, search.JOINT_POSTERIOR_FILE)
-  if not os.path.exists(path) and os.path.exists(joint):
-    path, about = joint, search.JOINT_FILE
-  if not os.path.exists(path):
-    raise ValueError(
-      f'{path}: no posterior draws (run the estimate with a posterior; a joint '
-      f"estimate's are its {search.JOINT_POSTERIOR_FILE})"
-    )
-  with np.load(path) as z:
-    samples, bounds = np.asarray(z['samples'], np.float64), np.asarray(z['bounds'])
-  if samples.ndim != 2 or samples.shape[1] != 3 or bounds.shape != (3, 2):
-    raise ValueError(f'{path}: need (S, 3) draws, got {samples.shape}')
-  material = 'gray_interlock'
-  est = os.path.join(workdir, about)
-  if os.path.exists(est):
-    with open(est) as f:
-      material = json.load(f).get('material', material)
-  space = physsim.SearchSpace(*(tuple(b) for b in bounds))
-  p = physsim.params.from_unit(np.clip(samples, -1, 1), space)
-  draws = np.stack([np.log(p.bending_scale), np.log(p.area_weight)], axis=1)
-  return material, draws, np.ones(len(draws))

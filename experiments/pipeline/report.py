@@ -16,7 +16,7 @@ import numpy as np
 
 import model as model_lib
 import physsim
-from experiments.pipeline import embedding, files
+from experiments.pipeline import embedding, files, measurements
 from experiments.pipeline import objective as obj_lib
 
 LABELS = {
@@ -24,7 +24,7 @@ LABELS = {
   'wind_speed': 'wind speed (m/s)',
   'area_weight': 'area weight (kg/m$^2$)',
 }
-SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weight'}
+SHORT = measurements.SHORT
 # Coverage of the posterior's intervals measured on held-out simulated
 # recordings, shipped with the package (``experiments/calibrate.py --install``):
 # the default distance's (its networks' recipe) and the shape distance's (no

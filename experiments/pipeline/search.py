@@ -33,7 +33,7 @@ import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import deadline, embedding, files, report
+from experiments.pipeline import deadline, embedding, files, measurements, report
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import setup as setup_lib
@@ -142,7 +142,7 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
   points = bo.posterior.grid_points(pc.grid)
   return bo.PosteriorSearch(
     pc, n_init=s.n_init, n_iter=s.max_iter,
-    log_prior=posterior_lib.log_prior(points, space, config.measured, pc.grid),
+    log_prior=measurements.log_prior(points, space, config.measured, pc.grid),
     x0=np.zeros(3), seed=config.seed, stop_tol=2.0 * s.stop_rel_change,
     stop_window=s.stop_window, min_iter=s.min_iter,
     state_path=os.path.join(workdir, POSTERIOR_STATE), device=device,
@@ -261,7 +261,7 @@ class _Search:
     h = self.state.history
     if h is None or not len(h):
       return 'initial design scored'
-    q = posterior_lib.physical(h[-1], space)  # (3, 3): 5/50/95% x fields
+    q = measurements.physical(h[-1], space)  # (3, 3): 5/50/95% x fields
     return 'posterior so far, before recalibration: median [90%] ' + ', '.join(
       f'{report.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
       for i, f in enumerate(posterior_lib.FIELDS)
@@ -858,7 +858,7 @@ def _argmin_summary(st: setup_lib.Setup, res: bo.Result, x_best) -> dict:
   """The paper's point (the best evaluation) and where the GP puts the minimum."""
   config, space = st.config, st.space
   post = bo.minimizer_samples(res.X, res.Y, BOUNDS, jax.random.key(config.seed))
-  samples = posterior_lib.physical(post.samples, space)
+  samples = measurements.physical(post.samples, space)
   best = physsim.from_unit(x_best, space)
   return {
     'point_unit': np.asarray(x_best, np.float64).tolist(),
@@ -886,7 +886,7 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   key = jax.random.key(config.seed)
   pc = posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
-  lp = posterior_lib.log_prior(points, space, config.measured, pc.grid)
+  lp = measurements.log_prior(points, space, config.measured, pc.grid)
   prior = posterior_lib.refine_draws(
     posterior_lib.prior_samples(
       jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)

@@ -64,7 +64,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, distributed, embedding, files, search  # noqa: E402
+from experiments.pipeline import (  # noqa: E402
+  cli,
+  distributed,
+  embedding,
+  files,
+  measurements,
+  search,
+)
 from experiments.pipeline import datasets as gen  # noqa: E402
 from experiments.pipeline import demo as demo_lib  # noqa: E402
 from experiments.pipeline import objective as objective_lib  # noqa: E402
@@ -365,7 +372,7 @@ def check_config(config: Config) -> None:
     raise ValueError(
       f'--length_sd_spread={config.length_sd_spread}: a spread of log errors in [0, 2]'
     )
-  posterior_lib.check_dof(config.length_dof, 'length_dof')
+  measurements.check_dof(config.length_dof, 'length_dof')
   if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
@@ -386,7 +393,7 @@ def with_reading(config: Config, est: EstimateConfig, reading: str, truth: dict,
   applies to the same recording in its measured mode."""
   if reading == 'none':
     return est
-  measured = posterior_lib.simulated_reading(
+  measured = measurements.simulated_reading(
     reading, truth, config.measured_sd, config.seed, seq
   )
   return est.replace(measured=measured)
@@ -567,7 +574,7 @@ def _log_lik(z: dict, form: str, sharpness: float, model_error: float) -> np.nda
 
 
 def _physical_with_ratio(unit, space) -> np.ndarray:
-  p = posterior_lib.physical(unit, space)
+  p = measurements.physical(unit, space)
   return np.concatenate([p, physsim.load_ratio(p[:, 1], p[:, 2])[:, None]], axis=1)
 
 
@@ -578,7 +585,7 @@ def _truth_row(t: dict) -> np.ndarray:
 
 @functools.lru_cache(maxsize=4096)
 @functools.lru_cache(maxsize=8192)
-def _prior_point(material: str, measured: posterior_lib.Measured) -> np.ndarray:
+def _prior_point(material: str, measured: measurements.Measured) -> np.ndarray:
   """The prior's own least-error points in ``FIELDS`` order (quadrature;
   read-only). Kept per fabric and reading: the analysis asks again for each
   likelihood and sharpness, and for every recording read without a reading."""
@@ -638,15 +645,15 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
     ll = _log_lik(z, form, sharpness, model_error)
     sd = config.measured_sd
     measured = {
-      'video': posterior_lib.Measured(),
-      'known wind': posterior_lib.simulated_reading(
+      'video': measurements.Measured(),
+      'known wind': measurements.simulated_reading(
         'wind_speed', t, sd, config.seed, r['seq']
       ),
-      'known area weight': posterior_lib.simulated_reading(
+      'known area weight': measurements.simulated_reading(
         'area_weight', t, sd, config.seed, r['seq']
       ),
     }
-    priors = {m: posterior_lib.log_prior(points, space, v) for m, v in measured.items()}
+    priors = {m: measurements.log_prior(points, space, v) for m, v in measured.items()}
     base = priors['video']
     prior_draws = {
       mode: _physical_with_ratio(_draws(rng, grid, lp, n // 4), space)
@@ -694,11 +701,11 @@ def posteriors(config: Config, runs: list[dict], form: str, sharpness: float,
                                   'pair_member': k, 'truth': trow, **score})  # fmt: skip
       # The same pair with an anemometer reading at each recording.
       readings = [measured['known wind']] + [
-        posterior_lib.simulated_reading(
+        measurements.simulated_reading(
           'wind_speed', mate['truth'], sd, config.seed, mate['seq']
         )
       ]  # fmt: skip
-      lps = [priors['known wind'], posterior_lib.log_prior(points, space, readings[1])]
+      lps = [priors['known wind'], measurements.log_prior(points, space, readings[1])]
       jw = posterior_lib.joint(
         [ll, _log_lik(zm, form, sharpness, model_error)], grid, lps,
         jax.random.key(int(rng.integers(1 << 30))), n=n,
@@ -757,7 +764,7 @@ def _length_priors(config: Config, material: str, seq: int, truth: tuple,
   space = physsim.search_space(material)
   grid = tuple(config.estimate.search.posterior_grid)
   points = bo.posterior.grid_points(grid)
-  length = posterior_lib.simulated_reading(
+  length = measurements.simulated_reading(
     'bending_length',
     truth,
     length_sd_of(config, seq),
@@ -766,12 +773,12 @@ def _length_priors(config: Config, material: str, seq: int, truth: tuple,
     space,
     dof=config.length_dof,
   )
-  wind = posterior_lib.simulated_reading(
+  wind = measurements.simulated_reading(
     'wind_speed', truth, config.measured_sd, config.seed, seq
   )
   # a ruler's reading: the same error, Gaussian (the same normal draw as
   # length_dof 0 would give)
-  ruler = posterior_lib.simulated_reading(
+  ruler = measurements.simulated_reading(
     'bending_length', truth, length_sd_of(config, seq), config.seed, seq, space
   )
   with_wind = lambda m: dataclasses.replace(
@@ -786,7 +793,7 @@ def _length_priors(config: Config, material: str, seq: int, truth: tuple,
   rng = np.random.default_rng([config.seed, 23, seq])
   out = {}
   for mode, m in readings.items():
-    lp = posterior_lib.log_prior(points, space, m, grid)
+    lp = measurements.log_prior(points, space, m, grid)
     unit = posterior_lib.refine_draws(
       _draws(rng, grid, lp, n), grid, space, m, seed=seq + 1
     )

@@ -47,11 +47,11 @@ from experiments.pipeline import (  # noqa: E402
   embedding,
   eval_set,
   files,
+  measurements,
   report,
   search,
 )  # fmt: skip
 from experiments.pipeline import objective as objective_lib  # noqa: E402
-from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.pipeline.objective import NETWORK_DISTANCE, EstimateConfig  # noqa: E402
 from experiments.studies import table1  # noqa: E402
@@ -161,10 +161,10 @@ def simulated_measurement(config: Config, rec: dict, truth: dict | None):
         raise ValueError(
           f'{rec["path"]}: a simulated reading needs the truth (meta.json)'
         )
-      return posterior_lib.simulated_reading(
+      return measurements.simulated_reading(
         name, truth, sd, config.reading_seed, int(rec['seq_id'])
       )
-  return posterior_lib.Measured()
+  return measurements.Measured()
 
 
 def misplaced_camera(config: Config, rec: dict, recording, estimate: EstimateConfig):
@@ -250,7 +250,7 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
       )  # fmt: skip
       recording = misplaced_camera(config, rec, recording, ec)
       measured = simulated_measurement(config, rec, recording.truth)
-      if measured != posterior_lib.Measured():
+      if measured != measurements.Measured():
         ec = ec.replace(measured=measured)
     except (ValueError, OSError) as e:
       results[key] = {'failed': str(e)}

@@ -20,8 +20,8 @@ import pytest
 
 import bo
 import physsim
+from experiments.pipeline import measurements, report, search
 from experiments.pipeline import posterior as posterior_lib
-from experiments.pipeline import report, search
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration, calibration_check
 
@@ -188,7 +188,7 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
 
 
 def test_calibration_modes_follow_what_was_measured():
-  m = posterior_lib.Measured
+  m = measurements.Measured
   assert report.calibration_mode(m()) == 'video'
   assert report.calibration_mode(m(wind_speed=3.0, wind_speed_sd=0.06)) == 'known wind'
   both = m(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2, area_weight_sd=0.004)
@@ -255,7 +255,7 @@ def _recalibrated_file(tmp_path, monkeypatch) -> dict:
 
 def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkeypatch):
   _recalibrated_file(tmp_path, monkeypatch)
-  m = posterior_lib.Measured
+  m = measurements.Measured
   note = report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
   assert note['recalibrated'] and note['mode'] == 'video'
   assert note['levels']['wind_speed'] == [0.01, 0.1, 0.4, 0.9, 0.99]
@@ -541,7 +541,7 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   # The reading each estimate gets is the one the analysis's mode applies.
   truth = runs[3]['truth']
   est = calibration.with_reading(knw, PSD_ESTIMATE, 'wind_speed', truth, 3)
-  assert est.measured == posterior_lib.simulated_reading(
+  assert est.measured == measurements.simulated_reading(
     'wind_speed', truth, knw.measured_sd, knw.seed, 3
   )
   assert calibration.with_reading(knw, PSD_ESTIMATE, 'none', truth, 3) == PSD_ESTIMATE

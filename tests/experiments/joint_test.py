@@ -13,7 +13,7 @@ from jax.scipy.special import logsumexp
 
 import physsim
 from experiments import estimate as estimate_script
-from experiments.pipeline import objective, report, search
+from experiments.pipeline import layout, measurements, objective, report, search
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from tests.experiments import estimate_fixtures as fx
@@ -111,7 +111,7 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   with pytest.raises(ValueError, match='1 wind readings for 2 recordings'):
     search.estimate_joint(config, recs, model_dir, str(tmp_path / 'x'), winds[:1])
   measured = config.replace(
-    measured=posterior_lib.Measured(wind_speed=4.0, wind_speed_sd=0.1)
+    measured=measurements.Measured(wind_speed=4.0, wind_speed_sd=0.1)
   )
   with pytest.raises(ValueError, match='--wind_speeds'):
     search.estimate_joint(measured, recs, model_dir, str(tmp_path / 'x'))
@@ -141,7 +141,7 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
   # experiments.plan reads the joint's shared draws: the fabric the
   # recordings told of together, its median the joint's own
-  material, draws, _ = posterior_lib.read_draws(workdir)
+  material, draws, _ = layout.read_draws(workdir)
   assert material == config.simulation.material
   assert np.exp(np.median(draws[:, 1])) == pytest.approx(
     out['area_weight']['median'], rel=0.02
@@ -172,7 +172,7 @@ def test_a_bending_length_and_a_scale_give_the_estimate_the_fabrics_bending(tmp_
   space = physsim.search_space(config.simulation.material)
   b, w = 3.0, fx.TRUTH['area_weight']  # the strip says 3x the reference
   c = float(physsim.params.bending_length(b, w, space.rigidity))
-  measured = posterior_lib.Measured(
+  measured = measurements.Measured(
     area_weight=w, area_weight_sd=0.01 * w, bending_length=c, bending_length_sd=0.02 * c
   )
   out = search.estimate(

@@ -11,7 +11,7 @@ import pytest
 
 import physsim
 from experiments import plan as script
-from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline import layout
 from experiments.studies import protocol
 
 
@@ -33,7 +33,7 @@ def test_the_candidate_that_sees_the_widest_parameter_wins_by_hand(tmp_path):
   # bending wide (the whole box), area weight narrow: a recording that sees
   # only bending beats one that sees only area weight at the same noise
   _posterior(tmp_path, (-1, 1), (-0.1, 0.1))
-  material, draws, weights = posterior_lib.read_draws(str(tmp_path))
+  material, draws, weights = layout.read_draws(str(tmp_path))
   assert material == 'gray_interlock' and draws.shape == (400, 2)
   sigma = 0.3
   sees = lambda i: {

@@ -10,7 +10,7 @@ import pytest
 
 import bo
 import physsim
-from experiments.pipeline import posterior
+from experiments.pipeline import measurements, posterior
 
 SPACE = physsim.SearchSpace()  # wind 1-6 m/s, area weight 0.1-0.37 kg/m^2
 
@@ -32,32 +32,32 @@ SPACE = physsim.SearchSpace()  # wind 1-6 m/s, area weight 0.1-0.37 kg/m^2
 )
 def test_readings_are_refused_with_their_own_reason(reading, message):
   with pytest.raises(ValueError, match=message):
-    posterior.Measured(**reading).check(SPACE)
+    measurements.Measured(**reading).check(SPACE)
 
 
 def test_a_reading_in_range_passes():
-  posterior.Measured(wind_speed=3.0, wind_speed_sd=0.06).check(SPACE)
+  measurements.Measured(wind_speed=3.0, wind_speed_sd=0.06).check(SPACE)
 
 
 def test_the_prior_is_a_gaussian_of_the_reading_in_physical_units():
   """log prior at the box centre and one reading sd away, by hand."""
-  measured = posterior.Measured(wind_speed=3.5, wind_speed_sd=0.25)
+  measured = measurements.Measured(wind_speed=3.5, wind_speed_sd=0.25)
   # Unit cube -> wind 1 + (u + 1) / 2 * 5: u = 0 is 3.5 m/s, u = 0.1 is 3.75.
   points = np.array([[0.0, 0.0, 0.0], [0.0, 0.1, 0.0]])
-  lp = posterior.log_prior(points, SPACE, measured)
+  lp = measurements.log_prior(points, SPACE, measured)
   np.testing.assert_allclose(lp, [0.0, -0.5], atol=1e-12)
-  assert np.all(posterior.log_prior(points, SPACE, posterior.Measured()) == 0.0)
+  assert np.all(measurements.log_prior(points, SPACE, measurements.Measured()) == 0.0)
 
 
 def test_simulated_readings_repeat_by_seed_and_recording():
   truth = {'bending_scale': 1.0, 'wind_speed': 3.0, 'area_weight': 0.2}
-  a = posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=7)
-  assert a == posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=7)
+  a = measurements.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=7)
+  assert a == measurements.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=7)
   assert a.wind_speed_sd == pytest.approx(0.06)
   assert abs(a.wind_speed - 3.0) < 5 * 0.06
-  assert a != posterior.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=8)
+  assert a != measurements.simulated_reading('wind_speed', truth, 0.02, seed=4, seq=8)
   with pytest.raises(ValueError, match="no instrument reads 'bending_scale'"):
-    posterior.simulated_reading('bending_scale', truth, 0.02, seed=4, seq=7)
+    measurements.simulated_reading('bending_scale', truth, 0.02, seed=4, seq=7)
 
 
 def test_the_picture_draws_the_intervals_the_table_prints(tmp_path, monkeypatch):
@@ -108,7 +108,7 @@ def test_a_bending_length_reads_bending_from_the_area_weight_by_peirces_formula(
     c, rel=1e-12
   )
   # weighed to 1% and the bending length read to 2%: bending to about 6% (3 x 2%)
-  m = posterior.Measured(area_weight=w, area_weight_sd=0.002, bending_length=c,
+  m = measurements.Measured(area_weight=w, area_weight_sd=0.002, bending_length=c,
                          bending_length_sd=0.02 * c)  # fmt: skip
   m.check(FABRIC)
   points = posterior.prior_points(FABRIC, m)
@@ -117,9 +117,9 @@ def test_a_bending_length_reads_bending_from_the_area_weight_by_peirces_formula(
   # on the grid: the prior's mass sits where c holds, along b / w = const
   pts = np.stack(np.meshgrid(np.linspace(-1, 1, 41), [0.0], np.linspace(-1, 1, 41),
                              indexing='ij'), -1).reshape(-1, 3)  # fmt: skip
-  without_scale = posterior.Measured(bending_length=c, bending_length_sd=0.02 * c)
-  lp = posterior.log_prior(pts, FABRIC, without_scale)
-  phys = posterior.physical(pts, FABRIC)
+  without_scale = measurements.Measured(bending_length=c, bending_length_sd=0.02 * c)
+  lp = measurements.log_prior(pts, FABRIC, without_scale)
+  phys = measurements.physical(pts, FABRIC)
   best = phys[lp > lp.max() - 0.5]
   ratio = best[:, 0] / best[:, 2]  # b / w of the most probable cells
   assert np.all(np.abs(np.log(ratio / (b / w))) < np.log(1.25)), ratio
@@ -130,16 +130,16 @@ def test_prior_points_factor_a_bending_length_as_the_full_grid_does():
   one's own terms on a line, the strip's reading by broadcasting): its points
   are those of ``log_prior`` on every point of the grid, to rounding."""
   n = 201
-  m = posterior.Measured(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2,
+  m = measurements.Measured(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2,
                          area_weight_sd=0.01, bending_length=0.02,
                          bending_length_sd=0.0006, bending_length_dof=10.0)  # fmt: skip
   got = posterior.prior_points(FABRIC, m, n=n)
   u = -1.0 + (2.0 * np.arange(n) + 1.0) / n
   b, w = np.meshgrid(u, u, indexing='ij')
   pts = np.stack([b.ravel(), np.zeros(n * n), w.ravel()], axis=1)
-  lp = posterior.log_prior(pts, FABRIC, m).reshape(n, n)
+  lp = measurements.log_prior(pts, FABRIC, m).reshape(n, n)
   weight = np.exp(lp - lp.max())
-  phys = posterior.physical(pts, FABRIC)
+  phys = measurements.physical(pts, FABRIC)
   for i, axis, nodes in ((0, 1, phys[::n, 0]), (2, 0, phys[:n, 2])):
     name = posterior.FIELDS[i]
     want = bo.calibration.bayes_point(
@@ -160,35 +160,35 @@ def test_draws_on_a_coarse_grid_follow_a_bending_length_within_their_cells():
   quadrature of the same prior, where the cells' centres alone could not."""
   b, w = 1.7, 0.2  # not at a cell's centre
   c = float(physsim.params.bending_length(b, w, FABRIC.rigidity))
-  m = posterior.Measured(area_weight=w, area_weight_sd=0.004, bending_length=c,
+  m = measurements.Measured(area_weight=w, area_weight_sd=0.004, bending_length=c,
                          bending_length_sd=0.02 * c)  # fmt: skip
   grid = (12, 4, 24)
 
   pts = np.asarray(bo.posterior.grid_points(grid))
-  lp = posterior.log_prior(pts, FABRIC, m, grid)
+  lp = measurements.log_prior(pts, FABRIC, m, grid)
   p = np.exp(lp - lp.max())
   rng = np.random.default_rng(0)
   idx = rng.choice(len(pts), 20000, p=p / p.sum())
   draws = pts[idx] + (rng.random((20000, 3)) - 0.5) * 2.0 / np.array(grid)
   refined = posterior.refine_draws(draws, grid, FABRIC, m, seed=1)
-  got = np.quantile(posterior.physical(refined, FABRIC)[:, 0], [0.05, 0.5, 0.95])
+  got = np.quantile(measurements.physical(refined, FABRIC)[:, 0], [0.05, 0.5, 0.95])
   # the reference: the same prior on a fine (b, w) grid
   ub, uw = np.linspace(-1, 1, 2001), np.linspace(-1, 1, 401)
   bb, ww = np.meshgrid(ub, uw, indexing='ij')
   fine = np.stack([bb.ravel(), np.zeros(bb.size), ww.ravel()], axis=1)
-  lpf = posterior.log_prior(fine, FABRIC, m).reshape(bb.shape)
+  lpf = measurements.log_prior(fine, FABRIC, m).reshape(bb.shape)
   pb = np.exp(lpf - lpf.max()).sum(axis=1)
-  bs = posterior.physical(fine[:: len(uw)], FABRIC)[:, 0]
+  bs = measurements.physical(fine[:: len(uw)], FABRIC)[:, 0]
   cdf = np.cumsum(pb) / pb.sum()
   want = np.interp([0.05, 0.5, 0.95], cdf, bs)
   np.testing.assert_allclose(got, want, rtol=_QUANTILE_TOL)
   assert want[0] < b < want[2]
   # the cells' centres alone: every draw's bending is one of 12 values
-  centres = posterior.physical(pts[idx], FABRIC)[:, 0]
+  centres = measurements.physical(pts[idx], FABRIC)[:, 0]
   assert len(np.unique(np.round(centres, 9))) <= 3
   assert len(np.unique(np.round(refined[:, 0], 9))) > 1000
   # without a bending length the draws are untouched
-  plain = posterior.Measured(area_weight=w, area_weight_sd=0.004)
+  plain = measurements.Measured(area_weight=w, area_weight_sd=0.004)
   np.testing.assert_array_equal(
     posterior.refine_draws(draws, grid, FABRIC, plain, seed=1), draws
   )
@@ -204,11 +204,11 @@ def test_draws_on_a_coarse_grid_follow_a_bending_length_within_their_cells():
 )
 def test_a_bad_bending_length_is_refused_naming_the_flag(reading, message):
   with pytest.raises(ValueError, match=message):
-    posterior.Measured(**reading).check(FABRIC)
+    measurements.Measured(**reading).check(FABRIC)
 
 
 def test_a_bending_length_needs_a_box_that_knows_its_fabric():
-  m = posterior.Measured(bending_length=0.02, bending_length_sd=0.002)
+  m = measurements.Measured(bending_length=0.02, bending_length_sd=0.002)
   with pytest.raises(ValueError, match='no reference rigidity'):
     m.check(SPACE)
 
@@ -248,16 +248,16 @@ def test_a_depth_readings_t_law_is_scipys_with_the_readings_sd():
   from scipy import stats
 
   c0, sd, dof = 0.02, 0.0008, 4.0
-  m = posterior.Measured(
+  m = measurements.Measured(
     bending_length=c0, bending_length_sd=sd, bending_length_dof=dof
   )
   w = np.full(7, 0.2)
   b = np.geomspace(0.5, 2.0, 7)
   c = np.asarray(physsim.params.bending_length(b, w, FABRIC.rigidity))
-  mine = posterior._length_term(b, w, FABRIC, m)
+  mine = measurements.length_term(b, w, FABRIC, m)
   want = stats.t.logpdf(c, dof, loc=c0, scale=sd * np.sqrt((dof - 2) / dof))
   np.testing.assert_allclose(mine - mine[0], want - want[0], rtol=1e-9, atol=1e-9)
-  gauss = posterior._length_term(
+  gauss = measurements.length_term(
     b, w, FABRIC, dataclasses.replace(m, bending_length_dof=0.0)
   )
   np.testing.assert_allclose(gauss, -0.5 * ((c - c0) / sd) ** 2, rtol=1e-12)
@@ -266,7 +266,7 @@ def test_a_depth_readings_t_law_is_scipys_with_the_readings_sd():
 
 @pytest.mark.parametrize('dof', [1.0, 2.0, -3.0, float('nan'), float('inf'), 1e4])
 def test_a_t_law_without_a_finite_variance_is_refused(dof):
-  m = posterior.Measured(
+  m = measurements.Measured(
     bending_length=0.02, bending_length_sd=0.001, bending_length_dof=dof
   )
   with pytest.raises(ValueError, match='--bending_length_dof'):
@@ -276,7 +276,7 @@ def test_a_t_law_without_a_finite_variance_is_refused(dof):
 def test_simulated_t_readings_have_the_sd_they_say_and_gaussian_ones_are_unchanged():
   truth = {'bending_scale': 1.0, 'wind_speed': 3.0, 'area_weight': 0.2}
   c = float(physsim.params.bending_length(1.0, 0.2, FABRIC.rigidity))
-  draw = lambda k, dof: posterior.simulated_reading(
+  draw = lambda k, dof: measurements.simulated_reading(
     'bending_length', truth, 0.05, seed=1, seq=k, space=FABRIC, dof=dof
   )
   t = np.array([draw(k, 4.0).bending_length for k in range(20_000)]) / c - 1.0
@@ -296,4 +296,4 @@ def test_simulated_t_readings_have_the_sd_they_say_and_gaussian_ones_are_unchang
   )
   assert draw(3, 0.0).bending_length_dof == 0.0
   with pytest.raises(ValueError, match='only a bending length'):
-    posterior.simulated_reading('wind_speed', truth, 0.02, seed=1, seq=0, dof=4.0)
+    measurements.simulated_reading('wind_speed', truth, 0.02, seed=1, seq=0, dof=4.0)

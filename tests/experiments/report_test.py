@@ -7,7 +7,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 import physsim
-from experiments.pipeline import objective, posterior, report
+from experiments.pipeline import measurements, objective, report
 
 # Percent errors and factors are ratios of a few floats: exact to rounding.
 TOL = 1e-9
@@ -270,13 +270,13 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
   assert 'python -m experiments.plan --workdir=out/e' in line and '\n' not in line
   # a scale's reading and a bending length given: nothing left to advise
   weighed = config.replace(
-    measured=posterior.Measured(area_weight=0.18, area_weight_sd=0.004,
+    measured=measurements.Measured(area_weight=0.18, area_weight_sd=0.004,
                                 bending_length=0.02, bending_length_sd=0.002),
   )  # fmt: skip
   assert report.next_recording_note(told, weighed, 'out/e') is None
   # the strip measured bending (the video adding nothing to it): area weight only
   strip = config.replace(
-    measured=posterior.Measured(bending_length=0.02, bending_length_sd=0.002)
+    measured=measurements.Measured(bending_length=0.02, bending_length_sd=0.002)
   )
   line = report.next_recording_note(told, strip, 'out/e')
   assert line.startswith('next: the recording(s) told little about area weight;'), line

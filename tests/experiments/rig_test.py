@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import fabric_files, intake, objective, report, rig
-from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline import fabric_files, intake, layout, objective, report, rig
 from physsim import camera, dataset
 
 _CONFIG = objective.PRESETS['smoke'].replace(distance='shape')
@@ -265,7 +264,7 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   record = fabric_files.write(str(tmp_path / 'w'), str(tmp_path / 'fabric'), draws=10)
   assert record['point']['area_weight'] == pytest.approx(joint['area_weight']['median'])
   assert set(record['files']) == {'mujoco', 'arcsim', 'draws'}
-  material, draws, _ = posterior_lib.read_draws(str(tmp_path / 'w'))
+  material, draws, _ = layout.read_draws(str(tmp_path / 'w'))
   assert material == truth.material and draws.shape[1] == 2
   lo, hi = joint['area_weight']['interval_90']
   assert lo <= np.exp(np.median(draws[:, 1])) <= hi

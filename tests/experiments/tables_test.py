@@ -5,6 +5,7 @@ import os
 import numpy as np
 import pytest
 
+from experiments.pipeline import measurements
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import Recording
 from experiments.studies import table1, tables
@@ -252,7 +253,6 @@ def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
   # drawn around its truth as its prior, the reading the calibration's post-hoc
   # 'known wind' mode draws for the same seed and recording number.
   from experiments.pipeline import objective
-  from experiments.pipeline import posterior as posterior_lib
   from tests.experiments import estimate_fixtures as fx
 
   models = str(tmp_path / 'models')
@@ -268,7 +268,7 @@ def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
   )  # fmt: skip
   out = tables._batched([(rec, 'physnet_depth')], models, str(tmp_path / 'w'), config)
   got = out[tables._key(rec, 'physnet_depth')]
-  want = posterior_lib.simulated_reading('wind_speed', fx.TRUTH, 0.02, 5, 3)
+  want = measurements.simulated_reading('wind_speed', fx.TRUTH, 0.02, 5, 3)
   assert got['config']['measured'] == want.to_dict()
   assert want.wind_speed != fx.TRUTH['wind_speed']
   assert want.wind_speed_sd == pytest.approx(0.02 * fx.TRUTH['wind_speed'])
@@ -285,15 +285,14 @@ def test_simulated_wind_reading_is_the_searchs_prior(tmp_path):
 
 
 def test_simulated_readings_are_seeded_and_unbiased():
-  from experiments.pipeline import posterior as posterior_lib
 
   truth = {'wind_speed': 3.0, 'area_weight': 0.2}
-  a = posterior_lib.simulated_reading('area_weight', truth, 0.05, 1, 7)
-  assert a == posterior_lib.simulated_reading('area_weight', truth, 0.05, 1, 7)
-  assert a != posterior_lib.simulated_reading('area_weight', truth, 0.05, 2, 7)
+  a = measurements.simulated_reading('area_weight', truth, 0.05, 1, 7)
+  assert a == measurements.simulated_reading('area_weight', truth, 0.05, 1, 7)
+  assert a != measurements.simulated_reading('area_weight', truth, 0.05, 2, 7)
   assert a.wind_speed == 0 and a.area_weight_sd == pytest.approx(0.01)
   z = np.array([
-    posterior_lib.simulated_reading('wind_speed', truth, 0.02, 0, k).wind_speed
+    measurements.simulated_reading('wind_speed', truth, 0.02, 0, k).wind_speed
     for k in range(2000)
   ]) / 3.0 - 1.0  # fmt: skip
   # 2000 standard normals times 0.02: mean within 4 standard errors of 0,
@@ -301,7 +300,7 @@ def test_simulated_readings_are_seeded_and_unbiased():
   assert abs(z.mean()) < 4 * 0.02 / np.sqrt(2000)
   assert z.std() == pytest.approx(0.02, rel=0.05)
   with pytest.raises(ValueError, match='bending_scale'):
-    posterior_lib.simulated_reading('bending_scale', truth, 0.02, 0, 0)
+    measurements.simulated_reading('bending_scale', truth, 0.02, 0, 0)
   with pytest.raises(ValueError, match='wind_reading_sd=1.5'):
     tables.Config(wind_reading_sd=1.5)
   with pytest.raises(ValueError, match='one reading at a time'):

@@ -1,0 +1,237 @@
+"""What is known before the video: the search box's prior and the user's readings.
+
+The second of the estimate's stages (after the intake): an anemometer's
+wind, a scale's area weight and an overhang's bending length (``Measured``),
+checked against the search box, and the prior they make on the search's
+grid (``log_prior``: uniform in the box, bending log-uniform, times each
+reading's law). The objective, the search and the posterior take them from
+here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+import physsim
+
+FIELDS = physsim.params.FIELDS  # bending_scale, wind_speed, area_weight
+SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weight'}
+
+
+@dataclasses.dataclass(frozen=True)
+class Measured:
+  """What the user measured besides the video (0: not measured).
+
+  Attributes:
+    wind_speed: an anemometer's reading at the cloth, m/s.
+    wind_speed_sd: its standard uncertainty, m/s.
+    area_weight: a scale and a ruler's reading, kg/m^2.
+    area_weight_sd: its standard uncertainty, kg/m^2.
+    bending_length: a cantilever test's bending length c, m (Peirce: half the
+      overhang at which a strip's tip reaches a 41.5-degree slope below the
+      table's edge; or ``physsim.cantilever.bending_length`` of an overhang
+      and its tip's reach). It reads bending and area weight together,
+      c = (bending x D0 / (w g))^(1/3) (``physsim.params.bending_length``).
+    bending_length_sd: its standard uncertainty, m.
+    bending_length_dof: the law of its error: 0, Gaussian (a ruler's
+      reading); more than 2, Student's t of that many degrees of freedom
+      with standard deviation ``bending_length_sd`` (a depth camera's
+      reading, ``physsim.overhang_depth.DOF``: most readings closer than a
+      Gaussian of that sd would put them, a few further off).
+  """
+
+  wind_speed: float = 0.0
+  wind_speed_sd: float = 0.0
+  area_weight: float = 0.0
+  area_weight_sd: float = 0.0
+  bending_length: float = 0.0
+  bending_length_sd: float = 0.0
+  bending_length_dof: float = 0.0
+
+  def to_dict(self) -> dict:
+    """The readings as files hold them: a bending length only when given, so
+    that files without one (and runs to resume) stay as they were written
+    before it was a reading."""
+    out = dataclasses.asdict(self)
+    if not (self.bending_length or self.bending_length_sd):
+      del out['bending_length'], out['bending_length_sd']
+    if not self.bending_length_dof:  # a Gaussian reading, as files held it
+      del out['bending_length_dof']
+    return out
+
+  def check(self, space: physsim.SearchSpace) -> None:
+    """Raises ValueError on a reading without uncertainty, or far outside the
+    box, or a bending length's error law that is neither Gaussian nor a t
+    with a finite variance."""
+    check_dof(self.bending_length_dof, 'bending_length_dof')
+    for name in ('wind_speed', 'area_weight', 'bending_length'):
+      v, sd = getattr(self, name), getattr(self, f'{name}_sd')
+      if v == 0 and sd == 0:
+        continue
+      if v == 0:
+        raise ValueError(
+          f'--{name}_sd={sd} was given without --{name} (the reading it is the '
+          'uncertainty of)'
+        )
+      lo, hi = reading_range(space, name)
+      if not sd > 0:
+        raise ValueError(
+          f'--{name}={v} needs --{name}_sd > 0 (its uncertainty), got {sd}'
+        )
+      if not v > 0:
+        raise ValueError(f'--{name}={v}: a reading must be > 0')
+      if v + 3 * sd < lo or v - 3 * sd > hi:
+        raise ValueError(
+          f'--{name}={v} +- {sd} lies outside the search range [{lo}, {hi}]'
+        )
+
+
+def reading_range(space: physsim.SearchSpace, name: str) -> tuple[float, float]:
+  """The range of reading ``name`` over the search box (a bending length's
+  from its bending and area weight ranges and the fabric's rigidity).
+
+  Raises:
+    ValueError: a bending length for a box of no fabric (its rigidity 0).
+  """
+  if name != 'bending_length':
+    return getattr(space, name)
+  if not space.rigidity > 0:
+    raise ValueError(
+      '--bending_length: the search box has no reference rigidity to read it '
+      "against (physsim.search_space gives each fabric's)"
+    )
+  (b0, b1), (w0, w1) = space.bending_scale, space.area_weight
+  lo = physsim.params.bending_length(b0, w1, space.rigidity)
+  hi = physsim.params.bending_length(b1, w0, space.rigidity)
+  return float(lo), float(hi)
+
+
+def simulated_reading(
+  name: str, truth: dict, rel_sd: float, seed: int, seq: int,
+  space: physsim.SearchSpace | None = None, dof: float = 0.0,
+) -> Measured:  # fmt: skip
+  """A simulated instrument's reading of ``name`` ('wind_speed': an
+  anemometer; 'area_weight': a scale and a ruler; 'bending_length': an
+  overhang, Peirce's c of the truth's bending and area weight against
+  ``space``'s rigidity) for a recording with known ``truth``: the truth times
+  ``1 + rel_sd * z``, ``z`` standard normal drawn from ``(seed, seq)`` alone,
+  so recording ``seq`` gets the same reading in every study that uses the
+  same seed (the calibration's post-hoc modes and a search run with the
+  reading as its prior). Its uncertainty is ``rel_sd`` times the truth. A
+  bending length with ``dof`` > 2 errs as Student's t of that many degrees
+  of freedom scaled to the same standard deviation (``Measured``), as the
+  depth reader does; ``dof`` 0 keeps the Gaussian draw, the same number."""
+  names = (*FIELDS[1:], 'bending_length')
+  if name not in names:
+    raise ValueError(f'no instrument reads {name!r}: one of {names}')
+  if dof and name != 'bending_length':
+    raise ValueError(f'{name}: only a bending length has a t law, got dof={dof}')
+  if name == 'bending_length':
+    reading_range(space, name)  # the box knows its fabric's rigidity
+    value = float(
+      physsim.params.bending_length(
+        truth['bending_scale'], truth['area_weight'], space.rigidity
+      )
+    )  # fmt: skip
+  else:
+    value = truth[name]
+  stream = FIELDS.index(name) if name in FIELDS else len(FIELDS)
+  rng = np.random.default_rng([seed, 13, seq, stream])
+  z = rng.standard_t(dof) * math.sqrt((dof - 2) / dof) if dof else rng.standard_normal()
+  v = value * (1.0 + rel_sd * z)
+  out = Measured(**{name: v, f'{name}_sd': rel_sd * value})
+  return dataclasses.replace(out, bending_length_dof=dof) if dof else out
+
+
+SUB_CELLS = (32, 4)  # a bending length's term averaged over (bending, area weight)
+
+
+MAX_DOF = 1000.0  # a bending length's t law (beyond it, say 0: the Gaussian)
+
+
+def check_dof(dof: float, flag: str) -> None:
+  """Raises ValueError naming ``--flag`` unless ``dof`` is 0 (a Gaussian
+  reading) or a t law with a finite variance (more than 2, at most
+  ``MAX_DOF``)."""
+  if not (dof == 0 or (math.isfinite(dof) and 2 < dof <= MAX_DOF)):
+    raise ValueError(
+      f'--{flag}={dof}: 0 (a Gaussian reading) or a Student-t of more than 2 '
+      f'and at most {MAX_DOF:g} degrees of freedom'
+    )
+
+
+def length_term(b, w, space: physsim.SearchSpace, measured: Measured):
+  """The bending-length reading's log likelihood at physical (b, w), up to
+  a constant: Gaussian, or Student's t with the reading's standard deviation
+  (``Measured.bending_length_dof``)."""
+  c = physsim.params.bending_length(b, w, space.rigidity)
+  dof = measured.bending_length_dof
+  if not dof:
+    return -0.5 * ((c - measured.bending_length) / measured.bending_length_sd) ** 2
+  scale = measured.bending_length_sd * math.sqrt((dof - 2) / dof)
+  r = (c - measured.bending_length) / scale
+  return -0.5 * (dof + 1) * np.log1p(r**2 / dof)
+
+
+def cell_offsets(grid, sub=SUB_CELLS) -> np.ndarray:
+  """(K, 3) unit offsets of a cell's sub-points (bending x area weight, the
+  wind at the centre) from its centre, for a grid of ``grid`` cells."""
+  width = 2.0 / np.asarray(grid, np.float64)
+  ub = ((np.arange(sub[0]) + 0.5) / sub[0] - 0.5) * width[0]
+  uw = ((np.arange(sub[1]) + 0.5) / sub[1] - 0.5) * width[2]
+  bb, ww = np.meshgrid(ub, uw, indexing='ij')
+  return np.stack([bb.ravel(), np.zeros(bb.size), ww.ravel()], axis=1)
+
+
+def log_prior(points, space: physsim.SearchSpace, measured: Measured,
+              grid=None) -> np.ndarray:  # fmt: skip
+  """(G,) log prior at unit-cube ``points (G, 3)``: uniform in the box (so
+  bending log-uniform), times a Gaussian for each measured quantity (a
+  bending length's in the c that each point's bending and area weight give).
+
+  With ``grid`` (the cells per dimension whose centres ``points`` are), a
+  bending length's term is the cell's mean over ``SUB_CELLS`` sub-points
+  rather than its centre's value: a strip reads c to a few percent, b to
+  three times that, narrower than a cell of the search's grid (x1.47 in
+  bending at the paper's 12), whose centres alone would put the posterior
+  on whichever centre lies nearest the reading. ``refine_draws`` then places
+  the draws within their cells by the same term.
+  """
+  out = np.zeros(len(points))
+  phys = physsim.params.from_unit(np.clip(points, -1, 1), space)
+  for i, name in enumerate(FIELDS):
+    if name == 'bending_scale':
+      continue
+    v, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
+    if sd > 0:
+      out += -0.5 * ((np.ravel(phys[i]) - v) / sd) ** 2
+  if measured.bending_length_sd > 0:
+    reading_range(space, 'bending_length')  # the box knows its fabric
+    if grid is None:
+      out += length_term(
+        np.ravel(phys.bending_scale), np.ravel(phys.area_weight), space, measured
+      )
+    else:
+      offsets = cell_offsets(grid)
+      # the term is the same for every wind: once per (bending, area weight)
+      bw, which = np.unique(
+        np.asarray(points, np.float64)[:, [0, 2]], axis=0, return_inverse=True
+      )
+      centres = np.stack([bw[:, 0], np.zeros(len(bw)), bw[:, 1]], axis=1)
+      sub = np.clip(centres[:, None, :] + offsets[None], -1.0, 1.0)
+      p = physsim.params.from_unit(sub.reshape(-1, 3), space)
+      term = length_term(p.bending_scale, p.area_weight, space, measured)
+      term = term.reshape(len(bw), -1)
+      top = term.max(axis=1)  # NumPy: the cells' count varies, nothing to compile
+      cell = top + np.log(np.exp(term - top[:, None]).sum(axis=1))
+      out += cell[np.ravel(which)] - np.log(len(offsets))
+  return out
+
+
+def physical(samples_unit, space: physsim.SearchSpace) -> np.ndarray:
+  """(S, 3) unit-cube draws -> (S, 3) physical values in ``FIELDS`` order."""
+  p = physsim.params.from_unit(np.clip(samples_unit, -1, 1), space)
+  return np.stack([np.ravel(a) for a in p], axis=1)
