@@ -8,7 +8,7 @@ centre's area-weight error on the same recordings; the same split by the
 true load ratio (``--ratio_split``). The reading is what a user sees when
 choosing a setting; the load ratio is what the physics cares about (the sheet
 blows flat at high ratios and its mean shape stops following the ratio:
-``benchmarks/gust_floor.py``). Then, pooled over the files, each estimate's
+docs/identifiability.md). Then, pooled over the files, each estimate's
 mean error with its standard error over groups (``by_group``): a group's
 recordings share one joint area weight, so the group, not the recording, is
 the independent unit. No simulation: seconds on a CPU.

@@ -13,11 +13,12 @@ length. A small mass m taped to the strip (a coin: ``Load``) adds its weight
 to the shear inboard of where it sits, and stiffens the span it covers (the
 strip does not bend under a coin): the shape then depends on L / c and
 m / (w b c) too, b the strip's width, so a coin of known mass could read the
-area weight w (``benchmarks.coin_bound`` bounds how well: too poorly to build
-a reader). ``tip`` solves it in float64 (RK4 from the free end, bisection on
-the tip's angle; NumPy, vectorised over ratios): the reference the simulator's
-overhang is checked against (``experiments.studies.protocol``), and, inverted
-(``bending_length``), what a measured overhang says about D.
+area weight w (a Fisher bound, docs/studies/protocol.md, says how well: too
+poorly to build a reader). ``tip`` solves it in float64 (RK4 from the free
+end, bisection on the tip's angle; NumPy, vectorised over ratios): the
+reference the simulator's overhang is checked against
+(``experiments.studies.protocol``), and, inverted (``bending_length``), what a
+measured overhang says about D.
 """
 
 from __future__ import annotations

@@ -15,8 +15,8 @@ Per candidate and truth (bending scale, area weight, wind), with MuJoCo C on
 the CPU:
 
 * the slopes J of the statistics with respect to (log bending, log area
-  weight, log wind) by central finite differences in steady wind (as
-  ``benchmarks.gust_floor``); a recording without wind has no wind parameter;
+  weight, log wind) by central finite differences in steady wind; a
+  recording without wind has no wind parameter;
 * their noise covariance R: the spread over ``draws`` gust histories
   (gust intensity ``gusts``), pulled half-way to its diagonal
   (``bo.design.shrink``: a 6 x 6 covariance from a few draws), plus a depth
