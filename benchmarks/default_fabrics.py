@@ -1,6 +1,6 @@
 """The estimate's defaults on one recording of each fabric, as a user runs them.
 
-Reads what ``benchmarks/gpu_default_fabrics.sh`` left under ``--root``: each
+Reads what ``benchmarks/gpu.sh fabrics`` left under ``--root``: each
 fabric's ``est_<fabric>/estimate.json`` (a paper-size estimate with nothing
 but the recording, its fabric and a workdir given: the default distance, the
 sheet's shape) and ``times.txt`` (process start to table, from the shell).
@@ -8,8 +8,8 @@ Prints per fabric whether the estimate quoted measured coverage (issue 41:
 never "indicative" at paper size for any of the 7 fabrics), its errors and
 which 90% / 50% intervals held the truth, and writes JSON.
 
-  bash benchmarks/gpu_default_fabrics.sh make /tmp/df
-  bash benchmarks/gpu_default_fabrics.sh estimate /tmp/df
+  bash benchmarks/gpu.sh fabrics_make /tmp/df
+  bash benchmarks/gpu.sh fabrics /tmp/df
   python -m benchmarks.default_fabrics --root=/tmp/df --out=/tmp/df/default_fabrics.json
 """
 
@@ -32,7 +32,7 @@ class Args:
   """Where the runs are.
 
   Attributes:
-    root: the folder ``gpu_default_fabrics.sh`` wrote.
+    root: the folder ``gpu.sh fabrics`` wrote.
     out: the JSON summary.
   """
 
