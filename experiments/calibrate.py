@@ -38,7 +38,7 @@ from absl import logging
 
 import bo
 import physsim
-from experiments.pipeline import cli, distributed, files, report
+from experiments.pipeline import calibration_tables, cli, distributed, files
 from experiments.studies import calibration, calibration_check
 
 
@@ -109,7 +109,7 @@ def main(args: Args) -> None:
       calibration_check.check(args.study, args.workdir, analyse_only=args.analyse_only)
     if args.install and distributed.is_main():
       dest = calibration_check.checked_file(args.study)
-      report.record_check(
+      calibration_tables.record_check(
         dest, calibration_check.check_record(physsim.dataset.read_json(done)), modes
       )
       print(f'check recorded in {dest}')
@@ -119,7 +119,7 @@ def main(args: Args) -> None:
     simulate_only=args.simulate_only,
   )  # fmt: skip
   if args.install and distributed.is_main():
-    dest = report.shipped_calibration(
+    dest = calibration_tables.shipped_calibration(
       args.study.estimate.scoring.distance, args.study.size
     )
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
@@ -128,19 +128,21 @@ def main(args: Args) -> None:
     if modes:  # those modes' tables; what the checks measured of the others
       if not old:
         raise ValueError(f'--install_modes: no file at {dest} to install them into')
-      new = report.with_modes_of(old, new, modes)
-      (keep, moved), drop = report.trimmed_checks(old, new), []
-      fabrics = report.trimmed_checks(old, new, 'fabric_checks')[0]
+      new = calibration_tables.with_modes_of(old, new, modes)
+      (keep, moved), drop = calibration_tables.trimmed_checks(old, new), []
+      fabrics = calibration_tables.trimmed_checks(old, new, 'fabric_checks')[0]
       if moved:
         print(f'the checks keep their other modes; check {", ".join(moved)} again '
               '(--check ... --install --install_modes=...)')  # fmt: skip
     else:
-      keep, drop = report.still_valid_checks(old, new)
-      fabrics = report.still_valid_checks(old, new, 'fabric_checks')[0]
+      keep, drop = calibration_tables.still_valid_checks(old, new)
+      fabrics = calibration_tables.still_valid_checks(old, new, 'fabric_checks')[0]
     if keep or modes:  # checks of tables this refit left as they were
       new['checks'] = keep
       new.pop('fabric_checks', None)
-      if pools := report.pools_of(fabrics, keep):  # by fabric, of checks kept
+      if pools := calibration_tables.pools_of(
+        fabrics, keep
+      ):  # by fabric, of checks kept
         new['fabric_checks'] = pools
       files.write_json(dest, new)
     else:

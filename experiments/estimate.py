@@ -35,8 +35,8 @@ from experiments.pipeline import (
   cli,
   files,
   intake,
+  layout,
   report,
-  search,
   setup,
   takes,
   user_recordings,
@@ -326,7 +326,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     )
   else:
     print(
-      f"{where}/{search.JOINT_FILE}; each recording's estimate.json and pictures: "
+      f"{where}/{layout.JOINT_FILE}; each recording's estimate.json and pictures: "
       f'{where}/recording_<k>/'
     )
   print(

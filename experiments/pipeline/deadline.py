@@ -4,7 +4,7 @@ A batch system (SLURM's ``--time``) or a lent machine kills a job at a fixed
 time, usually in the middle of a step whose work is then lost. A script run
 with ``--time_limit=S`` (``cli.run`` sets it, counting from the process's
 start) instead stops *before* a step that would not finish in time: the
-lockstep estimate (``search.estimate_many``) checks before each step, with the
+lockstep estimate (``estimation.estimate_many``) checks before each step, with the
 last step's duration as the forecast (its compile and set-up, ``physsim.one_off``,
 paid again only for a new program; the rest scaled by its candidates over its
 simulations where searches shared worlds: ``objective.distinct_worlds``), a

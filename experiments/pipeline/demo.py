@@ -6,7 +6,7 @@
    noise, 24 fps, an unseen camera pose, gustier wind: ``make_eval_set``'s
    settings, small);
 4. estimate bending, wind and area weight from that recording alone
-   (``search.estimate``) with the estimate's default, the sheet's shape
+   (``estimation.estimate``) with the estimate's default, the sheet's shape
    (``--distance=shape``, no network), and print them beside the truth and
    beside the trivial guess (the centre of the search range);
 5. estimate them again through the PhySNet of step 2 (the PSD between
@@ -25,8 +25,8 @@ import time
 
 import physsim
 from experiments.pipeline import datasets as gen
+from experiments.pipeline import estimation, report
 from experiments.pipeline import recording as recording_lib
-from experiments.pipeline import report, search
 from experiments.pipeline import training as train_lib
 from experiments.pipeline.objective import NETWORK_DISTANCE, EstimateConfig
 
@@ -103,10 +103,10 @@ def run(workdir: str, material: str, sequences: int, seed: int, backend: str):
     rec_dir, fps=est_cfg.simulation.fps, size=IMAGE_SIZE, frames=_FRAMES
   )
   print("== 4/5 estimate (the default: the sheet's shape, no network)", flush=True)
-  result = search.estimate(est_cfg, rec, '', workdir + '/estimate')
+  result = estimation.estimate(est_cfg, rec, '', workdir + '/estimate')
   print(report.report_table(result))
   print('== 5/5 the same recording through the PhySNet of step 2', flush=True)
-  physnet = search.estimate(
+  physnet = estimation.estimate(
     est_cfg.replace(distance=NETWORK_DISTANCE), rec,
     os.path.join(workdir, 'model', material), workdir + '/estimate_physnet',
   )  # fmt: skip

@@ -33,32 +33,16 @@ import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import deadline, embedding, files, measurements, report
+from experiments.pipeline import deadline, embedding, files, layout, measurements
 from experiments.pipeline import objective as obj_lib
-from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import setup as setup_lib
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import Recording, read_json
 
-RUN_FILE = 'run.json'
-ESTIMATE_FILE = 'estimate.json'
-POSTERIOR_FILE = 'posterior.npz'  # draws and the grid posterior/likelihood
-POSTERIOR_STATE = 'posterior_state.npz'
 BOUNDS = np.array([[-1.0, 1.0]] * 3)  # the search runs in the unit cube
 # Config fields that do not change what an estimate searches (the shared
 # discrepancy: only how the joint reads the searches).
 _RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias')  # fmt: skip
-
-
-# The settings a joint estimate's recordings may each have their own of; the
-# rest (material, likelihood, grid, search) they share.
-PER_RECORDING = (
-  'cloth_size',
-  'cloth_resolution',
-  'hem_mass',
-  'camera_sd_m',
-  'camera_sd_deg',
-)
 
 
 class Job(NamedTuple):
@@ -145,7 +129,7 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
     log_prior=measurements.log_prior(points, space, config.measured, pc.grid),
     x0=np.zeros(3), seed=config.seed, stop_tol=2.0 * s.stop_rel_change,
     stop_window=s.stop_window, min_iter=s.min_iter,
-    state_path=os.path.join(workdir, POSTERIOR_STATE), device=device,
+    state_path=os.path.join(workdir, layout.POSTERIOR_STATE), device=device,
   )  # fmt: skip
 
 
@@ -172,7 +156,7 @@ def minimizer_settings(config: EstimateConfig, workdir: str) -> dict:
     stop_rel_change=s.stop_rel_change,
     stop_window=s.stop_window,
     stop_min_iter=s.min_iter,
-    state_path=os.path.join(workdir, 'bo_state.npz'),
+    state_path=os.path.join(workdir, layout.BO_STATE),
   )
 
 
@@ -203,7 +187,7 @@ def check_run(job: Job, problem) -> None:
   if recording.rgb is not None and problem.net.modality == 'rgb':
     run['recording_rgb_sha1'] = _digest(recording.rgb)
   run = json.loads(json.dumps(run))  # tuples -> lists, as read back
-  path = os.path.join(workdir, RUN_FILE)
+  path = os.path.join(workdir, layout.RUN_FILE)
   if os.path.exists(path):
     old = read_json(path)
     diff = sorted(
@@ -232,7 +216,7 @@ def discrepancies(y) -> np.ndarray:
 
 
 @dataclasses.dataclass
-class _Search:
+class LiveSearch:
   """One job's search as it advances (``state`` and ``best`` change)."""
 
   index: int  # into ``jobs``
@@ -257,14 +241,14 @@ class _Search:
     """Where the search stands, in one line."""
     space = self.problem.space
     if isinstance(self.opt, bo.Minimizer):
-      return report.describe(*self.argmin(), space)
+      return describe_best(*self.argmin(), space)
     h = self.state.history
     if h is None or not len(h):
       return 'initial design scored'
     q = measurements.physical(h[-1], space)  # (3, 3): 5/50/95% x fields
     return 'posterior so far, before recalibration: median [90%] ' + ', '.join(
-      f'{report.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
-      for i, f in enumerate(posterior_lib.FIELDS)
+      f'{measurements.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
+      for i, f in enumerate(measurements.FIELDS)
     )
 
 
@@ -472,95 +456,63 @@ def score(problem: obj_lib.Problem, u, *, evaluator: Evaluator | None = None,
   return evaluator([problem], [np.asarray(u, np.float64)], [first], **outputs)[0]
 
 
-def estimate(
-  config: EstimateConfig,
-  recording: Recording,
-  model_dir: str,
-  workdir: str,
-  *,
-  progress: bool = True,
-  gp_on_cpu: bool = True,
-  evaluator: Evaluator | None = None,
-  allow_other_material: bool = False,
-  nets: dict[str, embedding.EmbeddingNet] | None = None,
-  setup: setup_lib.Setup | None = None,
-  pictures: list | None = None,
-) -> dict:
-  """Runs (or resumes) one estimate; returns and writes ``estimate.json``.
-
-  Args:
-    config: settings.
-    recording: the video (``load_recording``; with ``rgb=True`` for an RGB
-      network).
-    model_dir: a trained run of this material's network (PhySNet or SDN,
-      depth or RGB); '' with ``distance='shape'``, which needs none.
-    workdir: where state, JSON and pictures go.
-    progress: print one line per iteration.
-    gp_on_cpu: fit the GP and propose on the CPU (``gp_device``).
-    evaluator: an ``Evaluator`` to reuse (its compiled objectives) across
-      estimates in one process; default a new one.
-    allow_other_material: search with a network of other fabrics.
-    nets: the network already restored, by ``model_dir`` (not restored again).
-    setup: ``setup.resolve(config, model_dir)`` if the caller has it (nothing
-      is read again); its settings must be ``config``'s.
-    pictures: a list to put the pictures' drawing in, for the caller to run
-      after it printed the answer (``estimate_many``); None: drawn here.
-
-  Returns:
-    The result dict written to ``estimate.json``.
-
-  Raises:
-    ValueError: ``model_dir`` is not a trained run, was trained on another
-      fabric, or takes another frame size, an RGB network and a recording
-      without colour frames, a recording shorter than an SDN clip, ``workdir`` holds an estimate of another
-      recording, camera, model or config, or every candidate simulation blew
-      up (naming the recording).
-  """
-  if setup is not None:
-    mine, theirs = config.flat(), setup.config.flat()
-    if mine != theirs:
-      raise ValueError(
-        'the setup was resolved for other settings than the estimate is given: '
-        + ', '.join(
-          sorted(k for k in mine.keys() | theirs.keys() if mine.get(k) != theirs.get(k))
-        )  # fmt: skip
-      )
-  (out,) = estimate_many(
-    [Job(config, recording, model_dir, workdir, allow_other_material, setup)],
-    progress=progress, gp_on_cpu=gp_on_cpu, evaluator=evaluator, nets=nets,
-    pictures=pictures,
-  )  # fmt: skip
-  if isinstance(out, Exception):
-    raise out
-  return out
+def _compile_part(meter: physsim.one_off.Meter) -> str:
+  """', of which compile N s' where a step both compiled and set up."""
+  compile_s, setup_s = meter.parts()
+  return (
+    f', of which compile {compile_s:.1f} s' if compile_s > 0 and setup_s > 0 else ''
+  )
 
 
-def estimate_many(
+def step_forecast(
+  last_s: float,
+  asked: int,
+  simulated: int,
+  one_off_s: float = 0.0,
+  same_program: bool = False,
+) -> float:
+  """Seconds a lockstep step is forecast to take from the last one, which
+  took ``last_s`` for ``asked`` candidates in ``simulated`` simulations, of
+  which ``one_off_s`` compiling and setting up (``physsim.one_off``).
+
+  The rest is scaled by ``asked / simulated`` where searches shared worlds
+  (a design: ``distinct_worlds``) and the next step will not; the one-off
+  part is paid again unless the next step runs the last one's program
+  (``same_program``: no sharing before, the same padded rows). Still an
+  overestimate after a shared design (its rendering and scoring, already
+  done for every candidate, are scaled too): a stop too early costs a
+  resume, one too late the step."""
+  one_off_s = min(max(one_off_s, 0.0), last_s)
+  rest = (last_s - one_off_s) * max(1.0, asked / max(simulated, 1))
+  return rest + (0.0 if same_program else one_off_s)
+
+
+def run(
   jobs: list[Job],
+  write: Callable[..., dict],
   *,
   progress: bool = True,
   gp_on_cpu: bool = True,
   nets: dict[str, embedding.EmbeddingNet] | None = None,
   evaluator: Evaluator | None = None,
-  figures: bool = True,
-  pictures: list | None = None,
 ) -> list[dict | Exception]:
-  """Runs (or resumes) every job's estimate, scoring their candidates together.
+  """Runs (or resumes) every job's search in lockstep, scoring their
+  candidates together; hands each finished search to ``write``.
 
   Args:
     jobs: the recordings.
+    write: ``write(job, search, result, best_frames, **timing) -> dict``, what
+      a finished search leaves (``results.write_result``: the stages after
+      the search, which this one does not import).
     progress: print one line per step.
     gp_on_cpu: fit the GPs and propose on the CPU.
     nets: networks the caller has loaded already, by ``model_dir``.
     evaluator: an ``Evaluator`` to reuse across calls (default a new one).
-    figures: draw each estimate's pictures (a study of hundreds may not want them).
-    pictures: a list to put the pictures' drawing in (callables, for the
-      caller to run once it has printed the answer: the table first, the
-      pictures after); None: drawn as each estimate is written.
 
   Returns:
-    Per job, its ``estimate.json`` dict, or the exception that stopped it (a
-    bad recording or model, another run in its workdir, every candidate blown
+    Per job, what ``write`` returned (or its ``estimate.json`` from a run
+    that had finished before), or the exception that stopped it (a bad
+    recording or model, another run in its workdir, every candidate blown
     up): one job's failure does not stop the others. Each search's files are
     written at the end of the step in which it stopped.
 
@@ -575,7 +527,7 @@ def estimate_many(
   jobs = [
     j if isinstance(j, Job) else job for j, job in zip(resolved, jobs, strict=True)
   ]
-  live: list[_Search] = []
+  live: list[LiveSearch] = []
   for i, job in enumerate(jobs):
     if isinstance(resolved[i], Exception):
       out[i] = resolved[i]
@@ -588,7 +540,7 @@ def estimate_many(
       )
       os.makedirs(job.workdir, exist_ok=True)
       check_run(job, problem)
-      live.append(_Search(i, problem, opt, opt.start(), obj_lib.BestSeen()))
+      live.append(LiveSearch(i, problem, opt, opt.start(), obj_lib.BestSeen()))
     except (ValueError, OSError) as e:
       out[i] = e
   evaluate = evaluator or Evaluator()
@@ -636,17 +588,14 @@ def estimate_many(
         recordings_in_batch=len(jobs),
       )
       with physsim.devices.on_host():  # the read-out's small eager work
-        out[s.index] = write_result(
-          job, s, res, frames[s.index], figures=figures, pictures=pictures,
-          **timing,
-        )  # fmt: skip
+        out[s.index] = write(job, s, res, frames[s.index], **timing)
       if progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
   # Searches that finished before: their result stands (run.json matched).
   ended = [s for s in live if s.done()]
   for s in ended:
-    path = os.path.join(jobs[s.index].workdir, ESTIMATE_FILE)
+    path = os.path.join(jobs[s.index].workdir, layout.ESTIMATE_FILE)
     if os.path.isfile(path):
       out[s.index] = read_json(path)
   finish([s for s in ended if out[s.index] is None])
@@ -731,487 +680,12 @@ def estimate_many(
   return out
 
 
-def _compile_part(meter: physsim.one_off.Meter) -> str:
-  """', of which compile N s' where a step both compiled and set up."""
-  compile_s, setup_s = meter.parts()
+def describe_best(x_best, y_best, space) -> str:
+  """A minimiser's progress line's worth: the best PSD and its parameters."""
+  if not np.isfinite(y_best):
+    return 'every simulation so far blew up'
+  p = physsim.from_unit(x_best, space)
   return (
-    f', of which compile {compile_s:.1f} s' if compile_s > 0 and setup_s > 0 else ''
+    f'best PSD {y_best:.4g} at bending x{float(p.bending_scale):.3g}, wind '
+    f'{float(p.wind_speed):.2f} m/s, area weight {float(p.area_weight):.3f} kg/m^2'
   )
-
-
-def step_forecast(
-  last_s: float,
-  asked: int,
-  simulated: int,
-  one_off_s: float = 0.0,
-  same_program: bool = False,
-) -> float:
-  """Seconds a lockstep step is forecast to take from the last one, which
-  took ``last_s`` for ``asked`` candidates in ``simulated`` simulations, of
-  which ``one_off_s`` compiling and setting up (``physsim.one_off``).
-
-  The rest is scaled by ``asked / simulated`` where searches shared worlds
-  (a design: ``distinct_worlds``) and the next step will not; the one-off
-  part is paid again unless the next step runs the last one's program
-  (``same_program``: no sharing before, the same padded rows). Still an
-  overestimate after a shared design (its rendering and scoring, already
-  done for every candidate, are scaled too): a stop too early costs a
-  resume, one too late the step."""
-  one_off_s = min(max(one_off_s, 0.0), last_s)
-  rest = (last_s - one_off_s) * max(1.0, asked / max(simulated, 1))
-  return rest + (0.0 if same_program else one_off_s)
-
-
-def write_result(
-  job: Job,
-  search: _Search,
-  res,
-  best_frames: np.ndarray,
-  figures: bool = True,
-  pictures: list | None = None,
-  **timing,
-) -> dict:
-  """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
-  posterior ``posterior.png`` and ``posterior.npz``) of a finished search;
-  returns the result dict.
-
-  Args:
-    job: the estimate, its ``setup`` resolved (``resolve_jobs``): its
-      network's record (recipe, accuracy, retrieval; recorded beside the
-      estimate: a parameter near 1 is not constrained by the video) and the
-      calibration its intervals are read with.
-    search: its finished search.
-    res: ``search.opt.result(...)``: a ``bo.Result`` or ``bo.posterior.Result``.
-    best_frames: the lowest-PSD candidate's camera-0 frames as its network saw
-      them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
-    figures: draw the pictures (else only the JSON and ``posterior.npz``).
-    pictures: where to put the pictures' drawing, as callables, instead of
-      drawing them here (``estimate_many``).
-    **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
-  """
-  st, recording, workdir = job.setup, job.recording, job.workdir
-  config, space = st.config, st.space
-  x_best, y_best = search.argmin()
-  result = {
-    'recording': recording.source,
-    'material': config.simulation.material,
-    'garment': config.simulation.garment,
-    'point': config.search.point,
-  }
-  draws = []  # the pictures, each a callable
-  if config.search.point == 'argmin':
-    result.update(_argmin_summary(st, res, x_best))
-  else:
-    result.update(_posterior_summary(
-      st, res, workdir, recording.truth, draws if figures else None,
-      recording.source,
-    ))  # fmt: skip
-  retrieval = st.network.retrieval
-  material = physsim.load_material(physsim.fabric(config.simulation.material).material)
-  point = result['point_unit']
-  bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
-  result.update({
-    'bending_matrix_Nm': (bending * material.bending).tolist(),
-    'argmin': {
-      f: float(np.ravel(v)[0])
-      for f, v in zip(posterior_lib.FIELDS, physsim.from_unit(x_best, space), strict=True)
-    },
-    'psd_best': float(y_best),
-    'evaluations': int(len(res.Y)),
-    'failed_evaluations': int(np.sum(~np.isfinite(discrepancies(res.Y)))),
-    'iterations': int(res.n_iter),
-    'stopped_by_rule': bool(res.stopped_early),
-    **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
-    **{k: float(v) for k, v in timing.items()},
-    'config': config.flat(),
-  })  # fmt: skip
-  if recording.truth is not None:
-    result['truth'] = recording.truth
-    result['errors'] = report.errors(
-      physsim.from_unit(point, space), recording.truth, space
-    )
-    result['covered'] = report.covered(result, recording.truth)
-  files.write_json(os.path.join(workdir, ESTIMATE_FILE), result)
-  if not figures:
-    return result
-  n_init = config.search.n_init
-  iteration = report.iterations_of(len(res.Y), n_init, config.search.q)
-  draws.append(functools.partial(
-    report.plot_trace, res.X, discrepancies(res.Y), iteration, space,
-    recording.truth, os.path.join(workdir, 'trace.png'),
-  ))  # fmt: skip
-  draws.append(functools.partial(
-    report.plot_montage,
-    recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
-    best_frames, recording.fps, os.path.join(workdir, 'montage.png'),
-    sim_label='best simulation',
-  ))  # fmt: skip
-  if pictures is not None:
-    pictures.extend(draws)
-  else:
-    for draw in draws:
-      draw()
-  return result
-
-
-def _argmin_summary(st: setup_lib.Setup, res: bo.Result, x_best) -> dict:
-  """The paper's point (the best evaluation) and where the GP puts the minimum."""
-  config, space = st.config, st.space
-  post = bo.minimizer_samples(res.X, res.Y, BOUNDS, jax.random.key(config.seed))
-  samples = measurements.physical(post.samples, space)
-  best = physsim.from_unit(x_best, space)
-  return {
-    'point_unit': np.asarray(x_best, np.float64).tolist(),
-    'estimate': report.summary(samples, best),
-    'load_ratio': report.load_ratio_summary(samples, best),
-    'interval_meaning': 'where the GP puts the minimum of the PSD, not where '
-    'the parameters are; not calibrated',
-  }
-
-
-def _name(source: str) -> str:
-  """A recording's name for a title: its file or folder (a dataset sequence:
-  material/sequence)."""
-  parts = os.path.normpath(source).split(os.sep) if source else []
-  return '/'.join(parts[-2:]) if parts and parts[-1].isdigit() else (parts or [''])[-1]
-
-
-def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
-                       draws: list | None = None, source: str = '') -> dict:  # fmt: skip
-  """The posterior median as the point, credible intervals, the prior's width;
-  writes ``posterior.npz`` and puts the drawing of ``posterior.png`` in
-  ``draws`` (None: no picture). The intervals are read at the levels of
-  ``st.calibration`` where it matched these settings, network and mode."""
-  config, space, note = st.config, st.space, st.calibration
-  key = jax.random.key(config.seed)
-  pc = posterior_config(config)
-  points = bo.posterior.grid_points(pc.grid)
-  lp = measurements.log_prior(points, space, config.measured, pc.grid)
-  prior = posterior_lib.refine_draws(
-    posterior_lib.prior_samples(
-      jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
-    ), pc.grid, space, config.measured, config.seed + 1,
-  )  # fmt: skip
-  samples = posterior_lib.refine_draws(
-    res.samples, pc.grid, space, config.measured, config.seed
-  )
-  summary = posterior_lib.summarise(
-    samples, space, prior, _levels(note), _weights(note), config.measured
-  )
-  # The point: each parameter's (recalibrated) median or Bayes point.
-  which = 'bayes' if config.search.point == 'bayes' else 'median'
-  point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
-  median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
-  estimate = {}
-  for name in posterior_lib.FIELDS:
-    s = summary[name]
-    estimate[name] = {'value': s[which], **s}
-  files.write_atomic(
-    os.path.join(workdir, POSTERIOR_FILE),
-    lambda p: np.savez(
-      p, samples=samples, prior_samples=prior, log_post=res.log_post,
-      log_lik=res.log_lik, log_prior=lp, grid=np.asarray(pc.grid),
-      bounds=space.bounds(), gp_mean=res.mean, gp_var=res.var,
-      noise_sd=res.noise_sd, floor=res.floor,
-    ),
-  )  # fmt: skip
-  if draws is not None:
-    draws.append(functools.partial(
-      posterior_lib.plot, samples, prior, space, truth,
-      os.path.join(workdir, 'posterior.png'),
-      title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
-      summary=summary, point=which,
-    ))  # fmt: skip
-  recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
-  return {
-    'point_unit': np.ravel(median).tolist(),
-    'estimate': estimate,
-    'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
-    'noise_sd_log_psd': None
-    if config.scoring.likelihood == 'synthetic'
-    else res.noise_sd,
-    **(
-      {'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()}
-      if config.scoring.likelihood == 'synthetic'
-      else {}
-    ),
-    'interval_meaning': 'central credible intervals of the posterior given the '
-    'video (and any measured wind or area weight)'
-    + (
-      ', read at levels recalibrated on simulated recordings so that they hold '
-      'the truth as often as they say'
-      if recalibrated
-      else ''
-    ),
-    'calibration': note,
-  }
-
-
-def _levels(note: dict | None) -> dict | None:
-  """The recalibrated CDF levels a calibration note carries (it matched), else None."""
-  return note.get('levels') if note and note.get('matches') else None
-
-
-def _weights(note: dict | None) -> dict | None:
-  """The calibrated weights of the posterior's points (it matched), else None."""
-  return note.get('weights') if note and note.get('matches') else None
-
-
-JOINT_FILE = 'joint.json'
-# The joint's shared draws, as POSTERIOR_FILE keeps one recording's (what
-# experiments.plan reads): recording 0's (b, v_0, w) unit draws and the box.
-JOINT_POSTERIOR_FILE = 'joint_posterior.npz'
-
-
-def estimate_joint(
-  config: EstimateConfig,
-  recordings: list[Recording],
-  model_dir: str,
-  workdir: str,
-  winds: list[tuple[float, float]] | None = None,
-  allow_other_material: bool = False,
-  overrides: list[dict] | None = None,
-  fans: list[str] | None = None,
-  **kw,
-) -> dict:
-  """One fabric seen in several recordings (e.g. two fan settings): a joint
-  posterior with one bending and area weight and one wind per recording.
-
-  Each recording gets its own posterior search (in lockstep, under
-  ``<workdir>/recording_<k>``); their likelihoods on the shared grid are then
-  multiplied over bending and area weight, each recording's wind integrated
-  out (``posterior.joint``). Writes ``joint.json`` and ``joint.png``. Many
-  fabrics at once: ``joint_jobs`` for each, one ``estimate_many`` over all
-  their jobs, then ``combine_joint`` for each.
-
-  Args:
-    config: settings (``point='median'`` or ``'bayes'``; a measured area
-      weight applies to all recordings; a measured wind cannot, as each
-      recording has its own: see ``winds``).
-    recordings: two or more recordings of the same fabric.
-    model_dir: the fabric's trained network ('' for none: ``estimate``).
-    workdir: where everything goes.
-    winds: an anemometer's reading at each recording, ``(m/s, its standard
-      uncertainty)`` in the recordings' order, or None. Each enters that
-      recording's search as its prior (its simulations go to that slice) and
-      the joint posterior through it. Its intervals are recalibrated where
-      the calibration has tables for the mode 'joint pair, known winds' (the
-      shipped one has none: they are reported as indicative).
-    allow_other_material: search with a network of other fabrics.
-    overrides: per recording, the settings that are its own
-      (``PER_RECORDING``: its cloth's size and mesh, a known mass at its hem,
-      its camera's error), or None; a sheet and a swatch of one fabric share
-      one posterior this way.
-    fans: per recording, its fan setting's label: recordings of one label
-      share one wind (``posterior.joint``), and must have one reading of it
-      or none; None: one wind each.
-    **kw: ``estimate_many``'s keywords (``nets`` goes to ``joint_jobs``).
-
-  Returns:
-    The dict written to ``joint.json``: per recording its own estimate and its
-    wind and load ratio under the joint posterior, and the shared bending and
-    area weight.
-
-  Raises:
-    ValueError: fewer than two recordings, ``point='argmin'``, a measured
-      wind in ``config``, readings or fans for another number of recordings,
-      two readings of one fan setting, a reading the search box cannot
-      hold, or a recording whose estimate failed (named).
-  """
-  jobs = joint_jobs(
-    config, recordings, model_dir, workdir, winds, allow_other_material, overrides,
-    nets=kw.pop('nets', None), fans=fans,
-  )  # fmt: skip
-  return combine_joint(jobs, estimate_many(jobs, **kw), workdir, fans)
-
-
-def joint_jobs(
-  config: EstimateConfig,
-  recordings: list[Recording],
-  model_dir: str,
-  workdir: str,
-  winds: list[tuple[float, float]] | None = None,
-  allow_other_material: bool = False,
-  overrides: list[dict] | None = None,
-  nets: dict[str, embedding.EmbeddingNet] | None = None,
-  fans: list[str] | None = None,
-) -> list[Job]:
-  """The searches of one fabric's joint estimate (``estimate_joint``'s
-  arguments and checks), one per recording under ``<workdir>/recording_<k>``,
-  each with its setup resolved (``resolve_jobs``; ``nets``: networks restored
-  already, by folder).
-
-  Raises:
-    ValueError: ``estimate_joint``'s, or a recording whose setup is refused
-      (named).
-  """
-  if len(recordings) < 2:
-    raise ValueError(
-      f'a joint estimate needs two or more recordings, got {len(recordings)}'
-    )
-  if not config.posterior:
-    raise ValueError(
-      "a joint estimate combines posteriors: use point='median' or 'bayes'"
-    )
-  if config.measured.wind_speed_sd > 0:
-    raise ValueError(
-      "a measured wind is one recording's: estimate that recording alone, or "
-      'give one reading per recording (--wind_speeds, --wind_speed_sds)'
-    )
-  if winds is not None and len(winds) != len(recordings):
-    raise ValueError(f'{len(winds)} wind readings for {len(recordings)} recordings')
-  check_fans(fans, winds, len(recordings))
-  configs = [config] * len(recordings)
-  if winds is not None:
-    configs = [config.replace(wind_speed=v, wind_speed_sd=sd) for v, sd in winds]
-    space = physsim.search_space(config.simulation.material)
-    for c in configs:
-      c.measured.check(space)
-  if overrides is not None:
-    if len(overrides) != len(recordings):
-      raise ValueError(
-        f'{len(overrides)} sets of settings for {len(recordings)} recordings'
-      )
-    for o in overrides:
-      if set(o) - set(PER_RECORDING):
-        raise ValueError(
-          f'settings {sorted(set(o) - set(PER_RECORDING))} are shared by a joint '
-          f"estimate's recordings; a recording's own are {PER_RECORDING}"
-        )
-    configs = [c.replace(**o) for c, o in zip(configs, overrides, strict=True)]
-    for c in configs:
-      c.check()
-  jobs = [
-    Job(c, r, model_dir, os.path.join(workdir, f'recording_{k}'), allow_other_material)
-    for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
-  ]
-  resolved = resolve_jobs(jobs, nets)
-  for job, r in zip(jobs, resolved, strict=True):
-    if isinstance(r, Exception):
-      raise ValueError(f'{job.recording.source}: {r}') from r
-  return resolved
-
-
-def check_fans(fans, winds, n: int) -> None:
-  """Raises ValueError for fan labels (``estimate_joint``'s ``fans``) of
-  another number of recordings than ``n``, or recordings of one fan setting
-  with different wind readings (``winds``: (m/s, sd) each, (0, 0) none)."""
-  if fans is None:
-    return
-  if len(fans) != n:
-    raise ValueError(f'{len(fans)} fan settings for {n} recordings')
-  for f in dict.fromkeys(fans):
-    read = {tuple(winds[k]) for k, g in enumerate(fans) if g == f} if winds else set()
-    if len(read) > 1:
-      raise ValueError(
-        f'fan setting {f!r}: its recordings were read {sorted(read)}; one wind, '
-        'one reading (give it to each of them, or to none)'
-      )
-
-
-def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None,
-                    fans: list[str] | None = None) -> tuple[dict, list]:  # fmt: skip
-  """``posterior.joint`` of finished searches (``joint_jobs``'s, or any
-  subset of them) from their saved posteriors, drawing as many samples as
-  each kept, with a shared discrepancy of ``shared_bias`` (None: the
-  config's) and the recordings' fan settings (``fans``: one wind each
-  label); returns it and the loaded ``posterior.npz`` files."""
-  npz = [np.load(os.path.join(j.workdir, POSTERIOR_FILE)) for j in jobs]
-  grid = tuple(int(g) for g in npz[0]['grid'])
-  config = jobs[0].config
-  if shared_bias is None:
-    shared_bias = config.scoring.shared_bias
-  combined = posterior_lib.joint(
-    [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
-    n=len(npz[0]['samples']), shared_bias_sd=shared_bias,
-    area_weight_range=physsim.search_space(config.simulation.material).area_weight,
-    fans=fans,
-  )  # fmt: skip
-  return combined, npz
-
-
-def combine_joint(jobs: list[Job], results: list, workdir: str,
-                  fans: list[str] | None = None) -> dict:  # fmt: skip
-  """The joint posterior of one fabric's finished searches (``joint_jobs``,
-  then ``estimate_many``: ``results`` in the jobs' order; ``fans``: their
-  fan settings, ``estimate_joint``'s); writes and returns
-  ``estimate_joint``'s ``joint.json``.
-
-  Raises:
-    ValueError: a recording whose estimate failed (named).
-  """
-  for job, r in zip(jobs, results, strict=True):
-    if isinstance(r, Exception):
-      raise ValueError(f'{job.recording.source}: {r}') from r
-  configs = [job.config for job in jobs]
-  (first,) = resolve_jobs(jobs[:1])  # the joint_jobs' own setup, kept
-  if isinstance(first, Exception):
-    raise ValueError(f'{jobs[0].recording.source}: {first}') from first
-  winds = None
-  if any(c.measured.wind_speed_sd > 0 for c in configs):  # readings (some may lack)
-    winds = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
-  # The settings the recordings share.
-  config = configs[0].replace(wind_speed=0.0, wind_speed_sd=0.0)
-  key = jax.random.fold_in(jax.random.key(config.seed), 11)
-  uncalibrated = []
-  if fans is not None and len(set(fans)) < len(fans):
-    uncalibrated.append('recordings sharing one fan setting')
-  if any(c.simulation.hem_mass for c in configs[1:]) and not config.simulation.hem_mass:
-    uncalibrated.append('hem_mass (a recording with a known mass at its hem)')
-  note = setup_lib.calibration(
-    configs[0], first.setup.network, joint=True, recordings=len(jobs),
-    uncalibrated=tuple(uncalibrated),
-  )  # fmt: skip
-  # A joint the shipped tables cover was calibrated, and checked on another
-  # physics, without a shared discrepancy; elsewhere the discrepancy keeps its
-  # recordings from averaging away the simulator's error.
-  shared_sd = 0.0 if note and note.get('matches') else config.scoring.shared_bias
-  combined, npz = joint_posterior(jobs, key, shared_sd, fans)
-  space = first.setup.space
-  grid = tuple(int(g) for g in npz[0]['grid'])
-  combined['samples'] = [  # a bending length places (b, w) within their cells
-    posterior_lib.refine_draws(x, grid, space, c.measured, config.seed + k)
-    for k, (x, c) in enumerate(zip(combined['samples'], configs, strict=True))
-  ]
-  levels = _levels(note)
-  per = []
-  for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):
-    s = posterior_lib.summarise(
-      samples, space, npz[k]['prior_samples'], levels, _weights(note),
-      job.config.measured,
-    )  # fmt: skip
-    per.append({
-      'recording': job.recording.source,
-      'alone': results[k]['estimate'],
-      'wind_speed': s['wind_speed'],
-      'load_ratio': s['load_ratio'],
-      **({'measured_wind': list(winds[k])} if winds and winds[k][1] > 0 else {}),
-      **({'fan': fans[k]} if fans is not None else {}),
-      **({'hem_mass': job.config.simulation.hem_mass}
-         if job.config.simulation.hem_mass else {}),
-      **({'truth': job.recording.truth} if job.recording.truth else {}),
-    })  # fmt: skip
-    posterior_lib.plot(
-      samples, npz[k]['prior_samples'], space, job.recording.truth,
-      os.path.join(workdir, f'joint_recording_{k}.png'),
-      title=f'{config.simulation.material}: joint posterior, recording {k}',
-    )  # fmt: skip
-  shared = posterior_lib.summarise(
-    combined['samples'][0], space, npz[0]['prior_samples'], levels, _weights(note),
-    configs[0].measured,
-  )  # fmt: skip
-  files.write_atomic(
-    os.path.join(workdir, JOINT_POSTERIOR_FILE),
-    lambda p: np.savez(p, samples=combined['samples'][0], bounds=space.bounds()),
-  )
-  out = {
-    'material': config.simulation.material,
-    'recordings': per,
-    'bending_scale': shared['bending_scale'],
-    'area_weight': shared['area_weight'],
-    'shared_bias': float(shared_sd),
-    'calibration': note,
-    'config': config.flat(),
-  }
-  files.write_json(os.path.join(workdir, JOINT_FILE), out)
-  return out

@@ -12,7 +12,7 @@ re-reading config fields and folders.
   from experiments.pipeline import objective, setup
   s = setup.resolve(objective.PRESETS['smoke'], model_dir)
   s.network.embedding.image_size   # the frames it compares
-  s.calibration                     # report.calibration_note of these settings
+  s.calibration                     # calibration_tables.calibration_note of these settings
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 import physsim
-from experiments.pipeline import embedding, report
+from experiments.pipeline import calibration_tables, embedding
 from experiments.pipeline import objective as obj_lib
 
 
@@ -55,7 +55,7 @@ class Setup(NamedTuple):
     pin_centre: (3,) the midpoint of its pinned vertices, where a camera's
       placement error turns about.
     space: the fabric's search box.
-    calibration: ``report.calibration_note`` of these settings, network and
+    calibration: ``calibration_tables.calibration_note`` of these settings, network and
       mode (None where no calibration is shipped).
   """
 
@@ -124,10 +124,10 @@ def calibration(
   recordings: int = 1,
   uncalibrated: tuple[str, ...] = (),
 ) -> dict | None:
-  """``report.calibration_note`` of these settings, this network's recipe and
+  """``calibration_tables.calibration_note`` of these settings, this network's recipe and
   accuracy, and the mode (a joint estimate of ``recordings`` recordings;
   ``uncalibrated``: what else about it no calibration has measured)."""
-  return report.calibration_note(
+  return calibration_tables.calibration_note(
     config, joint=joint, recordings=recordings, network=net.recipe,
     accuracy=net.accuracy, uncalibrated=uncalibrated,
   )  # fmt: skip

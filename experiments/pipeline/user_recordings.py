@@ -4,8 +4,8 @@ Each recording (a ``takes.Take``: its path, camera file and own set-up) gets
 its settings (the shared ones with its cloth size, hem, up axis and wind
 reading), its intake where it is not one of this project's own sequences
 (``intake.take_in``: clip, background, alignment), the alignment's own error
-carried into its posterior, and then one estimate: ``search.estimate`` for a
-single recording, ``search.estimate_joint`` for several (one bending and area
+carried into its posterior, and then one estimate: ``estimation.estimate`` for a
+single recording, ``estimation.estimate_joint`` for several (one bending and area
 weight, one wind each). Before any intake writes, no workdir may hold another
 recording's run.
 """
@@ -17,7 +17,15 @@ import os
 from collections.abc import Callable
 from typing import NamedTuple
 
-from experiments.pipeline import files, intake, search, setup, takes
+from experiments.pipeline import (
+  estimation,
+  files,
+  intake,
+  joint,
+  layout,
+  setup,
+  takes,
+)
 from experiments.pipeline import recording as recording_lib
 
 
@@ -41,10 +49,10 @@ def take_settings(ik: intake.IntakeConfig, config, take: takes.Take):
 
 
 def own_settings(config) -> dict:
-  """A recording's own settings in a joint estimate (``search.PER_RECORDING``
+  """A recording's own settings in a joint estimate (``joint.PER_RECORDING``
   that its config writes: a config without a hem writes none)."""
   flat = config.flat()
-  return {k: flat[k] for k in search.PER_RECORDING if k in flat}
+  return {k: flat[k] for k in joint.PER_RECORDING if k in flat}
 
 
 def with_alignment_error(config, intakes: list, carry: bool = True):
@@ -115,7 +123,7 @@ def check_workdirs(
   for i, take in enumerate(recorded):
     if all_taken_in or needs_intake(take):
       intake.check_workdir(
-        intake_dir(workdir, i, n), take.path, take.camera_json, search.RUN_FILE
+        intake_dir(workdir, i, n), take.path, take.camera_json, layout.RUN_FILE
       )
 
 
@@ -225,19 +233,19 @@ def estimate(
   record = prepared.record
   if len(recorded) > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
-    result = search.estimate_joint(
+    result = estimation.estimate_joint(
       config, prepared.recordings, model, workdir,
       winds if any(t.wind for t in recorded) else None,
       overrides=[own_settings(c) for c in prepared.configs],
       fans=takes.fans(recorded), pictures=pictures, **kw,
     )  # fmt: skip
-    _record_alignment(os.path.join(workdir, search.JOINT_FILE), record)
+    _record_alignment(os.path.join(workdir, layout.JOINT_FILE), record)
   else:
-    result = search.estimate(
+    result = estimation.estimate(
       prepared.configs[0], prepared.recordings[0], model, workdir,
       pictures=pictures, **kw,
     )  # fmt: skip
-    _record_alignment(os.path.join(workdir, search.ESTIMATE_FILE), record)
+    _record_alignment(os.path.join(workdir, layout.ESTIMATE_FILE), record)
   return result
 
 

@@ -26,7 +26,7 @@ cross-fitted coverage is that of a network the tables never saw.
 estimate applies the tables only with a network of that recipe. A distance
 that embeds nothing (``estimate.distance='shape'``) needs no network: the
 study then trains none, estimates every recording from its depth frames
-alone, and its tables hold for that distance (``report.calibration_file``).
+alone, and its tables hold for that distance (``calibration_tables.calibration_file``).
 
 The study then calibrates the intervals themselves: per mode and quantity,
 the truths' ranks among the posterior draws give the CDF levels at which the
@@ -64,11 +64,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import (  # noqa: E402
+from experiments.pipeline import (
   cli,
   distributed,
   embedding,
+  estimation,  # noqa: E402
   files,
+  layout,
   measurements,
   search,
 )
@@ -464,7 +466,7 @@ def simulate_and_estimate(
     rec = loaded.get(i)
     truth = rec.truth if rec is not None else recording_truth(paths[i])
     if rec is not None:
-      # '' : no network (search.estimate_many compares depth frames directly)
+      # '' : no network (estimation.estimate_many compares depth frames directly)
       model_dir = os.path.join(model_roots[k], material) if model_roots else ''
       job_est = with_reading(config, est.replace(material=material), reading,
                              truth, seq)  # fmt: skip
@@ -473,7 +475,9 @@ def simulate_and_estimate(
                  'workdir': wd, 'network': seeds[k] if seeds else None})  # fmt: skip
   shared = f'{len(mine)} of ' if jax.process_count() > 1 else ''
   print(f'{shared}{len(rows)} recordings in lockstep', flush=True)
-  ran = search.estimate_many([jobs[i] for i in mine], figures=False)  # finished: read
+  ran = estimation.estimate_many(
+    [jobs[i] for i in mine], figures=False
+  )  # finished: read
   results = dict(zip(mine, ran, strict=True))
   if jax.process_count() > 1:
     distributed.barrier('calibration: estimates done')
@@ -502,7 +506,7 @@ def recording_truth(path: str) -> dict | None:
 def read_estimate(workdir: str) -> dict | Exception:
   """The ``estimate.json`` another process wrote in ``workdir``, or the error
   that says it is missing (that process printed why)."""
-  path = os.path.join(workdir, search.ESTIMATE_FILE)
+  path = os.path.join(workdir, layout.ESTIMATE_FILE)
   if not os.path.isfile(path):
     return FileNotFoundError(f'{path}: no estimate (its process printed why)')
   return physsim.dataset.read_json(path)
@@ -551,7 +555,7 @@ def _saved(run: dict) -> dict:
   packed with the run (``packed_runs``) or read from its estimate's folder."""
   if 'saved' in run:
     return run['saved']
-  with np.load(os.path.join(run['workdir'], search.POSTERIOR_FILE)) as z:
+  with np.load(os.path.join(run['workdir'], layout.POSTERIOR_FILE)) as z:
     return {k: z[k] for k in _PACKED}
 
 
@@ -1136,11 +1140,11 @@ def saved_runs(workdir: str) -> list[dict]:
   runs = []
   for seq in sorted(os.listdir(root)) if os.path.isdir(root) else []:
     wd = os.path.join(root, seq)
-    est = os.path.join(wd, search.ESTIMATE_FILE)
+    est = os.path.join(wd, layout.ESTIMATE_FILE)
     if (
       seq.isdigit()
       and os.path.isfile(est)
-      and os.path.isfile(os.path.join(wd, search.POSTERIOR_FILE))
+      and os.path.isfile(os.path.join(wd, layout.POSTERIOR_FILE))
     ):
       e = recording_lib.read_json(est)
       runs.append({'seq': int(seq), 'material': e.get('material'), 'truth': e['truth'],
@@ -1240,7 +1244,7 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
 
 def estimate_record(config: Config, estimate: EstimateConfig) -> dict:
   """The study's settings as its files hold them: ``estimate``'s flat
-  (``EstimateConfig.flat``), the form ``report.calibration_note`` matches."""
+  (``EstimateConfig.flat``), the form ``calibration_tables.calibration_note`` matches."""
   return {**dataclasses.asdict(config), 'estimate': estimate.flat()}
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import distributed, files, report, search
+from experiments.pipeline import calibration_tables, distributed, files, layout
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 from experiments.studies.calibration import (
@@ -122,7 +122,7 @@ def printed(runs: list[dict]) -> dict:
     raise ValueError('no finished estimates to check')
   rows = []
   for r in runs:
-    path = os.path.join(r['workdir'], search.ESTIMATE_FILE)
+    path = os.path.join(r['workdir'], layout.ESTIMATE_FILE)
     e = recording_lib.read_json(path)
     if 'covered' not in e or 'interval_50' not in e['covered']['wind_speed']:
       raise ValueError(f'{path}: no credible intervals with a truth to check')
@@ -175,7 +175,7 @@ def _printed_cells(rows: list[dict]) -> dict:
 def checked_file(config: Config) -> str:
   """The calibration file ``check`` checks with ``config``: the estimate's
   own (``--calibration``), else the one shipped for its settings."""
-  return report.calibration_file(study_configs(config)[3])
+  return calibration_tables.calibration_file(study_configs(config)[3])
 
 
 def check(

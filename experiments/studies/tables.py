@@ -20,7 +20,7 @@ paper's Figure 4: true and estimated 3x5 bending matrices) and
 against each parameter, relative to the truth: the landscape as sampled; for
 lines through the truth, ``experiments.studies.landscape``). Each estimate
 resumes from its own folder. All estimates run in lockstep in this process
-(``search.estimate_many``): every recording's candidates of an iteration are
+(``estimation.estimate_many``): every recording's candidates of an iteration are
 scored together, which on a GPU costs about what one estimate does.
 Under several processes (``experiments.pipeline.distributed``: one per GPU,
 or a cluster) each takes a contiguous share of the estimates, and process 0
@@ -41,10 +41,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments.pipeline import (  # noqa: E402
+from experiments.pipeline import (
   cli,
   distributed,
   embedding,
+  estimation,  # noqa: E402
   eval_set,
   files,
   measurements,
@@ -257,7 +258,7 @@ def _batched(jobs, models: str, workdir: str, config: Config) -> dict:
       continue
     batch.append(search.Job(ec, recording, model_dir, _out_dir(workdir, rec, method)))
     keys.append(key)
-  for key, res in zip(keys, search.estimate_many(batch, nets=nets), strict=True):
+  for key, res in zip(keys, estimation.estimate_many(batch, nets=nets), strict=True):
     results[key] = res if isinstance(res, dict) else {'failed': str(res)}
   return results
 

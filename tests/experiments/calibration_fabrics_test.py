@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import physsim
+from experiments.pipeline import calibration_tables, report
 from experiments.pipeline import datasets as gen
-from experiments.pipeline import report
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration, calibration_check
 from physsim.overhang_depth import DOF
@@ -162,8 +162,8 @@ def test_paper_estimates_of_its_fabrics_quote_it_and_demo_ones_do_not(
 ):
   workdir, out = study
   demo, paper = tmp_path / 'calibration_shape.json', tmp_path / 'shape_paper.json'
-  monkeypatch.setattr(report, 'SHAPE_CALIBRATION_FILE', str(demo))
-  monkeypatch.setattr(report, 'SHAPE_PAPER_CALIBRATION_FILE', str(paper))
+  monkeypatch.setattr(calibration_tables, 'SHAPE_CALIBRATION_FILE', str(demo))
+  monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(paper))
   demo_study = dataclasses.replace(
     calibration.PRESETS['smoke'], estimate=TINY.estimate.replace(
       q=8, n_init=16, max_iter=6, posterior_grid=(12, 64, 24))
@@ -175,18 +175,20 @@ def test_paper_estimates_of_its_fabrics_quote_it_and_demo_ones_do_not(
   }))  # fmt: skip
   with open(os.path.join(workdir, calibration.RESULT_FILE)) as f:
     paper.write_text(f.read())  # what --install --size=paper does
-  assert report.shipped_calibration('shape', 'paper') == str(paper)
+  assert calibration_tables.shipped_calibration('shape', 'paper') == str(paper)
   searched = calibration.study_configs(TINY)[3].replace(point='bayes')
   for m in FABRICS:
     mine = searched.replace(material=m)
-    assert report.calibration_file(mine) == str(paper)
-    note = report.calibration_note(mine)
+    assert calibration_tables.calibration_file(mine) == str(paper)
+    note = calibration_tables.calibration_note(mine)
     assert note['matches'] and note['recalibrated'], (m, note)
-  other = report.calibration_note(searched.replace(material='white_tablecloth'))
+  other = calibration_tables.calibration_note(
+    searched.replace(material='white_tablecloth')
+  )
   assert not other['matches'] and 'material' in other['differs'], other
-  assert report.calibration_file(demo_cfg) == str(demo)
+  assert calibration_tables.calibration_file(demo_cfg) == str(demo)
   with pytest.raises(ValueError, match='size'):
-    report.shipped_calibration('shape', 'poster')
+    calibration_tables.shipped_calibration('shape', 'poster')
 
 
 # The shipped paper-size file holds 30 recordings per fabric (210): a 90%
@@ -200,8 +202,11 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
   material,
 ):
   config = EstimateConfig().replace(distance='shape', material=material)
-  assert report.calibration_file(config) == report.SHAPE_PAPER_CALIBRATION_FILE
-  note = report.calibration_note(config)
+  assert (
+    calibration_tables.calibration_file(config)
+    == calibration_tables.SHAPE_PAPER_CALIBRATION_FILE
+  )
+  note = calibration_tables.calibration_note(config)
   assert note['matches'] and note['recalibrated'], note  # never "indicative"
   assert note['n_calibration_recordings'] >= 210
   for field, cov in note['coverage'].items():  # held out from the tables
@@ -209,8 +214,10 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
       assert lo <= cov[level] <= hi, (field, level, cov)
   # with an anemometer, and jointly with a second recording, too
   wind = config.replace(wind_speed=3.0, wind_speed_sd=0.06)
-  assert report.calibration_note(wind)['mode'] == 'known wind'
-  assert report.calibration_note(config, joint=True, recordings=2)['matches']
+  assert calibration_tables.calibration_note(wind)['mode'] == 'known wind'
+  assert calibration_tables.calibration_note(config, joint=True, recordings=2)[
+    'matches'
+  ]
   # the protocol set (issue 39): with an overhang's bending length read to
   # 3.5% under the depth reader's t law, with and without the anemometer
   space = physsim.search_space(material)
@@ -224,7 +231,7 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
     strip = readings.replace(
       bending_length=c, bending_length_sd=0.035 * c, bending_length_dof=DOF
     )
-    note = report.calibration_note(strip)
+    note = calibration_tables.calibration_note(strip)
     assert note['matches'] and note['recalibrated'] and note['mode'] == mode, note
     for field, cov in note['coverage'].items():
       for level, (lo, hi) in PAPER_BANDS.items():
@@ -233,7 +240,8 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
     bending_length=c, bending_length_sd=0.12 * c, bending_length_dof=DOF
   )
   assert (
-    'bending_length reading uncertainty' in report.calibration_note(loose)['differs'][0]
+    'bending_length reading uncertainty'
+    in calibration_tables.calibration_note(loose)['differs'][0]
   )
   # the reader's errors vary with the strip: the tables were fitted over a
   # range of them (a short strip's 5.8%, the benchmark's largest, inside it)
@@ -242,13 +250,13 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
   short = wind.replace(
     bending_length=c, bending_length_sd=0.058 * c, bending_length_dof=DOF
   )
-  assert report.calibration_note(short)['matches']
+  assert calibration_tables.calibration_note(short)['matches']
   # a ruler's Gaussian reading quotes the ruler's modes; a depth reading of
   # another t law than the tables drew is told so
   for readings, mode in ((config, 'bending length (ruler)'),
                          (wind, 'known wind, bending length (ruler)')):  # fmt: skip
     ruler = readings.replace(bending_length=c, bending_length_sd=0.035 * c)
-    note = report.calibration_note(ruler)
+    note = calibration_tables.calibration_note(ruler)
     assert note['matches'] and note['mode'] == mode, note
     for field, cov in note['coverage'].items():
       for level, (lo, hi) in PAPER_BANDS.items():
@@ -256,7 +264,7 @@ def test_a_default_paper_size_shape_estimate_of_any_fabric_quotes_measured_cover
   other = wind.replace(
     bending_length=c, bending_length_sd=0.035 * c, bending_length_dof=4.0
   )
-  (why,) = report.calibration_note(other)['differs']
+  (why,) = calibration_tables.calibration_note(other)['differs']
   assert why == (
     "bending length error law (Student's t, 4 degrees of freedom; calibrated: "
     "Student's t, 10 degrees of freedom)"
@@ -279,7 +287,7 @@ def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so(
   (``--check_reading=wind_speed``) where the file has one, else the video
   searches' ``known wind`` reading."""
   config = EstimateConfig().replace(distance='shape')
-  cal = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  cal = json.load(open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE))
   mine = [c for c in cal['checks'] if c['physics'] == 'mismatched']
   checks = {c['searched']: c for c in mine}
   assert 'video' in checks and set(checks) <= {'video', 'known wind'}
@@ -290,16 +298,16 @@ def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so(
   for mode in cal['recalibration']['modes']:
     assert all(mode in c['coverage'] for c in video), mode
     # what an estimate in this mode quotes: its seeds pooled
-    (quoted,) = report.quoted_checks(cal, mode)
+    (quoted,) = calibration_tables.quoted_checks(cal, mode)
     for field, cov in quoted['coverage'].items():
       assert cov['interval_90'] >= 0.85, (mode, field, cov)
       assert cov['interval_50'] >= 0.35, (mode, field, cov)
     cells = quoted['coverage'].values()
     assert np.mean([c['interval_50'] for c in cells]) >= 0.40, mode
-  line = report.calibration_line(report.calibration_note(config))
+  line = report.calibration_line(calibration_tables.calibration_note(config))
   assert f'On {sum(c["n"] for c in video)} recordings of another physics' in line
   reading = dict(wind_speed=3.0, wind_speed_sd=0.06)
-  (quoted,) = report.calibration_note(config.replace(**reading))['checks']
+  (quoted,) = calibration_tables.calibration_note(config.replace(**reading))['checks']
   want = checks.get('known wind', checks['video'])['coverage']['known wind']
   assert quoted['coverage']['load_ratio'] == want['load_ratio']
   # a file with both: the steered searches' check is the one quoted
@@ -310,15 +318,15 @@ def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so(
   both['checks'] = [steered] + [c for c in both['checks'] if c['searched'] == 'video']
   path = tmp_path / 'both.json'
   path.write_text(json.dumps(both))
-  (quoted,) = report.calibration_note(config.replace(calibration=str(path), **reading))[
-    'checks'
-  ]
+  (quoted,) = calibration_tables.calibration_note(
+    config.replace(calibration=str(path), **reading)
+  )['checks']
   assert quoted['coverage']['load_ratio']['interval_90'] == 0.8765
 
 
 def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_path):
   path = str(tmp_path / 'cal.json')
-  with open(report.SHAPE_PAPER_CALIBRATION_FILE) as f:
+  with open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE) as f:
     cal = {k: v for k, v in json.load(f).items() if k != 'checks'}
   with open(path, 'w') as f:
     json.dump(cal, f)
@@ -332,15 +340,15 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
   record = calibration_check.check_record(out)
   # the video's coverage is what the estimates printed
   assert record['coverage']['video']['wind_speed']['interval_90'] == 0.7
-  report.record_check(path, record)
-  report.record_check(path, {**record, 'n': 12})  # the same check, rerun
-  report.record_check(path, {**record, 'seed': 4})  # another
+  calibration_tables.record_check(path, record)
+  calibration_tables.record_check(path, {**record, 'n': 12})  # the same check, rerun
+  calibration_tables.record_check(path, {**record, 'seed': 4})  # another
   checks = json.load(open(path))['checks']
   assert [(c['seed'], c['n']) for c in checks] == [(3, 12), (4, 10)]
   with pytest.raises(ValueError, match='the check was of'):
-    report.record_check(path, {**record, 'setting': 'another calibration'})
+    calibration_tables.record_check(path, {**record, 'setting': 'another calibration'})
   assert json.load(open(path))['checks'] == checks  # unchanged
-  note = report.calibration_note(
+  note = calibration_tables.calibration_note(
     EstimateConfig().replace(distance='shape', calibration=path)
   )
   # one per physics: its seeds pooled, each coverage the recordings' mean
@@ -350,8 +358,8 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
   assert 'they held it in bending 70%/50%' in line
   other = json.loads(json.dumps(record))
   other['coverage']['video']['bending_scale']['interval_90'] = 1.0
-  report.record_check(path, {**other, 'seed': 5, 'n': 8})
-  (pooled,) = report.calibration_note(
+  calibration_tables.record_check(path, {**other, 'seed': 5, 'n': 8})
+  (pooled,) = calibration_tables.calibration_note(
     EstimateConfig().replace(distance='shape', calibration=path)
   )['checks']
   assert pooled['n'] == 30
@@ -367,14 +375,14 @@ def test_a_check_of_refitted_modes_replaces_their_coverage_alone(tmp_path):
   what it measured of the other (unchanged) tables; with no such check, or
   a mode the check did not read, nothing is written."""
   path = str(tmp_path / 'cal.json')
-  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  shipped = json.load(open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE))
   with open(path, 'w') as f:
     json.dump(shipped, f)
   earlier = next(c for c in shipped['checks'] if c['searched'] == 'video')
   cells = {f: {'interval_50': 0.123, 'interval_90': 0.9} for f in calibration.FIELDS}
   rerun = {**earlier, 'coverage': {m: cells for m in earlier['coverage']}}
   rerun.pop('rechecked', None)
-  report.record_check(path, rerun, ('bending length',))
+  calibration_tables.record_check(path, rerun, ('bending length',))
   checks = json.load(open(path))['checks']
   mine = next(
     c for c in checks if c['searched'] == 'video' and c['seed'] == earlier['seed']
@@ -389,7 +397,7 @@ def test_a_check_of_refitted_modes_replaces_their_coverage_alone(tmp_path):
     ({**rerun, 'coverage': {'video': cells}}, ('bending length',), 'did not read'),
   ):
     with pytest.raises(ValueError, match=message):
-      report.record_check(path, check, modes)
+      calibration_tables.record_check(path, check, modes)
     assert open(path).read() == before
 
 
@@ -400,7 +408,7 @@ def _installing(tmp_path, monkeypatch, refit: dict, shipped: dict):
   workdir.mkdir()
   (workdir / calibration.RESULT_FILE).write_text(json.dumps(refit))
   dest.write_text(json.dumps(shipped))
-  monkeypatch.setattr(report, 'shipped_calibration', lambda *a: str(dest))
+  monkeypatch.setattr(calibration_tables, 'shipped_calibration', lambda *a: str(dest))
   monkeypatch.setattr(calibration, 'run', lambda *a, **k: {})
   return workdir, dest
 
@@ -411,7 +419,7 @@ def _shipped_with_a_steered_check() -> dict:
   ``known wind`` mode's cells alone); where the file holds none, one is made
   of the video check's ``known wind`` cells, so that the install logic is
   tested against both kinds of check whatever the shipped file holds."""
-  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  shipped = json.load(open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE))
   if not any(c['searched'] == 'known wind' for c in shipped['checks']):
     video = next(c for c in shipped['checks'] if c['searched'] == 'video')
     steered = {k: v for k, v in video.items() if k != 'rechecked'}
@@ -429,16 +437,16 @@ def test_a_refit_keeps_the_checks_of_the_tables_it_left_alone(tmp_path, monkeypa
   video_checks = [c for c in shipped['checks'] if c['searched'] == 'video']
   wind_check = next(c for c in shipped['checks'] if c['searched'] == 'known wind')
   refit = {k: v for k, v in shipped.items() if k != 'checks'}
-  keep, drop = report.still_valid_checks(shipped, refit)
+  keep, drop = calibration_tables.still_valid_checks(shipped, refit)
   assert keep == shipped['checks'] and drop == []
   moved = json.loads(json.dumps(refit))
   moved['recalibration']['modes']['joint pair'][1][0] += (
     0.01  # a table the video check read
   )
-  keep, drop = report.still_valid_checks(shipped, moved)
+  keep, drop = calibration_tables.still_valid_checks(shipped, moved)
   assert keep == [wind_check] and drop == video_checks  # every seed's
   other = {**refit, 'sharpness': 0.7}
-  assert report.still_valid_checks(shipped, other)[0] == []
+  assert calibration_tables.still_valid_checks(shipped, other)[0] == []
   # the command: the refit's file installed with the checks it kept
   from experiments import calibrate
 
@@ -482,7 +490,7 @@ def test_a_refit_of_some_modes_installs_their_tables_alone(tmp_path, monkeypatch
   refit['recalibration']['length_sd'] = 0.123
   refit['held_out']['bending length']['bending_scale']['interval_50'] = 0.4242
   modes = ('bending length', 'known wind, bending length')
-  merged = report.with_modes_of(shipped, refit, modes)
+  merged = calibration_tables.with_modes_of(shipped, refit, modes)
   rec, old = merged['recalibration'], shipped['recalibration']
   for mode in rec['modes']:
     want = refit if mode in modes else shipped
@@ -491,16 +499,16 @@ def test_a_refit_of_some_modes_installs_their_tables_alone(tmp_path, monkeypatch
   assert merged['held_out']['bending length']['bending_scale']['interval_50'] == 0.4242
   assert merged['held_out']['video'] == shipped['held_out']['video']
   assert old['length_sd'] != 0.123  # the shipped file's own dict untouched
-  keep, drop = report.still_valid_checks(shipped, merged)
+  keep, drop = calibration_tables.still_valid_checks(shipped, merged)
   assert [c['searched'] for c in keep] == ['known wind']  # read no length table
   wind_check = keep[0]
   video_checks = [c for c in shipped['checks'] if c['searched'] == 'video']
   with pytest.raises(ValueError, match='another sharpness'):
-    report.with_modes_of(shipped, {**refit, 'sharpness': 0.7}, modes)
+    calibration_tables.with_modes_of(shipped, {**refit, 'sharpness': 0.7}, modes)
   lacking = json.loads(json.dumps(refit))
   del lacking['recalibration']['modes']['bending length']
   with pytest.raises(ValueError, match=r"no tables for \['bending length'\]"):
-    report.with_modes_of(shipped, lacking, modes)
+    calibration_tables.with_modes_of(shipped, lacking, modes)
   # the command
   workdir, dest = _installing(tmp_path, monkeypatch, refit, shipped)
   args = calibrate.Args(workdir=str(workdir), install=True, analyse_only=True,
@@ -535,21 +543,23 @@ def test_tables_fitted_with_a_model_error_apply_only_with_that_error(tmp_path):
   """A calibration fitted with the likelihood's discrepancy term: an estimate
   without it is told its intervals are indicative, naming the setting; one
   with it applies the tables. Files from before the term count as 0."""
-  with open(report.SHAPE_PAPER_CALIBRATION_FILE) as f:
+  with open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE) as f:
     cal = json.load(f)
   cal['config']['estimate']['model_error'] = 0.5
   path = str(tmp_path / 'cal.json')
   with open(path, 'w') as f:
     json.dump(cal, f)
   config = EstimateConfig().replace(distance='shape', calibration=path)
-  note = report.calibration_note(config)
+  note = calibration_tables.calibration_note(config)
   assert not note['matches'] and 'model_error' in note['differs']
-  assert report.calibration_note(config.replace(model_error=0.5))['matches']
+  assert calibration_tables.calibration_note(config.replace(model_error=0.5))['matches']
   del cal['config']['estimate']['model_error']
   with open(path, 'w') as f:
     json.dump(cal, f)
-  assert report.calibration_note(config)['matches']
-  assert not report.calibration_note(config.replace(model_error=0.5))['matches']
+  assert calibration_tables.calibration_note(config)['matches']
+  assert not calibration_tables.calibration_note(config.replace(model_error=0.5))[
+    'matches'
+  ]
 
 
 def _wilson_upper(k: int, n: int, z: float = 1.959964) -> float:
@@ -565,7 +575,7 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
   tmp_path,
 ):
   """``pooled_check``'s pool of two seeds' checks, kept by fabric in the
-  calibration file (``report.record_fabric_checks``): an estimate of a fabric
+  calibration file (``calibration_tables.record_fabric_checks``): an estimate of a fabric
   whose wind intervals held 11 times in 16 on the other physics quotes its
   own coverage beside the pooled one and calls them too narrow (Wilson's upper
   bound 0.89 < 0.9); a fabric that held 16 in 16 is quoted without it. A pool
@@ -573,7 +583,7 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
   refused or not quoted; nothing is written on a refusal."""
   from benchmarks import pooled_check
 
-  shipped = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  shipped = json.load(open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE))
   cal = {k: v for k, v in shipped.items() if k not in ('checks', 'fabric_checks')}
   path = str(tmp_path / 'cal.json')
   with open(path, 'w') as f:
@@ -599,7 +609,7 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
     })  # fmt: skip
     record = {'physics': 'mismatched', 'seed': seed, 'searched': 'video', 'n': 16,
               'setting': cal['setting'], 'coverage': {'video': cells}}  # fmt: skip
-    report.record_check(path, record)
+    calibration_tables.record_check(path, record)
   files = []
   for d in docs:
     files.append(str(tmp_path / f'check{d["seed"]}.json'))
@@ -613,13 +623,17 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
     ({**pool, 'modes': {}}, 'no .video. coverage by fabric'),
   ):
     with pytest.raises(ValueError, match=message):
-      report.record_fabric_checks(path, bad)
+      calibration_tables.record_fabric_checks(path, bad)
     assert open(path).read() == before
-  report.record_fabric_checks(path, pool)  # 0.9 of a seed's 8 counts 7: 88% of 16
-  report.record_fabric_checks(path, pool)  # the same pool again: replaced
+  calibration_tables.record_fabric_checks(
+    path, pool
+  )  # 0.9 of a seed's 8 counts 7: 88% of 16
+  calibration_tables.record_fabric_checks(path, pool)  # the same pool again: replaced
   assert len(json.load(open(path))['fabric_checks']) == 1
   config = EstimateConfig().replace(distance='shape', calibration=path)
-  white = report.calibration_note(config.replace(material='white_tablecloth'))
+  white = calibration_tables.calibration_note(
+    config.replace(material='white_tablecloth')
+  )
   (quoted,) = white['checks']
   mine = quoted['this_fabric']
   assert mine['n'] == 16 and mine['coverage']['wind_speed']['interval_90'] == 11 / 16
@@ -630,30 +644,35 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
     in line
   )
   assert 'Its wind 90% intervals held the truth less often than promised' in line
-  denim = report.calibration_note(config.replace(material='black_denim'))
+  denim = calibration_tables.calibration_note(config.replace(material='black_denim'))
   assert denim['checks'][0]['this_fabric']['short'] == []
   assert 'too narrow' not in report.calibration_line(denim)
   assert (
     'this_fabric'
-    not in report.calibration_note(config.replace(material='pink_nylon'))['checks'][0]
-  )
-  # a check pooled there rerun on more recordings: the pool is no longer of them
-  report.record_check(path, {**record, 'n': 24})
-  assert (
-    'this_fabric'
-    not in report.calibration_note(config.replace(material='white_tablecloth'))[
+    not in calibration_tables.calibration_note(config.replace(material='pink_nylon'))[
       'checks'
     ][0]
   )
+  # a check pooled there rerun on more recordings: the pool is no longer of them
+  calibration_tables.record_check(path, {**record, 'n': 24})
+  assert (
+    'this_fabric'
+    not in calibration_tables.calibration_note(
+      config.replace(material='white_tablecloth')
+    )['checks'][0]
+  )
   checks = json.load(open(path))['checks']
-  assert report.pools_of(json.load(open(path))['fabric_checks'], checks[:1]) == []
+  assert (
+    calibration_tables.pools_of(json.load(open(path))['fabric_checks'], checks[:1])
+    == []
+  )
 
 
 def test_the_shipped_file_quotes_each_fabric_its_own_coverage_on_another_physics():
   """Every fabric of the shipped paper-size file has its own coverage of the
   pooled video checks, of exactly their recordings; its shortfalls are the
   cells whose Wilson upper bound, by hand from their counts, is under 90%."""
-  cal = json.load(open(report.SHAPE_PAPER_CALIBRATION_FILE))
+  cal = json.load(open(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE))
   (pool,) = cal['fabric_checks']
   video = [
     c
@@ -668,7 +687,7 @@ def test_the_shipped_file_quotes_each_fabric_its_own_coverage_on_another_physics
   )
   for material in physsim.FABRICS:
     config = EstimateConfig().replace(distance='shape', material=material)
-    (quoted,) = report.calibration_note(config)['checks']
+    (quoted,) = calibration_tables.calibration_note(config)['checks']
     mine = quoted['this_fabric']
     n = by[material]['n']
     want = [q for q, v in by[material].items() if q != 'n'

@@ -14,7 +14,7 @@ import os
 
 import pytest
 
-from experiments.pipeline import report
+from experiments.pipeline import calibration_tables
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
 
@@ -73,31 +73,33 @@ def test_shape_estimates_quote_the_shape_calibration(study, tmp_path, monkeypatc
   default.write_text(json.dumps({'n': 1, 'setting': 'the networks', 'sharpness': 1.0,
                                  'coverage': {}}))  # fmt: skip
   shape_file = tmp_path / 'calibration_shape.json'
-  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(default))
-  monkeypatch.setattr(report, 'SHAPE_CALIBRATION_FILE', str(shape_file))
+  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(default))
+  monkeypatch.setattr(calibration_tables, 'SHAPE_CALIBRATION_FILE', str(shape_file))
   monkeypatch.setattr(
-    report, 'SHAPE_PAPER_CALIBRATION_FILE', str(tmp_path / 'none.json')
+    calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(tmp_path / 'none.json')
   )
   # the settings the study searched with, read at the sharpness it chose
   searched = calibration.study_configs(SMOKE)[3].replace(sharpness=out['sharpness'])
   # None shipped for the shape yet: the default file, whose note names the distance.
-  assert report.calibration_file(searched) == str(default)
-  assert report.shipped_calibration('shape') == str(shape_file)
-  assert report.shipped_calibration('energy') == str(default)
+  assert calibration_tables.calibration_file(searched) == str(default)
+  assert calibration_tables.shipped_calibration('shape') == str(shape_file)
+  assert calibration_tables.shipped_calibration('energy') == str(default)
   with open(os.path.join(workdir, calibration.RESULT_FILE)) as f:
     shape_file.write_text(f.read())  # what --install does for the shape
-  assert report.calibration_file(searched) == str(shape_file)
-  note = report.calibration_note(searched)
+  assert calibration_tables.calibration_file(searched) == str(shape_file)
+  note = calibration_tables.calibration_note(searched)
   assert note['matches'] and note['recalibrated'], note
   assert note['setting'].endswith('no network')
   assert note['n_calibration_recordings'] == 2 * SMOKE.pairs
   # An estimate that embeds keeps the default file, and one given a file uses it.
   energy = searched.replace(distance='energy')
-  assert report.calibration_file(energy) == str(default)
+  assert calibration_tables.calibration_file(energy) == str(default)
   mine = searched.replace(calibration=str(default))
-  assert report.calibration_file(mine) == str(default)
+  assert calibration_tables.calibration_file(mine) == str(default)
   # The shape calibration does not apply to another shape setting.
-  other = report.calibration_note(searched.replace(sharpness=3 * out['sharpness']))
+  other = calibration_tables.calibration_note(
+    searched.replace(sharpness=3 * out['sharpness'])
+  )
   assert not other['matches'] and 'sharpness' in ' '.join(other['differs'])
 
 
@@ -107,8 +109,11 @@ def test_the_shipped_shape_calibration_holds_for_demo_size_shape_estimates():
     estimate=calibration.Config().estimate.replace(distance='shape'),
   )
   searched = calibration.study_configs(config)[3].replace(point='bayes')
-  assert report.calibration_file(searched) == report.SHAPE_CALIBRATION_FILE
-  note = report.calibration_note(searched)
+  assert (
+    calibration_tables.calibration_file(searched)
+    == calibration_tables.SHAPE_CALIBRATION_FILE
+  )
+  note = calibration_tables.calibration_note(searched)
   assert note['matches'] and note['recalibrated'], note
   assert note['n_calibration_recordings'] >= 100  # the minimum
   for field, cov in note['coverage'].items():  # held out from the tables

@@ -20,7 +20,12 @@ import pytest
 
 import bo
 import physsim
-from experiments.pipeline import measurements, report, search
+from experiments.pipeline import (
+  calibration_tables,
+  layout,
+  measurements,
+  report,
+)
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration, calibration_check
@@ -54,7 +59,7 @@ def _fake_runs(
     mean = -2.0 + np.log1p(A * np.sum(seen * (points - obs) ** 2, -1))
     wd = os.path.join(root, f'{seq:04d}')
     os.makedirs(wd)
-    np.savez(os.path.join(wd, search.POSTERIOR_FILE), gp_mean=mean,
+    np.savez(os.path.join(wd, layout.POSTERIOR_FILE), gp_mean=mean,
              gp_var=np.zeros_like(mean), floor=mean.min(), noise_sd=SN)  # fmt: skip
     truth = {
       f: float(np.ravel(getattr(truths, f))[seq]) for f in physsim.Params._fields
@@ -158,13 +163,13 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   }  # fmt: skip
   path = tmp_path / 'calibration.json'
   path.write_text(json.dumps(cal))
-  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(path))
-  same = report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
+  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(path))
+  same = calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
   assert 'wind 88%/48%' in report.calibration_line(same)
-  other = report.calibration_note(PSD_ESTIMATE.replace(sharpness=1.4))
+  other = calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=1.4))
   assert other['matches'] is False
   assert 'not for this sharpness' in report.calibration_line(other)
-  other = report.calibration_note(
+  other = calibration_tables.calibration_note(
     PSD_ESTIMATE.replace(sharpness=0.7, likelihood='threshold')
   )
   assert other['matches'] is False
@@ -174,53 +179,65 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
     'estimate': {'cloth_resolution': 25, 'frames': 60, 'q': PSD_ESTIMATE.search.q}
   }
   path.write_text(json.dumps(cal))
-  assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))['matches'] is True
-  other = report.calibration_note(
+  assert (
+    calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))['matches']
+    is True
+  )
+  other = calibration_tables.calibration_note(
     PSD_ESTIMATE.replace(sharpness=0.7, cloth_resolution=10)
   )
   assert other['differs'] == ['cloth_resolution']
-  other = report.calibration_note(
+  other = calibration_tables.calibration_note(
     PSD_ESTIMATE.replace(sharpness=0.7, q=8)
   )  # the budget
   assert other['differs'] == ['q']
-  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
-  assert 'not measured' in report.calibration_line(report.calibration_note())
+  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
+  assert 'not measured' in report.calibration_line(
+    calibration_tables.calibration_note()
+  )
 
 
 def test_calibration_modes_follow_what_was_measured():
   m = measurements.Measured
-  assert report.calibration_mode(m()) == 'video'
-  assert report.calibration_mode(m(wind_speed=3.0, wind_speed_sd=0.06)) == 'known wind'
-  both = m(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2, area_weight_sd=0.004)
-  assert report.calibration_mode(both) is None
-  assert report.calibration_mode(m(area_weight=0.2, area_weight_sd=0.004)) == (
-    'known area weight'
-  )
-  assert report.calibration_mode(m(), joint=True) == 'joint pair'
-  wind = m(wind_speed=3.0, wind_speed_sd=0.06)
-  assert report.calibration_mode(wind, joint=True) == 'joint pair, known winds'
+  assert calibration_tables.calibration_mode(m()) == 'video'
   assert (
-    report.calibration_mode(m(area_weight=0.2, area_weight_sd=0.004), joint=True)
+    calibration_tables.calibration_mode(m(wind_speed=3.0, wind_speed_sd=0.06))
+    == 'known wind'
+  )
+  both = m(wind_speed=3.0, wind_speed_sd=0.06, area_weight=0.2, area_weight_sd=0.004)
+  assert calibration_tables.calibration_mode(both) is None
+  assert calibration_tables.calibration_mode(
+    m(area_weight=0.2, area_weight_sd=0.004)
+  ) == ('known area weight')
+  assert calibration_tables.calibration_mode(m(), joint=True) == 'joint pair'
+  wind = m(wind_speed=3.0, wind_speed_sd=0.06)
+  assert (
+    calibration_tables.calibration_mode(wind, joint=True) == 'joint pair, known winds'
+  )
+  assert (
+    calibration_tables.calibration_mode(
+      m(area_weight=0.2, area_weight_sd=0.004), joint=True
+    )
     is None
   )
   strip = m(bending_length=0.03, bending_length_sd=0.0012, bending_length_dof=4.0)
-  assert report.calibration_mode(strip) == 'bending length'
-  assert report.calibration_mode(dataclasses.replace(strip, wind_speed=3.0,
+  assert calibration_tables.calibration_mode(strip) == 'bending length'
+  assert calibration_tables.calibration_mode(dataclasses.replace(strip, wind_speed=3.0,
                                                      wind_speed_sd=0.06)) == (
     'known wind, bending length'
   )  # fmt: skip
   # a ruler's reading (Gaussian) has modes of its own
   ruler = dataclasses.replace(strip, bending_length_dof=0.0)
-  assert report.calibration_mode(ruler) == 'bending length (ruler)'
+  assert calibration_tables.calibration_mode(ruler) == 'bending length (ruler)'
   assert (
-    report.calibration_mode(
+    calibration_tables.calibration_mode(
       dataclasses.replace(ruler, wind_speed=3.0, wind_speed_sd=0.06)
     )
     == 'known wind, bending length (ruler)'
   )
-  assert report.calibration_mode(strip, joint=True) is None
+  assert calibration_tables.calibration_mode(strip, joint=True) is None
   scale = dataclasses.replace(strip, area_weight=0.2, area_weight_sd=0.004)
-  assert report.calibration_mode(scale) is None
+  assert calibration_tables.calibration_mode(scale) is None
 
 
 def test_a_group_of_recordings_shares_bending_and_area_weight_not_wind():
@@ -249,44 +266,46 @@ def _recalibrated_file(tmp_path, monkeypatch) -> dict:
   }  # fmt: skip
   path = tmp_path / 'calibration.json'
   path.write_text(json.dumps(cal))
-  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(path))
+  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(path))
   return cal
 
 
 def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkeypatch):
   _recalibrated_file(tmp_path, monkeypatch)
   m = measurements.Measured
-  note = report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
+  note = calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
   assert note['recalibrated'] and note['mode'] == 'video'
   assert note['levels']['wind_speed'] == [0.01, 0.1, 0.4, 0.9, 0.99]
   assert 'recalibrated on 200' in report.calibration_line(note)
   wind = PSD_ESTIMATE.replace(
     sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.06)
   )
-  assert report.calibration_note(wind)['mode'] == 'known wind'
+  assert calibration_tables.calibration_note(wind)['mode'] == 'known wind'
   # A reading five times less certain than the calibrated 2% is another mode.
   loose = PSD_ESTIMATE.replace(
     sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.3)
   )
-  note = report.calibration_note(loose)
+  note = calibration_tables.calibration_note(loose)
   assert note['matches'] is False and 'uncertainty' in note['differs'][0]
-  joint = report.calibration_note(
+  joint = calibration_tables.calibration_note(
     PSD_ESTIMATE.replace(sharpness=0.7), joint=True, recordings=3
   )
   assert joint['matches'] is False
-  assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7), joint=True,
+  assert calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7), joint=True,
                                  recordings=2)['mode'] == 'joint pair'  # fmt: skip
   # A joint pair with a wind reading at each: its own tables, when calibrated.
-  assert report.calibration_note(wind, joint=True, recordings=2)['mode'] == (
-    'joint pair, known winds'
-  )
+  assert calibration_tables.calibration_note(wind, joint=True, recordings=2)[
+    'mode'
+  ] == ('joint pair, known winds')
   cal = json.loads((tmp_path / 'calibration.json').read_text())
   del cal['recalibration']['modes']['joint pair, known winds']
   (tmp_path / 'calibration.json').write_text(json.dumps(cal))
-  older = report.calibration_note(wind, joint=True, recordings=2)
+  older = calibration_tables.calibration_note(wind, joint=True, recordings=2)
   assert older['matches'] is False
   assert older['differs'] == ['joint pair, known winds (not in this calibration)']
-  assert report.calibration_note(wind)['mode'] == 'known wind'  # still there
+  assert (
+    calibration_tables.calibration_note(wind)['mode'] == 'known wind'
+  )  # still there
 
 
 def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypatch):
@@ -294,9 +313,9 @@ def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypa
   cal['network'] = {'seeds': [0, 1], 'triplet_accuracy': [0.71, 0.88]}
   (tmp_path / 'calibration.json').write_text(json.dumps(cal))
   config = PSD_ESTIMATE.replace(sharpness=0.7)
-  within = report.calibration_note(config, accuracy=0.75)
+  within = calibration_tables.calibration_note(config, accuracy=0.75)
   assert within['recalibrated'] and 'weaker_network' not in within
-  weak = report.calibration_note(config, accuracy=0.66)
+  weak = calibration_tables.calibration_note(config, accuracy=0.66)
   assert weak['recalibrated']  # the tables still apply: same recipe
   assert weak['weaker_network'] == {'accuracy': 0.66, 'calibrated': [0.71, 0.88]}
   line = report.calibration_line(weak)
@@ -387,7 +406,7 @@ def test_saved_runs_read_back_a_workdirs_estimates(tmp_path):
   )
   runs = _fake_runs(config, str(tmp_path / 'estimates'))
   for r in runs[:3]:  # the fourth has no estimate.json: not finished
-    with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
+    with open(os.path.join(r['workdir'], layout.ESTIMATE_FILE), 'w') as f:
       json.dump({'truth': r['truth']}, f)
   got = calibration.saved_runs(str(tmp_path))
   assert [r['seq'] for r in got] == [0, 1, 2]
@@ -492,7 +511,7 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
            'calibration': {'matches': k < 8, 'recalibrated': True},
            'recording': f'rec/{k:04d}', 'material': 'gray_interlock',
            'estimate': {'wind_speed': {'interval_90': [1.0, 2.0]}}}  # fmt: skip
-    with open(os.path.join(r['workdir'], search.ESTIMATE_FILE), 'w') as f:
+    with open(os.path.join(r['workdir'], layout.ESTIMATE_FILE), 'w') as f:
       json.dump(est, f)
   out = calibration_check.check(
     config, str(tmp_path / 'w'), str(shipped), analyse_only=True
@@ -548,9 +567,9 @@ def test_check_reports_what_the_estimates_printed(tmp_path, monkeypatch):
   assert '8 of 10 estimates applied' in text
   assert (tmp_path / 'w' / 'check_ranks.png').stat().st_size > 0
   # An estimate without intervals (the paper's argmin) cannot be checked.
-  est = json.loads(open(os.path.join(runs[0]['workdir'], search.ESTIMATE_FILE)).read())
+  est = json.loads(open(os.path.join(runs[0]['workdir'], layout.ESTIMATE_FILE)).read())
   del est['covered']
-  with open(os.path.join(runs[0]['workdir'], search.ESTIMATE_FILE), 'w') as f:
+  with open(os.path.join(runs[0]['workdir'], layout.ESTIMATE_FILE), 'w') as f:
     json.dump(est, f)
   with pytest.raises(ValueError, match='no credible intervals'):
     calibration_check.printed(calibration.saved_runs(str(tmp_path / 'w')))
@@ -607,15 +626,15 @@ def test_the_tables_apply_only_to_a_network_of_their_recipe(tmp_path, monkeypatc
   mine = embedding.network_recipe(_fake_network(tmp_path / 'a'))
   config = PSD_ESTIMATE.replace(sharpness=0.7)
   # A calibration that recorded no recipe checks none.
-  assert report.calibration_note(config, network=mine)['recalibrated']
+  assert calibration_tables.calibration_note(config, network=mine)['recalibrated']
   cal['network'] = {'recipe': mine, 'seeds': [0, 1]}
   (tmp_path / 'calibration.json').write_text(json.dumps(cal))
   other_seed = embedding.network_recipe(_fake_network(tmp_path / 'b', seed=7))
-  note = report.calibration_note(config, network=other_seed)
+  note = calibration_tables.calibration_note(config, network=other_seed)
   assert note['recalibrated'] and note['networks'] == 2
   assert 'recordings of networks held out' in report.calibration_line(note)
   longer = embedding.network_recipe(_fake_network(tmp_path / 'c', epochs=20))
-  note = report.calibration_note(config, network=longer)
+  note = calibration_tables.calibration_note(config, network=longer)
   assert note['matches'] is False
   assert note['differs'] == ['network recipe (training.epochs)']
   assert 'network recipe (training.epochs)' in report.calibration_line(note)
@@ -688,9 +707,11 @@ def test_an_estimate_applies_the_calibration_file_it_is_given(tmp_path, monkeypa
   mine = tmp_path / 'mine.json'
   cal['recalibration']['n_calibration_recordings'] = 77
   mine.write_text(json.dumps(cal))
-  monkeypatch.setattr(report, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
-  assert report.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7)) is None
-  note = report.calibration_note(
+  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
+  assert (
+    calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7)) is None
+  )
+  note = calibration_tables.calibration_note(
     PSD_ESTIMATE.replace(sharpness=0.7, calibration=str(mine))
   )
   assert note['recalibrated'] and note['n_calibration_recordings'] == 77

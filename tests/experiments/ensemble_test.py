@@ -14,7 +14,7 @@ import jax
 import numpy as np
 import pytest
 
-from experiments.pipeline import embedding, search
+from experiments.pipeline import embedding, estimation
 from experiments.pipeline import objective as obj_lib
 from experiments.studies import tables
 from tests.experiments.estimate_fixtures import (
@@ -104,8 +104,10 @@ def test_ensemble_of_one_network_twice_estimates_as_that_network(env, tmp_path):
   hand = write_hand_made_model(str(tmp_path / 'hand'))
   copy = write_hand_made_model(str(tmp_path / 'copy'))
   config = CONFIG.replace(max_iter=1, min_iter=1)
-  one = search.estimate(config, env['rec'], hand, str(tmp_path / 'one'), progress=False)
-  two = search.estimate(
+  one = estimation.estimate(
+    config, env['rec'], hand, str(tmp_path / 'one'), progress=False
+  )
+  two = estimation.estimate(
     config, env['rec'], f'{hand},{copy}', str(tmp_path / 'two'), progress=False
   )
   assert two['evaluations'] == one['evaluations']

@@ -17,7 +17,7 @@ import pytest
 
 import physsim
 from experiments import estimate
-from experiments.pipeline import cli, files, objective, search
+from experiments.pipeline import cli, files, layout, objective, search
 from experiments.pipeline.posterior import Measured
 from experiments.studies import tables
 
@@ -226,7 +226,7 @@ def test_an_old_workdirs_run_resumes(tmp_path):
   problem, rec = _fake_problem()
   workdir = str(tmp_path)
   search.check_run(search.Job(SMOKE, rec, '', workdir), problem)
-  path = os.path.join(workdir, search.RUN_FILE)
+  path = os.path.join(workdir, layout.RUN_FILE)
   with open(path) as f:
     run = json.load(f)
   resumable = ('workers', 'calibration')

@@ -17,7 +17,7 @@ import pytest
 
 import model as model_lib
 import physsim
-from experiments.pipeline import embedding, search
+from experiments.pipeline import embedding, estimation
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import recording as recording_lib
 from experiments.pipeline import training as train
@@ -68,7 +68,7 @@ def env(tmp_path_factory):
 )
 def test_method_runs_end_to_end(env, method):
   workdir = os.path.join(env['root'], 'run_' + '_'.join(method))
-  result = search.estimate(
+  result = estimation.estimate(
     _SHORT, env['rec'], env['models'][method], workdir, progress=False
   )
   assert (
@@ -156,13 +156,15 @@ def test_rgb_method_without_rgb_frames_is_named(env, tmp_path):
     load(depth_only, rgb=True)
   rec = load(depth_only)
   with pytest.raises(ValueError, match=f'{depth_only}.*no RGB frames'):
-    search.estimate(_SHORT, rec, env['models'][('sdn', 'rgb')], str(tmp_path / 'w'))
+    estimation.estimate(_SHORT, rec, env['models'][('sdn', 'rgb')], str(tmp_path / 'w'))
 
 
 def test_recording_shorter_than_a_clip_is_named(env, tmp_path):
   short = env['rec']._replace(depth=env['rec'].depth[: CLIP_FRAMES - 1])
   with pytest.raises(ValueError, match=f'{env["seq"]}.*shorter than one SDN clip'):
-    search.estimate(_SHORT, short, env['models'][('sdn', 'depth')], str(tmp_path / 'w'))
+    estimation.estimate(
+      _SHORT, short, env['models'][('sdn', 'depth')], str(tmp_path / 'w')
+    )
   assert not os.path.exists(tmp_path / 'w')  # nothing written
 
 

@@ -19,7 +19,7 @@ import pytest
 
 import model as model_lib
 import physsim
-from experiments.pipeline import embedding, report, search
+from experiments.pipeline import embedding, estimation, layout, report, results, search
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -49,7 +49,7 @@ EVALUATOR = search.Evaluator()
 
 
 def _estimate(config, rec, model, workdir, **kw):
-  return search.estimate(
+  return estimation.estimate(
     config, rec, model, workdir, progress=False, evaluator=EVALUATOR, **kw
   )
 
@@ -275,7 +275,7 @@ def test_recovers_known_parameters(env, recovery):
   lo, hi = ratio['interval_90']
   assert lo <= ratio['posterior_median'] <= hi
   assert 0 < result['seconds_in_objective'] < result['seconds']
-  for name in ('estimate.json', 'trace.png', 'montage.png', search.RUN_FILE):
+  for name in ('estimate.json', 'trace.png', 'montage.png', layout.RUN_FILE):
     assert os.path.isfile(os.path.join(env['root'], 'full', name))
 
 
@@ -325,9 +325,9 @@ def test_montage_frames_are_kept_not_resimulated(env, tmp_path, monkeypatch):
   # the search's own batches, and they are what a fresh call gives.
   config = CONFIG.replace(max_iter=1)
   kept = []
-  real = search.write_result
+  real = results.write_result
   monkeypatch.setattr(
-    search, 'write_result', lambda *a, **kw: kept.append(a[3]) or real(*a, **kw)
+    results, 'write_result', lambda *a, **kw: kept.append(a[3]) or real(*a, **kw)
   )
   counting = _CountCalls(monkeypatch)
   result = _estimate(config, env['rec'], env['model'], str(tmp_path))
@@ -343,11 +343,11 @@ def test_resume_refuses_another_run(env, recovery):
   other = CONFIG.replace(gusts=0.3)
   full = os.path.join(env['root'], 'full')
   with pytest.raises(ValueError, match=r'run\.json.*config\.gusts'):
-    search.estimate(other, env['rec'], env['model'], full)
+    estimation.estimate(other, env['rec'], env['model'], full)
   # another camera is another run
   moved = env['rec'].pose._replace(position=env['rec'].pose.position + 0.1)
   with pytest.raises(ValueError, match=r'run\.json.*camera'):
-    search.estimate(CONFIG, env['rec']._replace(pose=moved), env['model'], full)
+    estimation.estimate(CONFIG, env['rec']._replace(pose=moved), env['model'], full)
   # the C worker count does not change results: it may differ on resume
   workers = CONFIG.replace(workers=2)
   job = search.Job(workers, env['rec'], env['model'], full)
@@ -375,7 +375,7 @@ def test_every_candidate_blowing_up_names_the_recording(env, tmp_path, monkeypat
   _blow_up(monkeypatch, range(max(CONFIG.search.q, CONFIG.search.n_init)))
   config = CONFIG.replace(max_iter=1)
   with pytest.raises(ValueError, match=f'{env["seq"]}.*blew up'):
-    search.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
+    estimation.estimate(config, env['rec'], env['model'], str(tmp_path / 'w'))
 
 
 def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
@@ -385,7 +385,9 @@ def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
   config = CONFIG.replace(max_iter=1, min_iter=1)
   workdir = str(tmp_path / 'w')
   # a fresh evaluator: its objectives are built with the patched rollout
-  result = search.estimate(config, env['rec'], env['model'], workdir, progress=False)
+  result = estimation.estimate(
+    config, env['rec'], env['model'], workdir, progress=False
+  )
   y = _state(workdir)['Y']
   assert len(y) == config.search.n_init + config.search.q
   failed = np.flatnonzero(np.isnan(y))
@@ -546,7 +548,7 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
   empty = str(tmp_path / 'empty')
   os.makedirs(empty)
   with pytest.raises(ValueError, match='not a fit workdir'):
-    search.estimate(CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
+    estimation.estimate(CONFIG, env['rec'], empty, str(tmp_path / 'w1'))
   untrained = str(tmp_path / 'untrained')
   os.makedirs(untrained)
   with open(os.path.join(env['model'], 'config.json')) as f:
@@ -554,10 +556,10 @@ def test_model_dir_must_be_a_trained_physnet_run(env, tmp_path):
   with open(os.path.join(untrained, 'config.json'), 'w') as f:
     f.write(text)
   with pytest.raises(ValueError, match='no checkpoint'):
-    search.estimate(CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
+    estimation.estimate(CONFIG, env['rec'], untrained, str(tmp_path / 'w2'))
   small = env['rec']._replace(depth=env['rec'].depth[:, :16, :16])
   with pytest.raises(ValueError, match=r'takes \(32, 32\)'):
-    search.estimate(CONFIG, small, env['model'], str(tmp_path / 'w3'))
+    estimation.estimate(CONFIG, small, env['model'], str(tmp_path / 'w3'))
 
 
 def test_bad_config_is_refused_before_anything_is_written(env, tmp_path):
@@ -568,7 +570,7 @@ def test_bad_config_is_refused_before_anything_is_written(env, tmp_path):
     (CONFIG.replace(q=0), 'q must be'),
   ):
     with pytest.raises(ValueError, match=match):
-      search.estimate(bad, env['rec'], env['model'], workdir)
+      estimation.estimate(bad, env['rec'], env['model'], workdir)
   assert not os.path.exists(workdir)
 
 

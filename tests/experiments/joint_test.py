@@ -13,7 +13,14 @@ from jax.scipy.special import logsumexp
 
 import physsim
 from experiments import estimate as estimate_script
-from experiments.pipeline import layout, measurements, objective, report, search
+from experiments.pipeline import (
+  estimation,
+  joint,
+  layout,
+  measurements,
+  objective,
+  report,
+)
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from tests.experiments import estimate_fixtures as fx
@@ -109,14 +116,14 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
     )
   winds = [(4.4, 0.09), (3.05, 0.06)]
   with pytest.raises(ValueError, match='1 wind readings for 2 recordings'):
-    search.estimate_joint(config, recs, model_dir, str(tmp_path / 'x'), winds[:1])
+    estimation.estimate_joint(config, recs, model_dir, str(tmp_path / 'x'), winds[:1])
   measured = config.replace(
     measured=measurements.Measured(wind_speed=4.0, wind_speed_sd=0.1)
   )
   with pytest.raises(ValueError, match='--wind_speeds'):
-    search.estimate_joint(measured, recs, model_dir, str(tmp_path / 'x'))
+    estimation.estimate_joint(measured, recs, model_dir, str(tmp_path / 'x'))
   workdir = str(tmp_path / 'joint')
-  out = search.estimate_joint(config, recs, model_dir, workdir, winds)
+  out = estimation.estimate_joint(config, recs, model_dir, workdir, winds)
   cell = 5.0 / config.search.posterior_grid[1]  # the grid's wind cell, m/s
   for k, (v, sd) in enumerate(winds):
     r = out['recordings'][k]
@@ -128,7 +135,7 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
       assert v - 4 * sd - cell < lo < hi < v + 4 * sd + cell, (k, lo, hi)
       assert hi - lo < cell + 2 * 1.645 * sd + 1e-9, (k, lo, hi)
     # the search's prior was its own reading's: highest in the reading's cell
-    z = np.load(os.path.join(workdir, f'recording_{k}', search.POSTERIOR_FILE))
+    z = np.load(os.path.join(workdir, f'recording_{k}', layout.POSTERIOR_FILE))
     lp = z['log_prior'].reshape(config.search.posterior_grid)
     centre = 1.0 + (np.argmax(lp[0, :, 0]) + 0.5) * cell
     assert abs(centre - v) <= cell / 2 + 1e-9, (k, centre)
@@ -138,7 +145,7 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   assert note is None or note['matches'] is False
   # no table covers it: the recordings share the simulator's error
   assert out['shared_bias'] == config.scoring.shared_bias > 0
-  assert os.path.isfile(os.path.join(workdir, search.JOINT_FILE))
+  assert os.path.isfile(os.path.join(workdir, layout.JOINT_FILE))
   # experiments.plan reads the joint's shared draws: the fabric the
   # recordings told of together, its median the joint's own
   material, draws, _ = layout.read_draws(workdir)
@@ -153,8 +160,8 @@ def test_joint_estimate_with_a_wind_reading_at_each_recording(tmp_path):
   assert out['config']['measured']['wind_speed_sd'] == 0.0
   # the same searches run for many fabrics at once (joint_jobs, one
   # estimate_many, combine_joint) resume here and combine to the same joint
-  jobs = search.joint_jobs(config, recs, model_dir, workdir, winds)
-  again = search.combine_joint(jobs, search.estimate_many(jobs), workdir)
+  jobs = joint.joint_jobs(config, recs, model_dir, workdir, winds)
+  again = joint.combine_joint(jobs, estimation.estimate_many(jobs), workdir)
   assert again['area_weight'] == out['area_weight']
   assert again['recordings'][1]['wind_speed'] == out['recordings'][1]['wind_speed']
 
@@ -175,7 +182,7 @@ def test_a_bending_length_and_a_scale_give_the_estimate_the_fabrics_bending(tmp_
   measured = measurements.Measured(
     area_weight=w, area_weight_sd=0.01 * w, bending_length=c, bending_length_sd=0.02 * c
   )
-  out = search.estimate(
+  out = estimation.estimate(
     config.replace(measured=measured), rec, model_dir, str(tmp_path / 'e'),
     progress=False,
   )  # fmt: skip
@@ -212,8 +219,8 @@ def test_a_sheet_and_its_hemmed_twin_at_one_fan_setting_share_one_wind(tmp_path)
   ]
   workdir = str(tmp_path / 'joint')
   with pytest.raises(ValueError, match='3 fan settings for 2 recordings'):
-    search.estimate_joint(config, recs, model_dir, workdir, fans=['a', 'a', 'b'])
-  out = search.estimate_joint(
+    estimation.estimate_joint(config, recs, model_dir, workdir, fans=['a', 'a', 'b'])
+  out = estimation.estimate_joint(
     config, recs, model_dir, workdir, overrides=[{}, {'hem_mass': 0.3}],
     fans=['low', 'low'],
   )  # fmt: skip
@@ -222,7 +229,7 @@ def test_a_sheet_and_its_hemmed_twin_at_one_fan_setting_share_one_wind(tmp_path)
   assert a['wind_speed']['interval_90'] == b['wind_speed']['interval_90']
   saved = [
     recording_lib.read_json(
-      os.path.join(workdir, f'recording_{k}', search.ESTIMATE_FILE)
+      os.path.join(workdir, f'recording_{k}', layout.ESTIMATE_FILE)
     )
     for k in range(2)
   ]

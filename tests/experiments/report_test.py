@@ -7,7 +7,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 import physsim
-from experiments.pipeline import measurements, objective, report
+from experiments.pipeline import calibration_tables, measurements, objective, report
 
 # Percent errors and factors are ratios of a few floats: exact to rounding.
 TOL = 1e-9
@@ -77,19 +77,27 @@ def test_calibration_mode(wind_sd, weight_sd, joint, mode):
     wind_speed_sd = wind_sd
     area_weight_sd = weight_sd
 
-  assert report.calibration_mode(Measured(), joint=joint) == mode
+  assert calibration_tables.calibration_mode(Measured(), joint=joint) == mode
 
 
 def test_shape_estimates_quote_their_own_calibration_at_their_size():
   demo = objective.EstimateConfig.preset('demo', distance='shape')
-  assert report.calibration_file(demo) == report.SHAPE_CALIBRATION_FILE
+  assert (
+    calibration_tables.calibration_file(demo)
+    == calibration_tables.SHAPE_CALIBRATION_FILE
+  )
   paper = objective.EstimateConfig().replace(distance='shape')
-  assert report.calibration_file(paper) == report.SHAPE_PAPER_CALIBRATION_FILE
+  assert (
+    calibration_tables.calibration_file(paper)
+    == calibration_tables.SHAPE_PAPER_CALIBRATION_FILE
+  )
   config = paper
   config = config.replace(distance='energy')
-  assert report.calibration_file(config) == report.CALIBRATION_FILE
+  assert (
+    calibration_tables.calibration_file(config) == calibration_tables.CALIBRATION_FILE
+  )
   config = config.replace(calibration='/elsewhere/mine.json')
-  assert report.calibration_file(config) == '/elsewhere/mine.json'
+  assert calibration_tables.calibration_file(config) == '/elsewhere/mine.json'
 
 
 def test_the_default_estimate_of_every_fabric_quotes_measured_coverage():
@@ -98,12 +106,14 @@ def test_the_default_estimate_of_every_fabric_quotes_measured_coverage():
   # "indicative"; through a network it does not (the PSD's tables are demo-size)
   for fabric in sorted(physsim.FABRICS):
     config = objective.EstimateConfig().replace(material=fabric)
-    note = report.calibration_note(config)
+    note = calibration_tables.calibration_note(config)
     assert note['matches'] and note['recalibrated'], (fabric, note.get('differs'))
     assert note['mode'] == 'video'
     assert 'indicative' not in report.calibration_line(note)
   psd = objective.EstimateConfig().replace(distance='energy')
-  assert 'indicative' in report.calibration_line(report.calibration_note(psd))
+  assert 'indicative' in report.calibration_line(
+    calibration_tables.calibration_note(psd)
+  )
 
 
 def test_the_distances_table_sets_each_estimate_beside_the_truth():

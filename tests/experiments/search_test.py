@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import physsim
+from experiments.pipeline import estimation, layout
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import search as em
 from tests.experiments.estimate_fixtures import (
@@ -59,7 +60,7 @@ def _jobs(env, prefix):
 def _resumes_to(env, prefix, batched):
   """Runs the jobs of ``prefix`` again (they resume) and checks that they
   end where the uninterrupted lockstep did."""
-  resumed = em.estimate_many(_jobs(env, prefix), progress=False)
+  resumed = estimation.estimate_many(_jobs(env, prefix), progress=False)
   for i in range(3):
     a = _state(os.path.join(env['root'], f'many{i}'))
     b = _state(os.path.join(env['root'], f'{prefix}{i}'))
@@ -69,19 +70,19 @@ def _resumes_to(env, prefix, batched):
 
 @pytest.fixture(scope='module')
 def batched(env):
-  return em.estimate_many(_jobs(env, 'many'), progress=False)
+  return estimation.estimate_many(_jobs(env, 'many'), progress=False)
 
 
 def test_lockstep_equals_one_by_one(env, batched):
   for i, (config, rec) in enumerate(env['recs']):
     alone_dir = os.path.join(env['root'], f'alone{i}')
-    alone = em.estimate(config, rec, env['model'], alone_dir, progress=False)
+    alone = estimation.estimate(config, rec, env['model'], alone_dir, progress=False)
     a, b = _state(alone_dir), _state(os.path.join(env['root'], f'many{i}'))
     np.testing.assert_allclose(b['X'], a['X'], atol=1e-9)
     np.testing.assert_allclose(b['Y'], a['Y'], rtol=_REPEAT_TOLERANCE)
     assert batched[i]['estimate'] == alone['estimate']
     assert batched[i]['recordings_in_batch'] == 3
-    for name in ('estimate.json', 'trace.png', 'montage.png', em.RUN_FILE):
+    for name in ('estimate.json', 'trace.png', 'montage.png', layout.RUN_FILE):
       assert os.path.isfile(os.path.join(env['root'], f'many{i}', name))
   # the two fabrics' searches differ: each scored against its own recording
   assert not np.allclose(batched[0]['psd_best'], batched[1]['psd_best'])
@@ -93,7 +94,7 @@ def test_a_bad_job_does_not_stop_the_others(env, tmp_path):
     em.Job(config, rec, str(tmp_path / 'no_model'), str(tmp_path / 'bad')),
     em.Job(config.replace(max_iter=1), rec, env['model'], str(tmp_path / 'ok')),
   ]
-  out = em.estimate_many(jobs, progress=False)
+  out = estimation.estimate_many(jobs, progress=False)
   assert isinstance(out[0], Exception) and 'no_model' in str(out[0])
   assert isinstance(out[1], dict) and out[1]['evaluations'] == 8
 
@@ -110,7 +111,7 @@ def test_resume_after_interrupt(env, batched, monkeypatch):
 
   monkeypatch.setattr(obj_lib.Objective, '__call__', dying)
   with pytest.raises(RuntimeError):
-    em.estimate_many(_jobs(env, 'resumed'), progress=False)
+    estimation.estimate_many(_jobs(env, 'resumed'), progress=False)
   monkeypatch.setattr(obj_lib.Objective, '__call__', real)
   _resumes_to(env, 'resumed', batched)
 
@@ -130,7 +131,7 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
     return real(self, problems, us, firsts, **kw)
 
   monkeypatch.setattr(em.Evaluator, '__call__', watching)
-  out = em.estimate_many(jobs, progress=False)
+  out = estimation.estimate_many(jobs, progress=False)
   # steps: initial design (both), iteration 1 (both; the short one stops),
   # then the long one alone, with the short one's result already written
   assert seen == [(2, False), (2, False), (1, True), (1, True)]
@@ -185,7 +186,7 @@ def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
   monkeypatch.setattr(obj_lib.Objective, '__init__', init)
   monkeypatch.setattr(em.Evaluator, 'compile', compile_)
   monkeypatch.setattr(em.Evaluator, '__call__', call)
-  out = em.estimate_many(jobs, progress=False)
+  out = estimation.estimate_many(jobs, progress=False)
   assert compiled == [[config.search.q] * 2] and design_first == [True]
   assert len(compiles_in_call) == 2  # the design, then step 1
   assert compiles_in_call[0] > 0.0 and compiles_in_call[1] == 0.0
@@ -217,7 +218,7 @@ def test_one_structure_is_one_call(env, monkeypatch):
     return real(obj, data, u, *a, **kw)
 
   monkeypatch.setattr(obj_lib.Objective, '__call__', call)
-  em.estimate_many(_jobs(env, 'counted'), progress=False)
+  estimation.estimate_many(_jobs(env, 'counted'), progress=False)
   n_init, q = CONFIG.search.n_init, CONFIG.search.q
   # (P, q, 3) per call: P padded to a power of two (2 recordings, then 1)
   assert calls[:2] == [(2, n_init, 3), (1, n_init, 3)]
@@ -232,7 +233,7 @@ POSTERIOR = CONFIG.replace(point='median', posterior_grid=(4, 8, 4), q=4, replic
 
 
 def _posterior_state(workdir):
-  with np.load(os.path.join(workdir, em.POSTERIOR_STATE)) as z:
+  with np.load(os.path.join(workdir, layout.POSTERIOR_STATE)) as z:
     return {k: z[k] for k in z.files}
 
 
@@ -258,9 +259,9 @@ def test_a_posterior_alone_and_in_a_batch_of_three(env):
            os.path.join(env['root'], f'post_many{i}'))
     for i, (config, rec) in enumerate(env['recs'])
   ]  # fmt: skip
-  together = em.estimate_many(jobs, progress=False, figures=False)
+  together = estimation.estimate_many(jobs, progress=False, figures=False)
   pictures = []  # drawn when the caller asks (after its table)
-  alone = em.estimate(*jobs[1][:3], os.path.join(env['root'], 'post_alone'),
+  alone = estimation.estimate(*jobs[1][:3], os.path.join(env['root'], 'post_alone'),
                       progress=False, pictures=pictures)  # fmt: skip
   names = ('posterior.png', 'trace.png', 'montage.png')
   for workdir in (jobs[1].workdir, os.path.join(env['root'], 'post_alone')):
@@ -276,8 +277,8 @@ def test_a_posterior_alone_and_in_a_batch_of_three(env):
   np.testing.assert_allclose(b['Y'], a['Y'], rtol=_REPEAT_TOLERANCE)
   np.testing.assert_allclose(b['history'], a['history'], atol=_BATCH_TOLERANCE)
   with (
-    np.load(os.path.join(env['root'], 'post_alone', em.POSTERIOR_FILE)) as pa,
-    np.load(os.path.join(jobs[1].workdir, em.POSTERIOR_FILE)) as pb,
+    np.load(os.path.join(env['root'], 'post_alone', layout.POSTERIOR_FILE)) as pa,
+    np.load(os.path.join(jobs[1].workdir, layout.POSTERIOR_FILE)) as pb,
   ):
     np.testing.assert_allclose(pb['log_post'], pa['log_post'], atol=_BATCH_TOLERANCE)
     np.testing.assert_allclose(pb['samples'], pa['samples'], atol=_BATCH_TOLERANCE)
@@ -309,7 +310,7 @@ def test_a_time_limit_stops_between_steps_and_the_rerun_resumes(
   deadline.set_limit(250.0, start=0.0)
   try:
     with pytest.raises(deadline.Reached, match='stopped before step 3'):
-      em.estimate_many(_jobs(env, 'limited'), progress=False)
+      estimation.estimate_many(_jobs(env, 'limited'), progress=False)
   finally:
     deadline.set_limit(0.0)
   # steps 0-2 began inside the budget (300 s on the clock); step 3 did not

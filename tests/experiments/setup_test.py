@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import embedding, report, setup
+from experiments.pipeline import calibration_tables, embedding, estimation, setup
 from experiments.pipeline import objective as obj
 
 SHAPE = obj.PRESETS['smoke'].replace(distance='shape')
@@ -21,7 +21,7 @@ def test_the_shape_distance_resolves_without_a_network():
   np.testing.assert_allclose(s.pin_centre, obj.pin_centre(SHAPE.simulation), atol=1e-12)
   assert s.space == physsim.search_space(SHAPE.simulation.material)
   # The note the report would compute for these settings, read once here.
-  assert s.calibration == report.calibration_note(SHAPE)
+  assert s.calibration == calibration_tables.calibration_note(SHAPE)
 
 
 def test_a_distance_that_embeds_needs_a_network():
@@ -93,10 +93,9 @@ def test_a_job_that_cannot_be_set_up_is_its_error_not_the_batchs(monkeypatch):
 
 
 def test_an_estimate_refuses_a_setup_of_other_settings():
-  from experiments.pipeline import search
 
   s = setup.resolve(SHAPE, '', image_size=32)
   with pytest.raises(ValueError, match='other settings.*q'):
-    search.estimate(
+    estimation.estimate(
       SHAPE.replace(q=4), _job(SHAPE).recording, '', '/nonexistent', setup=s
     )

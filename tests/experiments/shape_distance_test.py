@@ -20,7 +20,7 @@ import pytest
 
 import physsim
 from experiments import estimate as estimate_cli
-from experiments.pipeline import embedding, report, search
+from experiments.pipeline import embedding, estimation, layout, report, search
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -203,9 +203,9 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   )
   workdir = str(tmp_path / 'est')
   # No network ('': the shape needs none); rescored below with the hand-made one.
-  out = search.estimate(config, env['rec'], '', workdir, progress=False)
-  assert json.load(open(os.path.join(workdir, search.RUN_FILE)))['model_dir'] == ''
-  z = np.load(os.path.join(workdir, search.POSTERIOR_STATE))
+  out = estimation.estimate(config, env['rec'], '', workdir, progress=False)
+  assert json.load(open(os.path.join(workdir, layout.RUN_FILE)))['model_dir'] == ''
+  z = np.load(os.path.join(workdir, layout.POSTERIOR_STATE))
   n = config.search.n_init + config.search.q * config.search.max_iter
   assert z['Y'].shape == (n, 2) and np.isfinite(z['Y']).all()
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
@@ -214,7 +214,7 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   wind = out['estimate']['wind_speed']
   assert wind['narrowing_90'] > 1.5, wind
   assert wind['interval_90'][0] <= TRUTH['wind_speed'] <= wind['interval_90'][1]
-  saved = json.load(open(os.path.join(workdir, search.ESTIMATE_FILE)))
+  saved = json.load(open(os.path.join(workdir, layout.ESTIMATE_FILE)))
   assert len(saved['noise_sd_shape_m']) == 2 and saved['noise_sd_log_psd'] is None
   assert 0 < min(saved['noise_sd_shape_m']) < 0.05  # metres of centroid scatter
   assert report.synthetic_warning(config).startswith('warning: --likelihood=synthetic')

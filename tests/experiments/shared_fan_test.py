@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 from jax.scipy.special import logsumexp
 
-from experiments.pipeline import objective, report, search, simulation, takes
+from experiments.pipeline import (
+  calibration_tables,
+  joint,
+  objective,
+  report,
+  simulation,
+  takes,
+)
 from experiments.pipeline import posterior as posterior_lib
 
 GRID = (2, 3, 2)  # bending, wind, area weight cells
@@ -118,10 +125,10 @@ def test_a_fan_setting_has_one_prior_and_one_label_per_recording():
   with pytest.raises(ValueError, match='3 fan settings for 2 recordings'):
     posterior_lib.joint(lls, GRID, base, jax.random.key(0), n=4, fans='abc')
   with pytest.raises(ValueError, match=r"fan setting 'a': its recordings were read"):
-    search.check_fans(['a', 'a'], [(2.0, 0.05), (0.0, 0.0)], 2)
+    joint.check_fans(['a', 'a'], [(2.0, 0.05), (0.0, 0.0)], 2)
   with pytest.raises(ValueError, match='1 fan settings for 2 recordings'):
-    search.check_fans(['a'], None, 2)
-  search.check_fans(['a', 'a'], [(2.0, 0.05), (2.0, 0.05)], 2)  # one reading, twice
+    joint.check_fans(['a'], None, 2)
+  joint.check_fans(['a', 'a'], [(2.0, 0.05), (2.0, 0.05)], 2)  # one reading, twice
 
 
 def test_the_hem_is_a_known_mass_along_the_free_edge_of_the_simulated_cloth():
@@ -152,10 +159,10 @@ def test_the_hem_is_a_known_mass_along_the_free_edge_of_the_simulated_cloth():
   # an estimate with a hem was not calibrated: its note says so (the shipped
   # paper-size file matches this estimate but for the hem)
   paper = objective.EstimateConfig().replace(distance='shape')
-  assert report.calibration_note(paper)['matches']
-  note = report.calibration_note(paper.replace(hem_mass=0.3))
+  assert calibration_tables.calibration_note(paper)['matches']
+  note = calibration_tables.calibration_note(paper.replace(hem_mass=0.3))
   assert note['differs'] == ['hem_mass']
-  note = report.calibration_note(
+  note = calibration_tables.calibration_note(
     objective.EstimateConfig().replace(distance='shape'), joint=True, recordings=2,
     uncalibrated=('recordings sharing one fan setting',),
   )  # fmt: skip

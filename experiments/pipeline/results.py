@@ -1,0 +1,220 @@
+"""What one finished search leaves: ``estimate.json``, ``posterior.npz`` and its pictures.
+
+The stage after the posterior and the report's pieces: a search's result
+(``bo.Result`` or ``bo.posterior.Result``) read into the estimate a person
+reads (the point, 50% and 90% intervals read at the calibration's levels,
+errors against a known truth) and written beside its trace, montage and
+posterior figures.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+
+import jax
+import numpy as np
+
+import bo
+import physsim
+from experiments.pipeline import files, layout, measurements, report
+from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline import search as search_lib
+from experiments.pipeline import setup as setup_lib
+
+
+def write_result(
+  job: search_lib.Job,
+  search: search_lib.LiveSearch,
+  res,
+  best_frames: np.ndarray,
+  figures: bool = True,
+  pictures: list | None = None,
+  **timing,
+) -> dict:
+  """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
+  posterior ``posterior.png`` and ``posterior.npz``) of a finished search;
+  returns the result dict.
+
+  Args:
+    job: the estimate, its ``setup`` resolved (``resolve_jobs``): its
+      network's record (recipe, accuracy, retrieval; recorded beside the
+      estimate: a parameter near 1 is not constrained by the video) and the
+      calibration its intervals are read with.
+    search: its finished search.
+    res: ``search.opt.result(...)``: a ``bo.Result`` or ``bo.posterior.Result``.
+    best_frames: the lowest-PSD candidate's camera-0 frames as its network saw
+      them, ``(T, H, W)`` depth or ``(T, H, W, 3)`` colour.
+    figures: draw the pictures (else only the JSON and ``posterior.npz``).
+    pictures: where to put the pictures' drawing, as callables, instead of
+      drawing them here (``estimate_many``).
+    **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
+  """
+  st, recording, workdir = job.setup, job.recording, job.workdir
+  config, space = st.config, st.space
+  x_best, y_best = search.argmin()
+  result = {
+    'recording': recording.source,
+    'material': config.simulation.material,
+    'garment': config.simulation.garment,
+    'point': config.search.point,
+  }
+  draws = []  # the pictures, each a callable
+  if config.search.point == 'argmin':
+    result.update(_argmin_summary(st, res, x_best))
+  else:
+    result.update(_posterior_summary(
+      st, res, workdir, recording.truth, draws if figures else None,
+      recording.source,
+    ))  # fmt: skip
+  retrieval = st.network.retrieval
+  material = physsim.load_material(physsim.fabric(config.simulation.material).material)
+  point = result['point_unit']
+  bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
+  result.update({
+    'bending_matrix_Nm': (bending * material.bending).tolist(),
+    'argmin': {
+      f: float(np.ravel(v)[0])
+      for f, v in zip(posterior_lib.FIELDS, physsim.from_unit(x_best, space), strict=True)
+    },
+    'psd_best': float(y_best),
+    'evaluations': int(len(res.Y)),
+    'failed_evaluations': int(np.sum(~np.isfinite(search_lib.discrepancies(res.Y)))),
+    'iterations': int(res.n_iter),
+    'stopped_by_rule': bool(res.stopped_early),
+    **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
+    **{k: float(v) for k, v in timing.items()},
+    'config': config.flat(),
+  })  # fmt: skip
+  if recording.truth is not None:
+    result['truth'] = recording.truth
+    result['errors'] = report.errors(
+      physsim.from_unit(point, space), recording.truth, space
+    )
+    result['covered'] = report.covered(result, recording.truth)
+  files.write_json(os.path.join(workdir, layout.ESTIMATE_FILE), result)
+  if not figures:
+    return result
+  n_init = config.search.n_init
+  iteration = report.iterations_of(len(res.Y), n_init, config.search.q)
+  draws.append(functools.partial(
+    report.plot_trace, res.X, search_lib.discrepancies(res.Y), iteration, space,
+    recording.truth, os.path.join(workdir, layout.TRACE_PNG),
+  ))  # fmt: skip
+  draws.append(functools.partial(
+    report.plot_montage,
+    recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
+    best_frames, recording.fps, os.path.join(workdir, layout.MONTAGE_PNG),
+    sim_label='best simulation',
+  ))  # fmt: skip
+  if pictures is not None:
+    pictures.extend(draws)
+  else:
+    for draw in draws:
+      draw()
+  return result
+
+
+def _argmin_summary(st: setup_lib.Setup, res: bo.Result, x_best) -> dict:
+  """The paper's point (the best evaluation) and where the GP puts the minimum."""
+  config, space = st.config, st.space
+  post = bo.minimizer_samples(
+    res.X, res.Y, search_lib.BOUNDS, jax.random.key(config.seed)
+  )
+  samples = measurements.physical(post.samples, space)
+  best = physsim.from_unit(x_best, space)
+  return {
+    'point_unit': np.asarray(x_best, np.float64).tolist(),
+    'estimate': report.summary(samples, best),
+    'load_ratio': report.load_ratio_summary(samples, best),
+    'interval_meaning': 'where the GP puts the minimum of the PSD, not where '
+    'the parameters are; not calibrated',
+  }
+
+
+def _name(source: str) -> str:
+  """A recording's name for a title: its file or folder (a dataset sequence:
+  material/sequence)."""
+  parts = os.path.normpath(source).split(os.sep) if source else []
+  return '/'.join(parts[-2:]) if parts and parts[-1].isdigit() else (parts or [''])[-1]
+
+
+def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
+                       draws: list | None = None, source: str = '') -> dict:  # fmt: skip
+  """The posterior median as the point, credible intervals, the prior's width;
+  writes ``posterior.npz`` and puts the drawing of ``posterior.png`` in
+  ``draws`` (None: no picture). The intervals are read at the levels of
+  ``st.calibration`` where it matched these settings, network and mode."""
+  config, space, note = st.config, st.space, st.calibration
+  key = jax.random.key(config.seed)
+  pc = search_lib.posterior_config(config)
+  points = bo.posterior.grid_points(pc.grid)
+  lp = measurements.log_prior(points, space, config.measured, pc.grid)
+  prior = posterior_lib.refine_draws(
+    posterior_lib.prior_samples(
+      jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
+    ), pc.grid, space, config.measured, config.seed + 1,
+  )  # fmt: skip
+  samples = posterior_lib.refine_draws(
+    res.samples, pc.grid, space, config.measured, config.seed
+  )
+  summary = posterior_lib.summarise(
+    samples, space, prior, levels_of(note), weights_of(note), config.measured
+  )
+  # The point: each parameter's (recalibrated) median or Bayes point.
+  which = 'bayes' if config.search.point == 'bayes' else 'median'
+  point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
+  median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
+  estimate = {}
+  for name in posterior_lib.FIELDS:
+    s = summary[name]
+    estimate[name] = {'value': s[which], **s}
+  files.write_atomic(
+    os.path.join(workdir, layout.POSTERIOR_FILE),
+    lambda p: np.savez(
+      p, samples=samples, prior_samples=prior, log_post=res.log_post,
+      log_lik=res.log_lik, log_prior=lp, grid=np.asarray(pc.grid),
+      bounds=space.bounds(), gp_mean=res.mean, gp_var=res.var,
+      noise_sd=res.noise_sd, floor=res.floor,
+    ),
+  )  # fmt: skip
+  if draws is not None:
+    draws.append(functools.partial(
+      posterior_lib.plot, samples, prior, space, truth,
+      os.path.join(workdir, layout.POSTERIOR_PNG),
+      title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
+      summary=summary, point=which,
+    ))  # fmt: skip
+  recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
+  return {
+    'point_unit': np.ravel(median).tolist(),
+    'estimate': estimate,
+    'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
+    'noise_sd_log_psd': None
+    if config.scoring.likelihood == 'synthetic'
+    else res.noise_sd,
+    **(
+      {'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()}
+      if config.scoring.likelihood == 'synthetic'
+      else {}
+    ),
+    'interval_meaning': 'central credible intervals of the posterior given the '
+    'video (and any measured wind or area weight)'
+    + (
+      ', read at levels recalibrated on simulated recordings so that they hold '
+      'the truth as often as they say'
+      if recalibrated
+      else ''
+    ),
+    'calibration': note,
+  }
+
+
+def levels_of(note: dict | None) -> dict | None:
+  """The recalibrated CDF levels a calibration note carries (it matched), else None."""
+  return note.get('levels') if note and note.get('matches') else None
+
+
+def weights_of(note: dict | None) -> dict | None:
+  """The calibrated weights of the posterior's points (it matched), else None."""
+  return note.get('weights') if note and note.get('matches') else None

@@ -1,0 +1,137 @@
+"""The house's shape (issue 75): the import graph of physsim, model, bo and
+experiments has no cycle, function-level imports included, and the estimate
+pipeline's stages import only the stages before them. Reads source files
+only (no imports run)."""
+
+from __future__ import annotations
+
+import ast
+import os
+
+import pytest
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_PACKAGES = ('physsim', 'model', 'bo', 'experiments')
+_P = 'experiments.pipeline.'
+
+# The estimate's stages in the order they run (experiments/pipeline/__init__.py).
+# A module may import modules of its own stage or earlier ones, never later.
+STAGES = (
+  ('files', 'layout', 'cli', 'progress', 'deadline', 'distributed', 'jax_cache',
+   'embedding', 'simulation', 'recording'),
+  ('intake', 'takes', 'rig'),
+  ('measurements',),
+  ('objective',),
+  ('calibration_tables', 'setup'),
+  ('search',),
+  ('posterior',),
+  ('report', 'results', 'joint'),
+  ('estimation', 'user_recordings'),
+)  # fmt: skip
+
+
+def _modules() -> dict[str, str]:
+  """Dotted module name -> its file, for every module of the packages."""
+  out = {}
+  for package in _PACKAGES:
+    for folder, _, names in os.walk(os.path.join(_ROOT, package)):
+      for name in names:
+        if name.endswith('.py'):
+          path = os.path.join(folder, name)
+          dotted = os.path.relpath(path, _ROOT)[:-3].replace(os.sep, '.')
+          out[dotted.removesuffix('.__init__')] = path
+  return out
+
+
+def _imports(modules: dict[str, str]) -> dict[str, set[str]]:
+  """Each module's imports of the packages' modules, wherever in the file
+  they stand (top level or inside a function); ``from a import b`` counts
+  ``a.b`` where that is a module, else ``a``."""
+  graph = {}
+  for name, path in modules.items():
+    with open(path, encoding='utf-8') as f:
+      tree = ast.parse(f.read(), path)
+    package = name if path.endswith('__init__.py') else name.rpartition('.')[0]
+    found = set()
+    for node in ast.walk(tree):
+      if isinstance(node, ast.Import):
+        targets = [a.name for a in node.names]
+      elif isinstance(node, ast.ImportFrom):
+        base = node.module or ''
+        if node.level:  # relative: from the package, up level - 1
+          parts = package.split('.')
+          parts = parts[: len(parts) - node.level + 1]
+          base = '.'.join([*parts, base] if base else parts)
+        targets = [
+          f'{base}.{a.name}' if f'{base}.{a.name}' in modules else base
+          for a in node.names
+        ]
+      else:
+        continue
+      for t in targets:
+        while t and t not in modules:
+          t = t.rpartition('.')[0]
+        if t and t != name:
+          found.add(t)
+    graph[name] = found
+  return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str]:
+  """One cycle of ``graph`` as a path (first == last), or [] if none."""
+  state: dict[str, int] = {}  # 1: on the path, 2: done
+  path: list[str] = []
+
+  def visit(v):
+    state[v] = 1
+    path.append(v)
+    for w in sorted(graph[v]):
+      if state.get(w) == 1:
+        return [*path[path.index(w) :], w]
+      if w not in state and (c := visit(w)):
+        return c
+    path.pop()
+    state[v] = 2
+    return []
+
+  for v in sorted(graph):
+    if v not in state and (c := visit(v)):
+      return c
+  return []
+
+
+@pytest.fixture(scope='module')
+def graph():
+  return _imports(_modules())
+
+
+def test_the_import_graph_has_no_cycle(graph):
+  assert _cycle(graph) == []
+
+
+def test_a_planted_cycle_is_found():
+  g = {'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}
+  assert _cycle(g) == ['a', 'b', 'c', 'a']
+  assert _cycle({'a': {'b'}, 'b': set()}) == []
+
+
+def test_each_stage_imports_only_the_stages_before_it(graph):
+  level = {f'{_P}{m}': i for i, stage in enumerate(STAGES) for m in stage}
+  late = [
+    f'{m} (stage {level[m]}) imports {t} (stage {level[t]})'
+    for m in sorted(level)
+    for t in sorted(graph.get(m, ()))
+    if t in level and level[t] > level[m]
+  ]
+  assert late == []
+
+
+def test_every_pipeline_module_has_a_stage_or_is_an_application(graph):
+  """A new pipeline module is placed in ``STAGES``, or imports no stage of
+  it from below (an application at the top: datasets, training, demo)."""
+  staged = {f'{_P}{m}' for stage in STAGES for m in stage}
+  pipeline = {m for m in graph if m.startswith(_P)}
+  unknown = staged - pipeline
+  assert not unknown, f'STAGES names modules that do not exist: {unknown}'
+  below = [m for m in pipeline - staged if any(m in graph[s] for s in staged)]
+  assert below == [], f'staged modules import these unstaged ones: {below}'
