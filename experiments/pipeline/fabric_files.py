@@ -23,7 +23,7 @@ import os
 import numpy as np
 
 import physsim
-from experiments.pipeline import files, search
+from experiments.pipeline import files, layout, search
 from experiments.pipeline import posterior as posterior_lib
 from physsim import export
 
@@ -33,7 +33,7 @@ ARCSIM_FILE = 'fabric_arcsim.json'
 DRAWS_FILE = 'fabric_draws.csv'
 LICENSE_FILE = 'LICENSE_ARCSIM.txt'
 # The estimate's files it reads: one recording's, else a joint's.
-_SOURCES = (search.ESTIMATE_FILE, search.JOINT_FILE)
+_SOURCES = (layout.ESTIMATE_FILE, layout.JOINT_FILE)
 _NAMES = ('bending_scale', 'area_weight')
 
 
