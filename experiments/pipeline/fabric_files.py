@@ -23,7 +23,7 @@ import os
 import numpy as np
 
 import physsim
-from experiments.pipeline import files, layout, search
+from experiments.pipeline import files, layout
 from experiments.pipeline import posterior as posterior_lib
 from physsim import export
 
