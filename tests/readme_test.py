@@ -44,7 +44,7 @@ def test_the_library_snippet_runs_as_written_on_the_demos_outputs(tmp_path):
 
   workdir = str(tmp_path / 'demo')
   demo.run(workdir, 'gray_interlock', sequences=8, seed=0, backend='c')
-  (snippet,) = [b for b in _blocks('python') if "estimation.estimate" in b]
+  (snippet,) = [b for b in _blocks('python') if 'estimation.estimate' in b]
   assert "'out/demo'" in snippet
   script = tmp_path / 'snippet.py'
   script.write_text(snippet.replace("'out/demo'", repr(workdir)))
