@@ -18,18 +18,27 @@ and its density is ``w``.
 
 from __future__ import annotations
 
+import os
+
 import mujoco
 import numpy as np
 
 from physsim import cloth, materials
 from physsim.mesh import Mesh
 
+# Beyond these a parameter is a corrupt file or a typo, never a fabric: an
+# area weight of 1e308 kg/m^2 would be written as vertex masses of 1e305 kg.
+MAX_BENDING_SCALE = 1e4
+MAX_AREA_WEIGHT = 10.0  # kg/m^2
+
 
 def check(bending_scale: float, area_weight: float) -> None:
-  """Raises ValueError unless both are finite and > 0 (named)."""
-  for name, v in (('bending_scale', bending_scale), ('area_weight', area_weight)):
-    if not (np.isfinite(v) and v > 0):
-      raise ValueError(f'{name}={v}: need a finite value > 0')
+  """Raises ValueError unless both are finite, > 0 and at most
+  ``MAX_BENDING_SCALE`` and ``MAX_AREA_WEIGHT`` (named)."""
+  for name, v, hi in (('bending_scale', bending_scale, MAX_BENDING_SCALE),
+                      ('area_weight', area_weight, MAX_AREA_WEIGHT)):  # fmt: skip
+    if not (np.isfinite(v) and 0 < v <= hi):
+      raise ValueError(f'{name}={v}: need a finite value > 0 and <= {hi:g}')
 
 
 def young_modulus(bending_scale: float, material: str) -> float:
@@ -139,14 +148,24 @@ def mujoco_xml(
 """
 
 
-def load(xml: str) -> mujoco.MjModel:
-  """Compiles an exported model with the estimator's edge weights (the
-  custom numeric ``INVWEIGHT_KEY``, ``mujoco_xml``); a model without it as
-  it is.
+def load(source: str) -> mujoco.MjModel:
+  """Compiles an exported model (a path to its file, or its XML text when
+  ``source`` starts with '<') with the estimator's edge weights (the custom
+  numeric ``INVWEIGHT_KEY``, ``mujoco_xml``); a model without it as it is.
 
   Raises:
-    ValueError: weights that do not match the flex's edges.
+    ValueError: a file that cannot be read (named), or weights that do not
+      match the flex's edges.
   """
+  xml = source
+  if not source.lstrip().startswith('<'):
+    if not os.path.isfile(source):
+      raise ValueError(f'{source}: no such file (an exported fabric.xml, or MJCF text)')
+    try:
+      with open(source, encoding='utf-8') as f:
+        xml = f.read()
+    except (OSError, UnicodeDecodeError) as e:
+      raise ValueError(f'{source}: cannot be read ({type(e).__name__})') from None
   m = mujoco.MjModel.from_xml_string(xml)
   try:
     i = m.numeric(INVWEIGHT_KEY).id

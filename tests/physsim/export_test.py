@@ -113,10 +113,27 @@ def test_the_arcsim_material_carries_the_scale_and_the_weight():
 
 
 @pytest.mark.parametrize(
-  's, w', [(0.0, 0.2), (1.0, -0.1), (np.nan, 0.2), (1.0, np.inf)]
+  's, w',
+  [(0.0, 0.2), (1.0, -0.1), (np.nan, 0.2), (1.0, np.inf), (1.0, 1e308), (1e300, 0.2)],
 )
 def test_parameters_out_of_range_are_refused_by_name(s, w):
-  with pytest.raises(ValueError, match='bending_scale' if not s > 0 else 'area_weight'):
+  with pytest.raises(
+    ValueError, match='bending_scale' if not 0 < s <= 1e4 else 'area_weight'
+  ):
     export.arcsim_material('gray_interlock', s, w)
-  with pytest.raises(ValueError, match='need a finite value > 0'):
+  with pytest.raises(ValueError, match='need a finite value > 0 and <='):
     export.mujoco_xml(_mesh(), 'gray_interlock', s, w, _config(_mesh()))
+
+
+def test_load_takes_a_path_or_the_xml_text(tmp_path):
+  mesh = _mesh()
+  xml = export.mujoco_xml(mesh, 'gray_interlock', _S, _W, _config(mesh))
+  path = tmp_path / 'fabric.xml'
+  path.write_text(xml)
+  from_path, from_text = export.load(str(path)), export.load('  ' + xml)
+  np.testing.assert_array_equal(from_path.body_mass, from_text.body_mass)
+  np.testing.assert_array_equal(
+    from_path.flexedge_invweight0, from_text.flexedge_invweight0
+  )
+  with pytest.raises(ValueError, match='nowhere.xml: no such file'):
+    export.load(str(tmp_path / 'nowhere.xml'))
