@@ -14,7 +14,7 @@ recordings share one joint area weight, so the group, not the recording, is
 the independent unit. No simulation: seconds on a CPU.
 
   python -m benchmarks.fan_settings \\
-      --results=benchmarks/results/matched_synthetic_h100/joint_3_shape_synthetic_g0.3_c33.json
+      --results=/tmp/jf/joint_pairs.json,/tmp/jf4/joint_pairs.json,/tmp/jf5/joint_pairs.json
 """
 
 from __future__ import annotations

@@ -1,6 +1,8 @@
-"""Tests for the documentation as a map: BENCHMARKS.md short, every cited result
-and every relative link present, docs/README.md listing every page, and
-benchmarks/results holding only small summaries. Reads files only (no JAX)."""
+"""Tests for the documentation as a map: BENCHMARKS.md and every guide short,
+every cited result and every relative link present, docs/README.md listing every
+guide and docs/studies/README.md every study record, a record's links to files
+that left the tree found in git at the commit named, and benchmarks/results
+holding only small summaries. Reads files only (no JAX)."""
 
 from __future__ import annotations
 
@@ -14,6 +16,8 @@ import pytest
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _RESULTS = 'benchmarks/results'
 _MAX_LINES = 200  # BENCHMARKS.md: the current numbers, not a history
+_MAX_GUIDE = 200  # a guide in docs/ (not a study record under docs/studies/)
+_REMOVED_AFTER = 'c465b0e'  # where the records' removed benchmarks and results are
 _MAX_FILE = 100 * 1024  # one committed summary
 _MAX_TOTAL = 2 * 1024 * 1024  # every committed summary together
 _LINK = re.compile(r'\[[^\]]*\]\(([^)\s]+)\)')
@@ -24,6 +28,12 @@ def _pages() -> list[str]:
   """README.md, BENCHMARKS.md and every docs/*.md, relative to the root."""
   docs = sorted(glob.glob(os.path.join(_ROOT, 'docs', '*.md')))
   return ['README.md', 'BENCHMARKS.md', *(os.path.relpath(p, _ROOT) for p in docs)]
+
+
+def _studies() -> list[str]:
+  """Every dated study record, docs/studies/*.md, relative to the root."""
+  found = sorted(glob.glob(os.path.join(_ROOT, 'docs', 'studies', '*.md')))
+  return [os.path.relpath(p, _ROOT) for p in found]
 
 
 def _read(page: str) -> str:
@@ -111,23 +121,63 @@ def test_committed_figures_are_small():
   assert not big, f'over {_MAX_FILE} bytes (re-encode or drop): {big}'
 
 
-def test_docs_readme_lists_every_page():
-  listed = {
-    os.path.normpath(t.split('#')[0]) for t in _LINK.findall(_read('docs/README.md'))
-  }
-  pages = [os.path.basename(p) for p in _pages() if p.startswith('docs' + os.sep)]
+def test_every_guide_is_short():
+  long = {}
+  for page in _pages():
+    if page.startswith('docs' + os.sep):
+      n = len(_read(page).splitlines())
+      if n > _MAX_GUIDE:
+        long[page] = n
+  assert not long, (
+    f'guides over {_MAX_GUIDE} lines (a record goes to docs/studies/): {long}'
+  )
+
+
+@pytest.mark.parametrize('index', ['docs/README.md', 'docs/studies/README.md'])
+def test_a_docs_readme_lists_every_page_beside_it(index):
+  listed = {os.path.normpath(t.split('#')[0]) for t in _LINK.findall(_read(index))}
+  folder = os.path.dirname(index)
+  pages = [os.path.basename(p) for p in _pages() + _studies()]
+  pages = [p for p in pages if os.path.exists(os.path.join(_ROOT, folder, p))]
   missing = [p for p in pages if p != 'README.md' and p not in listed]
-  assert not missing, f'docs/README.md does not list {missing}'
+  assert not missing, f'{index} does not list {missing}'
+
+
+def _relative_links(page: str):
+  """(the link as written, the path it names relative to the root) per link."""
+  base = os.path.dirname(os.path.join(_ROOT, page))
+  for target in _LINK.findall(_read(page)):
+    if re.match(r'[a-z][a-z0-9+.-]*:', target) or target.startswith('#'):
+      continue  # a URL, or an anchor on the same page
+    path = os.path.normpath(os.path.join(base, target.split('#')[0].split('?')[0]))
+    yield target, os.path.relpath(path, _ROOT)
 
 
 def test_relative_links_resolve():
   broken = []
   for page in _pages():
-    base = os.path.dirname(os.path.join(_ROOT, page))
-    for target in _LINK.findall(_read(page)):
-      if re.match(r'[a-z][a-z0-9+.-]*:', target) or target.startswith('#'):
-        continue  # a URL, or an anchor on the same page
-      path = target.split('#')[0].split('?')[0]
-      if not os.path.exists(os.path.normpath(os.path.join(base, path))):
+    for target, path in _relative_links(page):
+      if not os.path.exists(os.path.join(_ROOT, path)):
         broken.append(f'{page}: {target}')
   assert not broken, 'links to missing files:\n' + '\n'.join(broken)
+
+
+def test_a_records_links_resolve_here_or_in_git_where_it_says():
+  # A study record is kept whole; what it links to under benchmarks/ may have
+  # left the tree since, and must then be in git at the commit its README names.
+  gone, broken = [], []
+  for page in _studies():
+    for _, path in _relative_links(page):
+      if os.path.exists(os.path.join(_ROOT, path)):
+        continue
+      (gone if path.startswith('benchmarks' + os.sep) else broken).append((page, path))
+  assert not broken, f'links to missing files: {broken}'
+  if gone and not _git_checkout():
+    pytest.skip('not a git checkout')
+  proc = _git('ls-tree', '-r', '-t', '--name-only', _REMOVED_AFTER, '--', 'benchmarks')
+  assert proc.returncode == 0, proc.stderr
+  there = set(proc.stdout.split('\n'))
+  absent = [
+    (page, path) for page, path in gone if path.replace(os.sep, '/') not in there
+  ]
+  assert not absent, f'gone from the tree and not at {_REMOVED_AFTER}: {absent}'

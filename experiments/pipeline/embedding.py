@@ -11,7 +11,7 @@ member, each member's PSD is taken in its own space, and the ensemble's PSD is
 their geometric mean (``model.psd.geometric_mean``). Networks of one recipe
 differ a lot by the seed alone; an ensemble averages out errors that are one
 network's own, not those the video itself leaves (which, at paper size, were
-the larger: docs/calibration.md).
+the larger: docs/studies/calibration.md).
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ class Simulation:
       Filmed beside the same cloth without it, the fan untouched (a protocol
       file's ``"fan"``: one wind for both), it weighs the cloth against a
       known mass rather than through the simulator's drag law
-      (docs/protocol.md, "A known mass at the hem").
+      (docs/studies/protocol.md, "A known mass at the hem").
   """
 
   material: str = 'gray_interlock'

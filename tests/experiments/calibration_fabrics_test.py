@@ -282,7 +282,7 @@ def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so(
   (wider is allowed, confidently wrong is not); a single 50% cell at least
   35%: on 56 recordings a 50% coverage is known to +-6.7 points (one binomial
   SE), and one seed alone has read 82% at 90% where the pool of four read 90%
-  (docs/calibration.md). An estimate's calibration line quotes the check of its
+  (docs/studies/calibration.md). An estimate's calibration line quotes the check of its
   own mode: with a wind reading, the check whose searches a reading steered
   (``--check_reading=wind_speed``) where the file has one, else the video
   searches' ``known wind`` reading."""

@@ -210,7 +210,7 @@ def test_the_joints_shared_discrepancy_caps_what_a_hem_pair_says_of_area_weight(
   log area weight to a few percent; the joint's shared discrepancy (log sd
   0.1 on area weight, every recording of the rig off by the same factor)
   adds its own spread in quadrature: the posterior sd is then about
-  sqrt(0.1^2 + s0^2), never under 0.1 (docs/protocol.md: why a hem pair
+  sqrt(0.1^2 + s0^2), never under 0.1 (docs/studies/protocol.md: why a hem pair
   narrows area weight so little in an uncalibrated joint)."""
   nb, nv, nw = 1, 300, 40
   lls, w = _ridge_pair(nv, nw, 20)
