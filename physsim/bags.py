@@ -30,12 +30,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from physsim import camera_files, video
+from physsim import camera_files, input_files, video
 
 IMAGE = ('sensor_msgs/msg/Image', 'sensor_msgs/Image')
 INFO = ('sensor_msgs/msg/CameraInfo', 'sensor_msgs/CameraInfo')
 IMU = ('sensor_msgs/msg/Imu', 'sensor_msgs/Imu')
 TF = ('tf2_msgs/msg/TFMessage', 'tf2_msgs/TFMessage')
+# The files a ROS 2 bag folder stores its messages in.
+STORAGE_EXTENSIONS = ('.db3', '.mcap')
 # Seconds of IMU readings averaged for gravity (the camera at rest).
 IMU_SECONDS = 1.0
 _ENCODINGS = {'16UC1': np.uint16, 'mono16': np.uint16, '32FC1': np.float32}
@@ -68,6 +70,35 @@ def is_bag(path: str) -> bool:
   if os.path.isfile(path):
     return path.lower().endswith('.bag')
   return os.path.isfile(os.path.join(path, 'metadata.yaml'))
+
+
+def check_bag_folder(path: str) -> None:
+  """Refuses a folder that holds a ROS 2 bag's storage (``.db3``, ``.mcap``)
+  without its ``metadata.yaml``: read as a frame folder it would be
+  refused for the wrong reason.
+
+  Raises:
+    ValueError: naming the folder and the storage file.
+  """
+  if not os.path.isdir(path) or os.path.lexists(os.path.join(path, 'metadata.yaml')):
+    return
+  stored = sorted(f for f in os.listdir(path) if f.lower().endswith(STORAGE_EXTENSIONS))
+  if stored:
+    raise ValueError(
+      f'{path}: a ROS 2 bag folder ({stored[0]}) without its metadata.yaml; copy '
+      'the whole folder `ros2 bag record` wrote, or run `ros2 bag reindex` on it'
+    )
+
+
+def _check_files(path: str) -> None:
+  """Refuses a bag whose files are not regular files (a FIFO would block
+  the reader forever), naming the file."""
+  if not os.path.isdir(path):
+    input_files.check_regular(path, 'bag')
+    return
+  for name in sorted(os.listdir(path)):
+    if name.lower().endswith((*STORAGE_EXTENSIONS, '.yaml')):
+      input_files.check_regular(os.path.join(path, name), 'bag file')
 
 
 def _pick(path, conns, kind: str, given: str, prefer, flag: str):
@@ -196,6 +227,7 @@ def read_bag(
     from rosbags.typesys import Stores, get_typestore  # noqa: PLC0415
   except ImportError:
     raise ValueError(f'{path}: reading bags needs `pip install rosbags`') from None
+  _check_files(path)
   try:
     reader = AnyReader(
       [Path(path)], default_typestore=get_typestore(Stores.ROS2_HUMBLE)

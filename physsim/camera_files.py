@@ -39,6 +39,7 @@ from typing import Any, NamedTuple
 import cv2
 import numpy as np
 
+from physsim import input_files
 from physsim.camera import Intrinsics, Pose
 
 FORMS = (
@@ -61,6 +62,19 @@ WORLD_AXES = ('x', 'y', 'z', '+x', '+y', '+z', '-x', '-y', '-z')
 MAX_FILE_BYTES = 1 << 20
 # The largest image side a camera file may give, pixels.
 MAX_SIDE = 8192
+# How many distortion coefficients OpenCV's models take (k1 k2 p1 p2 [k3 [k4 k5
+# k6 [s1 s2 s3 s4 [tx ty]]]]).
+DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
+# The largest distortion coefficient a lens has (rational models reach tens);
+# beyond it the file holds another unit or a typo.
+MAX_DISTORTION = 1000.0
+# Focal lengths as a share of the image side: 0.1 is a 157 degree view, 100 a
+# 0.6 degree one; outside, the file gives another unit or a typo.
+FOCAL_RANGE = (0.1, 100.0)
+# The principal point may lie this many image sides outside the image.
+PRINCIPAL_MARGIN = 1.0
+# The least share of the undistorted image that must map inside the frame.
+MIN_UNDISTORTED_INSIDE = 0.5
 
 
 def one_line(e: BaseException) -> str:
@@ -123,30 +137,11 @@ def _error(path: str, why: str) -> ValueError:
 
 
 def _load(path: str) -> dict:
-  if not os.path.isfile(path):
+  if not os.path.lexists(path):
     raise ValueError(f'{path}: no such camera file')
-  size = os.path.getsize(path)
-  if size > MAX_FILE_BYTES:
-    raise ValueError(
-      f'{path}: {size / 2**20:.0f} MiB is no camera file (at most '
-      f'{MAX_FILE_BYTES >> 20} MiB)'
-    )
-  try:
-    with open(path, encoding='utf-8') as f:
-      text = f.read()
-  except UnicodeDecodeError as e:
-    raise ValueError(
-      f'{path}: not a text file ({e.reason} at byte {e.start})'
-    ) from None
+  text = input_files.read_text(path, 'camera file', MAX_FILE_BYTES)
   if path.lower().endswith(('.yaml', '.yml')):
-    import yaml  # noqa: PLC0415 - only YAML camera files need it
-
-    try:
-      data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-      raise ValueError(f'{path}: not readable YAML ({one_line(e)})') from None
-    except RecursionError:
-      raise ValueError(f'{path}: not readable YAML (nested too deeply)') from None
+    data = input_files.load_yaml(text, path)
   else:
     try:
       data = json.loads(text)
@@ -159,13 +154,24 @@ def _load(path: str) -> dict:
   return data
 
 
+def _has_bool(value, depth: int = 0) -> bool:
+  """True where a (nested) list holds a JSON true/false among its numbers."""
+  if isinstance(value, bool | np.bool_):
+    return True
+  if isinstance(value, list | tuple) and depth < 4:
+    return any(_has_bool(v, depth + 1) for v in value)
+  return False
+
+
 def _numbers(path: str, key: str, value, shape) -> np.ndarray:
   if isinstance(value, dict) and 'data' in value:  # ROS / OpenCV YAML matrices
     value = value['data']
+  if _has_bool(value):
+    raise _error(path, f'"{key}" holds true/false, not numbers')
   try:
     a = np.asarray(value, np.float64)
   except (TypeError, ValueError, OverflowError, RecursionError):
-    raise _error(path, f'"{key}" is not numbers: {value!r}') from None
+    raise _error(path, f'"{key}" is not numbers: {input_files.shown(value)}') from None
   if shape is not None:
     if a.size != math.prod(shape):
       raise _error(path, f'"{key}" must hold {math.prod(shape)} numbers, has {a.size}')
@@ -250,10 +256,46 @@ def _pinhole(path, w, h, k: np.ndarray) -> Intrinsics:
       path,
       f'camera matrix must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {k.tolist()}',
     )
+  lo, hi = FOCAL_RANGE
+  for name, v, side in (('fx', k[0, 0], w), ('fy', k[1, 1], h)):
+    if not (math.isfinite(v) and lo * side <= v <= hi * side):
+      raise _error(
+        path,
+        f'"{name}"={v:.6g} must be a positive focal length in pixels, '
+        f'{lo * side:g} to {hi * side:g} for a {side} px side',
+      )
+  m = PRINCIPAL_MARGIN
+  for name, v, side in (('cx', k[0, 2], w), ('cy', k[1, 2], h)):
+    if not (math.isfinite(v) and -m * side <= v <= (1 + m) * side):
+      raise _error(
+        path,
+        f'"{name}"={v:.6g} px is far outside the {side} px image (expected '
+        f'{-m * side:g} to {(1 + m) * side:g} px)',
+      )
   try:
     return Intrinsics.from_pinhole(w, h, k[0, 0], k[1, 1], k[0, 2], k[1, 2])
   except ValueError as e:
     raise _error(path, str(e)) from None
+
+
+def _distortion(path: str, dist) -> tuple[float, ...]:
+  """OpenCV's distortion coefficients, checked for a count OpenCV takes and
+  a lens's magnitudes."""
+  a = _numbers(path, 'distortion', dist or [], None).ravel()
+  if a.size not in DISTORTION_LENGTHS:
+    raise _error(
+      path,
+      f'{a.size} distortion coefficients; OpenCV takes '
+      f'{", ".join(map(str, DISTORTION_LENGTHS))} (k1 k2 p1 p2 [k3 ...])',
+    )
+  worst = float(np.abs(a).max()) if a.size else 0.0
+  if worst > MAX_DISTORTION:
+    raise _error(
+      path,
+      f'a distortion coefficient of {worst:.3g}; no lens has one above '
+      f'{MAX_DISTORTION:g} (another unit or a typo?)',
+    )
+  return tuple(float(c) for c in a)
 
 
 def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
@@ -309,8 +351,12 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
     if 'camera_matrix' in d:
       k = _numbers(path, 'camera_matrix', d['camera_matrix'], (3, 3))
     else:
+      keys = ('fx', 'fy', 'cx', 'cy')
+      for key in keys:
+        if isinstance(d.get(key), bool):
+          raise _error(path, f'"{key}" must be a number, got {d[key]!r}')
       try:
-        vals = [float(d[key]) for key in ('fx', 'fy', 'cx', 'cy')]
+        vals = [float(d[key]) for key in keys]
       except (KeyError, TypeError, ValueError, OverflowError):
         raise _error(path, 'needs numbers "fx", "fy", "cx" and "cy"') from None
       k = np.array([[vals[0], 0, vals[2]], [0, vals[1], vals[3]], [0, 0, 1]])
@@ -319,9 +365,7 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
   else:
     raise _error(path, f'no camera found among its keys {sorted(d)}')
   intr = _pinhole(path, w, h, k)
-  distortion = tuple(
-    float(c) for c in _numbers(path, 'distortion', dist or [], None).ravel()
-  )
+  distortion = _distortion(path, dist)
   return CameraFile(
     intr, distortion, _pose(path, d), 'user', _fps(path, d), form, path,
     _gravity(path, d),
@@ -362,10 +406,26 @@ def scaled_to(camera: CameraFile, width: int, height: int) -> CameraFile:
 
 def undistort(depth: np.ndarray, cam: CameraFile) -> np.ndarray:
   """(T, H, W) depth frames remapped to the file's camera without its lens
-  distortion (nearest pixel: every value a real measurement)."""
+  distortion (nearest pixel: every value a real measurement).
+
+  Raises:
+    ValueError: naming the camera file: a distortion that maps most of the
+      image outside the frame (no lens does).
+  """
   intr = cam.intrinsics
   k = intr.matrix()
   maps = cv2.initUndistortRectifyMap(
     k, np.asarray(cam.distortion), None, k, (intr.width, intr.height), cv2.CV_32FC1
   )
+  inside = float(
+    np.mean(
+      (maps[0] >= -0.5) & (maps[0] <= intr.width - 0.5)
+      & (maps[1] >= -0.5) & (maps[1] <= intr.height - 0.5)
+    )
+  )  # fmt: skip
+  if not inside >= MIN_UNDISTORTED_INSIDE:
+    raise ValueError(
+      f'{cam.path}: its {len(cam.distortion)} distortion coefficients map only '
+      f'{inside:.0%} of the image inside the frame; check them (k1 k2 p1 p2 [k3 ...])'
+    )
   return np.stack([cv2.remap(f, *maps, cv2.INTER_NEAREST) for f in depth])

@@ -33,6 +33,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from physsim import input_files
+
 # Depth beyond this in a file said to be in metres is almost surely millimetres.
 MAX_METRES = 20.0
 # The nearest surfaces of a cloth recording (5th percentile of valid depth)
@@ -91,7 +93,12 @@ def natural_key(name: str) -> list:
 
 def frame_files(path: str, pattern: str = '*.png') -> list[str]:
   """The frame files of a folder in natural order: names matching ``pattern``
-  that hold a number and are not colour, mask or preview images."""
+  that hold a number and are not colour, mask or preview images.
+
+  Raises:
+    ValueError: naming it: a frame's name on a FIFO, socket, device or folder
+      (``open()`` on a FIFO would wait forever).
+  """
   files = [
     f
     for f in os.listdir(path)
@@ -99,6 +106,8 @@ def frame_files(path: str, pattern: str = '*.png') -> list[str]:
     and any(c.isdigit() for c in f)
     and not f.lower().startswith(_NOT_FRAMES)
   ]
+  for f in files:
+    input_files.check_regular(os.path.join(path, f), 'frame')
   return sorted(files, key=natural_key)
 
 
@@ -374,6 +383,10 @@ def _fps_beside(folder: str) -> float | None:
   """fps from ``meta.json`` or ``fps.txt`` in ``folder`` or its parent."""
   for d in (folder, os.path.dirname(os.path.abspath(folder))):
     meta = os.path.join(d, 'meta.json')
+    txt = os.path.join(d, 'fps.txt')
+    for file in (meta, txt):
+      if input_files.is_special(file):
+        input_files.check_regular(file, 'file')
     if os.path.isfile(meta):
       try:
         if os.path.getsize(meta) > MAX_TEXT_BYTES:
@@ -385,7 +398,6 @@ def _fps_beside(folder: str) -> float | None:
         raise ValueError(f'{meta}: not a JSON object with "fps" ({why})') from None
       if value is not None:
         return _positive_fps(meta, value)
-    txt = os.path.join(d, 'fps.txt')
     if os.path.isfile(txt):
       try:
         with open(txt, encoding='utf-8') as f:
@@ -554,6 +566,9 @@ def load_depth_video(
         f'one of {VIDEO_EXTENSIONS}'
       )
     beside = _fps_beside(os.path.dirname(os.path.abspath(path)))
+  elif os.path.lexists(path):
+    input_files.check_regular(path, 'recording')  # a FIFO, socket or device
+    raise ValueError(f'{path}: cannot be read')
   else:
     raise ValueError(f'{path}: no such file or folder')
 

@@ -48,7 +48,7 @@ import numpy as np
 import physsim
 from experiments.pipeline import cli, files, simulation
 from experiments.pipeline import recording as recording_lib
-from physsim import alignment, bags, camera_files, dataset, scene, video
+from physsim import alignment, bags, camera_files, dataset, input_files, scene, video
 
 # Pin spacing may differ from the simulated cloth's by this share.
 PIN_SPACING_TOL = 0.2
@@ -257,6 +257,7 @@ def _mask(path: str, index: np.ndarray, shape) -> np.ndarray:
       )
     picked = [os.path.join(path, names[i]) for i in index]
   else:
+    input_files.check_regular(path, 'mask image')
     picked = [path] * len(index)
   out = []
   for file in picked:
@@ -285,6 +286,8 @@ def outer_pins(mesh) -> np.ndarray:
 
 
 SWINGS_DEG = tuple(range(0, 91, 10))
+# The least share of the compared clip a recording must cover (``check_clip``).
+MIN_CLIP_SHARE = 0.5
 
 
 def swung(vertices: np.ndarray, pins_world: np.ndarray, deg: float) -> np.ndarray:
@@ -348,6 +351,7 @@ def take_in(
   if is_sequence(path) and not camera_json:
     return _passthrough(path, sim)
   bag = None
+  bags.check_bag_folder(path)
   if bags.is_bag(path):
     bag = bags.read_bag(
       path, depth_topic=config.depth_topic, info_topic=config.info_topic,
@@ -397,6 +401,7 @@ def take_in(
     )
   # The recording's frames that cover the compared clip.
   pos = video.resample_indices(len(vid.depth), vid.fps, sim.fps)[: sim.frames]
+  check_clip(path, len(pos), sim)
   index = np.arange(int(math.floor(pos[-1] + 0.5 + 1e-9)) + 1)
   depth = vid.depth[index]
   h, w = depth.shape[1:]
@@ -432,6 +437,24 @@ def take_in(
   if cam is None:
     return intake
   return _align(intake, cam, config, sim, bg.planes, workdir)
+
+
+def check_clip(path: str, frames: int, sim: simulation.Simulation) -> None:
+  """Refuses a recording much shorter than the clip the search compares:
+  ``frames`` at the simulation's rate against ``sim.frames``. A shorter one
+  sets how many frames are simulated (``Simulation.frames``), down to
+  ``MIN_CLIP_SHARE`` of them; below, a few frames would pass for the clip.
+
+  Raises:
+    ValueError: naming the recording and both lengths.
+  """
+  if frames < MIN_CLIP_SHARE * sim.frames:
+    raise ValueError(
+      f'{path}: {frames} frames at {sim.fps:g} fps ({frames / sim.fps:.2f} s), but '
+      f'the search compares a clip of {sim.frames} frames ({sim.frames / sim.fps:.2f}'
+      f' s; at least {MIN_CLIP_SHARE:.0%} of it needed); record longer, or shorten '
+      'the clip (--frames)'
+    )
 
 
 def given_ups(cam: camera_files.CameraFile, config: IntakeConfig) -> list:

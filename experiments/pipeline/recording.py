@@ -18,7 +18,7 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import embedding
-from physsim import camera_files, dataset, video
+from physsim import camera_files, dataset, input_files, video
 
 
 class Recording(NamedTuple):
@@ -44,7 +44,9 @@ class Recording(NamedTuple):
 
 
 def read_json(path: str) -> dict:
-  """A JSON file's content; a missing or corrupt file is a ValueError naming it."""
+  """A JSON file's content; a missing or corrupt file, or one that is no
+  regular file (a FIFO would block), is a ValueError naming it."""
+  input_files.check_regular(path, 'JSON file')
   try:
     with open(path) as f:
       return json.load(f)

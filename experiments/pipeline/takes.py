@@ -41,9 +41,14 @@ table's edge that gives it (``fabric_overhang``)::
 
 from __future__ import annotations
 
+import difflib
+import json
 import math
 import os
 from typing import NamedTuple
+
+from physsim import input_files
+from physsim.input_files import shown
 
 # What a protocol file's entry may say (the rest is the estimate's flags).
 KEYS = ('recording', 'camera_json', 'cloth_size', 'wind_speed', 'wind_speed_sd',
@@ -51,6 +56,10 @@ KEYS = ('recording', 'camera_json', 'cloth_size', 'wind_speed', 'wind_speed_sd',
 CLOTH_SIZE_RANGE = (0.05, 3.0)  # metres, as Simulation.cloth_size
 HEM_MASS_RANGE = (0.0, 1.0)  # kg, as Simulation.hem_mass
 UP_AXES = ('x', 'y', 'z', '-x', '-y', '-z')
+# What a protocol file holds at its top level.
+TOP_KEYS = ('recordings', 'fabric')
+# The largest protocol file read (one of a hundred recordings takes 20 kB).
+MAX_FILE_BYTES = 1 << 20
 
 
 class Take(NamedTuple):
@@ -79,28 +88,63 @@ class Take(NamedTuple):
 
 def _number(where: str, key: str, value, lo: float, hi: float) -> float:
   if isinstance(value, bool) or not isinstance(value, (int, float)):
-    raise ValueError(f'{where}: "{key}" must be a number, got {value!r}')
-  v = float(value)
+    raise ValueError(f'{where}: "{key}" must be a number, got {shown(value)}')
+  try:
+    v = float(value)
+  except OverflowError:  # an integer of hundreds of digits
+    v = math.inf
   if not (math.isfinite(v) and lo <= v <= hi):
-    raise ValueError(f'{where}: "{key}"={value} must be in [{lo}, {hi}]')
+    raise ValueError(f'{where}: "{key}"={shown(value)} must be in [{lo}, {hi}]')
   return v
+
+
+def check_keys(where: str, mapping: dict, known) -> None:
+  """Refuses a key of ``mapping`` not in ``known``, naming it (and the known
+  key it most likely misspells): a misspelt reading would be dropped.
+
+  Raises:
+    ValueError: naming ``where`` and the first unknown key.
+  """
+  unknown = [k for k in mapping if k not in known]
+  if not unknown:
+    return
+  key = unknown[0]
+  close = difflib.get_close_matches(key, known, 1, 0.5) if isinstance(key, str) else []
+  hint = f' (did you mean "{close[0]}"?)' if close else ''
+  more = f' and {len(unknown) - 1} more' if len(unknown) > 1 else ''
+  raise ValueError(
+    f'{where}: unknown key {shown(key, 40)}{more}{hint}; known: {", ".join(known)}'
+  )
+
+
+def _path(where: str, key: str, value, base: str, required: bool) -> str:
+  """An entry's path, relative to the file's folder, checked to exist (and a
+  camera file to be a regular file: a FIFO would block its reading)."""
+  if not isinstance(value, str) or (required and not value):
+    raise ValueError(f'{where}: "{key}" must be a path, got {shown(value)}')
+  if len(value) > 4096 or '\0' in value:
+    raise ValueError(f'{where}: "{key}" is no path ({shown(value)})')
+  path = os.path.join(base, value) if value else ''
+  if path and not os.path.exists(path):
+    named = path if len(path) <= 200 else shown(path)
+    raise ValueError(f'{where}: "{key}" {named}: no such file or folder')
+  if path and key == 'camera_json':
+    try:
+      input_files.check_regular(path, 'camera file')
+    except ValueError as e:
+      raise ValueError(f'{where}: "{key}" {e}') from None
+  if path and input_files.is_special(path):
+    raise ValueError(f'{where}: "{key}" {path}: not a regular file or folder')
+  return path
 
 
 def _take(where: str, entry, base: str) -> Take:
   if not isinstance(entry, dict):
-    raise ValueError(f'{where}: must be an object with "recording", got {entry!r}')
-  unknown = sorted(set(entry) - set(KEYS))
-  if unknown:
-    raise ValueError(f'{where}: unknown keys {unknown}; known: {list(KEYS)}')
+    raise ValueError(f'{where}: must be an object with "recording", got {shown(entry)}')
+  check_keys(where, entry, KEYS)
   paths = {}
   for key in ('recording', 'camera_json'):
-    value = entry.get(key, '')
-    if not isinstance(value, str) or (key == 'recording' and not value):
-      raise ValueError(f'{where}: "{key}" must be a path, got {value!r}')
-    path = os.path.join(base, value) if value else ''
-    if path and not os.path.exists(path):
-      raise ValueError(f'{where}: "{key}" {path}: no such file or folder')
-    paths[key] = path
+    paths[key] = _path(where, key, entry.get(key, ''), base, key == 'recording')
   size = 0.0
   if 'cloth_size' in entry:
     size = _number(where, 'cloth_size', entry['cloth_size'], *CLOTH_SIZE_RANGE)
@@ -113,14 +157,18 @@ def _take(where: str, entry, base: str) -> Take:
       _number(where, 'wind_speed_sd', entry['wind_speed_sd'], 1e-9, 100.0),
     )
   up = entry.get('world_up', '')
-  if up not in ('', *UP_AXES):
-    raise ValueError(f'{where}: "world_up"={up!r} must be one of {list(UP_AXES)}')
+  if not isinstance(up, str) or up not in ('', *UP_AXES):
+    raise ValueError(
+      f'{where}: "world_up"={shown(up)} must be one of {", ".join(UP_AXES)}'
+    )
   hem = 0.0
   if 'hem_mass' in entry:
     hem = _number(where, 'hem_mass', entry['hem_mass'], *HEM_MASS_RANGE)
   fan = entry.get('fan', '')
-  if not isinstance(fan, str):
-    raise ValueError(f'{where}: "fan" must be a label (a string), got {fan!r}')
+  if not isinstance(fan, str) or len(fan) > 100:
+    raise ValueError(
+      f'{where}: "fan" must be a label (a string of at most 100), got {shown(fan)}'
+    )
   return Take(paths['recording'], paths['camera_json'], size, wind, up, hem, fan)
 
 
@@ -136,23 +184,41 @@ def fans(recorded: list[Take]) -> list[str] | None:
 FABRIC_KEYS = {'area_weight': (1e-3, 10.0), 'bending_length': (1e-4, 1.0)}
 
 
-def _load(path: str):
-  """A protocol file's data (JSON, or YAML by its extension)."""
-  try:
-    with open(path) as f:
-      text = f.read()
-    if path.lower().endswith(('.yaml', '.yml')):
-      import yaml  # noqa: PLC0415 - only YAML protocol files need it
+def _load(path: str) -> dict:
+  """A protocol file's data (JSON, or YAML by its extension), its top-level
+  keys checked.
 
-      data = yaml.safe_load(text)
-    else:
-      import json  # noqa: PLC0415
-
+  Raises:
+    ValueError: naming the file: no regular file (a FIFO would block), too
+      large, unreadable, a YAML alias (a few hundred bytes of them expand to
+      gigabytes), not an object, or an unknown top-level key (a misspelt
+      ``"fabric"`` would drop its readings).
+  """
+  if not os.path.lexists(path):
+    raise ValueError(f'{path}: no such protocol file')
+  text = input_files.read_text(path, 'protocol file', MAX_FILE_BYTES)
+  if path.lower().endswith(('.yaml', '.yml')):
+    try:
+      data = input_files.load_yaml(text, path)
+    except ValueError as e:
+      raise ValueError(f'{input_files.short(e, 280)}') from None
+  else:
+    try:
       data = json.loads(text)
-  except Exception as e:  # OSError, JSON's, YAML's own, RecursionError
+    except ValueError as e:
+      raise ValueError(
+        f'{path}: not a readable protocol file (JSON: {input_files.short(e, 120)})'
+      ) from None
+    except RecursionError:
+      raise ValueError(
+        f'{path}: not a readable protocol file (nested too deeply)'
+      ) from None
+  if not isinstance(data, dict):
     raise ValueError(
-      f'{path}: not a readable protocol file ({type(e).__name__})'
-    ) from e
+      f'{path}: not a readable protocol file: {shown(data, 40)}, not an object '
+      '{"recordings": [...]}'
+    )
+  check_keys(path, data, TOP_KEYS)
   return data
 
 
@@ -164,17 +230,29 @@ def read(path: str) -> list[Take]:
       one (named by its index and key), before any recording is read.
   """
   data = _load(path)
-  entries = data.get('recordings') if isinstance(data, dict) else None
+  entries = data.get('recordings')
   if not isinstance(entries, list) or not entries:
     raise ValueError(f'{path}: needs "recordings": a list of one or more entries')
   base = os.path.dirname(os.path.abspath(path))
   out = [_take(f'{path}: recordings[{k}]', e, base) for k, e in enumerate(entries)]
+  seen = {}
+  for k, t in enumerate(out):
+    real = os.path.realpath(t.path)
+    if real in seen:
+      raise ValueError(
+        f'{path}: recordings[{k}] "recording" is recordings[{seen[real]}]\'s '
+        f'({t.path if len(t.path) <= 120 else shown(t.path)}): one recording listed '
+        'twice would count as two'
+      )
+    seen[real] = k
   for label in {t.fan for t in out if t.fan}:
     read = {t.wind for t in out if t.fan == label}
     if len(read) > 1:
+      readings = sorted(read, key=str)
       raise ValueError(
-        f'{path}: the recordings of fan {label!r} were read {sorted(read, key=str)}: '
-        'one wind, one reading (give it to each of them, or to none)'
+        f'{path}: the recordings of fan {shown(label, 40)} were read '
+        f'{shown(readings, 100)}: one wind, one reading (give it to each of them, '
+        'or to none)'
       )
   return out
 
@@ -190,15 +268,13 @@ def fabric_readings(path: str) -> dict[str, float]:
       reading without its uncertainty (or the reverse), named.
   """
   data = _load(path)
-  fabric = data.get('fabric', {}) if isinstance(data, dict) else {}
+  fabric = data.get('fabric', {})
   where = f'{path}: fabric'
   if not isinstance(fabric, dict):
-    raise ValueError(f'{where}: must be an object of readings, got {fabric!r}')
+    raise ValueError(f'{where}: must be an object of readings, got {shown(fabric)}')
   known = [k for name in FABRIC_KEYS for k in (name, f'{name}_sd')]
   known += ['bending_length_dof', 'overhang']
-  unknown = sorted(set(fabric) - set(known))
-  if unknown:
-    raise ValueError(f'{where}: unknown keys {unknown}; known: {known}')
+  check_keys(where, fabric, known)
   out = {}
   for name, (lo, hi) in FABRIC_KEYS.items():
     if (name in fabric) != (f'{name}_sd' in fabric):
@@ -250,7 +326,7 @@ def fabric_overhang(path: str) -> Overhang | None:
       a bending length given beside it.
   """
   data = _load(path)
-  fabric = data.get('fabric', {}) if isinstance(data, dict) else {}
+  fabric = data.get('fabric', {})
   if not isinstance(fabric, dict) or 'overhang' not in fabric:
     return None
   where = f'{path}: fabric: overhang'
@@ -258,19 +334,12 @@ def fabric_overhang(path: str) -> Overhang | None:
   if 'bending_length' in fabric:
     raise ValueError(f'{where}: give it or "bending_length", not both')
   if not isinstance(entry, dict):
-    raise ValueError(f'{where}: must be an object with "recording", got {entry!r}')
-  unknown = sorted(set(entry) - set(OVERHANG_KEYS))
-  if unknown:
-    raise ValueError(f'{where}: unknown keys {unknown}; known: {list(OVERHANG_KEYS)}')
+    raise ValueError(f'{where}: must be an object with "recording", got {shown(entry)}')
+  check_keys(where, entry, OVERHANG_KEYS)
   base = os.path.dirname(os.path.abspath(path))
   paths = {}
   for key in ('recording', 'camera_json'):
-    value = entry.get(key)
-    if not isinstance(value, str) or not value:
-      raise ValueError(f'{where}: "{key}" must be a path, got {value!r}')
-    paths[key] = os.path.join(base, value)
-    if not os.path.exists(paths[key]):
-      raise ValueError(f'{where}: "{key}" {paths[key]}: no such file or folder')
+    paths[key] = _path(where, key, entry.get(key), base, True)
   if 'length' not in entry:
     raise ValueError(f'{where}: needs "length", the strip past the edge, m')
   return Overhang(

@@ -189,6 +189,40 @@ def test_bad_inputs_are_refused_before_anything_runs(scene, tmp_path):
   assert ok.pins_camera is not None
 
 
+def test_a_short_recording_and_a_fifo_frame_are_refused_by_name(scene, tmp_path):
+  """3 of the clip's 8 frames would pass for the clip; a FIFO named like a
+  frame would block the reader forever."""
+  import shutil  # noqa: PLC0415
+  import threading  # noqa: PLC0415
+
+  sim = ef.CONFIG.simulation
+  names = sorted(os.listdir(scene.frames), key=physsim.video.natural_key)
+  short = tmp_path / 'short'
+  short.mkdir()
+  for name in names[:3]:
+    shutil.copy(os.path.join(scene.frames, name), short / name)
+  with pytest.raises(
+    ValueError, match=r'short: 3 frames at 20 fps .* clip of 8 frames'
+  ):
+    intake.take_in(str(short), intake.IntakeConfig(), scene.camera_json, sim)
+  fifo = tmp_path / 'fifo'
+  shutil.copytree(scene.frames, fifo)
+  os.mkfifo(fifo / '0006.png')
+  out = {}
+
+  def target():
+    try:
+      intake.take_in(str(fifo), intake.IntakeConfig(), scene.camera_json, sim)
+    except ValueError as e:
+      out['error'] = str(e)
+
+  t = threading.Thread(target=target, daemon=True)
+  t.start()
+  t.join(30.0)
+  assert not t.is_alive(), 'blocked on a FIFO'
+  assert out['error'].startswith(str(fifo / '0006.png')) and 'FIFO' in out['error']
+
+
 def test_masks_and_depth_range_restrict_the_cloth(scene, tmp_path):
   mask = np.zeros((120, 160), np.uint8)
   mask[:, :80] = 255

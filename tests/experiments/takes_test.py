@@ -6,6 +6,9 @@ one line naming the file, the entry and the key before any recording is read."""
 from __future__ import annotations
 
 import json
+import os
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -50,7 +53,8 @@ def test_a_protocol_file_gives_each_recording_its_own_set_up(folder):
   'entry, message',
   [
     ({'recording': 'nowhere'}, r'recordings\[0\]: "recording" .*nowhere: no such'),
-    ({'recording': 'sheet', 'size': 1}, r"recordings\[0\]: unknown keys \['size'\]"),
+    ({'recording': 'sheet', 'size': 1},
+     r"recordings\[0\]: unknown key 'size' \(did you mean \"cloth_size\"\?\)"),
     ({'recording': 'sheet', 'cloth_size': 0.01}, r'"cloth_size"=0.01 must be in'),
     ({'recording': 'sheet', 'cloth_size': 'big'}, r'"cloth_size" must be a number'),
     ({'recording': 'sheet', 'wind_speed': 2.0}, r'"wind_speed_sd" come together'),
@@ -70,8 +74,100 @@ def test_a_bad_entry_is_refused_naming_file_entry_and_key(folder, entry, message
 def test_a_file_that_is_no_protocol_is_refused(folder, text):
   path = folder / 'p.json'
   path.write_text(text)
-  with pytest.raises(ValueError, match=r'p.json: (not a readable|needs "recordings")'):
+  with pytest.raises(
+    ValueError, match=r'p.json: (not a readable|needs "recordings"|unknown key)'
+  ):
     takes.read(str(path))
+
+
+def test_a_misspelt_top_level_key_is_refused_not_dropped(folder):
+  """ "fabrik" would drop the scale's reading without a word."""
+  path = _write(folder / 'p.json', {'recordings': [{'recording': 'sheet'}],
+                                    'fabrik': {'area_weight': 0.2}})  # fmt: skip
+  for read in (takes.read, takes.fabric_readings, takes.fabric_overhang):
+    with pytest.raises(ValueError, match=r"unknown key 'fabrik' \(did you mean") as e:
+      read(path)
+    assert str(e.value).startswith(path)
+  path = _write(folder / 'q.json', {'recordings': [{'recording': 'sheet'}],
+                                    'fabric': {'area_wieght': 0.2}})  # fmt: skip
+  with pytest.raises(ValueError, match=r"q.json: fabric: unknown key 'area_wieght'"):
+    takes.fabric_readings(path)
+
+
+def test_one_recording_listed_twice_is_refused(folder):
+  path = _write(folder / 'p.json', {'recordings': [
+    {'recording': 'sheet', 'fan': 'low'}, {'recording': 'swatch'},
+    {'recording': './sheet/', 'fan': 'low'},
+  ]})  # fmt: skip
+  with pytest.raises(
+    ValueError, match=r'recordings\[2\] "recording" is recordings\[0\]'
+  ):
+    takes.read(path)
+
+
+def test_a_yaml_alias_bomb_is_refused_quickly_in_one_short_line(folder):
+  lines = ['a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+  for i in range(1, 9):
+    prev, cur = chr(ord('a') + i - 1), chr(ord('a') + i)
+    lines.append(f'{cur}: &{cur} [' + ', '.join([f'*{prev}'] * 9) + ']')
+  lines.append('recordings: [{recording: sheet, fan: *i}]')
+  path = folder / 'p.yaml'
+  path.write_text('\n'.join(lines) + '\n')
+  assert path.stat().st_size < 700
+  t0 = time.perf_counter()
+  with pytest.raises(ValueError, match='aliases') as e:
+    takes.read(str(path))
+  assert time.perf_counter() - t0 < 1.0
+  msg = str(e.value)
+  assert msg.startswith(str(path)) and '\n' not in msg and len(msg) <= 300
+
+
+@pytest.mark.parametrize(
+  'entry',
+  [{'recording': 'sheet', 'fan': 'x' * 100_000},
+   {'recording': 'sheet', 'world_up': ['z'] * 50_000},
+   {'recording': 'sheet', 'cloth_size': 10**400},
+   {'recording': 'sheet', 'x' * 50_000: 1},
+   {'recording': 'y' * 5000}],
+)  # fmt: skip
+def test_a_long_value_is_shown_by_its_type_and_size(folder, entry):
+  path = _write(folder / 'p.json', {'recordings': [entry]})
+  with pytest.raises(ValueError) as e:
+    takes.read(path)
+  msg = str(e.value)
+  assert msg.startswith(path) and '\n' not in msg and len(msg) <= 300, msg
+
+
+def test_a_fifo_is_refused_by_name_never_opened(folder):
+  fifo = str(folder / 'p.json')
+  os.mkfifo(fifo)
+  with pytest.raises(ValueError, match='FIFO') as e:
+    _in_thread(lambda: takes.read(fifo))
+  assert str(e.value).startswith(fifo)
+  os.mkfifo(folder / 'sheet' / 'cam.json')
+  path = _write(folder / 'q.json', {'recordings': [
+    {'recording': 'sheet', 'camera_json': 'sheet/cam.json'}]})  # fmt: skip
+  with pytest.raises(ValueError, match=r'recordings\[0\]: "camera_json" .*FIFO'):
+    _in_thread(lambda: takes.read(path))
+
+
+def _in_thread(fn, timeout: float = 10.0):
+  """fn() in a daemon thread, failing (not hanging) where it blocks."""
+  out = {}
+
+  def target():
+    try:
+      out['value'] = fn()
+    except BaseException as e:  # noqa: BLE001 - handed back to the test
+      out['error'] = e
+
+  t = threading.Thread(target=target, daemon=True)
+  t.start()
+  t.join(timeout)
+  assert not t.is_alive(), f'blocked for {timeout} s'
+  if 'error' in out:
+    raise out['error']
+  return out.get('value')
 
 
 def test_flags_give_one_size_per_recording():
@@ -158,7 +254,7 @@ def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
     ({'overhang': strip, 'bending_length': 0.02, 'bending_length_sd': 0.001},
      'not both'),
     ({'overhang': {**strip, 'recording': 'nowhere'}}, 'no such file'),
-    ({'overhang': {**strip, 'reach': 0.03}}, r"unknown keys \['reach'\]"),
+    ({'overhang': {**strip, 'reach': 0.03}}, r"unknown key 'reach'"),
     ({'overhang': {k: v for k, v in strip.items() if k != 'length'}}, 'needs "length"'),
   ):  # fmt: skip
     bad = _write(folder / 'b.json', {'recordings': [{'recording': 'sheet'}],
@@ -171,7 +267,7 @@ def test_a_protocol_files_overhang_recording_gives_the_bending_length(folder):
   ('fabric', 'message'),
   [
     ({'area_weight': 0.2}, r'"area_weight" and "area_weight_sd" come together'),
-    ({'weight': 0.2}, r"unknown keys \['weight'\]"),
+    ({'weight': 0.2}, r"unknown key 'weight'"),
     ({'bending_length': 5.0, 'bending_length_sd': 0.1}, r'"bending_length"=5.0 must be in'),
     ([0.2], r'must be an object of readings'),
     ({'bending_length_dof': 4}, r'"bending_length_dof" without "bending_length"'),

@@ -208,3 +208,39 @@ def test_ambiguous_topics_are_listed_and_bad_bags_named(tmp_path):
     bags.read_bag(str(junk))
   with pytest.raises(ValueError, match='junk.bag: not a readable ROS bag'):
     intake.take_in(str(junk), intake.IntakeConfig(), '', _CONFIG.simulation)
+
+
+def test_a_ros2_bag_folder_without_metadata_is_named_as_such(tmp_path):
+  path, _, _ = write_bag(tmp_path / 'rec', Stores.ROS2_HUMBLE, frames=2, imu=False)
+  (tmp_path / 'rec' / 'metadata.yaml').unlink()
+  assert not bags.is_bag(path)
+  with pytest.raises(
+    ValueError, match=r'rec: a ROS 2 bag folder .*without its metadata'
+  ):
+    intake.take_in(path, intake.IntakeConfig(), '', _CONFIG.simulation)
+
+
+def test_a_bag_whose_files_are_fifos_is_refused_by_name(tmp_path):
+  import os  # noqa: PLC0415
+  import threading  # noqa: PLC0415
+
+  path, _, _ = write_bag(tmp_path / 'rec', Stores.ROS2_HUMBLE, frames=2, imu=False)
+  (db3,) = [f for f in os.listdir(path) if f.endswith(('.db3', '.mcap'))]
+  os.remove(os.path.join(path, db3))
+  os.mkfifo(os.path.join(path, db3))
+  fifo_bag = str(tmp_path / 'x.bag')
+  os.mkfifo(fifo_bag)
+  for bag, name in ((path, db3), (fifo_bag, 'x.bag')):
+    out = {}
+
+    def target(bag=bag, out=out):
+      try:
+        bags.read_bag(bag)
+      except ValueError as e:
+        out['error'] = str(e)
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    t.join(10.0)
+    assert not t.is_alive(), f'{bag}: blocked'
+    assert name in out['error'] and 'FIFO' in out['error']

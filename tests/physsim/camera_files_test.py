@@ -1,6 +1,9 @@
 """Tests for physsim.camera_files: the camera files depth-camera tools write."""
 
 import json
+import os
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -145,3 +148,100 @@ def test_scaled_to_keeps_the_camera_and_refuses_other_aspect_ratios():
   )
   with pytest.raises(ValueError, match='another aspect ratio'):
     camera_files.scaled_to(cam, 256, 256)
+
+
+_BASE = {'width': W, 'height': H, 'fx': FX, 'fy': FY, 'cx': CX, 'cy': CY}
+
+
+@pytest.mark.parametrize('count', [1, 2, 3, 6, 7, 9, 13, 15])
+def test_distortion_counts_opencv_does_not_take_are_refused(tmp_path, count):
+  path = _write(tmp_path, 'cam.json', dict(_BASE, distortion=[0.01] * count))
+  with pytest.raises(ValueError, match=rf'{count} distortion coefficients') as e:
+    camera_files.read_camera(path)
+  assert str(e.value).startswith(path)
+
+
+@pytest.mark.parametrize('count', [0, 4, 5, 8, 12, 14])
+def test_distortion_counts_opencv_takes_are_read_and_undone(tmp_path, count):
+  path = _write(tmp_path, 'cam.json', dict(_BASE, distortion=[1e-3] * count))
+  cam = camera_files.read_camera(path)
+  assert len(cam.distortion) == count
+  out = camera_files.undistort(np.ones((1, H, W), np.float32), cam)
+  assert out.shape == (1, H, W)
+
+
+def test_absurd_distortion_is_blamed_on_the_camera_file(tmp_path):
+  path = _write(tmp_path, 'cam.json', dict(_BASE, distortion=[1e6, 0, 0, 0, 0]))
+  with pytest.raises(ValueError, match='distortion coefficient of 1e'):
+    camera_files.read_camera(path)
+  # Within the bound but still no lens: its undistortion leaves the frame.
+  path = _write(tmp_path, 'cam2.json', dict(_BASE, distortion=[900, 0, 0, 0, 0]))
+  cam = camera_files.read_camera(path)
+  with pytest.raises(ValueError, match='inside the frame') as e:
+    camera_files.undistort(np.ones((1, H, W), np.float32), cam)
+  assert str(e.value).startswith(path)
+
+
+@pytest.mark.parametrize(
+  ('field', 'value'),
+  [('fx', 1e300), ('fx', True), ('fy', 1e-3), ('fy', False), ('cx', 1e300),
+   ('cy', -1e9), ('fx', 'NaN')],
+)  # fmt: skip
+def test_intrinsics_must_be_plausible_numbers_named_by_field(tmp_path, field, value):
+  path = _write(tmp_path, 'cam.json', dict(_BASE, **{field: value}))
+  with pytest.raises(ValueError, match=rf'"{field}"|{field} must') as e:
+    camera_files.read_camera(path)
+  assert str(e.value).startswith(path)
+  # The same in a camera matrix, true/false included.
+  k = [[FX, 0, CX], [0, FY, CY], [0, 0, 1]]
+  k[0][0] = True
+  path = _write(tmp_path, 'k.json', {'width': W, 'height': H, 'K': k})
+  with pytest.raises(ValueError, match='true/false'):
+    camera_files.read_camera(path)
+
+
+def test_yaml_alias_bomb_is_refused_at_once_naming_the_file(tmp_path):
+  lines = ['a: &a [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]']
+  for i in range(1, 12):
+    prev = chr(ord('a') + i - 1)
+    cur = chr(ord('a') + i)
+    lines.append(f'{cur}: &{cur} [' + ', '.join([f'*{prev}'] * 10) + ']')
+  lines += ['image_width: 320', 'image_height: 240', 'camera_matrix: *l']
+  text = '\n'.join(lines) + '\n'
+  assert len(text) < 700
+  path = _write(tmp_path, 'bomb.yaml', text)
+  t0 = time.perf_counter()
+  with pytest.raises(ValueError, match='aliases') as e:
+    camera_files.read_camera(path)
+  assert time.perf_counter() - t0 < 1.0
+  msg = str(e.value)
+  assert msg.startswith(path) and '\n' not in msg and len(msg) <= 300
+
+
+def test_a_fifo_named_as_camera_file_is_refused_without_opening(tmp_path):
+  fifo = str(tmp_path / 'camera.json')
+  os.mkfifo(fifo)
+  t0 = time.perf_counter()
+  with pytest.raises(ValueError, match='FIFO') as e:
+    _in_thread(lambda: camera_files.read_camera(fifo))
+  assert str(e.value).startswith(fifo) and time.perf_counter() - t0 < 5
+
+
+def _in_thread(fn, timeout: float = 10.0):
+  """fn() in a daemon thread: a call that blocks (open() on a FIFO) fails the
+  test instead of hanging it."""
+  out = {}
+
+  def target():
+    try:
+      out['value'] = fn()
+    except BaseException as e:  # noqa: BLE001 - handed back to the test
+      out['error'] = e
+
+  t = threading.Thread(target=target, daemon=True)
+  t.start()
+  t.join(timeout)
+  assert not t.is_alive(), f'blocked for {timeout} s'
+  if 'error' in out:
+    raise out['error']
+  return out.get('value')

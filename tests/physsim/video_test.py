@@ -252,3 +252,41 @@ def test_depth_units_and_frame_rate_are_checked(tmp_path):
     video.load_depth_video(str(folder), depth_scale=0.0002)
   with pytest.raises(ValueError, match='depth_scale must be'):
     video.load_depth_video(str(folder), source_fps=20, depth_scale=0.0)
+
+
+def _returns_within(fn, timeout: float = 10.0):
+  """fn()'s error in a daemon thread: one that blocks (open() on a FIFO)
+  fails the test instead of hanging it."""
+  import threading  # noqa: PLC0415
+
+  out = {}
+
+  def target():
+    try:
+      fn()
+    except ValueError as e:
+      out['error'] = str(e)
+
+  t = threading.Thread(target=target, daemon=True)
+  t.start()
+  t.join(timeout)
+  assert not t.is_alive(), f'blocked for {timeout} s'
+  return out.get('error', '')
+
+
+def test_a_fifo_named_like_a_frame_is_refused_by_name(tmp_path):
+  folder = tmp_path / 'f'
+  _png_folder(folder, (_frames(t=6) * 1000).astype(np.uint16))
+  os.mkfifo(folder / '0006.png')
+  msg = _returns_within(lambda: video.load_depth_video(str(folder), source_fps=20))
+  assert msg.startswith(str(folder / '0006.png')) and 'FIFO' in msg
+  msg = _returns_within(lambda: video.read_header(str(folder)))
+  assert 'FIFO' in msg
+  # A FIFO as the recording itself, and as the fps.txt beside frames.
+  os.mkfifo(tmp_path / 'rec.npy')
+  msg = _returns_within(lambda: video.load_depth_video(str(tmp_path / 'rec.npy')))
+  assert msg.startswith(str(tmp_path / 'rec.npy')) and 'FIFO' in msg
+  os.remove(folder / '0006.png')
+  os.mkfifo(folder / 'fps.txt')
+  msg = _returns_within(lambda: video.load_depth_video(str(folder)))
+  assert msg.startswith(str(folder / 'fps.txt')) and 'FIFO' in msg
