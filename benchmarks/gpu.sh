@@ -1,6 +1,5 @@
 #!/usr/bin/env bash
-# The GPU jobs behind BENCHMARKS.md, one stage a call (gpu_posterior.sh and
-# gpu_scaling.sh hold the posterior's and the scaling runs' stages):
+# The GPU jobs behind BENCHMARKS.md, one stage a call:
 #   bash benchmarks/gpu.sh STAGE [RUN] [ARGS]
 # Stages on a run folder RUN (progress in RUN/status.txt, logs in RUN/logs/;
 # every step resumes: rerun after an interruption; long ones as a background
@@ -39,13 +38,38 @@
 #                  training throughput in float32 and bfloat16.
 #   motion         experiments.fabric_motion (does it move like fabric) and the
 #                  paper dataset's summary and montages.
+#   posterior SUB [RUN]   one GPU's work for the posterior estimate ($OUT default
+#                  out/benchmarks/posterior), SUB one of:
+#                  paper: a paper-size PhySNet-depth for gray interlock and NREC
+#                    (default 3) real-like recordings;
+#                  latency: then benchmarks/estimate_latency.py (after compile;
+#                    PAPER=1 adds the paper's argmin) and Tables 2-style estimates of
+#                    the NREC recordings in lockstep;
+#                  coverage: after paper, NREC recordings for each seed of EVAL_SEEDS
+#                    (default 1000-1003), each set estimated in its own process
+#                    (READING=wind_reading_sd or area_weight_reading_sd: a 2% reading;
+#                    DISTANCE, SHARPNESS, LIKELIHOOD: the estimate's flags).
+#   scaling SUB [RUN]   the same program on 1 GPU and on every GPU, the runs
+#                  differing only in CUDA_VISIBLE_DEVICES ($OUT default
+#                  out/gpu_scaling, read by python -m benchmarks.scaling_report
+#                  --logs=$OUT); GPUS lists the counts (default "1 N"), G picks them:
+#                  sweep: the paper's dataset sweep (210 worlds), after a warm-up;
+#                  setup: a quick PhySNet-depth (EPOCHS, default 1) and NREC
+#                    (default 21) real-like recordings;
+#                  lockstep: Tables 2-style estimates of them in lockstep, ITERS
+#                    (default 2) iterations after the design;
+#                  calibrate: the paper-size calibration (PAIRS, default 2: 14 x
+#                    PAIRS recordings) on 1 GPU and as N processes of one GPU each
+#                    (SHARDED=1: one process over the N), each run with its own
+#                    empty JAX cache.
 # Training: at most EPOCHS (30) epochs, chosen on VAL (0.2) of the training
 # simulations, stopping after PATIENCE (4) without a better one. COLUMNS: the
-# methods (default all four). SMOKE=1 checks paper, table1, identify and engine
-# on a CPU with tiny settings (NG=2: two launcher processes share it). Set
-# PYTHONPATH yourself if the dependencies live outside the interpreter.
+# methods (default all four). SMOKE=1 checks paper, table1, identify, engine,
+# posterior and scaling on a CPU with tiny settings (NG=2: two launcher
+# processes share it). Set PYTHONPATH yourself if the dependencies live outside
+# the interpreter.
 set -uo pipefail
-stage=${1:?stage: paper, table1, collect, identify, one, fabrics_make, fabrics, engine, render or motion}
+stage=${1:?stage: paper, table1, collect, identify, one, fabrics_make, fabrics, engine, render, motion, posterior or scaling}
 shift
 export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 EPOCHS=${EPOCHS:-30} VAL=${VAL:-0.2} PATIENCE=${PATIENCE:-4}
@@ -249,10 +273,175 @@ motion() {
   tail -n 3 "$OUT"/*.log
 }
 
+posterior() (  # SUB [RUN]: the posterior's stages (a subshell: its settings stay in it)
+  set -e
+  sub=${1:?posterior stage: paper, latency or coverage}
+  R=${2:-/tmp/posterior_run}
+  OUT=${OUT:-out/benchmarks/posterior}
+  mkdir -p "$R" "$OUT"
+  export PYTHONUNBUFFERED=1
+  GI=gray_interlock
+  if [ -n "${SMOKE:-}" ]; then
+    DS="--preset=smoke --materials=$GI --sequences=4"
+    TR="--preset=smoke"
+    EV="--preset=smoke --materials=$GI --sequences=2 --resolution=32 --frames=8 --cloth_resolution=8"
+    EST="--preset=smoke --backend=c"
+    LAT="--backend=c --settings=psd_smoke --repeats=1"
+  else
+    DS="--materials=$GI --batch_size=30"
+    TR="--val_fraction=0.2 --patience=4"
+    EV="--preset=eval --materials=$GI --sequences=${NREC:-3} --batch_size=${NREC:-3}"
+    EST=""
+    LAT="--backend=mjx --settings=psd${PAPER:+,paper} --repeats=1"
+  fi
+  case "$sub" in
+    paper)
+      python -m experiments.generate_dataset --out="$R/ds" $DS 2>&1 | tail -20 | tee "$OUT/dataset.log"
+      python -m experiments.train --dataset="$R/ds" --workdir="$R/t1/physnet_depth/simulation" \
+        --materials=$GI $TR 2>&1 | tail -5 | tee "$OUT/train.log"
+      python -m experiments.generate_dataset --out="$R/eval/fabrics" $EV 2>&1 | tail -8 | tee "$OUT/eval.log"
+      ;;
+    latency)
+      [ -z "${SMOKE:-}" ] && python -m benchmarks.estimate_latency --recording="$R/eval/fabrics/$GI/0000" --material=$GI \
+        --model="$R/t1/physnet_depth/simulation/$GI" --out="$OUT/latency.json" $LAT 2>&1 \
+        | tee "$OUT/latency.log"
+      for p in ${PAPER:+paper} default; do
+        pre=$p; [ -n "${SMOKE:-}" ] && pre=smoke
+        python -m experiments.tables --eval="$R/eval" --models="$R/t1" --workdir="$R/tables_$p" \
+          --methods=physnet_depth --preset=$pre ${EST:+--backend=c} 2>&1 | tail -30 | tee "$OUT/tables_$p.log"
+        cp "$R/tables_$p/tables.json" "$OUT/tables_$p.json"
+      done
+      cp "$R"/tables_default/physnet_depth/fabrics/$GI-0000/posterior.png "$OUT/posterior_${GI}_0000.png"
+      ;;
+    coverage)
+      pre=default; [ -n "${SMOKE:-}" ] && pre=smoke
+      seeds=${EVAL_SEEDS:-1000 1001 1002 1003}
+      for seed in $seeds; do
+        python -m experiments.generate_dataset --out="$R/eval_$seed/fabrics" $EV --seed="$seed" 2>&1 \
+          | tail -3 > "$OUT/eval_$seed.log"
+      done
+      read_flag=""; [ -n "${READING:-}" ] && read_flag="--$READING=0.02"
+      name=${READING:-video}${DISTANCE:+_$DISTANCE}${LIKELIHOOD:+_$LIKELIHOOD}${SHARPNESS:+_c$SHARPNESS}
+      pids=""
+      for seed in $seeds; do
+        XLA_PYTHON_CLIENT_MEM_FRACTION=0.2 \
+        python -m experiments.tables --eval="$R/eval_$seed" --models="$R/t1" --workdir="$R/cov_${name}_$seed" \
+          --methods=physnet_depth --preset=$pre ${EST:+--backend=c} $read_flag \
+          ${READING:+--reading_seed=$seed} ${DISTANCE:+--distance=$DISTANCE} \
+          ${SHARPNESS:+--sharpness=$SHARPNESS} ${LIKELIHOOD:+--likelihood=$LIKELIHOOD} \
+          > "$OUT/cov_${name}_$seed.log" 2>&1 &
+        pids="$pids $!"
+      done
+      for p in $pids; do wait "$p"; done
+      for seed in $seeds; do
+        tail -6 "$OUT/cov_${name}_$seed.log"
+        cp "$R/cov_${name}_$seed/tables.json" "$OUT/cov_${name}_$seed.json"
+      done
+      ;;
+    *) echo "unknown posterior stage $sub" >&2; exit 2 ;;
+  esac
+)
+
+scaling() (  # SUB [RUN]: one program on 1 GPU and on every GPU
+  sub=${1:?scaling stage: sweep, setup, lockstep or calibrate}
+  R=${2:-/tmp/scaling_run}
+  OUT=${OUT:-out/gpu_scaling}
+  mkdir -p "$R" "$OUT"
+  export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
+  NG=$(nvidia-smi -L 2>/dev/null | wc -l)
+  [ "$NG" -ge 1 ] 2>/dev/null || NG=2
+  GPUS=${GPUS:-"1 $NG"}
+  GI=gray_interlock
+  NREC=${NREC:-21}
+  ITERS=${ITERS:-2}
+  DS="--batch_size=210"
+  WARM="--materials=$GI --sequences=2 --batch_size=2 --frames=4"
+  TRAIN="--epochs=${EPOCHS:-1} --val_fraction=0.2"
+  EV="--preset=eval --materials=$GI --sequences=$NREC --batch_size=$NREC"
+  TAB="--methods=physnet_depth --min_iter=$ITERS --max_iter=$ITERS"
+  CAL="--preset=paper --pairs=${PAIRS:-2} --simulate_only"
+  if [ -n "${SMOKE:-}" ]; then
+    S="--preset=smoke --backend=c"
+    DS="$S --materials=$GI,black_denim --sequences=4 --batch_size=8"
+    WARM="$S --materials=$GI --sequences=1 --batch_size=1"
+    TRAIN="--preset=smoke --epochs=1"
+    EV="$S --materials=$GI --sequences=$NREC --batch_size=$NREC --resolution=32 --frames=8 --cloth_resolution=8"
+    TAB="$TAB --preset=smoke --backend=c"
+    CAL="--preset=smoke --distance=shape --materials=$GI --pairs=1 --backend=c --simulate_only"
+  fi
+  devices() {  # the first $1 devices, as CUDA_VISIBLE_DEVICES (or XLA host devices)
+    export CUDA_VISIBLE_DEVICES
+    CUDA_VISIBLE_DEVICES=$(seq -s, 0 $(($1 - 1)))
+    [ -n "${SMOKE:-}" ] && export XLA_FLAGS="--xla_force_host_platform_device_count=$1"
+  }
+  timed() {  # name command...: its log in $OUT/name.log, then "wall S" appended
+    local name=$1 t0
+    shift
+    t0=$EPOCHREALTIME
+    "$@" >"$OUT/$name.log" 2>&1
+    local rc=$?
+    awk -v a="$t0" -v b="$EPOCHREALTIME" -v rc=$rc \
+      'BEGIN { printf "wall %.2f s, exit %d\n", b - a, rc }' >>"$OUT/$name.log"
+    echo "$name: $(tail -1 "$OUT/$name.log")"
+  }
+  case "$sub" in
+    sweep)
+      devices 1
+      timed sweep_warmup python -m experiments.generate_dataset --out="$R/warm" $WARM
+      for g in $GPUS; do
+        devices "$g"
+        rm -rf "$R/sweep_$g"
+        timed "sweep_${g}gpu" python -m experiments.generate_dataset --out="$R/sweep_$g" $DS
+        cp "$R/sweep_$g/summary.json" "$OUT/sweep_${g}gpu.json"
+      done
+      ;;
+    setup)
+      devices 1
+      timed setup_train python -m experiments.train --dataset="$R/sweep_1" \
+        --workdir="$R/t1/physnet_depth/simulation" --materials=$GI $TRAIN
+      timed setup_eval python -m experiments.generate_dataset --out="$R/eval/fabrics" $EV
+      ;;
+    lockstep)
+      for g in ${G:-$GPUS}; do
+        devices "$g"
+        rm -rf "$R/tables_$g"
+        timed "lockstep_${g}gpu" python -m experiments.tables --eval="$R/eval" \
+          --models="$R/t1" --workdir="$R/tables_$g" $TAB
+      done
+      ;;
+    calibrate)
+      devices 1
+      timed calibrate_warmup python -m experiments.generate_dataset --out="$R/warm" $WARM
+      for g in ${G:-$GPUS}; do
+        rm -rf "$R/cal_$g" "$R/jax_cache_$g"
+        export PHYSNET_JAX_CACHE=$R/jax_cache_$g
+        if [ "$g" = 1 ]; then
+          devices 1
+          timed calibrate_1gpu python -m experiments.calibrate $CAL --workdir="$R/cal_1"
+        elif [ -n "${SHARDED:-}" ]; then
+          devices "$g"
+          timed "calsharded_${g}gpu" python -m experiments.calibrate $CAL --workdir="$R/cal_$g"
+        else
+          devices "$g"
+          gpp=1  # each process its own GPU (on a CPU: one host device each)
+          [ -n "${SMOKE:-}" ] && gpp=0 && export XLA_FLAGS=--xla_force_host_platform_device_count=1
+          timed "calibrate_${g}gpu" python -m experiments.launch --processes="$g" \
+            --gpus_per_process=$gpp --port=$((12355 + g)) \
+            --command="python -m experiments.calibrate $CAL --workdir=$R/cal_$g"
+        fi
+      done
+      ;;
+    *) echo "unknown scaling stage $sub" >&2; exit 2 ;;
+  esac
+)
+
 case "$stage" in
   paper | table1 | identify | one | fabrics_make | fabrics | collect)
     run_folder "${1:-}"
     shift $(($# > 0 ? 1 : 0))
+    "$stage" "$@"
+    ;;
+  posterior | scaling)
     "$stage" "$@"
     ;;
   engine | render | motion)

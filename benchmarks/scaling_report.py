@@ -1,4 +1,4 @@
-"""The table of ``benchmarks/gpu_scaling.sh``: the same program on 1 and N GPUs.
+"""The table of ``benchmarks/gpu.sh scaling``: the same program on 1 and N GPUs.
 
   python -m benchmarks.scaling_report --logs=out/gpu_scaling
 
@@ -41,7 +41,7 @@ class Args:
   """The scaling report.
 
   Attributes:
-    logs: gpu_scaling.sh's $OUT.
+    logs: ``gpu.sh scaling``'s $OUT.
     out: JSON output (empty: LOGS/scaling.json).
   """
 

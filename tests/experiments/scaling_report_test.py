@@ -1,4 +1,4 @@
-"""Tests for benchmarks/scaling_report.py: the logs of gpu_scaling.sh, read back
+"""Tests for benchmarks/scaling_report.py: the logs of gpu.sh scaling, read back
 into rows whose speed-ups are worked out by hand."""
 
 from __future__ import annotations
