@@ -21,7 +21,7 @@ STAGES = (
    'embedding', 'simulation', 'recording'),
   ('intake', 'takes', 'rig'),
   ('measurements',),
-  ('objective',),
+  ('config', 'problem', 'objective'),
   ('calibration_tables', 'setup'),
   ('search',),
   ('posterior',),
