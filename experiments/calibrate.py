@@ -1,4 +1,4 @@
-"""Simulation-based calibration of the estimate's credible intervals.
+r"""Simulation-based calibration of the estimate's credible intervals.
 
   python -m experiments.calibrate --workdir=out/calibration            # GPU: 200 recordings
   python -m experiments.calibrate --workdir=/tmp/cal --preset=smoke    # CPU, minutes

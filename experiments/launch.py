@@ -1,4 +1,4 @@
-"""Run one experiment as several processes on this machine, joined by jax.distributed.
+r"""Run one experiment as several processes on this machine, joined by jax.distributed.
 
   python -m experiments.launch --processes=4 --gpus_per_process=1 \
       --command="python -m experiments.tables --eval=data/eval --models=out/table1"

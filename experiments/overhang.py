@@ -1,8 +1,8 @@
-"""A fabric's bending length from an overhang: a ruler's reading or a depth recording (issue 39).
+r"""A fabric's bending length from an overhang: a ruler's reading or a depth recording (issue 39).
 
   python -m experiments.overhang --overhang=0.06 --reach=0.045
   python -m experiments.overhang --overhang=0.05 --depth=strip_frames/ \
-      --camera=camera.json --figure=overhang.png   # a depth camera instead
+      --camera_json=camera.json --figure=overhang.png   # a depth camera instead
   python -m experiments.overhang --overhang=0.06 --reach=0.045 --ruler_sd=0.002 \
       --material=gray_interlock --area_weight=0.21
   python -m experiments.overhang --overhang=0.06,0.06,0.06,0.06 \
@@ -23,7 +23,7 @@ weight it also prints the rigidity D = w g c^3 and the bending scale (D over
 the fabric's reference, what estimates report).
 
 With ``--depth`` (one recording per overhang: a folder of 16-bit PNG frames in
-mm, an .npy/.npz or a video, as estimates read them) and ``--camera`` (its
+mm, an .npy/.npz or a video, as estimates read them) and ``--camera_json`` (its
 intrinsics, an OpenCV-style JSON file) the reach is not read by hand: the
 strip's whole hanging curve is found in the frames and the elastica fitted
 to it (``physsim.overhang_depth``; film the table's edge from in front,
@@ -62,7 +62,9 @@ class Args:
     area_weight_sd: its standard uncertainty, kg/m^2.
     depth: depth recordings of the overhangs instead of reaches (one per
       overhang).
-    camera: the depth camera's file (intrinsics; required with ``depth``).
+    camera: the depth camera's file (intrinsics; required with ``depth``);
+      ``--camera_json`` as in ``experiments.estimate`` (``--camera`` is its
+      older name).
     depth_scale: metres per unit of 16-bit PNG frames.
     figure: a PNG of what was read from the recordings ('' for none).
   """
@@ -74,7 +76,7 @@ class Args:
   area_weight: float = 0.0
   area_weight_sd: float = 0.0
   depth: tuple[str, ...] = ()
-  camera: str = ''
+  camera: str = cli.renamed('', 'camera_json', aliases=('camera',))
   depth_scale: float = 0.001
   figure: str = ''
 
@@ -142,7 +144,7 @@ def reading(args: Args) -> dict:
 def _from_depth(overhang: float, path: str, args: Args) -> overhang_depth.Reading:
   """One depth recording's reading, refusals naming the file or flag."""
   if not args.camera:
-    raise ValueError(f"--depth={path}: needs --camera (the depth camera's file)")
+    raise ValueError(f"--depth={path}: needs --camera_json (the depth camera's file)")
   return overhang_depth.read_recording(
     path, args.camera, overhang, args.ruler_sd, args.depth_scale
   )

@@ -1,4 +1,4 @@
-"""What to record next, from an estimate's posterior (issue 39, item 4).
+r"""What to record next, from an estimate's posterior (issue 39, item 4).
 
   python -m experiments.plan --workdir=out/estimate           # its posterior.npz
   python -m experiments.plan --workdir=out/joint   # a joint's joint_posterior.npz

@@ -51,6 +51,7 @@ _REQUIRED = 'required'
 _CHOICES = 'choices'
 _SKIP = 'skip'
 _FLAG = 'flag'
+_ALIASES = 'aliases'
 
 
 def required(default: str = ''):
@@ -63,10 +64,11 @@ def choice(default: str, choices):
   return dataclasses.field(default=default, metadata={_CHOICES: tuple(choices)})
 
 
-def renamed(default, flag: str):
+def renamed(default, flag: str, *, aliases: tuple[str, ...] = ()):
   """A field whose flag has another name than the field (``--flag``): where a
-  script's word for a setting differs from the library's."""
-  return dataclasses.field(default=default, metadata={_FLAG: flag})
+  script's word for a setting differs from the library's. ``aliases``: older
+  names the flag still answers to (deprecated; ``--help`` says which)."""
+  return dataclasses.field(default=default, metadata={_FLAG: flag, _ALIASES: aliases})
 
 
 def nested(default, *, skip=()):
@@ -228,6 +230,8 @@ def define_flags(
       flags.DEFINE_string(name, default, doc, **kw)
     else:
       flags.DEFINE_list(name, [str(v) for v in default], doc, **kw)
+    for alias in leaf.field.metadata.get(_ALIASES, ()):
+      flags.DEFINE_alias(alias, name, **kw)
 
 
 def from_flags(

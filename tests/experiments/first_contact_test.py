@@ -1,0 +1,58 @@
+"""A newcomer's first contact with the scripts (issue 78): one name for the
+camera flag across scripts, docstring examples that paste into a shell as
+written."""
+
+from __future__ import annotations
+
+import ast
+import pathlib
+
+import pytest
+
+from experiments import overhang
+from experiments.pipeline import cli
+
+_ROOT = pathlib.Path(__file__).resolve().parents[2]
+SCRIPTS = sorted(
+  p.stem for p in (_ROOT / 'experiments').glob('*.py') if p.stem != '__init__'
+)
+
+
+def test_overhang_names_the_camera_as_estimate_does():
+  argv = ['overhang', '--overhang=0.05', '--depth=strip']
+  got = cli.parse(overhang.Args, overhang.PRESETS, [*argv, '--camera_json=c.json'])
+  assert got.camera == 'c.json'
+  # The older name still answers, as an alias of the same flag.
+  old = cli.parse(overhang.Args, overhang.PRESETS, [*argv, '--camera=d.json'])
+  assert old.camera == 'd.json'
+  with pytest.raises(ValueError, match='needs --camera_json'):
+    overhang.main(overhang.Args(overhang=(0.05,), depth=('strip',)))
+
+
+def _module_docstring_source(path: pathlib.Path) -> str:
+  src = path.read_text()
+  node = ast.parse(src).body[0]
+  return ast.get_source_segment(src, node) or ''
+
+
+@pytest.mark.parametrize('name', SCRIPTS)
+def test_docstring_examples_keep_their_line_continuations(name):
+  """A backslash at a line's end in a plain docstring is an escape: Python
+  drops it and the newline, so --help showed the example's lines run
+  together. Raw docstrings (or doubled backslashes) keep them."""
+  if name == 'validate':
+    pytest.skip('experiments/validate.py: owned by the export work (issue 78)')
+  path = _ROOT / 'experiments' / f'{name}.py'
+  seg = _module_docstring_source(path)
+  raw = seg[:1].lower() == 'r'
+  if raw:
+    return
+  lines = seg.splitlines()
+  broken = [
+    k + 1 for k, line in enumerate(lines)
+    if line.endswith('\\') and not line.endswith('\\\\')
+  ]  # fmt: skip
+  assert not broken, f'experiments/{name}.py: line(s) {broken} end in a lone backslash'
+  doc = ast.get_docstring(ast.parse(path.read_text()), clean=False) or ''
+  for line in doc.splitlines():
+    assert not line.rstrip().endswith('\\') or line.rstrip().endswith(' \\'), line
