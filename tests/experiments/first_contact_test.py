@@ -56,3 +56,10 @@ def test_docstring_examples_keep_their_line_continuations(name):
   doc = ast.get_docstring(ast.parse(path.read_text()), clean=False) or ''
   for line in doc.splitlines():
     assert not line.rstrip().endswith('\\') or line.rstrip().endswith(' \\'), line
+
+
+def test_the_licence_pyproject_names_is_at_the_root():
+  text = (_ROOT / 'LICENSE').read_text()
+  assert 'Apache License' in text and 'Version 2.0, January 2004' in text
+  assert 'END OF TERMS AND CONDITIONS' in text
+  assert 'Apache-2.0' in (_ROOT / 'pyproject.toml').read_text()
