@@ -32,11 +32,12 @@ class Args:
       or a joint estimate's ``joint_posterior.npz`` and ``joint.json``).
     candidates: recordings to rank (``protocol.Candidate`` names, e.g.
       ``swatch_20cm_2ms_r9``: size, fan m/s or ``still``, mesh; comma-separated).
-    nodes: posterior points where slopes are simulated (quantiles of bending).
+    nodes: posterior points where slopes are simulated (quantiles of bending;
+      1 to 16).
     reading: relative standard error of an anemometer reading of the new
-      recording's wind (0: none).
-    draws: gust histories per candidate for its noise.
-    clip: seconds of the recording.
+      recording's wind (0: none; at most 1).
+    draws: gust histories per candidate for its noise (3 to 64).
+    clip: seconds of the recording (0.25 to 10).
     seed: gust histories.
   """
 
@@ -59,8 +60,6 @@ PRESETS = {
 
 
 def main(args: Args) -> None:
-  if args.reading < 0:
-    raise ValueError(f'--reading={args.reading}: need >= 0')
   warmup = 0.25 if args.clip < 1 else 1.0
   config = protocol.Config(draws=args.draws, clip=args.clip, warmup=warmup,
                            seed=args.seed)  # fmt: skip

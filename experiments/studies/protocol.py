@@ -57,7 +57,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import physsim  # noqa: E402
 from bo import design  # noqa: E402
-from experiments.pipeline import files  # noqa: E402
+from experiments.pipeline import files, progress  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from physsim import cantilever  # noqa: E402
 
@@ -576,6 +576,14 @@ def _steady_kwargs(config: Config) -> dict:
               space=SPACE)  # fmt: skip
 
 
+def slope_path(c: Candidate, bending: float, area_weight: float, config: Config,
+               cache_dir: str) -> str:  # fmt: skip
+  """Where ``candidate_slopes`` caches the candidate's slopes at a truth."""
+  return os.path.join(
+    cache_dir, f'{_stem(c, bending, area_weight, config)}_v{CACHE_VERSION}.json'
+  )
+
+
 def candidate_slopes(c: Candidate, bending: float, area_weight: float,
                      config: Config, cache_dir: str, key) -> dict:  # fmt: skip
   """``simulate_candidate``, cached as JSON under ``cache_dir`` (a rerun, or
@@ -583,9 +591,7 @@ def candidate_slopes(c: Candidate, bending: float, area_weight: float,
   changes what is simulated or how its noise is read (``_SLOPE_FIELDS``; a
   short digest of those that differ from the defaults), so that a study of
   other clips never reads another's slopes."""
-  path = os.path.join(
-    cache_dir, f'{_stem(c, bending, area_weight, config)}_v{CACHE_VERSION}.json'
-  )
+  path = slope_path(c, bending, area_weight, config, cache_dir)
   if os.path.exists(path):
     with open(path) as f:
       return json.load(f)
@@ -1013,14 +1019,58 @@ def describe(name: str, clip: float) -> str:
   )
 
 
+# What experiments.plan may ask, checked before anything is read or simulated:
+# each candidate and node is up to a minute of MuJoCo C on two cores.
+PLAN_LIMITS = {'candidates': (1, 32), 'nodes': (1, 16), 'draws': (3, 64)}
+PLAN_CLIP_S = (0.25, 10.0)
+PLAN_READING = (0.0, 1.0)
+
+
+def check_plan(candidates, nodes: int, reading: float, config: Config) -> None:
+  """Refuses what ``plan`` cannot do sensibly, before anything is allocated:
+  counts outside ``PLAN_LIMITS`` (fewer than 3 gust histories give no noise
+  covariance, so any candidate looks informative), a clip outside
+  ``PLAN_CLIP_S``, a reading outside ``PLAN_READING``, a candidate that is
+  not one.
+
+  Raises:
+    ValueError: naming the flag and its value.
+  """
+  counts = {'candidates': len(candidates), 'nodes': nodes, 'draws': config.draws}
+  for name, value in counts.items():
+    lo, hi = PLAN_LIMITS[name]
+    if isinstance(value, bool) or not lo <= value <= hi:
+      what = f'{value} given' if name == 'candidates' else str(value)
+      raise ValueError(f'--{name}={what}: need {lo} to {hi}')
+  lo, hi = PLAN_CLIP_S
+  if not lo <= config.clip <= hi:
+    raise ValueError(f'--clip={config.clip:g}: need {lo:g} to {hi:g} s')
+  lo, hi = PLAN_READING
+  if not lo <= reading <= hi:
+    raise ValueError(f'--reading={reading:g}: need {lo:g} to {hi:g} (relative sd)')
+  for name in candidates:
+    if len(name) > 64:
+      raise ValueError(f'--candidates: a name of {len(name)} characters is none')
+    try:
+      parse(name)
+    except ValueError as e:
+      raise ValueError(f'--candidates: {e}') from None
+
+
 def plan(workdir: str, candidates=PLAN_CANDIDATES, nodes: int = 1,
-         reading: float = 0.0, config: Config | None = None) -> dict:  # fmt: skip
+         reading: float = 0.0, config: Config | None = None, *,
+         show_progress: bool = True) -> dict:  # fmt: skip
   """Ranks ``candidates`` for the estimate in ``workdir`` (``posterior.read_draws``);
   slopes simulated at ``nodes`` posterior points with ``config``'s settings,
-  cached in ``<workdir>/plan_slopes/``; writes ``plan.json``."""
+  cached in ``<workdir>/plan_slopes/``, with a progress bar and its time left
+  (``show_progress``); writes ``plan.json``.
+
+  Raises:
+    ValueError: settings ``check_plan`` refuses, or an estimate's files that
+      are missing or unreadable (named).
+  """
   config = config or Config()
-  if nodes < 1:
-    raise ValueError(f'--nodes={nodes}: need at least 1')
+  check_plan(candidates, nodes, reading, config)
   material, draws, weights = posterior_lib.read_draws(workdir)
   config = dataclasses.replace(config, material=material)
   points = node_values(draws, nodes)
@@ -1031,14 +1081,20 @@ def plan(workdir: str, candidates=PLAN_CANDIDATES, nodes: int = 1,
   )
   key = jax.random.key(config.seed)
   rows = {}
-  for name in candidates:
-    c = parse(name)
-    rows[name] = [
-      candidate_slopes(
-        c, float(np.exp(b)), float(np.exp(w)), config, cache, jax.random.fold_in(key, k)
-      )  # fmt: skip
-      for k, (b, w) in enumerate(points)
-    ]
+  total = len(candidates) * len(points)
+  with progress.Bar(total, 'plan: slopes', 'sim', disable=not show_progress) as bar:
+    for name in candidates:
+      c = parse(name)
+      rows[name] = []
+      for k, (b, w) in enumerate(points):
+        bending, area_weight = float(np.exp(b)), float(np.exp(w))
+        cached = os.path.exists(slope_path(c, bending, area_weight, config, cache))
+        rows[name].append(
+          candidate_slopes(
+            c, bending, area_weight, config, cache, jax.random.fold_in(key, k)
+          )
+        )
+        (bar.skip if cached else bar.done)(1)
   ranked = rank_candidates(draws, weights, rows, points, reading, material)
   best = ranked[0]
   line = recommendation(best, config.clip)

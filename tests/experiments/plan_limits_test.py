@@ -1,0 +1,73 @@
+"""experiments.plan's first contact (issue 78): every count and size bounded
+before anything is read or allocated, and progress with the time left."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments import plan as script
+from experiments.pipeline import cli
+from experiments.studies import protocol
+
+
+@pytest.mark.parametrize(
+  ('flag', 'message'),
+  [('--nodes=1000000000', r'--nodes=1000000000: need 1 to 16'),
+   ('--nodes=0', r'--nodes=0: need 1 to 16'),
+   ('--draws=0', r'--draws=0: need 3 to 64'),
+   ('--draws=2', r'--draws=2: need 3 to 64'),
+   ('--clip=1e9', r'--clip=1e\+09: need 0.25 to 10 s'),
+   ('--reading=-1', r'--reading=-1: need 0 to 1'),
+   ('--candidates=sheet_1e9cm_2ms_r9', r'--candidates: candidate .sheet_1e9cm'),
+   ('--candidates=' + ','.join(['sheet_100cm_2ms_r9'] * 40),
+    r'--candidates=40 given: need 1 to 32')],
+)  # fmt: skip
+def test_counts_and_sizes_are_bounded_before_anything_is_read(tmp_path, flag, message):
+  workdir = tmp_path / 'nowhere'
+  args = cli.parse(script.Args, script.PRESETS, ['plan', f'--workdir={workdir}', flag])
+  t0 = time.perf_counter()
+  with pytest.raises(ValueError, match=message) as e:
+    script.main(args)
+  assert time.perf_counter() - t0 < 1.0 and len(str(e.value)) <= 300
+  assert not workdir.exists()
+
+
+def test_plan_shows_its_progress_and_time_left(tmp_path, monkeypatch, capsys):
+  """Each candidate and node a step of the bar; cached ones counted, not
+  timed (a second run says nothing is left to simulate)."""
+  rng = np.random.default_rng(0)
+  u = rng.uniform(-1, 1, (200, 3))
+  space = physsim.search_space('gray_interlock')
+  np.savez(tmp_path / 'posterior.npz', samples=u, bounds=space.bounds())
+  (tmp_path / 'estimate.json').write_text(json.dumps({'material': 'gray_interlock'}))
+  calls = []
+
+  def fake(c, bending, area_weight, config, cache_dir, key):
+    calls.append(c.name)
+    time.sleep(0.01)
+    path = protocol.slope_path(c, bending, area_weight, config, cache_dir)
+    os.makedirs(cache_dir, exist_ok=True)
+    row = {'wind': c.wind, 'slopes': [[1.0, 0.5, 0.2]] if c.wind else [[1.0, 0.5]],
+           'noise_cov': [[0.1]]}  # fmt: skip
+    with open(path, 'w') as f:
+      json.dump(row, f)
+    return row
+
+  monkeypatch.setattr(protocol, 'candidate_slopes', fake)
+  names = ('sheet_100cm_2ms_r5', 'swatch_20cm_still_r5', 'sheet_100cm_5ms_r5')
+  args = script.Args(workdir=str(tmp_path), candidates=names, nodes=2, draws=3)
+  script.main(args)
+  err = capsys.readouterr().err
+  assert len(calls) == 6
+  assert 'plan: slopes' in err and '6/6 (100%)' in err and 'left' in err, err
+  calls.clear()
+  script.main(args)
+  assert len(calls) == 6  # the real one would read its cache: counted, not timed
+  err = capsys.readouterr().err
+  assert '6/6 (100%)' in err
