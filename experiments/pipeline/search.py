@@ -521,39 +521,81 @@ def run(
       ``--time_limit`` (``deadline``); every search's state is saved, so the
       same call resumes.
   """
-  t_start = time.perf_counter()
-  out: list[dict | Exception | None] = [None] * len(jobs)
-  resolved = resolve_jobs(jobs, nets)
-  jobs = [
-    j if isinstance(j, Job) else job for j, job in zip(resolved, jobs, strict=True)
-  ]
-  live: list[LiveSearch] = []
-  for i, job in enumerate(jobs):
-    if isinstance(resolved[i], Exception):
-      out[i] = resolved[i]
-      continue
-    st = job.setup
-    try:
-      problem = obj_lib.make_problem(st.config, st.network.embedding, job.recording)
-      opt = make_searcher(
-        st.config, st.space, job.workdir, gp_on_cpu=gp_on_cpu, index=i
-      )
-      os.makedirs(job.workdir, exist_ok=True)
-      check_run(job, problem)
-      live.append(LiveSearch(i, problem, opt, opt.start(), obj_lib.BestSeen()))
-    except (ValueError, OSError) as e:
-      out[i] = e
-  evaluate = evaluator or Evaluator()
-  seconds_before = evaluate.seconds
-  # The searches' GP steps run as one program per setting (bo.batched), their
-  # rows stacked over the recordings and spread over the host's CPU devices
-  # (one per core: cli.host_devices) or the local GPUs. The batch keeps its
-  # first size (on CPUs the rows of searches that finished are skipped), so
-  # the program compiles once.
-  gp_devices = jax.local_devices(backend='cpu') if gp_on_cpu else jax.local_devices()
-  gp_seconds = 0.0
+  lock = _Lockstep(jobs, write, progress, gp_on_cpu, evaluator or Evaluator())
+  lock.start(nets)
+  # Searches that finished before: their result stands (run.json matched).
+  ended = [s for s in lock.live if s.done()]
+  for s in ended:
+    path = os.path.join(lock.jobs[s.index].workdir, layout.ESTIMATE_FILE)
+    if os.path.isfile(path):
+      lock.out[s.index] = read_json(path)
+  lock.finish([s for s in ended if lock.out[s.index] is None])
+  while active := [s for s in lock.live if not s.done()]:
+    lock.step(active)
+  return lock.out
 
-  def finish(finished):
+
+@dataclasses.dataclass
+class _Lockstep:
+  """``run``'s searches as they advance together, and what they have cost.
+
+  The searches' GP steps run as one program per setting (bo.batched), their
+  rows stacked over the recordings and spread over the host's CPU devices
+  (one per core: cli.host_devices) or the local GPUs. The batch keeps its
+  first size (on CPUs the rows of searches that finished are skipped), so
+  the program compiles once.
+  """
+
+  jobs: list[Job]
+  write: Callable[..., dict]
+  progress: bool
+  gp_on_cpu: bool
+  evaluate: Evaluator
+  out: list = dataclasses.field(default_factory=list)
+  live: list[LiveSearch] = dataclasses.field(default_factory=list)
+  t_start: float = dataclasses.field(default_factory=time.perf_counter)
+  gp_seconds: float = 0.0
+  steps: int = 0
+  last_step_s: float = 0.0
+  last_asked: int = 0
+  last_run: int = 0
+  last_rows: int = 0
+  last_one_off: float = 0.0
+  one_off: physsim.one_off.Meter = dataclasses.field(
+    default_factory=physsim.one_off.Meter
+  )  # compiles and set-ups of each step
+
+  def __post_init__(self):
+    self.out = [None] * len(self.jobs)
+    self.seconds_before = self.evaluate.seconds
+    self.gp_devices = (
+      jax.local_devices(backend='cpu') if self.gp_on_cpu else jax.local_devices()
+    )
+
+  def start(self, nets) -> None:
+    """Each job's setup, problem and search (or the exception refusing it)."""
+    resolved = resolve_jobs(self.jobs, nets)
+    self.jobs = [
+      j if isinstance(j, Job) else job
+      for j, job in zip(resolved, self.jobs, strict=True)
+    ]
+    for i, job in enumerate(self.jobs):
+      if isinstance(resolved[i], Exception):
+        self.out[i] = resolved[i]
+        continue
+      st = job.setup
+      try:
+        problem = obj_lib.make_problem(st.config, st.network.embedding, job.recording)
+        opt = make_searcher(
+          st.config, st.space, job.workdir, gp_on_cpu=self.gp_on_cpu, index=i
+        )
+        os.makedirs(job.workdir, exist_ok=True)
+        check_run(job, problem)
+        self.live.append(LiveSearch(i, problem, opt, opt.start(), obj_lib.BestSeen()))
+      except (ValueError, OSError) as e:
+        self.out[i] = e
+
+  def finish(self, finished: list[LiveSearch]) -> None:
     """Writes the results of searches that just ended. Their best candidates'
     frames were kept while scoring; one batch re-simulates those found before
     a resume."""
@@ -562,122 +604,121 @@ def run(
       if np.isfinite(s.argmin()[1]):
         ok.append(s)
       else:
-        out[s.index] = ValueError(
-          f'{jobs[s.index].recording.source}: every candidate simulation blew up'
+        self.out[s.index] = ValueError(
+          f'{self.jobs[s.index].recording.source}: every candidate simulation blew up'
         )
     frames = {s.index: s.best.frames_of(s.argmin()[0]) for s in ok}
     redo = [s for s in ok if frames[s.index] is None]
     if redo:
-      scores = evaluate(
+      scores = self.evaluate(
         [s.problem for s in redo], [s.argmin()[0][None] for s in redo],
         [len(s.state.Y) for s in redo], frames=True,
       )  # fmt: skip
       frames.update({s.index: sc.frames for s, sc in zip(redo, scores, strict=True)})
     t0 = time.perf_counter()
     results = bo.batched.result_many(
-      [s.opt for s in ok], [s.state for s in ok], devices=gp_devices,
-      min_rows=len(live),
+      [s.opt for s in ok], [s.state for s in ok], devices=self.gp_devices,
+      min_rows=len(self.live),
     )  # fmt: skip
     t_result = time.perf_counter() - t0
     for s, res in zip(ok, results, strict=True):
-      job = jobs[s.index]
+      job = self.jobs[s.index]
       timing = dict(
-        seconds=time.perf_counter() - t_start,
-        seconds_in_objective=evaluate.seconds - seconds_before,
-        seconds_in_search=gp_seconds + t_result,
-        recordings_in_batch=len(jobs),
+        seconds=time.perf_counter() - self.t_start,
+        seconds_in_objective=self.evaluate.seconds - self.seconds_before,
+        seconds_in_search=self.gp_seconds + t_result,
+        recordings_in_batch=len(self.jobs),
       )
       with physsim.devices.on_host():  # the read-out's small eager work
-        out[s.index] = write(job, s, res, frames[s.index], **timing)
-      if progress:
+        self.out[s.index] = self.write(job, s, res, frames[s.index], **timing)
+      if self.progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
-  # Searches that finished before: their result stands (run.json matched).
-  ended = [s for s in live if s.done()]
-  for s in ended:
-    path = os.path.join(jobs[s.index].workdir, layout.ESTIMATE_FILE)
-    if os.path.isfile(path):
-      out[s.index] = read_json(path)
-  finish([s for s in ended if out[s.index] is None])
-  step, last_step_s, last_asked, last_run, last_rows = 0, 0.0, 0, 0, 0
-  one_off = physsim.one_off.Meter()  # compiles and set-ups of each step
-  last_one_off = 0.0
-  while active := [s for s in live if not s.done()]:
+  def step(self, active: list[LiveSearch]) -> None:
+    """One step of every unfinished search: ask, score together, tell."""
     # --time_limit: not a step that would end after it (the first is
     # forecast as free: it compiles, and nothing says how long it takes)
     deadline.check(
       step_forecast(
-        last_step_s, last_asked, last_run, one_off_s=last_one_off,
-        same_program=last_run >= last_asked and _pad(len(active)) == last_rows,
+        self.last_step_s, self.last_asked, self.last_run,
+        one_off_s=self.last_one_off,
+        same_program=self.last_run >= self.last_asked
+        and _pad(len(active)) == self.last_rows,
       ),
-      f'step {step} of {len(active)} searches',
+      f'step {self.steps} of {len(active)} searches',
     )  # fmt: skip
     t0 = time.perf_counter()
-    one_off.mark()
+    self.one_off.mark()
     got = bo.batched.ask_many(
-      [s.opt for s in active], [s.state for s in active], devices=gp_devices,
-      min_rows=len(live),
+      [s.opt for s in active], [s.state for s in active], devices=self.gp_devices,
+      min_rows=len(self.live),
     )  # fmt: skip
     asked = []
     for s, (x, state) in zip(active, got, strict=True):
       s.state = state
       asked.append(x)
     t1 = time.perf_counter()
-    gp_seconds += t1 - t0
-    # While the design's simulations run (a GPU's: on MuJoCo C they hold the
-    # host's cores and Python's lock), the next step's GP program is traced
-    # and, in a lockstep, its fused program compiled: searches that share
-    # their design simulate it as a program of its own (distinct_worlds).
-    # The latter starts once the design's own program is compiled: two
-    # traces at once share Python's lock, and the design's is waited for.
-    warm, compiled = [], None
-    if step == 0 and not _on_mujoco_c([s.problem.config for s in active]):
-      warm.append(_in_background(
-        bo.batched.warm_ask, [s.opt for s in active], [s.state for s in active],
-        asked, devices=gp_devices, min_rows=len(live),
-      ))  # fmt: skip
-      if len(active) > 1:
-        compiled = functools.partial(
-          _compile_in_background, warm, evaluate, [s.problem for s in active],
-          [s.problem.config.search.q for s in active],
-        )  # fmt: skip
-
-    run_before = evaluate.simulated
-    scores = evaluate(
+    self.gp_seconds += t1 - t0
+    warm, compiled = self._warm_up(active, asked)
+    run_before = self.evaluate.simulated
+    scores = self.evaluate(
       [s.problem for s in active], asked, [len(s.state.Y) for s in active],
       frames=True, compiled=compiled,
     )  # fmt: skip
-    last_asked, last_run = sum(map(len, asked)), evaluate.simulated - run_before
+    self.last_asked = sum(map(len, asked))
+    self.last_run = self.evaluate.simulated - run_before
     for t in warm:
       t.join()
     t2 = time.perf_counter()
     for s, x, sc in zip(active, asked, scores, strict=True):
       s.best.update(x, sc.psd, sc.frames)
-      told = (
-        sc.residual
-        if jobs[s.index].config.scoring.likelihood == 'synthetic'
-        else sc.psd
-      )
-      s.state = s.opt.tell(s.state, x, told)
+      synthetic = self.jobs[s.index].config.scoring.likelihood == 'synthetic'
+      s.state = s.opt.tell(s.state, x, sc.residual if synthetic else sc.psd)
     ended = [s for s in active if s.done()]
-    if progress:
-      if len(active) == 1:
-        head, what = f'iteration {active[0].state.iteration:3d}', active[0].describe()
-      else:
-        head = f'step {step:3d}'
-        what = f'{len(active)} searches, {len(active) - len(ended)} still searching'
-      shared = f'; {last_asked} candidates' if last_run < last_asked else ''
-      print(
-        f'{head}: {what} ({min(last_run, last_asked)} simulations {t2 - t1:.1f} s, '
-        f'search {t1 - t0:.1f} s{shared}; compile and set-up {one_off.seconds():.1f} s'
-        f'{_compile_part(one_off)})',
-        flush=True,
-      )
-    finish(ended)
-    step += 1
-    last_step_s, last_one_off = time.perf_counter() - t0, one_off.seconds()
-    last_rows = _pad(len(active))
-  return out
+    if self.progress:
+      self._say(active, ended, t2 - t1, t1 - t0)
+    self.finish(ended)
+    self.steps += 1
+    self.last_step_s = time.perf_counter() - t0
+    self.last_one_off = self.one_off.seconds()
+    self.last_rows = _pad(len(active))
+
+  def _warm_up(self, active, asked) -> tuple[list, Callable | None]:
+    """On the first step off MuJoCo C: while the design's simulations run, the
+    next step's GP program is traced and, in a lockstep, its fused program
+    compiled (searches that share their design simulate it as a program of
+    its own: distinct_worlds). The latter starts once the design's own
+    program is compiled: two traces at once share Python's lock, and the
+    design's is waited for. Returns the threads and the compile hook."""
+    warm, compiled = [], None
+    if self.steps == 0 and not _on_mujoco_c([s.problem.config for s in active]):
+      warm.append(_in_background(
+        bo.batched.warm_ask, [s.opt for s in active], [s.state for s in active],
+        asked, devices=self.gp_devices, min_rows=len(self.live),
+      ))  # fmt: skip
+      if len(active) > 1:
+        compiled = functools.partial(
+          _compile_in_background, warm, self.evaluate, [s.problem for s in active],
+          [s.problem.config.search.q for s in active],
+        )  # fmt: skip
+    return warm, compiled
+
+  def _say(self, active, ended, sim_s: float, search_s: float) -> None:
+    """The step's progress line."""
+    if len(active) == 1:
+      head, what = f'iteration {active[0].state.iteration:3d}', active[0].describe()
+    else:
+      head = f'step {self.steps:3d}'
+      what = f'{len(active)} searches, {len(active) - len(ended)} still searching'
+    shared = (
+      f'; {self.last_asked} candidates' if self.last_run < self.last_asked else ''
+    )
+    print(
+      f'{head}: {what} ({min(self.last_run, self.last_asked)} simulations '
+      f'{sim_s:.1f} s, search {search_s:.1f} s{shared}; compile and set-up '
+      f'{self.one_off.seconds():.1f} s{_compile_part(self.one_off)})',
+      flush=True,
+    )
 
 
 def describe_best(x_best, y_best, space) -> str:
