@@ -240,7 +240,8 @@ def from_flags(
   """The chosen preset with the flags given on the command line applied.
 
   Raises:
-    ValueError: a required field is missing or a list holds a bad value.
+    ValueError: a required field is missing, given empty (``--workdir=``)
+      as is one whose default is not, or a list holds a bad value.
   """
   config = presets[flag_values.preset]
   missing = []
@@ -250,6 +251,11 @@ def from_flags(
     if flag.present:
       value = flag.value
       kind, elem = _parser(leaf.type, name)
+      if kind == 'str' and not value.strip():
+        # '--workdir=' (a shell variable that was never set): refused by name,
+        # where the field wants a value or has one by default.
+        if leaf.field.metadata.get(_REQUIRED) or _get(config, leaf.path):
+          raise ValueError(f'--{name}: empty')
       if kind == 'list':
         try:
           value = tuple(elem(v) for v in value)

@@ -63,3 +63,20 @@ def test_the_licence_pyproject_names_is_at_the_root():
   assert 'Apache License' in text and 'Version 2.0, January 2004' in text
   assert 'END OF TERMS AND CONDITIONS' in text
   assert 'Apache-2.0' in (_ROOT / 'pyproject.toml').read_text()
+
+
+@pytest.mark.parametrize('name', ['estimate', 'plan', 'demo', 'calibrate'])
+def test_an_empty_workdir_is_refused_by_name(name):
+  """'--workdir=' (a shell variable never set) was "No such file or
+  directory: ''"."""
+  import importlib  # noqa: PLC0415
+
+  script = importlib.import_module(f'experiments.{name}')
+  presets = getattr(script, 'PRESETS', {'default': script.Args()})
+  for value in ('', '  '):
+    with pytest.raises(ValueError, match=r'^--workdir: empty$'):
+      cli.parse(script.Args, presets, [name, f'--workdir={value}'])
+  # a flag whose empty value means "none" stays accepted
+  if name == 'estimate':
+    got = cli.parse(script.Args, presets, [name, '--workdir=w', '--camera_json='])
+    assert got.camera_json == ''
