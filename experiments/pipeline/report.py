@@ -124,12 +124,41 @@ WIDTH = 100  # columns the printed table and its notes fit in
 # The Bayes point and the median further apart than this get a note.
 MEDIAN_NOTE_SHARE = 0.1
 # What the table calls each quantity (short enough for WIDTH).
+# What a person reads, in the units a lab reports (issue 76): bending as its
+# rigidity in uN m (the search's scale times the fabric's reference rigidity,
+# ``physsim.reference_rigidity``), area weight in g/m^2; ``estimate.json``
+# keeps the search's own scales, labelled. A result without a known fabric
+# keeps the scale (``SCALE_NAMES``).
 ROW_NAMES = {
-  'bending_scale': 'bending (x)',
+  'bending_scale': 'bending rigidity (uN m)',
   'wind_speed': 'wind (m/s)',
-  'area_weight': 'weight (kg/m^2)',
+  'area_weight': 'area weight (g/m^2)',
   'load_ratio': 'load ratio',
 }
+SCALE_NAMES = {**ROW_NAMES, 'bending_scale': 'bending (x)'}
+LENGTH_NAME = 'bending length (mm)'
+
+
+def in_units(material: str | None) -> tuple[dict, dict]:
+  """(row names, factors): what each quantity's row is called and the factor
+  from the search's scale to the unit it is printed in, for ``material``'s
+  results (None or unknown: bending stays a scale)."""
+  factors = {'bending_scale': 1.0, 'wind_speed': 1.0, 'area_weight': 1e3,
+             'load_ratio': 1.0}  # fmt: skip
+  if material not in physsim.FABRICS:
+    return SCALE_NAMES, factors
+  factors['bending_scale'] = 1e6 * physsim.reference_rigidity(material)
+  return ROW_NAMES, factors
+
+
+def length_mm(bending_scale: float, area_weight: float, material: str | None):
+  """Peirce's bending length of a point, mm (None: no known fabric)."""
+  if material not in physsim.FABRICS:
+    return None
+  d0 = physsim.reference_rigidity(material)
+  return 1e3 * float(physsim.params.bending_length(bending_scale, area_weight, d0))
+
+
 _ERROR_NAMES = {
   'wind_speed_pct': ('wind', '%'),
   'area_weight_pct': ('area weight', '%'),
@@ -185,14 +214,16 @@ def distances_table(results: dict[str, dict]) -> str:
   names = list(results)
   first = results[names[0]]
   truth = with_load_ratio(first['truth']) if first.get('truth') else {}
+  label, unit = in_units(first.get('material'))
   rows = []
   for q in [*physsim.Params._fields, 'load_ratio']:
-    cells = [ROW_NAMES[q]] + ([f'{truth[q]:.3g}'] if truth else [])
+    k = unit[q]
+    cells = [label[q]] + ([f'{k * truth[q]:.3g}'] if truth else [])
     for n in names:
       r = results[n]
       e = r['load_ratio'] if q == 'load_ratio' else r['estimate'][q]
       lo, hi = e['interval_90']
-      cell = f'{e["value"]:.3g} [{lo:.3g}, {hi:.3g}]'
+      cell = f'{k * e["value"]:.3g} [{k * lo:.3g}, {k * hi:.3g}]'
       if truth and 'errors' in r:
         key = 'bending_factor' if q == 'bending_scale' else f'{q}_pct'
         cell += f' ({_error_cell(key, r["errors"]["estimate"][key])})'
@@ -223,19 +254,34 @@ def report_table(result: dict) -> str:
     head += ['point (argmin)', 'GP 90% interval']
   head += ['retrieval'] if retrieval else []
   true = with_load_ratio(truth) if truth else {}
-  iv = lambda e, k: f'[{e[k][0]:.3g}, {e[k][1]:.3g}]'
+  material = result.get('material')
+  label, unit = in_units(material)
   rows = []
   for name in [*physsim.Params._fields, 'load_ratio']:
     e = result['load_ratio'] if name == 'load_ratio' else result['estimate'][name]
-    cells = [ROW_NAMES[name]] + ([f'{true[name]:.3g}'] if truth else [])
-    cells += [f'{e["value"]:.3g}']
+    k = unit[name]
+    iv = lambda key, e=e, k=k: f'[{k * e[key][0]:.3g}, {k * e[key][1]:.3g}]'
+    cells = [label[name]] + ([f'{k * true[name]:.3g}'] if truth else [])
+    cells += [f'{k * e["value"]:.3g}']
     if posterior:
-      cells += [iv(e, 'interval_50'), iv(e, 'interval_90'), f'x{e["narrowing_90"]:.1f}']
+      cells += [iv('interval_50'), iv('interval_90'), f'x{e["narrowing_90"]:.1f}']
     else:
-      cells += [iv(e, 'interval_90')]
+      cells += [iv('interval_90')]
     if retrieval:
       cells += [f'{retrieval[name]:.2f}' if name in retrieval else '-']
     rows.append(cells)
+  est = result['estimate']
+  length = length_mm(
+    est['bending_scale']['value'], est['area_weight']['value'], material
+  )
+  if length is not None:  # the point's, as a lab reads it; no interval of its own
+    true_length = (
+      [f'{length_mm(truth["bending_scale"], truth["area_weight"], material):.3g}']
+      if truth
+      else []
+    )
+    rows.append([LENGTH_NAME, *true_length, f'{length:.3g}',
+                 *['-'] * (len(head) - 2 - len(true_length))])  # fmt: skip
   lines = _markdown(head, rows)
   if truth:
     lines += [''] + errors_table(result['errors'])
@@ -247,7 +293,13 @@ def report_table(result: dict) -> str:
   }
   lines += notes(
     "load ratio: rho v^2 / (w g), wind pressure over weight, what the sheet's "
-    'shape measures best.',
+    'shape measures best.'
+    + (
+      ' bending length: (rigidity / (area weight x g))^(1/3) of the point; no '
+      'interval of its own (not calibrated).'
+      if length is not None
+      else ''
+    ),
     f'point: {point.get(result.get("point"), "the best simulation (not calibrated)")}; '
     "narrower: the prior's 90% width over the interval's (x1.0: the recording "
     "told nothing about it, the interval is the prior's)"
@@ -288,10 +340,11 @@ def median_line(result: dict, share: float = MEDIAN_NOTE_SHARE) -> str:
   posterior median: where the posterior is wide and skewed the point leans to
   the prior's middle, and a reader with, say, a strong fan should see both."""
   far = []
+  label, unit = in_units(result.get('material'))
   for name in physsim.Params._fields:
-    e = result['estimate'][name]
+    e, k = result['estimate'][name], unit[name]
     if 'median' in e and abs(e['median'] / e['value'] - 1) > share:
-      far.append(f'{ROW_NAMES[name]} {e["median"]:.3g} (point {e["value"]:.3g})')
+      far.append(f'{label[name]} {k * e["median"]:.3g} (point {k * e["value"]:.3g})')
   if not far:
     return ''
   return (
@@ -305,33 +358,35 @@ def joint_table(joint: dict) -> str:
   """A joint estimate for a person, in at most ``WIDTH`` columns: shared
   bending and area weight and each recording's wind and load ratio (point,
   90% interval, narrowing), each beside the same recording estimated alone."""
-  iv = lambda e: f'[{e["interval_90"][0]:.3g}, {e["interval_90"][1]:.3g}]'
+  label, unit = in_units(joint.get('material'))
+  iv = lambda e, k=1.0: (
+    f'[{k * e["interval_90"][0]:.3g}, {k * e["interval_90"][1]:.3g}]'
+  )
   rows = []
   for name in ('bending_scale', 'area_weight'):
-    e = joint[name]
-    rows.append([f'{ROW_NAMES[name]}, shared', f'{e["median"]:.3g}', iv(e),
+    e, k = joint[name], unit[name]
+    rows.append([f'{label[name]}, shared', f'{k * e["median"]:.3g}', iv(e, k),
                  f'x{e["narrowing_90"]:.1f}', '-', '-'])  # fmt: skip
-  for k, r in enumerate(joint['recordings']):
+  for i, r in enumerate(joint['recordings']):
     for name in ('wind_speed', 'load_ratio'):
       e, a = r[name], r['alone'].get(name)
       rows.append([
-        f'{ROW_NAMES[name]}, rec. {k}', f'{e["median"]:.3g}', iv(e),
+        f'{label[name]}, rec. {i}', f'{e["median"]:.3g}', iv(e),
         f'x{e["narrowing_90"]:.1f}', f'{a["value"]:.3g}' if a else '-',
         iv(a) if a else '-',
       ])  # fmt: skip
   head = ['quantity', 'point', '90% interval', 'narrower', 'alone', 'alone 90%']
   lines = _markdown(head, rows)
+  shared = ('bending_scale', 'area_weight')
   alone = [
-    [f'recording {k}']
+    [f'recording {i}']
     + [
-      f'{r["alone"][n]["value"]:.3g} {iv(r["alone"][n])}'
-      for n in ('bending_scale', 'area_weight')
+      f'{unit[n] * r["alone"][n]["value"]:.3g} {iv(r["alone"][n], unit[n])}'
+      for n in shared
     ]
-    for k, r in enumerate(joint['recordings'])
+    for i, r in enumerate(joint['recordings'])
   ]
-  lines += [''] + _markdown(
-    ['each alone', ROW_NAMES['bending_scale'], ROW_NAMES['area_weight']], alone
-  )
+  lines += [''] + _markdown(['each alone', *(label[n] for n in shared)], alone)
   lines += [''] + notes(
     "point: the joint posterior's median; narrower: the prior's 90% width over "
     "the interval's; alone: the same recording estimated by itself.",

@@ -231,7 +231,7 @@ def test_the_joint_table_fits_and_sets_each_recording_beside_itself_alone():
   lines = table.splitlines()
   assert max(map(len, lines)) <= report.WIDTH
   assert any(
-    x.startswith('| weight (kg/m^2), shared') and '[0.19, 0.23]' in x for x in lines
+    x.startswith('| area weight (g/m^2), shared') and '[190, 230]' in x for x in lines
   )
   rec2 = next(x for x in lines if x.startswith('| wind (m/s), rec. 2'))
   assert '| 3.5 ' in rec2 and '[3.3, 3.7]' in rec2 and '[4.41, 5.62]' in rec2
@@ -317,3 +317,27 @@ def test_a_point_far_from_the_median_gets_the_median_in_a_note():
   assert 'posterior median where' not in report.report_table(
     {**result, 'point': 'median'}
   )
+
+
+def test_the_table_prints_a_labs_units():
+  """Issue 76: bending as rigidity in uN m (the scale times the fabric's
+  reference rigidity), area weight in g/m^2, and the point's bending length in
+  mm, each derived here by hand from the result's scales; estimate.json's
+  scales stay as they are."""
+  result = _result()
+  d0 = physsim.reference_rigidity('gray_interlock')  # N m
+  lines = report.report_table(result).splitlines()
+  assert max(map(len, lines)) <= report.WIDTH
+  rigidity = next(x for x in lines if x.startswith('| bending rigidity (uN m)'))
+  cells = [c.strip() for c in rigidity.split('|')[1:-1]]
+  assert cells[1] == f'{2.0 * d0 * 1e6:.3g}' and cells[2] == f'{0.5 * d0 * 1e6:.3g}'
+  assert cells[4] == f'[{0.12 * d0 * 1e6:.3g}, {3.1 * d0 * 1e6:.3g}]'
+  weight = next(x for x in lines if x.startswith('| area weight (g/m^2)'))
+  assert '| 200 ' in weight and '| 250 ' in weight and '[150, 330]' in weight
+  length = next(x for x in lines if x.startswith('| bending length (mm)'))
+  by_hand = 1e3 * (0.5 * d0 / (0.25 * 9.81)) ** (1 / 3)
+  assert f'| {by_hand:.3g} ' in length
+  assert result['estimate']['bending_scale']['value'] == 0.5  # the file's scale
+  # without a known fabric the bending stays the search's scale
+  plain = report.report_table({**result, 'material': None})
+  assert 'bending (x)' in plain and 'bending length' not in plain

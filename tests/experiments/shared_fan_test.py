@@ -170,12 +170,12 @@ def test_the_hem_is_a_known_mass_along_the_free_edge_of_the_simulated_cloth():
 
 
 def test_a_protocol_file_names_the_fan_and_the_hem(tmp_path):
-  for name in ('plain', 'hem'):
+  for name in ('plain', 'hem', 'other'):
     (tmp_path / name).mkdir()
   entries = [
     {'recording': 'plain', 'fan': 'low'},
     {'recording': 'hem', 'fan': 'low', 'hem_mass': 0.3},
-    {'recording': 'plain'},
+    {'recording': 'other'},  # a recording listed twice is refused (takes.read)
   ]
   path = tmp_path / 'p.json'
   path.write_text(json.dumps({'recordings': entries}))
