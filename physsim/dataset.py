@@ -18,6 +18,7 @@ finished folders' ``meta.json`` (``rebuild_index``), written atomically.
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import json
 import math
@@ -117,10 +118,26 @@ def write_atomic(path: str, write) -> None:
     write(tmp)
     os.chmod(tmp, user_mode(0o666))  # mkstemp makes it private (0600)
     os.replace(tmp, path)
-  except BaseException:
+  except BaseException as e:
     if os.path.exists(tmp):
       os.remove(tmp)
+    if is_disk_full(e):
+      raise disk_full(path, e) from None
     raise
+
+
+# What a write that ran out of room raises (ENOSPC: no space, EDQUOT: quota).
+_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+def is_disk_full(e: BaseException) -> bool:
+  """True for the OSError of a write that ran out of disk space or quota."""
+  return isinstance(e, OSError) and e.errno in _FULL
+
+
+def disk_full(path: str, e: OSError) -> ValueError:
+  """The one line that says a write failed for want of room, naming it."""
+  return ValueError(f'disk full: {path} ({e.strerror or "no space left"})')
 
 
 def write_text_atomic(path: str, text: str) -> None:
@@ -152,9 +169,30 @@ def read_json(path: str) -> dict:
 
 
 def imwrite(path: str, image: np.ndarray) -> None:
-  """``cv2.imwrite``, with a ValueError naming the file when it fails."""
-  if not cv2.imwrite(path, image):
-    raise ValueError(f'{path}: OpenCV could not write the image')
+  """An image encoded by OpenCV (by ``path``'s extension) and written by
+  Python, so that a full disk says so (``cv2.imwrite`` only returns False).
+
+  Raises:
+    ValueError: naming the file: an image OpenCV cannot encode, or "disk
+      full" (the file then removed).
+    OSError: any other failed write.
+  """
+  ext = os.path.splitext(path)[1] or '.png'
+  try:
+    ok, buf = cv2.imencode(ext, image)
+  except cv2.error as e:
+    raise ValueError(f'{path}: OpenCV cannot encode the image ({e.err})') from None
+  if not ok:
+    raise ValueError(f'{path}: OpenCV cannot encode the image as {ext}')
+  try:
+    with open(path, 'wb') as f:
+      f.write(buf.tobytes())
+  except OSError as e:
+    if not is_disk_full(e):
+      raise
+    if os.path.exists(path):
+      os.remove(path)
+    raise disk_full(path, e) from None
 
 
 def read_png(path: str, dtype=None) -> np.ndarray:

@@ -782,30 +782,46 @@ def write(
   intake: Intake, workdir: str, sim: simulation.Simulation, *, frames: bool = True
 ) -> None:
   """Saves ``intake.json``, ``overlay.png`` and (``frames``) the cleaned
-  frames as 16-bit mm PNGs in ``intake/``, each under its final name only
-  when complete (``sim``: the estimate's ``Simulation``, for the simulated cloth)."""
+  frames as 16-bit mm PNGs in ``intake/`` (``sim``: the estimate's
+  ``Simulation``, for the simulated cloth): all of them, or none. Each is
+  written under a temporary folder first and renamed into place only when
+  every one is complete, ``intake.json`` last: a full disk leaves no
+  ``overlay.png`` without its ``intake.json``.
+
+  Raises:
+    ValueError: "disk full" naming the file that did not fit.
+  """
   os.makedirs(workdir, exist_ok=True)
   img = overlay(intake, simulation.mesh(sim))
-  files.write_atomic(
-    os.path.join(workdir, OVERLAY_FILE), lambda p: dataset.imwrite(p, img)
-  )
-  if frames:
-    final = os.path.join(workdir, FRAMES_DIR)
-    tmp = tempfile.mkdtemp(prefix='.intake-', dir=workdir)
-    try:
+  tmp = tempfile.mkdtemp(prefix='.intake-', dir=workdir)
+  try:
+    dataset.imwrite(os.path.join(tmp, OVERLAY_FILE), img)
+    if frames:
+      staged = os.path.join(tmp, FRAMES_DIR)
+      os.makedirs(staged)
       mm = dataset.depth_to_mm(intake.depth)
       for t, f in enumerate(mm):
-        dataset.imwrite(os.path.join(tmp, f'{t:04d}.png'), f)
-      with open(os.path.join(tmp, 'fps.txt'), 'w') as f:
+        dataset.imwrite(os.path.join(staged, f'{t:04d}.png'), f)
+      with open(os.path.join(staged, 'fps.txt'), 'w') as f:
         f.write(f'{intake.fps:g}\n')
-      os.chmod(tmp, dataset.user_mode(0o777))  # mkdtemp makes it private
+      os.chmod(staged, dataset.user_mode(0o777))
+    files.write_json(os.path.join(tmp, INTAKE_FILE), to_json(intake))
+    for name in (OVERLAY_FILE, INTAKE_FILE):
+      os.chmod(os.path.join(tmp, name), dataset.user_mode(0o666))
+    # Into place: the frames, the overlay, then intake.json (the run's mark).
+    if frames:
+      final = os.path.join(workdir, FRAMES_DIR)
       if os.path.isdir(final):
         shutil.rmtree(final)
-      os.replace(tmp, final)
-    finally:
-      if os.path.isdir(tmp):
-        shutil.rmtree(tmp)
-  files.write_json(os.path.join(workdir, INTAKE_FILE), to_json(intake))
+      os.replace(staged, final)
+    os.replace(os.path.join(tmp, OVERLAY_FILE), os.path.join(workdir, OVERLAY_FILE))
+    os.replace(os.path.join(tmp, INTAKE_FILE), os.path.join(workdir, INTAKE_FILE))
+  except OSError as e:
+    if dataset.is_disk_full(e):
+      raise dataset.disk_full(getattr(e, 'filename', None) or workdir, e) from None
+    raise
+  finally:
+    shutil.rmtree(tmp, ignore_errors=True)
 
 
 def to_recording(intake: Intake, fps: float, size: tuple[int, int], frames: int):

@@ -223,6 +223,37 @@ def test_a_short_recording_and_a_fifo_frame_are_refused_by_name(scene, tmp_path)
   assert out['error'].startswith(str(fifo / '0006.png')) and 'FIFO' in out['error']
 
 
+def test_a_full_disk_is_said_and_leaves_no_overlay_without_intake_json(
+  scene, tmp_path, monkeypatch
+):
+  import builtins  # noqa: PLC0415
+  import errno  # noqa: PLC0415
+
+  from physsim import dataset  # noqa: PLC0415
+
+  ik = intake.take_in(
+    scene.frames, intake.IntakeConfig(), scene.camera_json, ef.CONFIG.simulation
+  )
+
+  def full_at(suffix):
+    def fake_open(path, mode='r', *a, **kw):
+      if 'w' in mode and str(path).endswith(suffix):
+        raise OSError(errno.ENOSPC, 'No space left on device', str(path))
+      return builtins.open(path, mode, *a, **kw)
+
+    return fake_open
+
+  for suffix in ('.json', '0003.png', 'overlay.png'):
+    w = tmp_path / f'w{suffix}'
+    monkeypatch.setattr(dataset, 'open', full_at(suffix), raising=False)
+    with pytest.raises(ValueError, match=r'^disk full: .*\(No space left on device\)'):
+      intake.write(ik, str(w), ef.CONFIG.simulation)
+    assert os.listdir(w) == [], os.listdir(w)  # all of its files or none
+  monkeypatch.undo()
+  intake.write(ik, str(tmp_path / 'ok'), ef.CONFIG.simulation)
+  assert sorted(os.listdir(tmp_path / 'ok')) == ['intake', 'intake.json', 'overlay.png']
+
+
 def test_masks_and_depth_range_restrict_the_cloth(scene, tmp_path):
   mask = np.zeros((120, 160), np.uint8)
   mask[:, :80] = 255

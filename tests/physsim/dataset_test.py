@@ -75,7 +75,7 @@ def test_write_read_round_trip(tmp_path):
 def test_failed_write_leaves_no_sequence(tmp_path, monkeypatch):
   rng = np.random.default_rng(2)
   depth = dataset.mm_to_depth(_depth(rng))
-  real = cv2.imwrite
+  real = dataset.imwrite
   calls = []
 
   def flaky(path, image, *a):
@@ -84,7 +84,7 @@ def test_failed_write_leaves_no_sequence(tmp_path, monkeypatch):
       raise OSError('disk full')
     return real(path, image, *a)
 
-  monkeypatch.setattr(dataset.cv2, 'imwrite', flaky)
+  monkeypatch.setattr(dataset, 'imwrite', flaky)
   with pytest.raises(OSError, match='disk full'):
     dataset.write_sequence(str(tmp_path), _row('0000'), depth)
   assert len(calls) == 4
@@ -92,10 +92,10 @@ def test_failed_write_leaves_no_sequence(tmp_path, monkeypatch):
   assert list(parent.iterdir()) == []  # no final folder, tmp removed
   assert not dataset.is_complete(str(tmp_path), 'gray_interlock', '0000')
   # a previous finished version survives a failed overwrite
-  monkeypatch.setattr(dataset.cv2, 'imwrite', real)
+  monkeypatch.setattr(dataset, 'imwrite', real)
   dataset.write_sequence(str(tmp_path), _row('0000'), depth)
   calls.clear()
-  monkeypatch.setattr(dataset.cv2, 'imwrite', flaky)
+  monkeypatch.setattr(dataset, 'imwrite', flaky)
   with pytest.raises(OSError):
     dataset.write_sequence(str(tmp_path), _row('0000'), depth * 2, overwrite=True)
   np.testing.assert_array_equal(
@@ -186,3 +186,29 @@ def test_reader_errors_name_the_file(tmp_path):
     dataset.write_sequence(str(tmp_path), _row('0001'), np.zeros((2, 4, 8, 6)))
   with pytest.raises(ValueError, match='folder name'):
     _row('a/b')
+
+
+def test_a_full_disk_is_said_as_such_naming_the_file(tmp_path, monkeypatch):
+  """cv2.imwrite only returns False on a full disk ("OpenCV could not write
+  the image"); the image is encoded by OpenCV and written by Python."""
+  import builtins  # noqa: PLC0415
+  import errno  # noqa: PLC0415
+
+  def full(path, mode='r', *a, **kw):
+    if 'w' in mode:
+      raise OSError(errno.ENOSPC, 'No space left on device', str(path))
+    return builtins.open(path, mode, *a, **kw)
+
+  monkeypatch.setattr(dataset, 'open', full, raising=False)
+  image = np.zeros((4, 4), np.uint16)
+  for write in (
+    lambda p: dataset.imwrite(p, image),
+    lambda p: dataset.write_json_atomic(p, {'a': 1}),
+  ):
+    path = str(tmp_path / 'x.png')
+    with pytest.raises(ValueError, match=r'^disk full: .*x.png \(No space'):
+      write(path)
+    assert os.listdir(tmp_path) == []
+  monkeypatch.undo()
+  dataset.imwrite(str(tmp_path / 'y.png'), image)
+  assert cv2.imread(str(tmp_path / 'y.png'), cv2.IMREAD_UNCHANGED).dtype == np.uint16
