@@ -21,27 +21,29 @@ import physsim
 from experiments.pipeline import calibration_tables, distributed, files, layout
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
-from experiments.studies.calibration import (
+from experiments.studies.calibration_analysis import (
   CONFIDENT_MISS_PCT,
+  coverage_of,
+  summarise,
+)
+from experiments.studies.calibration_config import (
   FIELDS,
   LEVELS,
   MODE_OF_READING,
   Config,
   check_config,
-  coverage_of,
-  error_text,
   estimate_record,
   network_of,
   network_seeds,
-  pair_text,
-  plot_ranks,
-  posteriors,
+  study_configs,
+)
+from experiments.studies.calibration_report import error_text, pair_text, plot_ranks
+from experiments.studies.calibration_runs import (
   recorded_networks,
   saved_runs,
   simulate_and_estimate,
-  study_configs,
-  summarise,
 )
+from experiments.studies.calibration_scores import posteriors
 
 CHECK_FILE = 'check.json'
 
@@ -200,20 +202,7 @@ def check(
   Raises:
     ValueError: no calibration there, or ``config.seed`` is its own.
   """
-  check_config(config)
-  path = shipped_file or checked_file(config)
-  if not os.path.isfile(path):
-    raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
-  # the estimates apply the tables being checked
-  config = dataclasses.replace(
-    config, estimate=config.estimate.replace(calibration=path)
-  )
-  shipped = recording_lib.read_json(path)
-  if shipped.get('config', {}).get('seed') == config.seed:
-    raise ValueError(
-      f"seed {config.seed} is the calibration's own ({path}): its recordings "
-      'are not held out; pass another --seed'
-    )
+  config, path, shipped = _checked(config, shipped_file)
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
   if analyse_only:
@@ -251,6 +240,37 @@ def check(
     'config': estimate_record(config, config.estimate),
     'seconds': time.time() - t0,
   }
+  _write(out, workdir)
+  return out
+
+
+def _checked(config: Config, shipped_file: str | None) -> tuple[Config, str, dict]:
+  """The check's config (its estimates apply the tables being checked), the
+  calibration file's path and its contents.
+
+  Raises:
+    ValueError: no calibration there, or ``config.seed`` is its own.
+  """
+  check_config(config)
+  path = shipped_file or checked_file(config)
+  if not os.path.isfile(path):
+    raise ValueError(f'{path}: no calibration to check (experiments/calibrate.py)')
+  # the estimates apply the tables being checked
+  config = dataclasses.replace(
+    config, estimate=config.estimate.replace(calibration=path)
+  )
+  shipped = recording_lib.read_json(path)
+  if shipped.get('config', {}).get('seed') == config.seed:
+    raise ValueError(
+      f"seed {config.seed} is the calibration's own ({path}): its recordings "
+      'are not held out; pass another --seed'
+    )
+  return config, path, shipped
+
+
+def _write(out: dict, workdir: str) -> None:
+  """Writes a check's ``check.json``, ``check.md`` and ``check_ranks.png``, and
+  prints its table."""
   files.write_json(os.path.join(workdir, CHECK_FILE), out)
   text = check_table(out)
   files.write_text(os.path.join(workdir, 'check.md'), text + '\n')
@@ -259,7 +279,6 @@ def check(
     key='recalibrated_rank_histogram', xlabel='rank, recalibrated',
   )  # fmt: skip
   print(text)
-  return out
 
 
 def check_record(out: dict) -> dict:
@@ -328,24 +347,38 @@ def check_table(out: dict) -> str:
     "the prior's own | promised (cross-fitted) | mean error: point | range centre |",
     '|---|---|---|---|---|---|---|---|',
   ]
+  lines += _mode_rows(out)
+  lines += _miss_lines(out)
+  mode = out.get('printed_mode', 'video')
+  lines += _material_lines(pr, mode)
+  lines += _network_lines(out['modes'].get(mode, {}), mode)
+  return '\n'.join(lines)
+
+
+def _prior_cell(cell: dict) -> str:
+  """How often the prior's own 50% / 90% intervals held the truths."""
+  if 'prior_interval_90' not in cell:
+    return '-'
+  return (
+    f'{100 * cell["prior_interval_50"]:.0f}% / {100 * cell["prior_interval_90"]:.0f}%'
+  )
+
+
+def _mode_rows(out: dict) -> list[str]:
+  """``check_table``'s rows: the estimates' printed intervals (where read),
+  then every mode's read from the saved posteriors."""
+  sh, pr = out['shipped'], out['printed']
   promised = lambda m, f: (
     pair_text(sh['held_out'][m][f]) if f in sh['held_out'].get(m, {}) else '-'
   )
-
-  def prior(cell):
-    if 'prior_interval_90' not in cell:
-      return '-'
-    return (
-      f'{100 * cell["prior_interval_50"]:.0f}% / {100 * cell["prior_interval_90"]:.0f}%'
-    )
-
   mode = out.get('printed_mode', 'video')
   video = out['modes'].get(mode, {})
+  lines = []
   for f in FIELDS if pr else ():
     c = pr[f]
     lines.append(
       f'| {mode}, as printed | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | '
-      f'{prior(video.get(f, {}))} | {promised(mode, f)} | '
+      f'{_prior_cell(video.get(f, {}))} | {promised(mode, f)} | '
       f'{error_text(f, c["estimate_error"])} | {error_text(f, c["range_centre_error"])} |'
     )
   for mode, s in out['modes'].items():
@@ -353,10 +386,16 @@ def check_table(out: dict) -> str:
       c = s[f]
       key = 'factor' if f == 'bending_scale' else 'pct'
       lines.append(
-        f'| {mode} | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | {prior(c)} | '
+        f'| {mode} | {f} | {_pct_ci(c, 50)} | {_pct_ci(c, 90)} | {_prior_cell(c)} | '
         f'{promised(mode, f)} | {error_text(f, c["point_error_" + key])} | '
         f'{error_text(f, c["centre_error_" + key])} |'
       )
+  return lines
+
+
+def _miss_lines(out: dict) -> list[str]:
+  """The confident wind misses, as printed and per mode as read again."""
+  pr, lines = out['printed'], []
   if pr and 'confident_misses' in pr:
     misses = pr['confident_misses']
     lines += [
@@ -385,32 +424,45 @@ def check_table(out: dict) -> str:
         for m, c in conf
       ),
     ]
-  if per := (pr or {}).get('per_material'):
-    lines += [
-      '',
-      f'{mode.capitalize()}, as printed, fabric by fabric (50% / 90% intervals '
-      'that held the truth; each pair shares bending and area weight):',
-      '',
-      '| fabric | recordings | ' + ' | '.join(FIELDS) + ' | mean error: wind |',
-      '|---|---:|' + '---|' * (len(FIELDS) + 1),
-    ]
-    for m, c in per.items():
-      lines.append(
-        f'| {m} | {c["n"]} | ' + ' | '.join(pair_text(c[f]) for f in FIELDS)
-        + f' | {error_text("wind_speed", c["wind_speed"]["estimate_error"])} |'
-      )  # fmt: skip
+  return lines
+
+
+def _material_lines(pr: dict | None, mode: str) -> list[str]:
+  """The printed intervals fabric by fabric (a check of several)."""
+  per = (pr or {}).get('per_material')
+  if not per:
+    return []
+  lines = [
+    '',
+    f'{mode.capitalize()}, as printed, fabric by fabric (50% / 90% intervals '
+    'that held the truth; each pair shares bending and area weight):',
+    '',
+    '| fabric | recordings | ' + ' | '.join(FIELDS) + ' | mean error: wind |',
+    '|---|---:|' + '---|' * (len(FIELDS) + 1),
+  ]
+  for m, c in per.items():
+    lines.append(
+      f'| {m} | {c["n"]} | ' + ' | '.join(pair_text(c[f]) for f in FIELDS)
+      + f' | {error_text("wind_speed", c["wind_speed"]["estimate_error"])} |'
+    )  # fmt: skip
+  return lines
+
+
+def _network_lines(video: dict, mode: str) -> list[str]:
+  """The printed mode's intervals network by network (several networks)."""
   nets = video.get('per_network', {})
-  if len(nets) > 1:
-    lines += [
-      '',
-      f'{mode.capitalize()}, network by network (50% / 90% intervals that held '
-      'the truth):',
-      '',
-      '| network seed | recordings | ' + ' | '.join(FIELDS) + ' |',
-      '|---|---:|' + '---|' * len(FIELDS),
-    ]
-    for seed, c in nets.items():
-      lines.append(
-        f'| {seed} | {c["n"]} | ' + ' | '.join(pair_text(c[f]) for f in FIELDS) + ' |'
-      )
-  return '\n'.join(lines)
+  if len(nets) <= 1:
+    return []
+  lines = [
+    '',
+    f'{mode.capitalize()}, network by network (50% / 90% intervals that held '
+    'the truth):',
+    '',
+    '| network seed | recordings | ' + ' | '.join(FIELDS) + ' |',
+    '|---|---:|' + '---|' * len(FIELDS),
+  ]
+  for seed, c in nets.items():
+    lines.append(
+      f'| {seed} | {c["n"]} | ' + ' | '.join(pair_text(c[f]) for f in FIELDS) + ' |'
+    )
+  return lines
