@@ -101,7 +101,7 @@ class Point:
     return (self.rigidity / (self.area_weight * physsim.params.GRAVITY)) ** (1 / 3)
 
 
-def _in_range(path: str, key: str, v, lo: float, hi: float) -> float:
+def in_range(path: str, key: str, v, lo: float, hi: float) -> float:
   """``v`` as a float, refused (naming the file and key) unless a finite
   number in [lo, hi]."""
   try:
@@ -148,12 +148,12 @@ def read_point(workdir: str) -> Point:
   if not isinstance(config, dict):
     raise ValueError(f'{path}: config is a {type(config).__name__}, not an object')
   ranges = {'bending_scale': BENDING_SCALE_RANGE, 'area_weight': AREA_WEIGHT_RANGE}
-  point = {k: _in_range(path, k, raw[k], *ranges[k]) for k in _NAMES}
+  point = {k: in_range(path, k, raw[k], *ranges[k]) for k in _NAMES}
   intervals = {}
   for k in _NAMES:
     if len(raw_iv[k]) != 2:
       raise ValueError(f'{path}: {k}.interval_90 holds {len(raw_iv[k])} values, not 2')
-    lo, hi = (_in_range(path, f'{k}.interval_90', v, *ranges[k]) for v in raw_iv[k])
+    lo, hi = (in_range(path, f'{k}.interval_90', v, *ranges[k]) for v in raw_iv[k])
     if lo > hi:
       raise ValueError(f'{path}: {k}.interval_90 [{lo:.6g}, {hi:.6g}] is reversed')
     intervals[k] = [lo, hi]
@@ -161,18 +161,18 @@ def read_point(workdir: str) -> Point:
     source=path,
     material=material,
     intervals=intervals,
-    cloth_size=_in_range(
+    cloth_size=in_range(
       path, 'config.cloth_size', config.get('cloth_size', 1.0), *CLOTH_SIZE_RANGE
     ),  # fmt: skip
     cloth_resolution=round(
-      _in_range(
+      in_range(
         path,
         'config.cloth_resolution',
         config.get('cloth_resolution', 25),
         *RESOLUTION_RANGE,
       )
     ),  # fmt: skip
-    fps=_in_range(path, 'config.fps', config.get('fps', 20.0), *FPS_RANGE),
+    fps=in_range(path, 'config.fps', config.get('fps', 20.0), *FPS_RANGE),
     **point,
   )
 

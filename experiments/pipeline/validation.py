@@ -105,15 +105,15 @@ def read_export(folder: str) -> Exported:
   out = Exported(
     folder=folder,
     material=material,
-    flex_scale=rng._in_range(
+    flex_scale=rng.in_range(
       path, 'flex_bending_scale', scale, *rng.BENDING_SCALE_RANGE
     ),  # fmt: skip
-    area_weight=rng._in_range(path, 'area_weight', w, *rng.AREA_WEIGHT_RANGE),
-    size=rng._in_range(path, 'mesh.size_m', size, *rng.CLOTH_SIZE_RANGE),
+    area_weight=rng.in_range(path, 'area_weight', w, *rng.AREA_WEIGHT_RANGE),
+    size=rng.in_range(path, 'mesh.size_m', size, *rng.CLOTH_SIZE_RANGE),
     resolution=round(
-      rng._in_range(path, 'mesh.vertices_per_side', n, *rng.RESOLUTION_RANGE)
+      rng.in_range(path, 'mesh.vertices_per_side', n, *rng.RESOLUTION_RANGE)
     ),  # fmt: skip
-    fps=rng._in_range(path, 'mesh.fps', fps, *rng.FPS_RANGE),
+    fps=rng.in_range(path, 'mesh.fps', fps, *rng.FPS_RANGE),
   )
   with open(xml_path, encoding='utf-8', errors='replace') as f:
     found = re.search(r'young="([^"]+)"', f.read())
@@ -171,8 +171,8 @@ def check_set_up(
 ) -> None:  # fmt: skip
   """Refuses, before the recording is read, a set-up the export cannot be
   compared in: no camera file (the prediction is seen through the
-  recording's camera), a sheet of another size than the export's, a wind
-  outside what a fan blows.
+  recording's camera), a sheet of another size than the export's, the
+  recording the estimate was made from, a wind outside what a fan blows.
 
   Raises:
     ValueError: one line naming the recording or the flag.
@@ -190,11 +190,32 @@ def check_set_up(
       f'{exported.folder} is a {exported.size:g} m sheet; export for this one '
       f'(experiments.export --cloth_size={cloth_size:g})'
     )
+  source = os.path.join(exported.folder, fabric_files.FABRIC_FILE)
+  estimated = estimated_from(layout.read_json(source).get('source', ''))
+  if os.path.realpath(recording) in estimated:
+    raise ValueError(
+      f'{recording}: the estimate behind {exported.folder} was made from it; '
+      'validate on a recording it did not see'
+    )
   lo, hi = WIND_RANGE
   if not (math.isfinite(wind_speed) and lo <= wind_speed <= hi):
     raise ValueError(
       f"--wind_speed={wind_speed}: need the anemometer's reading, {lo:g}-{hi:g} m/s"
     )
+
+
+def estimated_from(estimate_file) -> set[str]:
+  """The real paths of the recordings an estimate's JSON (one recording's or
+  a joint's) was made from; none where it cannot be read."""
+  try:
+    data = layout.read_json(str(estimate_file))
+  except ValueError:
+    return set()
+  found = [data.get('recording')]
+  recordings = data.get('recordings')
+  if isinstance(recordings, list):
+    found += [r.get('recording') for r in recordings if isinstance(r, dict)]
+  return {os.path.realpath(p) for p in found if isinstance(p, str) and p}
 
 
 def simulation(exported: Exported, settings: Settings) -> objective_lib.Simulation:

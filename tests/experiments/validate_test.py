@@ -79,6 +79,20 @@ def test_a_recording_of_another_cloth_size_is_refused_in_one_line(made):
   assert not any(n.startswith('validate') for n in os.listdir(made['half']))
 
 
+def test_the_recording_the_estimate_was_made_from_is_refused(made, tmp_path):
+  est = tmp_path / 'est'
+  est.mkdir()
+  (est / 'estimate.json').write_text(json.dumps({
+    'material': 'gray_interlock', 'recording': made['depth'],
+    'config': {'cloth_size': 1.0, 'cloth_resolution': 10, 'fps': 20.0},
+    'estimate': {'bending_scale': _entry(1.0), 'area_weight': _entry(0.185)},
+  }))  # fmt: skip
+  fabric_files.write(str(est), str(tmp_path / 'f'), draws=0)
+  with pytest.raises(ValueError) as e:
+    script.main(_args(made, fabric=str(tmp_path / 'f')))
+  assert 'was made from it' in _one_line(e)
+
+
 @pytest.mark.parametrize(
   'kw, message',
   [({'wind_speed': 0.0}, '--wind_speed=0.0'), ({'wind_speed': 90.0}, '--wind_speed'),
