@@ -20,6 +20,8 @@ world; its summary is printed and ``intake.json``, ``overlay.png`` and the
 cleaned frames are written before the search. Writes ``estimate.json``,
 ``trace.png`` and ``montage.png`` into ``--workdir`` and resumes from what it
 holds (``experiments.pipeline.search``).
+
+``--help`` lists the flags most estimates need; ``--helpfull`` lists all of them.
 """
 
 from __future__ import annotations
@@ -121,6 +123,14 @@ class Args:
 
 
 PRESETS = {k: Args(search=v) for k, v in objective_lib.PRESETS.items()}
+# What --help lists: the recording, its camera, the fabric, the readings a
+# person has; the search's own settings under --helpfull.
+KEY_FLAGS = (
+  'recording', 'camera_json', 'protocol', 'workdir', 'preset', 'material',
+  'distance', 'model', 'intake_only', 'fps', 'depth_scale', 'world_up',
+  'cloth_size', 'wind_speed', 'wind_speed_sd', 'area_weight', 'area_weight_sd',
+  'bending_length', 'bending_length_sd',
+)  # fmt: skip
 
 # What a joint estimate's recordings share (joint.json's entries).
 JOINT_SHARED = ('bending_scale', 'area_weight')
@@ -336,4 +346,4 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
 
 
 if __name__ == '__main__':
-  cli.run(Args, PRESETS, main)
+  cli.run(Args, PRESETS, main, key_flags=KEY_FLAGS)

@@ -41,7 +41,7 @@ import signal
 import sys
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 
 from absl import app, flags
 
@@ -186,52 +186,74 @@ def _replace(obj, path, value):
   return dataclasses.replace(obj, **{path[0]: child})
 
 
+# Where --help's further flags are listed (--helpfull shows them).
+FURTHER = 'further flags'
+
+
 def define_flags(
   cls,
   presets: Mapping[str, object],
   flag_values: flags.FlagValues = flags.FLAGS,
   module_name: str | None = None,
+  key_flags: Collection[str] | None = None,
 ) -> None:
   """Defines ``--preset``, ``--verbose`` and one flag per leaf field of ``cls``.
 
   Help text is the field's documentation; the default shown is the first
   preset's value. ``module_name`` is the module ``--help`` lists them under
-  (the running script's: absl names it by ``sys.argv[0]``).
+  (the running script's: absl names it by ``sys.argv[0]``). ``key_flags``:
+  the flags a person needs, the only ones ``--help`` lists; the others go
+  under ``FURTHER``, which ``--helpfull`` lists with them. None: every flag
+  is a key one.
+
+  Raises:
+    ValueError: no preset, or a key flag that is no flag of ``cls``.
   """
   if not presets:
     raise ValueError(f'{cls.__name__}: need at least one preset')
   first = next(iter(presets.values()))
-  kw = dict(flag_values=flag_values, module_name=module_name)
+  all_leaves = leaves(cls)
+  if key_flags is not None:
+    known = {leaf.flag for leaf in all_leaves} | {'preset', 'verbose', 'time_limit'}
+    unknown = sorted(set(key_flags) - known)
+    if unknown:
+      raise ValueError(f'{cls.__name__}: key flags {unknown} are no flags of it')
+
+  def kw(name: str) -> dict:
+    key = key_flags is None or name in key_flags
+    return dict(flag_values=flag_values, module_name=module_name if key else FURTHER)
+
   flags.DEFINE_enum(
     'preset', next(iter(presets)), list(presets),
-    'named settings; flags given override them', **kw,
+    'named settings; flags given override them', **kw('preset'),
   )  # fmt: skip
-  flags.DEFINE_bool('verbose', False, 'show the traceback of an error', **kw)
+  flags.DEFINE_bool('verbose', False, 'show the traceback of an error', **kw('verbose'))
   flags.DEFINE_float(
     'time_limit', 0.0,
     'seconds from the start after which no new step of a long job begins (it '
     'stops cleanly between steps, exit status 75, and resumes when run again); 0: none',
-    **kw,
+    **kw('time_limit'),
   )  # fmt: skip
-  for leaf in leaves(cls):
+  for leaf in all_leaves:
     name, doc = leaf.flag, leaf.doc
     default = _get(first, leaf.path)
     kind, elem = _parser(leaf.type, name)
     choices = leaf.field.metadata.get(_CHOICES)
+    where = kw(name)
     if choices:
-      flags.DEFINE_enum(name, default, list(choices), doc, **kw)
+      flags.DEFINE_enum(name, default, list(choices), doc, **where)
     elif kind == 'bool':
-      flags.DEFINE_bool(name, default, doc, **kw)
+      flags.DEFINE_bool(name, default, doc, **where)
     elif kind == 'int':
-      flags.DEFINE_integer(name, default, doc, **kw)
+      flags.DEFINE_integer(name, default, doc, **where)
     elif kind == 'float':
-      flags.DEFINE_float(name, default, doc, **kw)
+      flags.DEFINE_float(name, default, doc, **where)
     elif kind == 'str':
-      flags.DEFINE_string(name, default, doc, **kw)
+      flags.DEFINE_string(name, default, doc, **where)
     else:
-      flags.DEFINE_list(name, [str(v) for v in default], doc, **kw)
+      flags.DEFINE_list(name, [str(v) for v in default], doc, **where)
     for alias in leaf.field.metadata.get(_ALIASES, ()):
-      flags.DEFINE_alias(alias, name, **kw)
+      flags.DEFINE_alias(alias, name, **where)
 
 
 def from_flags(
@@ -348,11 +370,19 @@ def _parse_flags(argv):
     sys.exit(2)
 
 
-def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) -> None:
+def run(
+  cls,
+  presets: Mapping[str, object],
+  main: Callable[[object], object],
+  *,
+  key_flags: Collection[str] | None = None,
+) -> None:
   """A script's whole ``__main__``: flags from ``cls``, ``main(config)``, and
   user errors as one line (exit status 2) unless ``--verbose``; Ctrl-C as one
   line naming the command that resumes (exit status 130). Under a
-  multi-process launch (``distributed``) the processes are joined first."""
+  multi-process launch (``distributed``) the processes are joined first.
+  ``key_flags``: the flags ``--help`` lists (``define_flags``; the rest under
+  ``--helpfull``)."""
   from experiments.pipeline import distributed, jax_cache  # noqa: PLC0415 - imports jax
   from physsim import interrupt  # noqa: PLC0415 - imports jax
 
@@ -363,7 +393,7 @@ def run(cls, presets: Mapping[str, object], main: Callable[[object], object]) ->
   interrupt.install((signal.SIGINT, signal.SIGTERM))
   jax_cache.enable()  # a later process loads what this one compiles
   distributed.initialize()
-  define_flags(cls, presets, module_name=sys.argv[0])
+  define_flags(cls, presets, module_name=sys.argv[0], key_flags=key_flags)
 
   def _main(argv):
     try:

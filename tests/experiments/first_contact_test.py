@@ -80,3 +80,28 @@ def test_an_empty_workdir_is_refused_by_name(name):
   if name == 'estimate':
     got = cli.parse(script.Args, presets, [name, '--workdir=w', '--camera_json='])
     assert got.camera_json == ''
+
+
+def test_estimate_help_leads_with_the_flags_a_person_needs():
+  """--help was 345 lines of 72 flags in alphabetical order; it now lists
+  the key ones, and --helpfull all."""
+  import re  # noqa: PLC0415
+
+  from absl import flags  # noqa: PLC0415
+
+  from experiments import estimate  # noqa: PLC0415
+
+  fv = flags.FlagValues()
+  cli.define_flags(
+    estimate.Args, estimate.PRESETS, fv, module_name='est', key_flags=estimate.KEY_FLAGS
+  )
+  short = set(re.findall(r'^\s+--(?:\[no\])?(\w+):', fv.module_help('est'), re.M))
+  full = set(re.findall(r'^\s+--(?:\[no\])?(\w+):', fv.get_help(), re.M))
+  assert short == set(estimate.KEY_FLAGS) and len(short) <= 25
+  assert {'recording', 'camera_json', 'workdir', 'material'} <= short
+  assert {'n_init', 'q', 'posterior_grid', 'verbose'} <= full - short
+  assert len(full) > 60
+  with pytest.raises(ValueError, match=r"key flags \['recordings'\]"):
+    cli.define_flags(
+      estimate.Args, estimate.PRESETS, flags.FlagValues(), key_flags=['recordings']
+    )
