@@ -23,7 +23,7 @@ import time
 from absl import logging
 
 import physsim
-from experiments.pipeline import cli, embedding, files, search
+from experiments.pipeline import cli, embedding, estimation, files, search
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import recording as recording_lib
 
@@ -114,7 +114,7 @@ def main(args: Args) -> None:
     for _ in range(1 + args.repeats):  # the first run compiles
       with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        r = search.estimate(
+        r = estimation.estimate(
           config, rec, model, tmp, progress=False, evaluator=evaluator,
           **kwargs,
         )  # fmt: skip

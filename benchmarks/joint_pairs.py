@@ -6,8 +6,9 @@ group shares bending and area weight and draws a wind per recording, as
 ``experiments.calibrate`` draws its pairs: ``calibration.truths``), gives each
 recording a simulated anemometer reading (``posterior.simulated_reading``,
 ``--reading_sd``) and estimates every group jointly: all recordings' searches
-in lockstep (``search.joint_jobs``, one ``estimate_many``), each steered by its
-reading, then each group's joint posterior (``search.combine_joint``).
+in lockstep (``joint.joint_jobs``, one ``estimation.estimate_many``), each
+steered by its reading, then each group's joint posterior
+(``joint.combine_joint``).
 Prints, over the recordings, the mean error of area weight, wind and the load
 ratio from one recording with its reading (each joint's ``alone``), from the
 group's first k recordings jointly (posterior median, 2 <= k < group) and from
@@ -48,7 +49,8 @@ import numpy as np
 from absl import logging
 
 import physsim
-from experiments.pipeline import cli, datasets, embedding, files, objective, search
+from experiments.pipeline import cli, datasets, embedding, estimation, files, objective
+from experiments.pipeline import joint as joint_lib
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from experiments.studies import calibration
@@ -219,8 +221,8 @@ def _error(est: float, truth: float) -> float:
 def _first_k_medians(jobs, k: int, space, shared_bias=None) -> list[dict]:
   """Posterior medians of each of the first ``k`` recordings' (wind, area
   weight, load ratio) under their joint posterior (``posterior.joint`` of
-  their saved likelihoods, ``search.joint_posterior``; one wind each)."""
-  joint, _ = search.joint_posterior(
+  their saved likelihoods, ``joint_lib.joint_posterior``; one wind each)."""
+  joint, _ = joint_lib.joint_posterior(
     jobs[:k], jax.random.key(jobs[0].config.seed), shared_bias
   )
   out = []
@@ -235,13 +237,13 @@ def _first_k_medians(jobs, k: int, space, shared_bias=None) -> list[dict]:
   return out
 
 
-def main(args: Args) -> None:
-  logging.set_verbosity(logging.WARNING)  # orbax logs every restore at INFO
+def _config(args: Args) -> objective.EstimateConfig:
+  """The estimate's settings: the preset's with the flags that override it,
+  every flag checked before any work."""
   for name, low in _LOWER.items():
     if not getattr(args, name) >= low:
       raise ValueError(f'--{name}={getattr(args, name)}: need at least {low}')
-  config = args.estimate
-  config = config.replace(
+  config = args.estimate.replace(
     material=args.material,
     **({'backend': args.backend} if args.backend else {}),
     **({'distance': args.distance} if args.distance else {}),
@@ -257,22 +259,17 @@ def main(args: Args) -> None:
     raise ValueError(
       f'--hem_mass pairs a sheet with its hemmed twin: --group=2, got {args.group}'
     )
-  fans = ['pair', 'pair'] if args.hem_mass else None
-  overrides = [{}, {'hem_mass': args.hem_mass}] if args.hem_mass else None
-  net = embedding.for_distance(args.model, config.scoring.distance, args.image_size)
   if args.seconds:  # compare the whole clip
     config = config.replace(frames=round(args.seconds * config.simulation.fps))
-  space = physsim.search_space(args.material)
-  centre = space.center()
-  guess = {
-    'wind_speed': float(centre.wind_speed), 'area_weight': float(centre.area_weight),
-    'load_ratio': float(physsim.load_ratio(centre.wind_speed, centre.area_weight)),
-  }  # fmt: skip
-  groups = _recordings(args, args.workdir, net.image_size[0])
-  if not groups:
-    raise ValueError('no group of recordings was kept')
+  return config
+
+
+def _plan(args: Args, config, net, groups: list[list[dict]]) -> list[tuple]:
+  """Per group: (group, recordings, readings, workdir, its searches)."""
+  fans = ['pair', 'pair'] if args.hem_mass else None
+  overrides = [{}, {'hem_mass': args.hem_mass}] if args.hem_mass else None
   nets = {args.model: net} if args.model else None  # restored once
-  plan = []  # (group, recordings, readings, workdir, jobs)
+  plan = []
   for group in groups:
     recs, winds = [], []
     for r in group:
@@ -290,17 +287,64 @@ def main(args: Args) -> None:
         )
         winds.append((m.wind_speed, m.wind_speed_sd))
     wd = os.path.join(args.workdir, f'pair_{group[0]["seq"] // args.group:02d}')
-    jobs = search.joint_jobs(config, recs, args.model, wd, winds or None, nets=nets,
-                             overrides=overrides, fans=fans)  # fmt: skip
+    jobs = joint_lib.joint_jobs(config, recs, args.model, wd, winds or None, nets=nets,
+                                overrides=overrides, fans=fans)  # fmt: skip
     plan.append((group, recs, winds, wd, jobs))
-  # Every group's searches in lockstep: one simulation batch for all.
-  results = search.estimate_many([j for *_, jobs in plan for j in jobs])
+  return plan
+
+
+def _row(group, k: int, rec, winds, out: dict, guess: dict) -> dict:
+  """Recording ``k`` of a group: its truth, reading, the points of it alone
+  and of the joint, their errors and the range centre's, the joint's cover."""
+  t = dict(rec.truth)
+  t['load_ratio'] = float(physsim.load_ratio(t['wind_speed'], t['area_weight']))
+  alone = out['recordings'][k]['alone']
+  joint = {
+    'wind_speed': out['recordings'][k]['wind_speed'],
+    'area_weight': out['area_weight'],
+    'load_ratio': out['recordings'][k]['load_ratio'],
+  }
+  one = {n: alone[n]['value'] for n in NAMES[:2]}
+  one['load_ratio'] = physsim.load_ratio(one['wind_speed'], one['area_weight'])
+  # the points themselves beside their errors, for their bias (signed error)
+  points = {
+    'alone': {n: float(one[n]) for n in NAMES},
+    'joint': {n: float(joint[n]['bayes']) for n in NAMES},
+  }
+  return {
+    'seq': group[k]['seq'],
+    'truth': t,
+    'reading': list(winds[k]) if winds else None,
+    **{f'{who}_point': p for who, p in points.items()},
+    **{who: {n: _error(p[n], t[n]) for n in NAMES} for who, p in points.items()},
+    'joint_median': {n: _error(joint[n]['median'], t[n]) for n in NAMES},
+    'centre': {n: _error(guess[n], t[n]) for n in NAMES},
+    'joint_covered_90': {
+      n: bool(joint[n]['interval_90'][0] <= t[n] <= joint[n]['interval_90'][1])
+      for n in NAMES
+    },
+    # how much each narrows the 90% interval (prior width over posterior's)
+    'narrowing_90': {
+      'alone': {n: alone[n]['narrowing_90'] for n in NAMES[:2]},
+      'joint': {n: joint[n]['narrowing_90'] for n in NAMES[:2]},
+    },
+  }  # fmt: skip
+
+
+def _rows(args: Args, plan, results, space) -> list[dict]:
+  """Every kept recording's row; a group whose search failed is left out."""
+  fans = ['pair', 'pair'] if args.hem_mass else None
+  centre = space.center()
+  guess = {
+    'wind_speed': float(centre.wind_speed), 'area_weight': float(centre.area_weight),
+    'load_ratio': float(physsim.load_ratio(centre.wind_speed, centre.area_weight)),
+  }  # fmt: skip
   ks = range(2, args.group)  # fewer than the whole group
   rows = []
   for g, (group, recs, winds, wd, jobs) in enumerate(plan):
     done = results[g * args.group : (g + 1) * args.group]
     try:
-      out = search.combine_joint(jobs, done, wd, fans)
+      out = joint_lib.combine_joint(jobs, done, wd, fans)
     except ValueError as e:  # a search failed: the others still count
       print(f'group {g}: left out ({e})')
       continue
@@ -308,39 +352,8 @@ def main(args: Args) -> None:
     if fans:  # the same searches with a wind each (no fan shared)
       apart = _first_k_medians(jobs, args.group, space, out['shared_bias'])
     for k, rec in enumerate(recs):
-      t = dict(rec.truth)
-      t['load_ratio'] = float(physsim.load_ratio(t['wind_speed'], t['area_weight']))
-      alone = out['recordings'][k]['alone']
-      joint = {
-        'wind_speed': out['recordings'][k]['wind_speed'],
-        'area_weight': out['area_weight'],
-        'load_ratio': out['recordings'][k]['load_ratio'],
-      }
-      one = {n: alone[n]['value'] for n in NAMES[:2]}
-      one['load_ratio'] = physsim.load_ratio(one['wind_speed'], one['area_weight'])
-      # the points themselves beside their errors, for their bias (signed error)
-      points = {
-        'alone': {n: float(one[n]) for n in NAMES},
-        'joint': {n: float(joint[n]['bayes']) for n in NAMES},
-      }
-      row = {
-        'seq': group[k]['seq'],
-        'truth': t,
-        'reading': list(winds[k]) if winds else None,
-        **{f'{who}_point': p for who, p in points.items()},
-        **{who: {n: _error(p[n], t[n]) for n in NAMES} for who, p in points.items()},
-        'joint_median': {n: _error(joint[n]['median'], t[n]) for n in NAMES},
-        'centre': {n: _error(guess[n], t[n]) for n in NAMES},
-        'joint_covered_90': {
-          n: bool(joint[n]['interval_90'][0] <= t[n] <= joint[n]['interval_90'][1])
-          for n in NAMES
-        },
-      }  # fmt: skip
-      # how much each narrows the 90% interval (prior width over posterior's)
-      row['narrowing_90'] = {
-        'alone': {n: alone[n]['narrowing_90'] for n in NAMES[:2]},
-        'joint': {n: joint[n]['narrowing_90'] for n in NAMES[:2]},
-      }
+      row = _row(group, k, rec, winds, out, guess)
+      t = row['truth']
       for j in ks:  # the group's first j recordings, jointly
         if k < j:
           row[f'first_{j}'] = {n: _error(first[j][k][n], t[n]) for n in NAMES}
@@ -350,17 +363,30 @@ def main(args: Args) -> None:
       rows.append(row)
   if not rows:
     raise ValueError('every group failed')
+  return rows
+
+
+def _labels(args: Args) -> dict:
+  """The table's rows: each estimate's key in a row, and its label."""
   labels = {'alone': 'one recording and its reading'}
   labels.update(
-    {f'first_{j}': f'the first {j}, jointly (posterior median)' for j in ks}
+    {
+      f'first_{j}': f'the first {j}, jointly (posterior median)'
+      for j in range(2, args.group)
+    }
   )
-  if fans:
+  if args.hem_mass:
     labels['fans_apart'] = 'the pair, a wind each (posterior median)'
   labels.update({
     'joint_median': f'all {args.group}, jointly (posterior median)',
     'joint': f'all {args.group}, jointly (reported point)',
     'centre': 'range centre',
   })  # fmt: skip
+  return labels
+
+
+def _summary(rows: list[dict], labels: dict) -> dict:
+  """Mean errors per estimate, the joint's coverage, narrowing and bias."""
   summary = {}
   for who in labels:
     have = [r[who] for r in rows if who in r]
@@ -369,6 +395,21 @@ def main(args: Args) -> None:
   summary['joint_covered_90'] = {
     n: float(np.mean([r['joint_covered_90'][n] for r in rows])) for n in NAMES
   }
+  summary['narrowing_90'] = {
+    who: {
+      n: float(np.mean([r['narrowing_90'][who][n] for r in rows])) for n in NAMES[:2]
+    }
+    for who in ('alone', 'joint')
+  }
+  # bias: the mean signed log error of the group's point, percent
+  summary['joint_bias'] = {
+    n: float(100 * np.mean([np.log(r['joint_point'][n] / r['truth'][n]) for r in rows]))
+    for n in NAMES
+  }
+  return summary
+
+
+def _print(args: Args, config, rows, groups, labels: dict, summary: dict) -> None:
   print(f'{len(rows)} recordings in {len(groups)} groups of {args.group}, '
         f'{args.material}, distance {config.scoring.distance}, '
         + (f'readings with {100 * args.reading_sd:g}% error' if args.reading_sd
@@ -382,26 +423,32 @@ def main(args: Args) -> None:
     s = summary[who]
     print(f'| {label} | {s["n"]} | '
           + ' | '.join(f'{s[n]:.1f}%' for n in NAMES) + ' |')  # fmt: skip
-  summary['narrowing_90'] = {
-    who: {
-      n: float(np.mean([r['narrowing_90'][who][n] for r in rows])) for n in NAMES[:2]
-    }
-    for who in ('alone', 'joint')
-  }
   nar = summary['narrowing_90']
   print("90% intervals' narrowing (prior width over posterior width), one recording / "
         'the group: ' + ', '.join(f"{n} x{nar['alone'][n]:.2f} / x{nar['joint'][n]:.2f}"
                                   for n in NAMES[:2]))  # fmt: skip
-  # bias: the mean signed log error of the group's point, percent
-  summary['joint_bias'] = {
-    n: float(100 * np.mean([np.log(r['joint_point'][n] / r['truth'][n]) for r in rows]))
-    for n in NAMES
-  }
   print('joint points, mean signed log error (bias): '
         + ', '.join(f"{n} {summary['joint_bias'][n]:+.1f}%" for n in NAMES))  # fmt: skip
   cov = summary['joint_covered_90']
   print('joint 90% intervals held the truth: '
         + ', '.join(f'{n} {100 * cov[n]:.0f}%' for n in NAMES))  # fmt: skip
+
+
+def main(args: Args) -> None:
+  logging.set_verbosity(logging.WARNING)  # orbax logs every restore at INFO
+  config = _config(args)
+  net = embedding.for_distance(args.model, config.scoring.distance, args.image_size)
+  space = physsim.search_space(args.material)
+  groups = _recordings(args, args.workdir, net.image_size[0])
+  if not groups:
+    raise ValueError('no group of recordings was kept')
+  plan = _plan(args, config, net, groups)
+  # Every group's searches in lockstep: one simulation batch for all.
+  results = estimation.estimate_many([j for *_, jobs in plan for j in jobs])
+  rows = _rows(args, plan, results, space)
+  labels = _labels(args)
+  summary = _summary(rows, labels)
+  _print(args, config, rows, groups, labels, summary)
   files.write_json(
     os.path.join(args.workdir, 'joint_pairs.json'),
     {

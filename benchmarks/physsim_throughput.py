@@ -390,7 +390,8 @@ def _paper_dataset(model, backend):
   }
 
 
-def main(args: Args) -> None:
+def _model(args: Args):
+  """The benchmark's cloth with the solver settings the flags override."""
   batch_sizes = list(args.batch_sizes)
   if not batch_sizes or min(batch_sizes) < 1:
     raise ValueError(f'--batch_sizes={",".join(map(str, batch_sizes))}: need positive')
@@ -410,10 +411,14 @@ def main(args: Args) -> None:
   model = physsim.build(physsim.square(args.resolution), 'gray_interlock', config)
   if args.ls_iterations:  # not a SimConfig setting: patched on the compiled model
     model.mj_model.opt.ls_iterations = args.ls_iterations
-  cores = os.cpu_count() or 1
-  device = jax.devices()[0]
+  return model
+
+
+def _rows(args: Args, model, cores: int) -> list[dict]:
+  """MuJoCo C's rows, then per batch size each backend's (ablated, traced,
+  against MuJoCo Warp direct where asked)."""
   rows = [_c_row(args, model, 1), _c_row(args, model, cores)] if args.c_baseline else []
-  for b in batch_sizes:
+  for b in args.batch_sizes:
     project = []
     for backend in args.backends:
       project.append(_device_row(args, model, b, backend))
@@ -433,27 +438,15 @@ def main(args: Args) -> None:
   paper_steps = _PAPER_SEQUENCES * (_PAPER_SECONDS + _WARMUP) / model.config.timestep
   for r in rows:
     r['paper_dataset_s'] = paper_steps / r['world_steps_per_s']
+  return rows
+
+
+def _print(args: Args, model, result: dict, cores: int) -> None:
+  rows = result['rows']
   c_all = rows[1]['world_steps_per_s'] if args.c_baseline else float('nan')
-  result = {
-    'machine': {
-      'platform': platform.platform(),
-      'cpu_cores': cores,
-      'jax_device': str(device),
-      'jax': jax.__version__,
-    },
-    'resolution': args.resolution,
-    'timestep': model.config.timestep,
-    'solver': f'{model.config.solver} x{model.config.iterations}',
-    'ls_iterations': int(model.mj_model.opt.ls_iterations),
-    'sim_config': dataclasses.asdict(model.config),
-    'devices': [str(d) for d in jax.local_devices()],
-    'rows': rows,
-  }
-  if args.paper_dataset:
-    result['paper_dataset'] = {b: _paper_dataset(model, b) for b in args.backends}
   print(
     f'\n{args.resolution}x{args.resolution} cloth, dt {model.config.timestep * 1e3:g} ms, '
-    f'{result["solver"]}, device {device}, {cores} CPU cores'
+    f'{result["solver"]}, device {jax.devices()[0]}, {cores} CPU cores'
   )
   print(
     '| backend | batch | world-steps/s | x C all cores | x MuJoCo Warp direct | '
@@ -475,6 +468,30 @@ def main(args: Args) -> None:
       f'\nPaper dataset, 210 x (1+3) s in one {backend} call: {d["run_s"]:.2f} s '
       f'after {d["compile_s"]:.1f} s compile; valid {d["valid_fraction"]:.3f}'
     )
+
+
+def main(args: Args) -> None:
+  model = _model(args)
+  cores = os.cpu_count() or 1
+  rows = _rows(args, model, cores)
+  result = {
+    'machine': {
+      'platform': platform.platform(),
+      'cpu_cores': cores,
+      'jax_device': str(jax.devices()[0]),
+      'jax': jax.__version__,
+    },
+    'resolution': args.resolution,
+    'timestep': model.config.timestep,
+    'solver': f'{model.config.solver} x{model.config.iterations}',
+    'ls_iterations': int(model.mj_model.opt.ls_iterations),
+    'sim_config': dataclasses.asdict(model.config),
+    'devices': [str(d) for d in jax.local_devices()],
+    'rows': rows,
+  }
+  if args.paper_dataset:
+    result['paper_dataset'] = {b: _paper_dataset(model, b) for b in args.backends}
+  _print(args, model, result, cores)
   files.write_json(args.out, result)
   print(f'wrote {args.out}')
 

@@ -330,100 +330,109 @@ def _seeds(h: dict) -> str:
   return f'{min(v):.0f}-{max(v):.0f}%'
 
 
-def table(checks: dict | None, sets: dict | None) -> str:
-  lines = []
-  if checks:
-    lines += [
-      f'Shipped tables on {checks["n"]} recordings of the {checks["physics"]} '
-      f'physics (seeds {", ".join(map(str, checks["seeds"]))}; {checks["calibration"]}); '
-      "brackets: 95% intervals counting recordings as independent (a pair's two "
-      "share bending and area weight); seeds: the range of the seeds' own",
-      '',
-      '| mode | quantity | 50% held | seeds | 90% held | seeds | mean error: point | range centre |',
-      '|---|---|---|---|---|---|---|---|',
-    ]
-    for mode, by in checks['modes'].items():
-      for q, r in by.items():
-        if q == 'by_material':
-          continue
-        fmt = (
-          (lambda v: f'x{v:.2f}') if q == 'bending_scale' else (lambda v: f'{v:.1f}%')
-        )
-        lines.append(
-          f'| {mode} | {q} | {_pct(r["held_50"])} | {_seeds(r["held_50"])} | '
-          f'{_pct(r["held_90"])} | {_seeds(r["held_90"])} | {fmt(r["point_error"])} | '
-          f'{fmt(r["centre_error"])} |'
-        )
-    conf = [(m, by['wind_speed']) for m, by in checks['modes'].items()
-            if 'confident_misses' in by.get('wind_speed', {})]  # fmt: skip
-    if conf:
-      lines += [
-        '',
-        'Wind points more than 25% off with the truth outside the 90% interval, '
-        'per mode, beside how many the posteriors themselves expect (their mass '
-        'there, summed; calibrated intervals expect some): '
-        + '; '.join(
-          f'{m} {r["confident_misses"]} ({r["confident_misses_expected"]:.1f})'
-          for m, r in conf
-        ),
-      ]
-    video = checks['modes'].get('video', {}).get('by_material')
-    if video:
-      lines += [
-        '',
-        'By fabric, the video alone: how often the 90% intervals held '
-        "(brackets: 95% intervals; a fabric's recordings are few, and a pair's two "
-        'share bending and area weight)',
-        '',
-        '| fabric | n | ' + ' | '.join(FIELDS) + ' |',
-        '|---|---|' + '---|' * len(FIELDS),
-      ]
-      for m, r in video.items():
-        cells = ' | '.join(_pct(r[q]['held_90']) for q in FIELDS)
-        lines.append(f'| {m} | {r["n"]} | {cells} |')
-  if sets:
-    lines += [
-      '',
-      f"Protocol sets (seeds {', '.join(map(str, sets['seeds']))}; the reader's t of "
-      f'{sets["law"]["dof"]:g}, set-ups "{sets["setups"]}"); brackets: 95% intervals '
-      'resampling whole pairs (a pair shares its truth)',
-      '',
-      "| sets | n | bending factor (median) | its 90% vs the prior's | area weight | wind "
-      '| bending 90% / 50% held | wind | area weight |',
-      '|---|---|---|---|---|---|---|---|---|',
-    ]
-    for mode, r in sets['modes'].items():
-      held = ' | '.join(
-        f'{_pct(r[f"{f}_held_90"], "ci_pairs")} / {_pct(r[f"{f}_held_50"], "ci_pairs")}'
-        for f in SET_FIELDS
-      )
+def _checks_table(checks: dict) -> list[str]:
+  """The pooled checks' coverage per mode and quantity, the confident wind
+  misses, and the video's coverage by fabric."""
+  lines = [
+    f'Shipped tables on {checks["n"]} recordings of the {checks["physics"]} '
+    f'physics (seeds {", ".join(map(str, checks["seeds"]))}; {checks["calibration"]}); '
+    "brackets: 95% intervals counting recordings as independent (a pair's two "
+    "share bending and area weight); seeds: the range of the seeds' own",
+    '',
+    '| mode | quantity | 50% held | seeds | 90% held | seeds | mean error: point | range centre |',
+    '|---|---|---|---|---|---|---|---|',
+  ]
+  for mode, by in checks['modes'].items():
+    for q, r in by.items():
+      if q == 'by_material':
+        continue
+      fmt = (lambda v: f'x{v:.2f}') if q == 'bending_scale' else (lambda v: f'{v:.1f}%')
       lines.append(
-        f'| {mode} ({r["how"]}) | {r["sets"]} | x{r["bending_median_factor"]:.2f} | '
-        f'x{r["bending_narrowing_90_median"]:.1f} narrower | '
-        f'{r["area_weight_mean_pct"]:.1f}% | {r["wind_mean_pct"]:.1f}% | {held} |'
+        f'| {mode} | {q} | {_pct(r["held_50"])} | {_seeds(r["held_50"])} | '
+        f'{_pct(r["held_90"])} | {_seeds(r["held_90"])} | {fmt(r["point_error"])} | '
+        f'{fmt(r["centre_error"])} |'
       )
-    last = list(sets['modes'])[-1]
+  conf = [(m, by['wind_speed']) for m, by in checks['modes'].items()
+          if 'confident_misses' in by.get('wind_speed', {})]  # fmt: skip
+  if conf:
     lines += [
       '',
-      f"Area weight by fabric ({last}): mean error, the box centre's on the same "
-      'truths, the box (high / low), 90% held',
-      '',
-      '| fabric | sets | area weight | box centre | box | 90% held |',
-      '|---|---|---|---|---|---|',
-    ]
-    for material, a in sets['modes'][last]['area_weight_by_fabric'].items():
-      lines.append(
-        f'| {material} | {a["sets"]} | {a["mean_pct"]:.1f}% | {a["centre_pct"]:.1f}% | '
-        f'x{a["box_ratio"]:.2f} | {100 * a["held_90"]:.0f}% |'
-      )
-    lines += [
-      '',
-      'Area weight by the true wind: '
-      + ', '.join(
-        f'{band} {v:.1f}%'
-        for band, v in sets['modes'][last]['area_weight_by_wind'].items()
+      'Wind points more than 25% off with the truth outside the 90% interval, '
+      'per mode, beside how many the posteriors themselves expect (their mass '
+      'there, summed; calibrated intervals expect some): '
+      + '; '.join(
+        f'{m} {r["confident_misses"]} ({r["confident_misses_expected"]:.1f})'
+        for m, r in conf
       ),
     ]
+  video = checks['modes'].get('video', {}).get('by_material')
+  if video:
+    lines += [
+      '',
+      'By fabric, the video alone: how often the 90% intervals held '
+      "(brackets: 95% intervals; a fabric's recordings are few, and a pair's two "
+      'share bending and area weight)',
+      '',
+      '| fabric | n | ' + ' | '.join(FIELDS) + ' |',
+      '|---|---|' + '---|' * len(FIELDS),
+    ]
+    for m, r in video.items():
+      cells = ' | '.join(_pct(r[q]['held_90']) for q in FIELDS)
+      lines.append(f'| {m} | {r["n"]} | {cells} |')
+  return lines
+
+
+def _sets_table(sets: dict) -> list[str]:
+  """The protocol sets per mode, and area weight by fabric and by wind."""
+  lines = [
+    '',
+    f"Protocol sets (seeds {', '.join(map(str, sets['seeds']))}; the reader's t of "
+    f'{sets["law"]["dof"]:g}, set-ups "{sets["setups"]}"); brackets: 95% intervals '
+    'resampling whole pairs (a pair shares its truth)',
+    '',
+    "| sets | n | bending factor (median) | its 90% vs the prior's | area weight | wind "
+    '| bending 90% / 50% held | wind | area weight |',
+    '|---|---|---|---|---|---|---|---|---|',
+  ]
+  for mode, r in sets['modes'].items():
+    held = ' | '.join(
+      f'{_pct(r[f"{f}_held_90"], "ci_pairs")} / {_pct(r[f"{f}_held_50"], "ci_pairs")}'
+      for f in SET_FIELDS
+    )
+    lines.append(
+      f'| {mode} ({r["how"]}) | {r["sets"]} | x{r["bending_median_factor"]:.2f} | '
+      f'x{r["bending_narrowing_90_median"]:.1f} narrower | '
+      f'{r["area_weight_mean_pct"]:.1f}% | {r["wind_mean_pct"]:.1f}% | {held} |'
+    )
+  last = list(sets['modes'])[-1]
+  lines += [
+    '',
+    f"Area weight by fabric ({last}): mean error, the box centre's on the same "
+    'truths, the box (high / low), 90% held',
+    '',
+    '| fabric | sets | area weight | box centre | box | 90% held |',
+    '|---|---|---|---|---|---|',
+  ]
+  for material, a in sets['modes'][last]['area_weight_by_fabric'].items():
+    lines.append(
+      f'| {material} | {a["sets"]} | {a["mean_pct"]:.1f}% | {a["centre_pct"]:.1f}% | '
+      f'x{a["box_ratio"]:.2f} | {100 * a["held_90"]:.0f}% |'
+    )
+  lines += [
+    '',
+    'Area weight by the true wind: '
+    + ', '.join(
+      f'{band} {v:.1f}%'
+      for band, v in sets['modes'][last]['area_weight_by_wind'].items()
+    ),
+  ]
+  return lines
+
+
+def table(checks: dict | None, sets: dict | None) -> str:
+  lines = _checks_table(checks) if checks else []
+  if sets:
+    lines += _sets_table(sets)  # its first line blank, as after the checks'
   return '\n'.join(lines)
 
 

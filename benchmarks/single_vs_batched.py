@@ -1,7 +1,7 @@
 """One recording estimated alone against the same recording inside a lockstep.
 
 A calibration study (``experiments.calibrate``) estimates its recordings in one
-lockstep (``search.estimate_many``: one device program per step for all). This
+lockstep (``estimation.estimate_many``: one device program per step for all). This
 script estimates some of them again, one at a time in one process, with the
 settings and seed its estimate ran with (its ``estimate.json``), and prints per quantity the median and 90%
 interval of each, and the time of each single estimate (the first includes the
@@ -21,7 +21,7 @@ import json
 import os
 import time
 
-from experiments.pipeline import cli, files, search
+from experiments.pipeline import cli, estimation, files, layout, search
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from experiments.pipeline.objective import EstimateConfig
@@ -59,7 +59,7 @@ def main(args: Args) -> None:
   rows = []
   for seq in args.seqs:
     batched = recording_lib.read_json(
-      os.path.join(args.workdir, 'estimates', seq, search.ESTIMATE_FILE)
+      os.path.join(args.workdir, 'estimates', seq, layout.ESTIMATE_FILE)
     )
     est = EstimateConfig.from_flat(batched['config'])
     recording = recording_lib.load_recording(
@@ -67,7 +67,7 @@ def main(args: Args) -> None:
       size=(args.image_size, args.image_size), frames=est.simulation.frames,
     )  # fmt: skip
     t0 = time.perf_counter()
-    alone = search.estimate(
+    alone = estimation.estimate(
       est, recording, '',
       os.path.join(args.workdir, 'alone', seq), progress=False, evaluator=evaluator,
     )  # fmt: skip
