@@ -68,6 +68,12 @@ def joint_jobs(
     )
   if winds is not None and len(winds) != len(recordings):
     raise ValueError(f'{len(winds)} wind readings for {len(recordings)} recordings')
+  if config.measured.air_free and (winds is None or any(sd <= 0 for _, sd in winds)):
+    raise ValueError(
+      "--air_coefficient=free: a joint estimate reads the fabric's air from each "
+      "recording's wind reading (--wind_speeds, --wind_speed_sds); without "
+      'them the video sees the wind and the air as one'
+    )
   check_fans(fans, winds, len(recordings))
   configs = [config] * len(recordings)
   if winds is not None:
@@ -118,12 +124,13 @@ def check_fans(fans, winds, n: int) -> None:
 
 
 def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None,
-                    fans: list[str] | None = None) -> tuple[dict, list]:  # fmt: skip
+                    fans: list[str] | None = None, air=None) -> tuple[dict, list]:  # fmt: skip
   """``posterior.joint`` of finished searches (``joint_jobs``'s, or any
   subset of them) from their saved posteriors, drawing as many samples as
   each kept, with a shared discrepancy of ``shared_bias`` (None: the
   config's) and the recordings' fan settings (``fans``: one wind each
-  label); returns it and the loaded ``posterior.npz`` files."""
+  label; ``air``: ``posterior.joint``'s, the air coefficient shared); returns
+  it and the loaded ``posterior.npz`` files."""
   npz = [np.load(os.path.join(j.workdir, layout.POSTERIOR_FILE)) for j in jobs]
   grid = tuple(int(g) for g in npz[0]['grid'])
   config = jobs[0].config
@@ -133,7 +140,7 @@ def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None,
     [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
     n=len(npz[0]['samples']), shared_bias_sd=shared_bias,
     area_weight_range=physsim.search_space(config.simulation.material).area_weight,
-    fans=fans,
+    fans=fans, air=air,
   )  # fmt: skip
   return combined, npz
 
@@ -174,9 +181,13 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   # physics, without a shared discrepancy; elsewhere the discrepancy keeps its
   # recordings from averaging away the simulator's error.
   shared_sd = 0.0 if note and note.get('matches') else config.scoring.shared_bias
-  combined, npz = joint_posterior(jobs, key, shared_sd, fans)
   space = first.setup.space
+  air = _air_of(configs, space, first.setup.config.search.posterior_grid)
+  combined, npz = joint_posterior(jobs, key, shared_sd, fans, air)
   grid = tuple(int(g) for g in npz[0]['grid'])
+  shared_air = lambda k: (  # the shared c's draws beside recording k's prior's
+    None if air is None else (combined['air'], npz[k]['air_prior_samples'])
+  )
   combined['samples'] = [  # a bending length places (b, w) within their cells
     posterior_lib.refine_draws(x, grid, space, c.measured, config.seed + k)
     for k, (x, c) in enumerate(zip(combined['samples'], configs, strict=True))
@@ -186,7 +197,7 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):
     s = posterior_lib.summarise(
       samples, space, npz[k]['prior_samples'], levels, results_lib.weights_of(note),
-      job.config.measured,
+      job.config.measured, air=shared_air(k),
     )  # fmt: skip
     per.append({
       'recording': job.recording.source,
@@ -205,21 +216,41 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
       title=f'{config.simulation.material}: joint posterior, recording {k}',
     )  # fmt: skip
   shared = posterior_lib.summarise(
-    combined['samples'][0], space, npz[0]['prior_samples'], levels, results_lib.weights_of(note),
-    configs[0].measured,
+    combined['samples'][0], space, npz[0]['prior_samples'], levels,
+    results_lib.weights_of(note), configs[0].measured, air=shared_air(0),
   )  # fmt: skip
   files.write_atomic(
     os.path.join(workdir, layout.JOINT_POSTERIOR_FILE),
-    lambda p: np.savez(p, samples=combined['samples'][0], bounds=space.bounds()),
+    lambda p: np.savez(
+      p,
+      samples=combined['samples'][0],
+      bounds=space.bounds(),
+      **({'air_samples': combined['air']} if air else {}),
+    ),  # fmt: skip
   )
   out = {
     'material': config.simulation.material,
     'recordings': per,
     'bending_scale': shared['bending_scale'],
     'area_weight': shared['area_weight'],
+    **({'air_coefficient': shared['air_coefficient']} if air else {}),
     'shared_bias': float(shared_sd),
     'calibration': note,
     'config': config.flat(),
   }
   files.write_json(os.path.join(workdir, layout.JOINT_FILE), out)
   return out
+
+
+def _air_of(configs, space: physsim.SearchSpace, grid) -> tuple | None:
+  """``posterior.joint``'s ``air`` for recordings with ``configs`` (None: the
+  air coefficient held at ArcSim's 1): their wind readings and the effective
+  wind at each of the grid's wind cells."""
+  if not configs[0].measured.air_free:
+    return None
+  nv = int(grid[1])
+  u = np.zeros((nv, 3))
+  u[:, 1] = -1.0 + (2.0 * np.arange(nv) + 1.0) / nv
+  winds = np.ravel(physsim.params.from_unit(u, space).wind_speed)
+  readings = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
+  return readings, winds

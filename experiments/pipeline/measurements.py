@@ -16,9 +16,20 @@ import math
 import numpy as np
 
 import physsim
+from experiments.pipeline import cli
 
 FIELDS = physsim.params.FIELDS  # bending_scale, wind_speed, area_weight
 SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weight'}
+# The air coefficient c: a multiplier on the normal wind pressure that is the
+# fabric's own (porosity, surface, drape in the flow; ArcSim's sheet is 1). The
+# sheet feels c rho v^2, so the simulator blown at the effective wind
+# v_eff = v sqrt(c) loads it as the fabric at v (``physsim.SimConfig``'s
+# ``air_density`` times c makes such a fabric: only the flutter's air damping,
+# c |v - u| against sqrt(c) |v_eff - u|, tells them apart). Its prior:
+# log-uniform over AIR_RANGE, integrated on AIR_NODES nodes.
+AIR_MODES = ('fixed', 'free')
+AIR_RANGE = (0.3, 1.5)
+AIR_NODES = 96
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +52,11 @@ class Measured:
       with standard deviation ``bending_length_sd`` (a depth camera's
       reading, ``physsim.overhang_depth.DOF``: most readings closer than a
       Gaussian of that sd would put them, a few further off).
+    air_coefficient: 'fixed': the fabric takes the wind as ArcSim's sheet does
+      (today's model, what the shipped calibration holds); 'free': its own air
+      coefficient c, log-uniform over 0.3-1.5, read from the wind readings and
+      the load the video sees (a joint of fan settings shares one c; without a
+      reading c stays the prior's and the wind widens by it; not calibrated).
   """
 
   wind_speed: float = 0.0
@@ -50,6 +66,13 @@ class Measured:
   bending_length: float = 0.0
   bending_length_sd: float = 0.0
   bending_length_dof: float = 0.0
+  air_coefficient: str = cli.choice('fixed', AIR_MODES)
+
+  @property
+  def air_free(self) -> bool:
+    """The air coefficient is the fabric's own, not ArcSim's 1 (and a wind
+    reading, where given, is the true wind, the search's the effective)."""
+    return self.air_coefficient == 'free'
 
   def to_dict(self) -> dict:
     """The readings as files hold them: a bending length only when given, so
@@ -60,6 +83,8 @@ class Measured:
       del out['bending_length'], out['bending_length_sd']
     if not self.bending_length_dof:  # a Gaussian reading, as files held it
       del out['bending_length_dof']
+    if not self.air_free:  # ArcSim's air, as files held it
+      del out['air_coefficient']
     return out
 
   def check(self, space: physsim.SearchSpace) -> None:
@@ -67,6 +92,10 @@ class Measured:
     box, or a bending length's error law that is neither Gaussian nor a t
     with a finite variance."""
     check_dof(self.bending_length_dof, 'bending_length_dof')
+    if self.air_coefficient not in AIR_MODES:
+      raise ValueError(
+        f'--air_coefficient={str(self.air_coefficient)[:40]!r}: one of {AIR_MODES}'
+      )
     for name in ('wind_speed', 'area_weight', 'bending_length'):
       v, sd = getattr(self, name), getattr(self, f'{name}_sd')
       if v == 0 and sd == 0:
@@ -206,7 +235,9 @@ def log_prior(points, space: physsim.SearchSpace, measured: Measured,
     if name == 'bending_scale':
       continue
     v, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
-    if sd > 0:
+    if sd > 0 and name == 'wind_speed' and measured.air_free:
+      out += air_wind_log_prior(np.ravel(phys[i]), v, sd)
+    elif sd > 0:
       out += -0.5 * ((np.ravel(phys[i]) - v) / sd) ** 2
   if measured.bending_length_sd > 0:
     reading_range(space, 'bending_length')  # the box knows its fabric
@@ -235,3 +266,60 @@ def physical(samples_unit, space: physsim.SearchSpace) -> np.ndarray:
   """(S, 3) unit-cube draws -> (S, 3) physical values in ``FIELDS`` order."""
   p = physsim.params.from_unit(np.clip(samples_unit, -1, 1), space)
   return np.stack([np.ravel(a) for a in p], axis=1)
+
+
+def air_nodes(n: int = AIR_NODES, air_range=AIR_RANGE) -> tuple[np.ndarray, np.ndarray]:
+  """(c (n,), log weight (n,)): the air coefficient's log-uniform prior as
+  equal-weight nodes at the centres of n equal steps in log c."""
+  lo, hi = np.log(np.asarray(air_range, np.float64))
+  c = np.exp(lo + (hi - lo) * (np.arange(n) + 0.5) / n)
+  return c, np.full(n, -np.log(n))
+
+
+def effective_wind_log_density(v_eff, reading: float, sd: float, c) -> np.ndarray:
+  """log p(v_eff | c), normalised in v_eff: the simulator's effective wind
+  v_eff = v sqrt(c) of a fabric of air coefficient ``c`` blown at a true
+  wind v that an anemometer read as ``reading`` +- ``sd`` (Gaussian):
+  N(v_eff / sqrt(c); reading, sd) / sqrt(c). Broadcasts ``v_eff`` against
+  ``c``."""
+  v_eff, c = np.asarray(v_eff, np.float64), np.asarray(c, np.float64)
+  z = (v_eff / np.sqrt(c) - reading) / sd
+  return -0.5 * z**2 - np.log(sd * np.sqrt(2.0 * np.pi)) - 0.5 * np.log(c)
+
+
+def air_wind_log_prior(v_eff, reading: float, sd: float) -> np.ndarray:
+  """log p(v_eff): a wind reading's law for the effective wind with the air
+  coefficient unknown (``effective_wind_log_density`` averaged over
+  ``air_nodes``): the reading says where v is; the fabric's air stretches it
+  by sqrt(c) either way."""
+  c, log_w = air_nodes()
+  terms = effective_wind_log_density(np.ravel(v_eff)[:, None], reading, sd, c[None])
+  top = terms.max(axis=1, keepdims=True)
+  return (top + np.log(np.exp(terms - top + log_w).sum(axis=1, keepdims=True)))[:, 0]
+
+
+def air_given_wind(v_eff, reading: float, sd: float, seed: int) -> np.ndarray:
+  """(S,) air coefficients drawn given each effective wind ``v_eff`` (S,) and
+  the reading: p(c | v_eff) proportional to p(c) p(v_eff | c), on
+  ``air_nodes`` jittered within their log steps (seeded)."""
+  c, log_w = air_nodes()
+  v_eff = np.ravel(np.asarray(v_eff, np.float64))
+  logits = log_w + effective_wind_log_density(v_eff[:, None], reading, sd, c[None])
+  p = np.exp(logits - logits.max(axis=1, keepdims=True))
+  cdf = np.cumsum(p, axis=1)
+  rng = np.random.default_rng([seed, 31])
+  k = (cdf < rng.random(len(v_eff))[:, None] * cdf[:, -1:]).sum(axis=1)
+  k = np.minimum(k, len(c) - 1)
+  step = np.log(c[1] / c[0]) if len(c) > 1 else 0.0
+  return c[k] * np.exp(step * (rng.random(len(v_eff)) - 0.5))
+
+
+def air_draws(v_eff, measured: Measured, seed: int) -> np.ndarray:
+  """(S,) air coefficients for draws of the effective wind ``v_eff`` (S,):
+  given each and the wind reading (``air_given_wind``), or without a reading
+  from the prior alone (the video sees c v^2 only: c stays the prior's)."""
+  v_eff = np.ravel(np.asarray(v_eff, np.float64))
+  if measured.wind_speed_sd > 0:
+    return air_given_wind(v_eff, measured.wind_speed, measured.wind_speed_sd, seed)
+  lo, hi = np.log(AIR_RANGE)
+  return np.exp(np.random.default_rng([seed, 37]).uniform(lo, hi, len(v_eff)))

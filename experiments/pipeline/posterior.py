@@ -19,7 +19,7 @@ from jax.scipy.special import logsumexp
 
 import bo
 import physsim
-from experiments.pipeline import files
+from experiments.pipeline import files, measurements
 
 # Moved to the stages they belong to; still reachable here for the benchmarks
 # and studies that name them so (``layout``, ``measurements``).
@@ -41,15 +41,18 @@ LEVELS = (50, 90)
 # factor, the rest in percent. The prior's own point minimises it (the prior
 # is known exactly), and a point is moved towards the prior's on its scale.
 ERROR_LOSS = {'bending_scale': 'factor', 'wind_speed': 'relative',
-              'area_weight': 'relative', 'load_ratio': 'relative'}  # fmt: skip
+              'area_weight': 'relative', 'load_ratio': 'relative',
+              'air_coefficient': 'factor'}  # fmt: skip
 # The loss a posterior's own point minimises (``bo.calibration.bayes_point``).
 # For the wind and the load ratio, which the video measures, the median
 # (``'log'``): the percent error's action leans to the low tail of a wide
 # posterior, and on recordings of another physics (224, four seeds) and of the
 # windy rig the median was the closer of the two (docs/calibration.md, "The
 # point"); on the estimator's own physics the two tie.
-POINT_LOSS = {**ERROR_LOSS, 'wind_speed': 'log', 'load_ratio': 'log'}
-LOG_SCALED = ('bending_scale', 'load_ratio')  # widths compared on a log scale
+POINT_LOSS = {**ERROR_LOSS, 'wind_speed': 'log', 'load_ratio': 'log',
+              'air_coefficient': 'log'}  # fmt: skip
+# widths compared on a log scale
+LOG_SCALED = ('bending_scale', 'load_ratio', 'air_coefficient')
 
 
 def refine_draws(samples_unit, grid, space: physsim.SearchSpace, measured: Measured,
@@ -206,8 +209,15 @@ def _stats(x: np.ndarray, prior: np.ndarray, name: str, cdf_levels=None,
 
 def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
               recalibration: dict | None = None, weights: dict | None = None,
-              measured: Measured | None = None) -> dict:  # fmt: skip
+              measured: Measured | None = None, air=None) -> dict:  # fmt: skip
   """Physical summaries of posterior draws, each beside the prior's.
+
+  With ``air`` (the air coefficient free: ``(c of the draws (S,), c of the
+  prior's (S',))``, ``measurements.air_given_wind``), the draws' wind is the
+  simulator's effective one: the fabric's true wind v_eff / sqrt(c) is
+  summarised as ``wind_speed`` and c as ``air_coefficient``; the load ratio
+  stays the effective load rho v_eff^2 / (w g) the video sees. Neither has a
+  recalibrated level (they read at the nominal ones).
 
   Args:
     samples_unit: (S, 3) posterior draws, unit cube.
@@ -236,15 +246,29 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
   post = with_ratio(physical(samples_unit, space))
   prior = with_ratio(physical(prior_unit, space))
   names = [*FIELDS, 'load_ratio']
+  if air is not None:
+    c_post, c_prior = (np.ravel(np.asarray(c, np.float64)) for c in air)
+    post[:, 1] /= np.sqrt(c_post)
+    prior[:, 1] /= np.sqrt(c_prior)
+    post = np.concatenate([post, c_post[:, None]], axis=1)
+    prior = np.concatenate([prior, c_prior[:, None]], axis=1)
+    names.append('air_coefficient')
+    # the readings' own points: the wind reading is of the true wind
+    measured = None if measured is None else dataclasses.replace(
+      measured, air_coefficient='fixed'
+    )  # fmt: skip
   points = None if measured is None else prior_points(space, measured)
   if recalibration is not None:
     post = bo.calibration.defensive(post, prior)
+  free = ('wind_speed', 'load_ratio', 'air_coefficient') if air is not None else ()
   return {
     name: _stats(
       post[:, i], prior[:, i], name,
-      cdf_levels=None if recalibration is None else recalibration[name],
+      cdf_levels=None
+      if recalibration is None or name in free
+      else recalibration[name],
       weight=(weights or {}).get(name),
-      prior_point=None if points is None else points[name],
+      prior_point=None if points is None or name not in points else points[name],
     )
     for i, name in enumerate(names)
   }  # fmt: skip
@@ -279,7 +303,7 @@ def _shifted(ev: np.ndarray, factor: float, area_weight_range) -> np.ndarray:
 
 def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
           shared_bias_sd: float = 0.0, area_weight_range=None,
-          fans=None) -> dict:  # fmt: skip
+          fans=None, air=None) -> dict:  # fmt: skip
   """The joint posterior of recordings of one fabric: shared bending and area
   weight, one wind each, or one per fan setting (``fans``).
 
@@ -311,16 +335,90 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
       the cloth whatever the wind); None: every recording its own. The
       recordings of one fan setting must have one prior (one reading of it).
 
+    air: with the fabric's air coefficient c free and shared, ``(readings,
+      winds)``: each recording's anemometer reading ``(m/s, sd)`` of its true
+      wind, and the (nv,) effective winds of the grid's wind cells, m/s. Each
+      recording's prior of its effective wind is then its reading's given c
+      (``measurements.effective_wind_log_density``) and c is drawn with
+      (b, w) from their joint, its prior log-uniform (``measurements.air_nodes``).
+
   Returns:
     ``{'samples': [(n, 3) unit draws of (b, v_k, w) per recording],
     'log_post_bw': (nb, nw)}``: each recording's draws share (b, w) from the
     joint and draw their own wind given them (one for a fan setting's
-    recordings, the same in each).
+    recordings, the same in each); with ``air``, ``'air'``: (n,) the shared
+    air coefficient's draws (each recording's v_k is then its effective wind).
 
   Raises:
     ValueError: priors or fans for another number of recordings, or two
       recordings of one fan setting with different priors.
   """
+  nb, nv, nw = grid
+  ll, lp, groups, members = _by_fan(log_liks, log_prior_grid, grid, fans)
+  fans = list(range(len(log_liks))) if fans is None else list(fans)
+  # The prior of (b, w) (each recording's wind summed out: the same up to a
+  # constant), and each fan setting's of v given (b, w).
+  lp_bw = logsumexp(lp[0], axis=1)  # (nb, nw)
+  if air is None:
+    lp_v = [[p - logsumexp(p, axis=1)[:, None, :] for p in lp]]  # log p(v_k | b, w)
+    log_c = np.zeros(1)
+  else:
+    readings, winds = air
+    c, log_c = measurements.air_nodes()
+    step = float(np.abs(np.diff(winds[:2]))[0]) if len(winds) > 1 else 1.0
+    lp_v = [
+      [
+        measurements.effective_wind_log_density(winds, *readings[ks[0]], ci)[
+          None, :, None
+        ]
+        + np.log(step)
+        for ks in members
+      ]
+      for ci in c
+    ]  # per c, per fan setting: log p(v_k | c) on the grid's cells
+  # Each fan setting's evidence for (b, w), its wind integrated out, per c.
+  log_bwc = np.stack(
+    [
+      lp_bw
+      + lc
+      + _evidence(
+        [np.asarray(logsumexp(x + v, axis=1)) for x, v in zip(ll, lv, strict=True)],
+        shared_bias_sd,
+        area_weight_range,
+      )
+      for lc, lv in zip(log_c, lp_v, strict=True)
+    ]
+  )  # fmt: skip  (C, nb, nw)
+  log_bwc = log_bwc - logsumexp(log_bwc)
+  k_bw, k_v, k_jit = jax.random.split(key, 3)
+  idx = np.asarray(jax.random.categorical(k_bw, log_bwc.ravel(), shape=(n,)))
+  ic, ib, iw = np.unravel_index(idx, log_bwc.shape)
+  winds_out = []
+  for k, x in enumerate(ll):  # each fan setting's
+    if air is None:  # (n, nv): wind given (b, w)
+      cond = x[ib, :, iw] + lp_v[0][k][ib, :, iw]
+    else:  # ... and c
+      cond = x[ib, :, iw] + np.stack([lv[k][0, :, 0] for lv in lp_v])[ic]
+    iv = np.asarray(jax.random.categorical(jax.random.fold_in(k_v, k), cond, axis=1))
+    cells = np.stack([ib, iv, iw], axis=1).astype(np.float64)
+    jit = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, k), (n, 3)))
+    winds_out.append(-1.0 + 2.0 * (cells + jit) / np.asarray(grid, np.float64))
+  out = {
+    'samples': [winds_out[groups.index(f)] for f in fans],
+    'log_post_bw': np.asarray(logsumexp(log_bwc, axis=0)),
+  }
+  if air is not None:
+    ratio = c[1] / c[0] if len(c) > 1 else 1.0
+    u = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, 99), (n,)))
+    out['air'] = c[ic] * ratio ** (u - 0.5)  # within its log step
+  return out
+
+
+def _by_fan(log_liks, log_prior_grid, grid, fans):
+  """Recordings grouped by fan setting: per group the sum of its log
+  likelihoods and its prior on the (nb, nv, nw) grid, the groups' labels and
+  their members. Raises ValueError on priors or fans for another number of
+  recordings, or a group whose recordings have different priors."""
   nb, nv, nw = grid
   ll = [np.asarray(x).reshape(nb, nv, nw) for x in log_liks]
   priors = (
@@ -343,41 +441,24 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
       )
   ll = [sum(ll[k] for k in ks) for ks in members]
   lp = [lp[ks[0]] for ks in members]
-  # The prior of (b, w) (each recording's wind summed out: the same up to a
-  # constant), and each fan setting's of v given (b, w).
-  lp_bw = logsumexp(lp[0], axis=1)  # (nb, nw)
-  lp_v = [p - logsumexp(p, axis=1)[:, None, :] for p in lp]  # log p(v_k | b, w)
-  # Each fan setting's evidence for (b, w), its wind integrated out.
-  ev = [np.asarray(logsumexp(x + v, axis=1)) for x, v in zip(ll, lp_v, strict=True)]
-  if shared_bias_sd > 0:
-    if area_weight_range is None:
-      raise ValueError('a shared discrepancy needs the area weight range of the box')
-    z, wt = np.polynomial.hermite_e.hermegauss(BIAS_NODES)
-    total = np.stack(
-      [
-        sum(
-          _shifted(e, float(np.exp(shared_bias_sd * d)), area_weight_range) for e in ev
-        )
-        for d in z
-      ]
-    )  # (nodes, nb, nw)
-    ev_sum = np.asarray(logsumexp(total + np.log(wt / wt.sum())[:, None, None], axis=0))
-  else:
-    ev_sum = sum(ev)
-  log_bw = np.asarray(lp_bw + ev_sum)
-  log_bw = log_bw - logsumexp(log_bw)
-  k_bw, k_v, k_jit = jax.random.split(key, 3)
-  idx = np.asarray(jax.random.categorical(k_bw, log_bw.ravel(), shape=(n,)))
-  ib, iw = np.unravel_index(idx, (nb, nw))
-  winds = []
-  for k, x in enumerate(ll):  # each fan setting's
-    cond = x[ib, :, iw] + lp_v[k][ib, :, iw]  # (n, nv): wind given (b, w)
-    iv = np.asarray(jax.random.categorical(jax.random.fold_in(k_v, k), cond, axis=1))
-    cells = np.stack([ib, iv, iw], axis=1).astype(np.float64)
-    jit = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, k), (n, 3)))
-    winds.append(-1.0 + 2.0 * (cells + jit) / np.asarray(grid, np.float64))
-  out = [winds[groups.index(f)] for f in fans]
-  return {'samples': out, 'log_post_bw': log_bw}
+  return ll, lp, groups, members
+
+
+def _evidence(ev: list, shared_bias_sd: float, area_weight_range) -> np.ndarray:
+  """(nb, nw): the fan settings' evidence for (b, w) together, their shared
+  discrepancy (``joint``'s ``shared_bias_sd``) integrated out."""
+  if not shared_bias_sd > 0:
+    return sum(ev)
+  if area_weight_range is None:
+    raise ValueError('a shared discrepancy needs the area weight range of the box')
+  z, wt = np.polynomial.hermite_e.hermegauss(BIAS_NODES)
+  total = np.stack(
+    [
+      sum(_shifted(e, float(np.exp(shared_bias_sd * d)), area_weight_range) for e in ev)
+      for d in z
+    ]
+  )  # (nodes, nb, nw)
+  return np.asarray(logsumexp(total + np.log(wt / wt.sum())[:, None, None], axis=0))
 
 
 # -------------------------------------------------------------------- figures

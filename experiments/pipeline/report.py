@@ -71,25 +71,35 @@ def load_ratio_summary(samples_phys: np.ndarray, best: physsim.Params) -> dict:
   return stats(physsim.load_ratio(best.wind_speed, best.area_weight), ratio)
 
 
-def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace) -> dict:
+def errors(best: physsim.Params, truth: dict, space: physsim.SearchSpace,
+           air: float | None = None) -> dict:  # fmt: skip
   """Percent errors of wind and area weight, the bending factor, the percent
-  error of the load ratio rho v^2 / (w g) (what a sheet's shape constrains
-  best), and the same for the trivial estimate (the centre of the search range)."""
+  error of the load ratio c rho v^2 / (w g) (what a sheet's shape constrains
+  best; c the air coefficient, 1 where not estimated), and the same for the
+  trivial estimate (the centre of the search range). With ``air`` (the
+  estimate's c) and a truth that knows its own, c's factor too."""
   centre = space.center()
-  true_ratio = float(physsim.load_ratio(truth['wind_speed'], truth['area_weight']))
+  true_ratio = with_load_ratio(truth)['load_ratio']
 
-  def one(p):
+  def one(p, c):
     b = float(np.asarray(p.bending_scale).ravel()[0])
-    ratio = float(physsim.load_ratio(p.wind_speed, p.area_weight))
+    ratio = c * float(physsim.load_ratio(p.wind_speed, p.area_weight))
     pct = lambda k: 100 * abs(float(getattr(p, k)) - truth[k]) / truth[k]
-    return {
+    out = {
       'wind_speed_pct': pct('wind_speed'),
       'area_weight_pct': pct('area_weight'),
       'bending_factor': float(np.exp(abs(np.log(b / truth['bending_scale'])))),  # >= 1
       'load_ratio_pct': 100 * abs(ratio - true_ratio) / true_ratio,
     }
+    if air is not None and 'air_coefficient' in truth:
+      out['air_factor'] = float(np.exp(abs(np.log(c / truth['air_coefficient']))))
+    return out
 
-  return {'estimate': one(best), 'range_centre': one(centre)}
+  mid = float(np.sqrt(np.prod(measurements.AIR_RANGE)))  # the prior's centre
+  return {
+    'estimate': one(best, 1.0 if air is None else air),
+    'range_centre': one(centre, 1.0 if air is None else mid),
+  }
 
 
 def mean_error(values, name: str) -> float:
@@ -101,11 +111,11 @@ def mean_error(values, name: str) -> float:
 
 
 def with_load_ratio(truth: dict) -> dict:
-  """A truth (wind speed, area weight, ...) with its load ratio beside it."""
-  return {
-    **truth,
-    'load_ratio': float(physsim.load_ratio(truth['wind_speed'], truth['area_weight'])),
-  }
+  """A truth (wind speed, area weight, ...) with its load ratio beside it:
+  the load the sheet feels, c rho v^2 / (w g), c its air coefficient where the
+  truth knows it (else ArcSim's 1)."""
+  ratio = physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
+  return {**truth, 'load_ratio': float(truth.get('air_coefficient', 1.0) * ratio)}
 
 
 def covered(result: dict, truth: dict) -> dict:
@@ -114,6 +124,8 @@ def covered(result: dict, truth: dict) -> dict:
   rows = dict(result['estimate'], load_ratio=result.get('load_ratio', {}))
   true = with_load_ratio(truth)
   for name, e in rows.items():
+    if name not in true:  # an air coefficient the truth does not know
+      continue
     out[name] = {
       k: bool(e[k][0] <= true[name] <= e[k][1]) for k in e if k.startswith('interval_')
     }
@@ -134,6 +146,7 @@ ROW_NAMES = {
   'wind_speed': 'wind (m/s)',
   'area_weight': 'area weight (g/m^2)',
   'load_ratio': 'load ratio',
+  'air_coefficient': 'air coefficient (x ArcSim)',
 }
 SCALE_NAMES = {**ROW_NAMES, 'bending_scale': 'bending (x)'}
 LENGTH_NAME = 'bending length (mm)'
@@ -144,7 +157,7 @@ def in_units(material: str | None) -> tuple[dict, dict]:
   from the search's scale to the unit it is printed in, for ``material``'s
   results (None or unknown: bending stays a scale)."""
   factors = {'bending_scale': 1.0, 'wind_speed': 1.0, 'area_weight': 1e3,
-             'load_ratio': 1.0}  # fmt: skip
+             'load_ratio': 1.0, 'air_coefficient': 1.0}  # fmt: skip
   if material not in physsim.FABRICS:
     return SCALE_NAMES, factors
   factors['bending_scale'] = 1e6 * physsim.reference_rigidity(material)
@@ -164,6 +177,7 @@ _ERROR_NAMES = {
   'area_weight_pct': ('area weight', '%'),
   'bending_factor': ('bending', 'x'),
   'load_ratio_pct': ('load ratio', '%'),
+  'air_factor': ('air coefficient', 'x'),
 }
 
 
@@ -200,6 +214,8 @@ def errors_table(errors: dict) -> list[str]:
   table (percent; a factor for bending)."""
   rows = []
   for key, (name, _) in _ERROR_NAMES.items():
+    if key not in errors['estimate']:
+      continue
     rows.append(
       [name, _error_cell(key, errors['estimate'][key]),
        _error_cell(key, errors['range_centre'][key])]
@@ -257,11 +273,14 @@ def report_table(result: dict) -> str:
   material = result.get('material')
   label, unit = in_units(material)
   rows = []
-  for name in [*physsim.Params._fields, 'load_ratio']:
+  air = ['air_coefficient'] if 'air_coefficient' in result['estimate'] else []
+  for name in [*physsim.Params._fields, 'load_ratio', *air]:
     e = result['load_ratio'] if name == 'load_ratio' else result['estimate'][name]
     k = unit[name]
     iv = lambda key, e=e, k=k: f'[{k * e[key][0]:.3g}, {k * e[key][1]:.3g}]'
-    cells = [label[name]] + ([f'{k * true[name]:.3g}'] if truth else [])
+    cells = [label[name]] + (
+      [f'{k * true[name]:.3g}' if name in true else '-'] if truth else []
+    )
     cells += [f'{k * e["value"]:.3g}']
     if posterior:
       cells += [iv('interval_50'), iv('interval_90'), f'x{e["narrowing_90"]:.1f}']
@@ -293,7 +312,14 @@ def report_table(result: dict) -> str:
   }
   lines += notes(
     "load ratio: rho v^2 / (w g), wind pressure over weight, what the sheet's "
-    'shape measures best.'
+    'shape measures best'
+    + (
+      " (times the fabric's air coefficient c: the pressure it feels); air "
+      'coefficient: the normal wind pressure on this fabric over an ArcSim '
+      "sheet's, read from the wind reading and the load the video sees."
+      if air
+      else '.'
+    )
     + (
       ' bending length: (rigidity / (area weight x g))^(1/3) of the point; no '
       'interval of its own (not calibrated).'
@@ -363,7 +389,8 @@ def joint_table(joint: dict) -> str:
     f'[{k * e["interval_90"][0]:.3g}, {k * e["interval_90"][1]:.3g}]'
   )
   rows = []
-  for name in ('bending_scale', 'area_weight'):
+  air = ('air_coefficient',) if 'air_coefficient' in joint else ()
+  for name in ('bending_scale', 'area_weight', *air):
     e, k = joint[name], unit[name]
     rows.append([f'{label[name]}, shared', f'{k * e["median"]:.3g}', iv(e, k),
                  f'x{e["narrowing_90"]:.1f}', '-', '-'])  # fmt: skip

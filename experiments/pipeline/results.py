@@ -88,9 +88,14 @@ def write_result(
   })  # fmt: skip
   if recording.truth is not None:
     result['truth'] = recording.truth
+    est = result['estimate']
     result['errors'] = report.errors(
-      physsim.from_unit(point, space), recording.truth, space
-    )
+      physsim.params.make(*(est[f]['value'] for f in measurements.FIELDS))
+      if 'air_coefficient' in est
+      else physsim.from_unit(point, space),
+      recording.truth, space,
+      air=est['air_coefficient']['value'] if 'air_coefficient' in est else None,
+    )  # fmt: skip
     result['covered'] = report.covered(result, recording.truth)
   files.write_json(os.path.join(workdir, layout.ESTIMATE_FILE), result)
   if not figures:
@@ -161,12 +166,27 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   summary = posterior_lib.summarise(
     samples, space, prior, levels_of(note), weights_of(note), config.measured
   )
-  # The point: each parameter's (recalibrated) median or Bayes point.
+  # The point: each parameter's (recalibrated) median or Bayes point, in the
+  # search's coordinates (with the air free, its wind is the effective one).
   which = 'bayes' if config.search.point == 'bayes' else 'median'
   point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
   median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
+  air = {}
+  if config.measured.air_free:  # what a person reads: the true wind, and c
+    air = {
+      'air_samples': measurements.air_draws(
+        measurements.physical(samples, space)[:, 1], config.measured, config.seed
+      ),
+      'air_prior_samples': measurements.air_draws(
+        measurements.physical(prior, space)[:, 1], config.measured, config.seed + 1
+      ),
+    }  # fmt: skip
+    summary = posterior_lib.summarise(
+      samples, space, prior, levels_of(note), weights_of(note), config.measured,
+      air=(air['air_samples'], air['air_prior_samples']),
+    )  # fmt: skip
   estimate = {}
-  for name in posterior_lib.FIELDS:
+  for name in [*posterior_lib.FIELDS, *(['air_coefficient'] if air else [])]:
     s = summary[name]
     estimate[name] = {'value': s[which], **s}
   files.write_atomic(
@@ -175,7 +195,7 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
       p, samples=samples, prior_samples=prior, log_post=res.log_post,
       log_lik=res.log_lik, log_prior=lp, grid=np.asarray(pc.grid),
       bounds=space.bounds(), gp_mean=res.mean, gp_var=res.var,
-      noise_sd=res.noise_sd, floor=res.floor,
+      noise_sd=res.noise_sd, floor=res.floor, **air,
     ),
   )  # fmt: skip
   if draws is not None:

@@ -25,16 +25,17 @@ from experiments.studies import tables
 # config was always ``--sim_fps``), with the bending-length reading (and its law) and the
 # joint's shared discrepancy and a hem's known mass added since.
 FLAT_FLAGS = [
-  'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd', 'calibration', 'camera_sd_deg',
+  'air_coefficient', 'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
   'garment', 'garment_spacing', 'gusts', 'hem_mass', 'likelihood', 'material', 'max_iter',
   'min_iter', 'model_error', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
   'sensor_noise', 'shared_bias', 'sharpness', 'sim_fps', 'stop_rel_change', 'stop_window', 'warmup',
   'wind_speed', 'wind_speed_sd', 'workers',
 ]  # fmt: skip
-# experiments.estimate's flags before the split (and the bending length's, the hem's).
+# experiments.estimate's flags before the split (and the bending length's, the
+# hem's, the air coefficient's).
 ESTIMATE_FLAGS = [
-  'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
+  'air_coefficient', 'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
   'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd',
   'calibration', 'camera_json',
   'camera_sd_deg', 'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size',
