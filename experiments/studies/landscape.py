@@ -198,6 +198,63 @@ def run(
   """Runs (or resumes) the study; returns and writes ``landscape.json``.
   ``model_dir`` may be '' with the shape distance (frames at ``image_size``)."""
   t0 = time.time()
+  config, rec, problem = _problem(config, recording_dir, model_dir, image_size)
+  space = problem.space
+  truth = physsim.params.make(**rec.truth)
+  u_truth = np.asarray(physsim.to_unit(truth, space), np.float64).ravel()
+  U, parts = points(config, u_truth)
+  os.makedirs(workdir, exist_ok=True)
+  psd, stats = evaluate_points(
+    problem,
+    U,
+    config.batch,
+    os.path.join(workdir, STATE_FILE),
+    _signature(config, rec, model_dir),
+  )
+  P = np.stack([np.ravel(a) for a in physsim.from_unit(U, space)], 1)  # (N, 3)
+  g = parts['grid']
+  wind, weight = P[g, 1], P[g, 2]
+  truth_ratio = float(
+    physsim.load_ratio(rec.truth['wind_speed'], rec.truth['area_weight'])
+  )
+  line_0 = parts['line_0']
+  result = {
+    'recording': rec.source,
+    'model': model_dir,
+    'material': config.objective.simulation.material,
+    'truth': rec.truth,
+    'truth_ratio': truth_ratio,
+    'psd_truth': float(psd[line_0][np.argmin(np.abs(U[line_0, 0] - u_truth[0]))]),
+    'line': _lines(parts, psd, P, rec.truth),
+    'grid': _grid(psd[g], wind, weight, config.grid),
+    'identifiability': {
+      'stats': {s: stats[g, j].tolist() for j, s in enumerate(STATS)},
+      'ratio': physsim.load_ratio(wind, weight).tolist(),
+      **{s: ratio_r2(stats[g, j], wind, weight) for j, s in enumerate(STATS)},
+    },
+    'failed_simulations': int(np.sum(~np.isfinite(psd))),
+    'config': est.record(config),
+    'seconds': time.time() - t0,
+  }  # fmt: skip
+  files.write_json(os.path.join(workdir, 'landscape.json'), result)
+  plot_lines(result['line'], space, os.path.join(workdir, 'landscape_1d.png'))
+  plot_grid(
+    result['grid'], rec.truth, os.path.join(workdir, 'landscape_wind_weight.png')
+  )
+  plot_identifiability(
+    result['identifiability'], wind, truth_ratio,
+    os.path.join(workdir, 'identifiability.png'),
+  )  # fmt: skip
+  return result
+
+
+def _problem(config: Config, recording_dir: str, model_dir: str, image_size: int):
+  """(the config for the recording's fabric, the recording, its estimate
+  problem).
+
+  Raises:
+    ValueError: a recording without ground truth.
+  """
   net = embedding.for_distance(model_dir, config.objective.scoring.distance, image_size)
   meta = recording_lib.read_json(os.path.join(recording_dir, 'meta.json'))
   obj_config = config.objective.replace(
@@ -212,24 +269,14 @@ def run(
   )
   if rec.truth is None:
     raise ValueError(f'{recording_dir}: no ground truth (meta.json wind_speed, ...)')
-  problem = est.make_problem(obj_config, net, rec)
-  space = problem.space
-  truth = physsim.params.make(**rec.truth)
-  u_truth = np.asarray(physsim.to_unit(truth, space), np.float64).ravel()
-  U, parts = points(config, u_truth)
-  os.makedirs(workdir, exist_ok=True)
-  psd, stats = evaluate_points(
-    problem,
-    U,
-    config.batch,
-    os.path.join(workdir, STATE_FILE),
-    _signature(config, rec, model_dir),
-  )
-  P = np.stack([np.ravel(a) for a in physsim.from_unit(U, space)], 1)  # (N, 3)
-  names = physsim.Params._fields
+  return config, rec, est.make_problem(obj_config, net, rec)
 
+
+def _lines(parts: dict, psd: np.ndarray, P: np.ndarray, truth: dict) -> dict:
+  """Per parameter, the PSD along its line through the truth (``P``: (N, 3)
+  physical points) and where it is least."""
   lines = {}
-  for i, name in enumerate(names):
+  for i, name in enumerate(physsim.Params._fields):
     idx = parts[f'line_{i}']
     y = psd[idx]
     best = int(np.nanargmin(y)) if np.isfinite(y).any() else None
@@ -237,52 +284,26 @@ def run(
       'values': P[idx, i].tolist(),
       'psd': y.tolist(),
       'argmin': None if best is None else float(P[idx[best], i]),
-      'truth': float(rec.truth[name]),
+      'truth': float(truth[name]),
     }
-  g = parts['grid']
-  wind, weight = P[g, 1], P[g, 2]
-  grid_psd = psd[g]
+  return lines
+
+
+def _grid(grid_psd: np.ndarray, wind: np.ndarray, weight: np.ndarray,
+          n: int) -> dict:  # fmt: skip
+  """The PSD over the (wind, area weight) grid at the true bending, where it
+  is least and how much of it the load ratio explains."""
   k = int(np.nanargmin(grid_psd)) if np.isfinite(grid_psd).any() else None
-  truth_ratio = float(
-    physsim.load_ratio(rec.truth['wind_speed'], rec.truth['area_weight'])
-  )
-  result = {
-    'recording': rec.source,
-    'model': model_dir,
-    'material': obj_config.simulation.material,
-    'truth': rec.truth,
-    'truth_ratio': truth_ratio,
-    'psd_truth': float(psd[parts['line_0']][np.argmin(np.abs(U[parts['line_0'], 0] - u_truth[0]))]),
-    'line': lines,
-    'grid': {
-      'wind_speed': np.unique(wind).tolist(),
-      'area_weight': np.unique(weight).tolist(),
-      'psd': grid_psd.reshape(config.grid, config.grid).tolist(),  # [wind, weight]
-      'argmin': None
-      if k is None
-      else {'wind_speed': float(wind[k]), 'area_weight': float(weight[k]),
-            'ratio': float(physsim.load_ratio(wind[k], weight[k])), 'psd': float(grid_psd[k])},
-      'psd_vs_ratio': ratio_r2(np.log(grid_psd), wind, weight),
-    },
-    'identifiability': {
-      'stats': {s: stats[g, j].tolist() for j, s in enumerate(STATS)},
-      'ratio': physsim.load_ratio(wind, weight).tolist(),
-      **{s: ratio_r2(stats[g, j], wind, weight) for j, s in enumerate(STATS)},
-    },
-    'failed_simulations': int(np.sum(~np.isfinite(psd))),
-    'config': est.record(config),
-    'seconds': time.time() - t0,
+  return {
+    'wind_speed': np.unique(wind).tolist(),
+    'area_weight': np.unique(weight).tolist(),
+    'psd': grid_psd.reshape(n, n).tolist(),  # [wind, weight]
+    'argmin': None
+    if k is None
+    else {'wind_speed': float(wind[k]), 'area_weight': float(weight[k]),
+          'ratio': float(physsim.load_ratio(wind[k], weight[k])), 'psd': float(grid_psd[k])},
+    'psd_vs_ratio': ratio_r2(np.log(grid_psd), wind, weight),
   }  # fmt: skip
-  files.write_json(os.path.join(workdir, 'landscape.json'), result)
-  plot_lines(lines, space, os.path.join(workdir, 'landscape_1d.png'))
-  plot_grid(
-    result['grid'], rec.truth, os.path.join(workdir, 'landscape_wind_weight.png')
-  )
-  plot_identifiability(
-    result['identifiability'], wind, truth_ratio,
-    os.path.join(workdir, 'identifiability.png'),
-  )  # fmt: skip
-  return result
 
 
 # -------------------------------------------------------------------- figures
