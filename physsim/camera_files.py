@@ -131,9 +131,17 @@ class CameraFile(NamedTuple):
     return any(abs(c) > 0 for c in self.distortion)
 
 
-def _error(path: str, why: str) -> ValueError:
-  forms = '\n  '.join(FORMS)
-  return ValueError(f'{path}: {why}. Accepted camera files:\n  {forms}')
+# The accepted forms in one short line, for a file that holds none of them.
+FORMS_LINE = (
+  'accepted: OpenCV JSON (width, height, fx, fy, cx, cy), ROS CameraInfo YAML, '
+  "RealSense/Open3D intrinsics JSON, the project's (intrinsics, extrinsics)"
+)
+
+
+def _error(path: str, why: str, forms: bool = False) -> ValueError:
+  """One line naming the file (``forms``: and the accepted forms)."""
+  why = input_files.short(ValueError(why), 160)
+  return ValueError(f'{path}: {why}' + (f'; {FORMS_LINE}' if forms else ''))
 
 
 def _load(path: str) -> dict:
@@ -150,7 +158,7 @@ def _load(path: str) -> dict:
     except RecursionError:
       raise ValueError(f'{path}: not readable JSON (nested too deeply)') from None
   if not isinstance(data, dict):
-    raise _error(path, f'holds a {type(data).__name__}, not a mapping')
+    raise _error(path, f'holds a {type(data).__name__}, not a mapping', forms=True)
   return data
 
 
@@ -363,7 +371,8 @@ def parse_camera(d: dict[str, Any], path: str = 'camera') -> CameraFile:
     dist = d.get('distortion', d.get('dist_coeffs', ()))
     form = 'OpenCV JSON'
   else:
-    raise _error(path, f'no camera found among its keys {sorted(d)}')
+    keys = input_files.shown(list(d), 80)
+    raise _error(path, f'no camera found among its keys {keys}', forms=True)
   intr = _pinhole(path, w, h, k)
   distortion = _distortion(path, dist)
   return CameraFile(
