@@ -133,8 +133,6 @@ PRESETS = {
     min_coverage=0.01,
   ),
 }
-
-
 POSES = {'train': physsim.PoseRanges(), 'evaluation': physsim.PoseRanges.evaluation()}
 
 

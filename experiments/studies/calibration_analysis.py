@@ -25,17 +25,11 @@ from experiments.studies.calibration_scores import LOG_FIELDS, QGRID, posteriors
 # The error each point is judged by, and the loss a posterior's own point
 # minimises: the estimate's (``posterior.ERROR_LOSS``, ``POINT_LOSS``).
 _LOSS = posterior_lib.ERROR_LOSS
-
-
 _POINT_LOSS = posterior_lib.POINT_LOSS
-
-
 # A wind estimate this far off (percent) whose 90% interval misses the truth is
 # confidently wrong: issue 40's target is none on held-out recordings. The
 # tables count such points for every quantity (bending: a factor of 1.25).
 CONFIDENT_MISS_PCT = 25.0
-
-
 _CONFIDENT = {'relative': (1 / (1 + CONFIDENT_MISS_PCT / 100), 1 / (1 - CONFIDENT_MISS_PCT / 100)),
               'factor': (1 / 1.25, 1.25)}  # fmt: skip
 

@@ -20,27 +20,17 @@ from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline.objective import EstimateConfig
 
 FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
-
-
 # The mode an estimate is in, by the reading it was given (Config.check_reading).
 MODE_OF_READING = {'none': 'video', 'wind_speed': 'known wind',
                    'area_weight': 'known area weight'}  # fmt: skip
-
-
 LEVELS = (50, 90)
-
-
 # The modes with a bending length read from an overhang (issue 39's protocol:
 # the sheet with the strip, and with an anemometer too): by a depth camera
 # (its t law, ``length_dof``), and by a ruler (Gaussian).
 LENGTH_MODES = ('bending length', 'known wind, bending length',
                 'bending length (ruler)', 'known wind, bending length (ruler)')  # fmt: skip
-
-
 MODES = ('video', 'known wind', 'known area weight', 'joint pair',
          'joint pair, known winds', *LENGTH_MODES)  # fmt: skip
-
-
 RESULT_FILE = 'calibration.json'
 
 

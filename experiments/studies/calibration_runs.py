@@ -39,11 +39,7 @@ from experiments.studies.calibration_config import (
 # What the analysis reads of each estimate's posterior.npz, and how many
 # recordings one packed file holds.
 _PACKED = ('gp_mean', 'gp_var', 'floor', 'noise_sd')
-
-
 PACKED_DIR = 'packed'
-
-
 _PER_PACK = 50
 
 

@@ -28,11 +28,7 @@ from experiments.studies.calibration_runs import saved_gp
 # Each recording's posterior is kept as its quantile function on this grid of
 # CDF levels, so intervals at any (recalibrated) level come without redrawing.
 QGRID = np.linspace(0.0, 1.0, 1001)
-
-
 LOG_FIELDS = posterior_lib.LOG_SCALED  # compared on a log scale
-
-
 _LOG_COLUMNS = tuple(f in LOG_FIELDS for f in FIELDS)
 
 
