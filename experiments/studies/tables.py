@@ -24,7 +24,8 @@ resumes from its own folder. All estimates run in lockstep in this process
 scored together, which on a GPU costs about what one estimate does.
 Under several processes (``experiments.pipeline.distributed``: one per GPU,
 or a cluster) each takes a contiguous share of the estimates, and process 0
-writes the tables once every process has finished its share.
+writes the tables once every process has finished its share. The tables'
+numbers and markdown are in ``tables_report``, its figures in ``tables_figures``.
 """
 
 from __future__ import annotations
@@ -33,44 +34,41 @@ import dataclasses
 import json
 import os
 
-import matplotlib
+import jax
+import numpy as np
 
-matplotlib.use('Agg')
-import jax  # noqa: E402
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-import physsim  # noqa: E402
+import physsim
 from experiments.pipeline import (
   cli,
   distributed,
   embedding,
-  estimation,  # noqa: E402
+  estimation,
   eval_set,
-  files,
+  files,  # noqa: F401 - the tests write their files through tables.files
   measurements,
-  report,
   search,
-)  # fmt: skip
-from experiments.pipeline import objective as objective_lib  # noqa: E402
-from experiments.pipeline import recording as recording_lib  # noqa: E402
-from experiments.pipeline.objective import NETWORK_DISTANCE, EstimateConfig  # noqa: E402
-from experiments.studies import table1  # noqa: E402
-from physsim import dataset  # noqa: E402
+)
+from experiments.pipeline import objective as objective_lib
+from experiments.pipeline import recording as recording_lib
+from experiments.pipeline.objective import NETWORK_DISTANCE, EstimateConfig
+from experiments.studies import table1
+from experiments.studies.tables_figures import (
+  bending_surfaces,
+  candidate_landscapes,
+  plot_candidate_landscapes,
+)
+from experiments.studies.tables_report import (
+  ERROR_NAMES,  # noqa: F401 - the tables' names, importable from here as before
+  ERRORS,  # noqa: F401
+  PAPER,  # noqa: F401
+  format_overall,
+  format_tables,
+  overall,
+  rescore,
+  summarise,
+)
+from physsim import dataset
 
-# The paper's PhySNet-depth results (percent error of wind speed, area weight).
-PAPER = {
-  'white_tablecloth': (6.5, 8.6),
-  'gray_interlock': (9.6, 19.6),
-  'black_denim': (5.4, 5.5),
-  'ponte_roma': (35.0, 0.4),
-  'sparkle_fleece': (34.6, 0.0),
-  'red_violet': (16.7, 6.3),
-  'pink_nylon': (12.6, 2.6),
-  'tshirt': (3.1, 17.1),
-  'shirt': (34.2, 1.5),
-  'jeans': (21.7, 0.6),
-}
 # The paper's four methods, as <network>_<modality> run folders of table1.
 METHODS = ('physnet_depth', 'physnet_rgb', 'sdn_depth', 'sdn_rgb')
 
@@ -86,8 +84,6 @@ def for_networks(estimate: EstimateConfig) -> EstimateConfig:
 
 # No network: the shape distance on the depth frames.
 SHAPE_METHOD = 'shape'
-ERRORS = ('wind_speed_pct', 'area_weight_pct', 'bending_factor', 'load_ratio_pct')
-ERROR_NAMES = ('wind %', 'area weight %', 'bending factor', 'load ratio %')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -302,281 +298,6 @@ def run_all(config: Config, eval_root: str, models: str, workdir: str) -> dict:
     print(f'{len(mine)} estimates in lockstep', flush=True)
     results.update(_batched(mine, models, workdir, config))
   return results
-
-
-def rescore(result: dict) -> dict:
-  """The result with its ``errors`` recomputed by today's ``estimate.errors``
-  from its estimate and truth (so older runs gain newer error measures)."""
-  if 'truth' not in result or 'estimate' not in result:
-    return result
-  best = physsim.Params(
-    *(result['estimate'][f]['value'] for f in physsim.Params._fields)
-  )
-  space = physsim.search_space(result['material'])
-  return {**result, 'errors': report.errors(best, result['truth'], space)}
-
-
-def _values(rows, source, err):
-  return [r['errors'][source][err] for r in rows if err in r['errors'][source]]
-
-
-def _mean(rows, source, err):
-  vals = _values(rows, source, err)
-  return report.mean_error(vals, err) if vals else float('nan')
-
-
-def summarise(results: dict, methods) -> dict:
-  """{(method, set name): {'n', 'failed', estimate/range_centre means}}."""
-  groups = {}
-  for (method, _, name, _), res in results.items():
-    groups.setdefault((method, name), []).append(res)
-  out = {}
-  for (method, name), rows in sorted(groups.items()):
-    ok = [r for r in rows if 'errors' in r]
-    s = {'n': len(rows), 'failed': len(rows) - len(ok)}
-    for source in ('estimate', 'range_centre'):
-      s[source] = {e: _mean(ok, source, e) for e in ERRORS} if ok else None
-    out[(method, name)] = s
-  return out
-
-
-def _group(key: tuple) -> str:
-  return 'fabrics' if key[1] == 'fabrics' else 'garments'
-
-
-def overall(results: dict, methods) -> dict:
-  """Per method and group (fabrics, garments), over every recording: the mean
-  and median of each error, and on how many recordings the method beats the
-  range centre. ``('range centre', group)`` holds the trivial estimate's
-  errors over the distinct recordings."""
-  rows, centre = {}, {}
-  for key, res in sorted(results.items()):
-    if key[0] not in methods:
-      continue
-    rows.setdefault((key[0], _group(key)), []).append(res)
-    if 'errors' in res:
-      centre.setdefault(_group(key), {})[key[1:]] = res
-  out = {}
-  for (method, group), rs in rows.items():
-    ok = [r for r in rs if 'errors' in r]
-    s = {'n': len(rs), 'failed': len(rs) - len(ok)}
-    for e in ERRORS:
-      pairs = [
-        (r['errors']['estimate'][e], r['errors']['range_centre'][e])
-        for r in ok
-        if e in r['errors']['estimate']
-      ]
-      s[e] = {
-        'mean': _mean(ok, 'estimate', e),
-        'median': float(np.median(_values(ok, 'estimate', e))) if pairs else None,
-        'beats_centre': sum(a < b for a, b in pairs),
-        'of': len(pairs),
-      }
-    out[(method, group)] = s
-  for group, recs in centre.items():
-    rs = list(recs.values())
-    out[('range centre', group)] = {
-      'n': len(rs),
-      'failed': 0,
-      **{
-        e: {
-          'mean': _mean(rs, 'range_centre', e),
-          'median': float(np.median(_values(rs, 'range_centre', e))),
-        }
-        for e in ERRORS
-      },
-    }
-  return out
-
-
-def format_overall(table: dict) -> str:
-  """Markdown of ``overall``: one row per method and group."""
-  lines = [
-    '### All recordings',
-    '',
-    '| method | set | n | '
-    + ' | '.join(f'{n}: mean / median' for n in ERROR_NAMES)
-    + ' | beats range centre on (wind / area weight / bending / load ratio) |',
-    '|---' * (3 + len(ERRORS) + 1) + '|',
-  ]
-  for (method, group), s in sorted(
-    table.items(), key=lambda kv: (kv[0][1], kv[0][0] == 'range centre', kv[0][0])
-  ):
-    num = lambda e, v: f'x{v:.2f}' if e == 'bending_factor' else f'{v:.1f}'
-    cells = [
-      num(e, s[e]['mean'])
-      + ('' if s[e]['median'] is None else f' / {num(e, s[e]["median"])}')
-      for e in ERRORS
-    ]
-    beats = (
-      ' / '.join(f'{s[e]["beats_centre"]}' for e in ERRORS)
-      + f' of {s[ERRORS[0]]["of"]}'
-      if 'beats_centre' in s[ERRORS[0]]
-      else ''
-    )
-    failed = f' ({s["failed"]} F)' if s['failed'] else ''
-    lines.append(
-      f'| {method} | {group} | {s["n"]}{failed} | '
-      + ' | '.join(cells)
-      + f' | {beats} |'
-    )
-  lines += [
-    '',
-    'Bending: geometric mean / median of the factor. Load ratio: rho v^2 / (w g) '
-    'from the estimated wind and area weight against the true one (a static sheet '
-    'constrains only this combination of the two).',
-  ]
-  return '\n'.join(lines)
-
-
-def _fmt(s, source):
-  if s[source] is None:
-    return 'F | F | F'
-  v = s[source]
-  return (
-    f'{v["wind_speed_pct"]:.1f} | {v["area_weight_pct"]:.1f} | '
-    f'x{v["bending_factor"]:.2f}'
-  )
-
-
-def format_tables(summary: dict, methods) -> str:
-  lines = []
-  sets = (
-    ('Table 2: fabrics', [f for f in physsim.FABRICS]),
-    ('Table 3: garments', list(eval_set.GARMENT_FABRICS)),
-  )
-  for title, names in sets:
-    names = [n for n in names if any((m, n) in summary for m in methods)]
-    if not names:
-      continue
-    lines += [f'### {title}', '']
-    head = '| | ' + ' | '.join(
-      f'{m}: wind % | area weight % | bending factor' for m in methods
-    )
-    head += ' | range centre: wind % | area weight % | bending factor'
-    head += ' | paper PhySNet-depth: wind % | area weight % |'
-    lines.append(head)
-    lines.append('|---' * (1 + 3 * len(methods) + 3 + 2) + '|')
-    for n in names:
-      cells = []
-      centre = None
-      for m in methods:
-        s = summary.get((m, n))
-        if s is None:
-          cells.append('- | - | -')
-          continue
-        tag = f' ({s["failed"]}/{s["n"]} F)' if s['failed'] else ''
-        cells.append(_fmt(s, 'estimate') + tag)
-        centre = centre or (s if s['range_centre'] else None)
-      pw, pa = PAPER.get(n, (float('nan'),) * 2)
-      lines.append(
-        f'| {n} | '
-        + ' | '.join(cells)
-        + f' | {_fmt(centre, "range_centre") if centre else "- | - | -"}'
-        + f' | {pw} | {pa} |'
-      )
-    lines.append('')
-  lines.append(
-    "Mean over each fabric's or garment's recordings: percent error |est - true| / "
-    'true of wind speed and area weight; bending as the factor exp|log(est / true)| '
-    '(>= 1, geometric mean). "range centre" is the trivial estimate at the centre of '
-    'the search box (log-centre for bending). F: every candidate blew up or the run '
-    'failed.'
-  )
-  return '\n'.join(lines)
-
-
-def bending_surfaces(results: dict, method: str, path: str) -> None:
-  """The paper's Figure 4: true and estimated 3x5 bending matrices per fabric."""
-  fabrics = sorted(
-    {k[2] for k in results if k[0] == method and k[1] == 'fabrics'},
-    key=list(physsim.FABRICS).index,
-  )
-  if not fabrics:
-    return
-  cols = min(4, len(fabrics))
-  rows = -(-len(fabrics) // cols)
-  fig = plt.figure(figsize=(4 * cols, 3.4 * rows))
-  ang = physsim.materials.BENDING_ANGLES
-  curv = np.arange(5) * 5.0  # ArcSim samples, 1/m
-  gx, gy = np.meshgrid(curv, ang)
-  for i, fab in enumerate(fabrics):
-    ax = fig.add_subplot(rows, cols, i + 1, projection='3d')
-    base = physsim.load_material(physsim.fabric(fab).material).bending
-    res = [
-      r
-      for k, r in results.items()
-      if k[:3] == (method, 'fabrics', fab) and 'truth' in r
-    ][:1]
-    if not res:
-      continue
-    r = res[0]
-    true = base * r['truth']['bending_scale']
-    est = np.asarray(r['bending_matrix_Nm'])
-    ax.plot_wireframe(gx, gy, np.log10(true), color='k', lw=0.8, label='true')
-    ax.plot_surface(gx, gy, np.log10(est), alpha=0.6, cmap='viridis')
-    ax.set(
-      title=fab, xlabel='curvature (1/m)', ylabel='angle (deg)', zlabel='log10 N m'
-    )
-    ax.title.set_fontsize(9)
-  fig.suptitle(f'bending matrices, true (wire) vs estimated (surface), {method}')
-  fig.tight_layout()
-  files.savefig(fig, path, dpi=90)
-  plt.close(fig)
-
-
-def candidate_landscapes(results: dict, method: str, workdir: str) -> dict:
-  """Every candidate a method's searches scored, placed against the truth.
-
-  Reads each finished estimate's ``bo_state.npz`` (no simulation). Returns
-  ``{fabric or garment: [(ratio (n, 3), rel (n,)) per recording]}``: ``ratio``
-  is ``log10(value / truth)`` of bending scale, wind speed and area weight (0 =
-  the truth), ``rel`` the candidate's PSD over the search's best (>= 1; NaN
-  where its simulation failed).
-  """
-  out: dict = {}
-  for key, r in sorted(results.items()):
-    if key[0] != method or 'truth' not in r:
-      continue
-    state = os.path.join(workdir, key[0], key[1], f'{key[2]}-{key[3]}', 'bo_state.npz')
-    if not os.path.isfile(state):
-      continue
-    with np.load(state) as z:
-      x, y = np.asarray(z['X'], np.float64), np.asarray(z['Y'], np.float64)
-    values = physsim.from_unit(x, physsim.search_space(r['material']))
-    truth = [r['truth'][f] for f in physsim.Params._fields]
-    ratio = np.stack(
-      [np.log10(np.ravel(v) / t) for v, t in zip(values, truth, strict=True)], 1
-    )
-    out.setdefault(key[2], []).append((ratio, y / np.nanmin(y)))
-  return out
-
-
-def plot_candidate_landscapes(landscapes: dict, method: str, path: str) -> None:
-  """The PSD along each parameter, as the searches sampled it: one row per
-  fabric or garment, one column per parameter, one colour per recording."""
-  if not landscapes:
-    return
-  names = list(landscapes)
-  labels = ('bending scale', 'wind speed', 'area weight')
-  fig, axes = plt.subplots(
-    len(names), 3, figsize=(11, 2.1 * len(names)), sharey=True, squeeze=False
-  )
-  for row, name in zip(axes, names, strict=True):
-    for j, (ratio, rel) in enumerate(landscapes[name]):
-      for i, ax in enumerate(row):
-        ax.semilogy(ratio[:, i], rel, '.', ms=4, color=f'C{j}')
-    for i, ax in enumerate(row):
-      ax.axvline(0.0, color='k', lw=0.8)
-      ax.set_title(f'{name}: {labels[i]}', fontsize=8)
-  for i, ax in enumerate(axes[-1]):
-    ax.set_xlabel(f'log10({labels[i]} / truth)')
-  for ax in axes[:, 0]:
-    ax.set_ylabel('PSD / best')
-  fig.suptitle(f'{method}: every candidate the searches scored (truth at 0)')
-  fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / fig.get_figheight()))  # room for the title
-  files.savefig(fig, path, dpi=80)
-  plt.close(fig)
 
 
 def run(config: Config, eval_root: str, models: str, workdir: str) -> str:
