@@ -38,6 +38,8 @@ IMU = ('sensor_msgs/msg/Imu', 'sensor_msgs/Imu')
 TF = ('tf2_msgs/msg/TFMessage', 'tf2_msgs/TFMessage')
 # The files a ROS 2 bag folder stores its messages in.
 STORAGE_EXTENSIONS = ('.db3', '.mcap')
+# The largest metadata.yaml read (ros2 writes a few kB).
+MAX_METADATA = 1 << 20
 # Seconds of IMU readings averaged for gravity (the camera at rest).
 IMU_SECONDS = 1.0
 _ENCODINGS = {'16UC1': np.uint16, 'mono16': np.uint16, '32FC1': np.float32}
@@ -92,13 +94,18 @@ def check_bag_folder(path: str) -> None:
 
 def _check_files(path: str) -> None:
   """Refuses a bag whose files are not regular files (a FIFO would block
-  the reader forever), naming the file."""
+  the reader forever), or whose metadata.yaml is too large or holds a YAML
+  alias, naming the file."""
   if not os.path.isdir(path):
     input_files.check_regular(path, 'bag')
     return
   for name in sorted(os.listdir(path)):
     if name.lower().endswith((*STORAGE_EXTENSIONS, '.yaml')):
       input_files.check_regular(os.path.join(path, name), 'bag file')
+  # rosbags expands YAML aliases: a few hundred bytes of them would take
+  # minutes and gigabytes. No metadata.yaml ros2 writes holds one.
+  meta = os.path.join(path, 'metadata.yaml')
+  input_files.load_yaml(input_files.read_text(meta, 'bag file', MAX_METADATA), meta)
 
 
 def _pick(path, conns, kind: str, given: str, prefer, flag: str):
@@ -235,7 +242,8 @@ def read_bag(
     reader.open()
   except Exception as e:  # noqa: BLE001 - rosbags raises its own many kinds
     raise ValueError(
-      f'{path}: not a readable ROS bag ({type(e).__name__}: {e})'
+      f'{path}: not a readable ROS bag ({type(e).__name__}: '
+      f'{input_files.short(e, 160)})'
     ) from None
   try:
     return _read(reader, path, depth_topic, info_topic, imu_topic, start)
@@ -243,7 +251,8 @@ def read_bag(
     raise
   except Exception as e:  # noqa: BLE001 - a corrupt message deep in the bag
     raise ValueError(
-      f'{path}: a message cannot be read ({type(e).__name__}: {e})'
+      f'{path}: a message cannot be read ({type(e).__name__}: '
+      f'{input_files.short(e, 160)})'
     ) from None
   finally:
     reader.close()

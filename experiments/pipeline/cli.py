@@ -347,9 +347,19 @@ def host_devices(n: int | None = None) -> None:
   )
 
 
+# The longest error line printed; a longer one is cut (a flag's or file's long
+# value echoed back), its head naming the flag or file.
+MAX_LINE = 300
+
+
 def one_line(e: BaseException) -> str:
-  """A user error's message on one line (the lines of a longer one joined)."""
-  return '; '.join(line.strip() for line in str(e).splitlines() if line.strip())
+  """A user error's message on one line (the lines of a longer one joined),
+  at most ``MAX_LINE`` characters."""
+  text = '; '.join(line.strip() for line in str(e).splitlines() if line.strip())
+  if len(text) <= MAX_LINE:
+    return text
+  cut = f'... ({len(text)} characters)'
+  return text[: MAX_LINE - len(cut)] + cut
 
 
 def resume_command(argv: list[str] | None = None) -> str:

@@ -105,3 +105,28 @@ def test_estimate_help_leads_with_the_flags_a_person_needs():
     cli.define_flags(
       estimate.Args, estimate.PRESETS, flags.FlagValues(), key_flags=['recordings']
     )
+
+
+def test_an_error_line_is_at_most_300_characters_naming_its_flag():
+  e = ValueError('--nodes=' + 'x' * 10_000 + ': need 1 to 16')
+  line = cli.one_line(e)
+  assert len(line) <= cli.MAX_LINE and line.startswith('--nodes=xxx')
+  assert line.endswith('(10022 characters)')
+  assert cli.one_line(ValueError('a\nb')) == 'a; b'
+
+
+def test_a_line_break_in_a_list_flag_is_one_line_and_exit_status_2(tmp_path):
+  """absl parses list flags as CSV: its error, a line break, still one line."""
+  import os  # noqa: PLC0415
+  import subprocess  # noqa: PLC0415
+  import sys  # noqa: PLC0415
+
+  out = subprocess.run(
+    [sys.executable, '-m', 'experiments.plan', f'--workdir={tmp_path}',
+     '--candidates=a\nb,c'],
+    capture_output=True, text=True, cwd=_ROOT, timeout=300,
+    env=dict(os.environ, JAX_PLATFORMS='cpu', PYTHONPATH=str(_ROOT)),
+  )  # fmt: skip
+  lines = [x for x in out.stderr.splitlines() if x.startswith('error')]
+  assert out.returncode == 2, out.stderr[-2000:]
+  assert len(lines) == 1 and lines[0].startswith('error: flag --candidates=a; b,c')

@@ -244,3 +244,17 @@ def test_a_bag_whose_files_are_fifos_is_refused_by_name(tmp_path):
     t.join(10.0)
     assert not t.is_alive(), f'{bag}: blocked'
     assert name in out['error'] and 'FIFO' in out['error']
+
+
+def test_a_yaml_alias_in_metadata_is_refused_before_rosbags_expands_it(tmp_path):
+  import time  # noqa: PLC0415
+
+  path, _, _ = write_bag(tmp_path / 'rec', Stores.ROS2_HUMBLE, frames=2, imu=False)
+  meta = tmp_path / 'rec' / 'metadata.yaml'
+  bomb = ['a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]']
+  bomb += [f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 10) + ']' for i in range(1, 9)]
+  meta.write_text('\n'.join(bomb) + '\n' + meta.read_text())
+  t0 = time.perf_counter()
+  with pytest.raises(ValueError, match=r'metadata.yaml: YAML aliases') as e:
+    bags.read_bag(path)
+  assert time.perf_counter() - t0 < 1.0 and len(str(e.value)) <= 300
