@@ -1,4 +1,5 @@
-"""One recording's estimate time after compile, for a few settings.
+"""One recording's estimate alone: its time after compile, for a few
+settings, or beside the same recording estimated in a lockstep.
 
 Each setting runs the same estimate 1 + ``--repeats`` times in one process: the
 first pays the compiles (MJX, renderer, network, GP buffers), the others are
@@ -11,20 +12,34 @@ Prints a table and writes JSON.
       --out=out/estimate_latency.json
   python -m benchmarks.estimate_latency --preset=shape \
       --recording=/tmp/eval/fabrics/gray_interlock/0000   # no network
+
+``--against=WORKDIR``: a calibration study (``experiments.calibrate``)
+estimates its recordings in one lockstep (``estimation.estimate_many``: one
+device program per step for all); each of ``--seqs`` is estimated again alone
+in this process, with the settings and seed its estimate ran with (its
+``estimate.json``), and the table gives per quantity the median and 90%
+interval of each, and each single estimate's time (the first includes the
+compile). ``--image_size`` must be the one the study read its recordings at
+(``calibration.image_size``: 256 at the paper's size, 32 at the demo's):
+
+  python -m benchmarks.estimate_latency --against=/tmp/cal_paper \
+      --seqs=0000,0010 --out=$OUT/single_vs_batched.json
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import tempfile
 import time
 
 from absl import logging
 
 import physsim
-from experiments.pipeline import cli, embedding, estimation, files, search
+from experiments.pipeline import cli, embedding, estimation, files, layout, search
 from experiments.pipeline import objective as objective_lib
+from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 
 # name -> (objective.PRESETS name, EstimateConfig overrides, estimate()
@@ -53,7 +68,7 @@ class Args:
   """The estimate-latency benchmark.
 
   Attributes:
-    recording: a dataset sequence folder (required).
+    recording: a dataset sequence folder (required without --against).
     material: its fabric.
     model: its trained network (required for a setting that embeds: psd,
       psd_smoke, paper; the shape distance reads the frames without one).
@@ -64,9 +79,12 @@ class Args:
     repeats: timed runs after the compile run (the table shows their median;
       a timed run can still compile shapes the first run's search did not
       reach).
+    against: a calibration study's workdir with finished estimates: estimate
+      --seqs of them alone, beside their lockstep estimates.
+    seqs: with --against, the recordings (their estimates' folder names).
   """
 
-  recording: str = cli.required()
+  recording: str = ''
   material: str = 'gray_interlock'
   model: str = ''
   image_size: int = 256
@@ -74,6 +92,8 @@ class Args:
   settings: tuple[str, ...] = ('default', 'q24', 'gp_on_gpu')
   backend: str = cli.choice('auto', physsim.BACKENDS)
   repeats: int = 1
+  against: str = ''
+  seqs: tuple[str, ...] = ('0000', '0010')
 
 
 PRESETS = {
@@ -84,8 +104,57 @@ PRESETS = {
 }
 
 
+def _summary(result: dict) -> dict:
+  return {
+    f: [result['estimate'][f]['median'], *result['estimate'][f]['interval_90']]
+    for f in posterior_lib.FIELDS
+  }
+
+
+def against_lockstep(args: Args) -> None:
+  """Each of ``args.seqs`` of the study ``args.against`` estimated alone,
+  beside its estimate in the study's lockstep; a table and JSON (a list)."""
+  evaluator = search.Evaluator()
+  rows = []
+  for seq in args.seqs:
+    batched = recording_lib.read_json(
+      os.path.join(args.against, 'estimates', seq, layout.ESTIMATE_FILE)
+    )
+    est = objective_lib.EstimateConfig.from_flat(batched['config'])
+    recording = recording_lib.load_recording(
+      batched['recording'], fps=est.simulation.fps,
+      size=(args.image_size, args.image_size), frames=est.simulation.frames,
+    )  # fmt: skip
+    t0 = time.perf_counter()
+    alone = estimation.estimate(
+      est, recording, '',
+      os.path.join(args.against, 'alone', seq), progress=False, evaluator=evaluator,
+    )  # fmt: skip
+    rows.append({
+      'seq': seq, 'material': batched['material'],
+      'seconds': time.perf_counter() - t0,
+      'objective_s': alone.get('seconds_in_objective'),
+      'search_s': alone.get('seconds_in_search'),
+      'alone': _summary(alone), 'batched': _summary(batched),
+      'recordings_in_batch': batched.get('recordings_in_batch'),
+    })  # fmt: skip
+  files.write_json(args.out, rows)
+  print('| recording | quantity | alone: median [90%] | in the batch | seconds alone |')
+  print('|---|---|---|---|---|')
+  for r in rows:
+    for f in posterior_lib.FIELDS:
+      a, b = r['alone'][f], r['batched'][f]
+      print(f'| {r["seq"]} {r["material"]} | {f} | {a[0]:.3g} [{a[1]:.3g}, {a[2]:.3g}] '
+            f'| {b[0]:.3g} [{b[1]:.3g}, {b[2]:.3g}] | {r["seconds"]:.1f} |')  # fmt: skip
+  print(json.dumps({'out': args.out}))
+
+
 def main(args: Args) -> None:
   logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint at INFO
+  if args.against:
+    return against_lockstep(args)
+  if not args.recording:
+    raise ValueError('missing --recording (or --against=a calibration workdir)')
   unknown = sorted(set(args.settings) - set(SETTINGS))
   if unknown or not args.settings:
     raise ValueError(f'unknown --settings {unknown}; known: {list(SETTINGS)}')

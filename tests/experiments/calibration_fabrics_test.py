@@ -140,13 +140,13 @@ def test_every_fabric_is_estimated_as_itself_and_reported(study):
 
 @pytest.mark.slow
 def test_a_recording_estimated_alone_matches_itself_in_the_lockstep(study, tmp_path):
-  from benchmarks import single_vs_batched
+  from benchmarks import estimate_latency
 
   workdir, _ = study
   out = str(tmp_path / 'svb.json')
   seq = f'{calibration.first_seq(TINY, FABRICS[1]):04d}'  # a black denim recording
-  single_vs_batched.main(single_vs_batched.Args(
-    workdir=workdir, image_size=TINY_RECORDINGS.resolution, seqs=(seq,), out=out,
+  estimate_latency.main(estimate_latency.Args(
+    against=workdir, image_size=TINY_RECORDINGS.resolution, seqs=(seq,), out=out,
   ))  # fmt: skip
   with open(out) as f:
     (row,) = json.load(f)
