@@ -584,6 +584,38 @@ def slope_path(c: Candidate, bending: float, area_weight: float, config: Config,
   )
 
 
+def _cached_slopes(path: str) -> dict:
+  """A cached slope file, checked: a damaged one (its writes are atomic, so
+  damaged after) is refused naming it rather than ranked as garbage.
+
+  Raises:
+    ValueError: naming the file and how to recompute it.
+  """
+  why = ''
+  try:
+    out = physsim.dataset.read_json(path)
+  except ValueError as e:
+    out, why = None, str(e).removeprefix(f'{path}: ')[:100]
+  if out is not None:
+    try:
+      slopes = np.asarray(out['slopes'], np.float64)
+      cov = np.asarray(out['noise_cov'], np.float64)
+      float(out['wind'])
+    except (KeyError, TypeError, ValueError):
+      why = 'no slopes, noise_cov and wind'
+    else:
+      m = slopes.shape[0] if slopes.ndim == 2 else -1
+      if cov.shape != (m, m) or not (
+        np.isfinite(slopes).all() and np.isfinite(cov).all()
+      ):
+        why = f'slopes {slopes.shape} and noise_cov {cov.shape} do not fit or are not finite'
+  if why:
+    raise ValueError(
+      f'{path}: a damaged cached slope file ({why}); delete it to recompute'
+    )
+  return out
+
+
 def candidate_slopes(c: Candidate, bending: float, area_weight: float,
                      config: Config, cache_dir: str, key) -> dict:  # fmt: skip
   """``simulate_candidate``, cached as JSON under ``cache_dir`` (a rerun, or
@@ -593,8 +625,7 @@ def candidate_slopes(c: Candidate, bending: float, area_weight: float,
   other clips never reads another's slopes."""
   path = slope_path(c, bending, area_weight, config, cache_dir)
   if os.path.exists(path):
-    with open(path) as f:
-      return json.load(f)
+    return _cached_slopes(path)
   t0 = time.time()
   out = simulate_candidate(c, bending, area_weight, config, key)
   out['seconds'] = time.time() - t0

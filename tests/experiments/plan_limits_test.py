@@ -71,3 +71,20 @@ def test_plan_shows_its_progress_and_time_left(tmp_path, monkeypatch, capsys):
   assert len(calls) == 6  # the real one would read its cache: counted, not timed
   err = capsys.readouterr().err
   assert '6/6 (100%)' in err
+
+
+@pytest.mark.parametrize(
+  'content',
+  ['{"slopes": [[1', '[]', '{"wind": 0}', '{"wind": 0, "slopes": [[1, 2]], '
+   '"noise_cov": [[1, 2], [3, 4]]}', '{"wind": 0, "slopes": [[NaN, 2]], '
+   '"noise_cov": [[1]]}', '\xff\xfe'],
+)  # fmt: skip
+def test_a_damaged_cached_slope_file_is_named(tmp_path, content):
+  c = protocol.parse('swatch_20cm_still_r5')
+  config = protocol.Config(draws=3, clip=0.5)
+  path = protocol.slope_path(c, 1.0, 0.2, config, str(tmp_path))
+  with open(path, 'w', encoding='latin-1') as f:
+    f.write(content)
+  with pytest.raises(ValueError, match=r'a damaged cached slope file') as e:
+    protocol.candidate_slopes(c, 1.0, 0.2, config, str(tmp_path), None)
+  assert str(e.value).startswith(path) and len(str(e.value)) <= 300
