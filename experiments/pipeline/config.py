@@ -18,7 +18,7 @@ import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import cli
+from experiments.pipeline import cli, measurements
 from experiments.pipeline.measurements import Measured
 from experiments.pipeline.simulation import Simulation
 
@@ -137,6 +137,10 @@ class Search:
       weight).
     replicates: candidates per iteration that repeat the most probable cell
       with fresh randomness (they measure the simulator's noise).
+    box: the search box, bending scale, wind (m/s) and area weight (kg/m^2)
+      as (low, high) pairs, six numbers; empty: the fabric's own, widened
+      where a reading needs it (``measurements.search_box``; a joint
+      estimate's recordings share the widest).
   """
 
   point: str = cli.choice('bayes', POINTS)
@@ -151,6 +155,7 @@ class Search:
   min_iter: int = 2
   posterior_grid: tuple[int, ...] = (12, 64, 24)
   replicates: int = 1
+  box: tuple[float, ...] = ()
 
   @property
   def posterior(self) -> bool:
@@ -270,6 +275,8 @@ class EstimateConfig:
       del out['shared_bias']
     if not out['hem_mass']:  # ... and before a hem could be simulated
       del out['hem_mass']
+    if not out['box']:  # ... and before the box could be set
+      del out['box']
     return out
 
   @classmethod
@@ -341,7 +348,9 @@ class EstimateConfig:
       )
     if self.posterior and not 0 <= se.replicates < se.q:
       raise ValueError(f'need 0 <= replicates < q, got {se.replicates}, {se.q}')
-    self.measured.check(physsim.search_space(sim.material))
+    if se.box:
+      measurements.check_box(se.box)
+    self.measured.check(measurements.search_box(sim.material, self.measured, se.box)[0])
     if sc.calibration and not os.path.isfile(sc.calibration):
       raise ValueError(
         f'calibration {sc.calibration!r}: no such file (experiments/calibrate.py '

@@ -14,7 +14,7 @@ import jax
 import numpy as np
 
 import physsim
-from experiments.pipeline import embedding, files, layout
+from experiments.pipeline import embedding, files, layout, measurements
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import results as results_lib
 from experiments.pipeline import setup as setup_lib
@@ -78,9 +78,8 @@ def joint_jobs(
   configs = [config] * len(recordings)
   if winds is not None:
     configs = [config.replace(wind_speed=v, wind_speed_sd=sd) for v, sd in winds]
-    space = physsim.search_space(config.simulation.material)
     for c in configs:
-      c.measured.check(space)
+      c.check()
   if overrides is not None:
     if len(overrides) != len(recordings):
       raise ValueError(
@@ -95,6 +94,7 @@ def joint_jobs(
     configs = [c.replace(**o) for c, o in zip(configs, overrides, strict=True)]
     for c in configs:
       c.check()
+  configs = _one_box(configs)
   jobs = [
     Job(c, r, model_dir, layout.recording_dir(workdir, k), allow_other_material)
     for k, (c, r) in enumerate(zip(configs, recordings, strict=True))
@@ -139,7 +139,9 @@ def joint_posterior(jobs: list[Job], key, shared_bias: float | None = None,
   combined = posterior_lib.joint(
     [z['log_lik'] for z in npz], grid, [z['log_prior'] for z in npz], key,
     n=len(npz[0]['samples']), shared_bias_sd=shared_bias,
-    area_weight_range=physsim.search_space(config.simulation.material).area_weight,
+    area_weight_range=jobs[0].setup.space.area_weight
+    if jobs[0].setup is not None
+    else physsim.search_space(config.simulation.material).area_weight,
     fans=fans, air=air,
   )  # fmt: skip
   return combined, npz
@@ -254,3 +256,20 @@ def _air_of(configs, space: physsim.SearchSpace, grid) -> tuple | None:
   winds = np.ravel(physsim.params.from_unit(u, space).wind_speed)
   readings = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
   return readings, winds
+
+
+def _one_box(configs: list) -> list:
+  """The recordings' configs on one search box (a joint's grids must match):
+  where their readings widen the fabric's box differently, each gets the
+  widest (``Search.box``)."""
+  boxes = [
+    measurements.search_box(
+      c.simulation.material, c.measured, c.search.box
+    )[0].bounds()
+    for c in configs
+  ]  # fmt: skip
+  if all(np.array_equal(b, boxes[0]) for b in boxes):
+    return configs
+  lo, hi = np.min([b[:, 0] for b in boxes], 0), np.max([b[:, 1] for b in boxes], 0)
+  box = tuple(float(v) for pair in zip(lo, hi, strict=True) for v in pair)
+  return [c.replace(box=box) for c in configs]

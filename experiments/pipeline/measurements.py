@@ -323,3 +323,90 @@ def air_draws(v_eff, measured: Measured, seed: int) -> np.ndarray:
     return air_given_wind(v_eff, measured.wind_speed, measured.wind_speed_sd, seed)
   lo, hi = np.log(AIR_RANGE)
   return np.exp(np.random.default_rng([seed, 37]).uniform(lo, hi, len(v_eff)))
+
+
+# A reading's range a search box must hold (issue 76: a reading outside the
+# box was pinned at its edge, silently): its 99.9% central range (3.29 sd;
+# a t law's own quantile), and the furthest the box is ever widened to (the
+# simulator's and the flutter's limits).
+READING_Z = 3.29
+BOX_LIMITS = {'bending_scale': (0.01, 100.0), 'wind_speed': (0.3, 12.0),
+              'area_weight': (0.02, 1.0)}  # fmt: skip
+
+
+def _reading_span(measured: Measured, name: str) -> tuple[float, float] | None:
+  """The 99.9% central range of reading ``name`` (None: not read)."""
+  v, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
+  if not sd > 0:
+    return None
+  z = READING_Z
+  dof = measured.bending_length_dof if name == 'bending_length' else 0.0
+  if dof:  # Student's t scaled to sd: its own 99.9% quantile
+    t = float(np.quantile(np.random.default_rng(0).standard_t(dof, 200_000), 0.9995))
+    z = t * math.sqrt((dof - 2) / dof)
+  return max(v - z * sd, 1e-6), v + z * sd
+
+
+def check_box(box) -> None:
+  """Raises ValueError unless ``box`` is six finite numbers, (low, high) for
+  bending, wind and area weight, each low < high within ``BOX_LIMITS``."""
+  if len(box) != 6 or not all(
+    isinstance(v, int | float) and math.isfinite(v) for v in box
+  ):
+    raise ValueError(f'--box: six numbers (bending, wind, area weight lows and '
+                     f'highs in pairs), got {str(tuple(box))[:80]}')  # fmt: skip
+  for name, lo, hi in zip(FIELDS, box[::2], box[1::2], strict=True):
+    limit = BOX_LIMITS[name]
+    if not limit[0] <= lo < hi <= limit[1]:
+      raise ValueError(
+        f'--box: {name} {lo:g}-{hi:g}; need low < high within {limit[0]:g}-{limit[1]:g}'
+      )
+
+
+def search_box(
+  material: str, measured: Measured, box=()
+) -> tuple[physsim.SearchSpace, list]:
+  """The search box: ``box`` where given (``Search.box``), else the fabric's
+  (``physsim.search_space``) widened, where a reading needs it, to hold the
+  reading's 99.9% range (with the air coefficient free, the wind's stretched
+  by sqrt(c)); a bending length's as the bending its range gives over the
+  area weights the box (or a scale's reading) allows. Never beyond
+  ``BOX_LIMITS``.
+
+  Returns:
+    The box, and one line per widened field saying what widened it.
+  """
+  space = physsim.search_space(material)
+  if box:
+    pairs = dict(zip(FIELDS, zip(box[::2], box[1::2], strict=True), strict=True))
+    return dataclasses.replace(space, **pairs), []
+  want = {}
+  wind = _reading_span(measured, 'wind_speed')
+  if wind is not None:
+    lo, hi = wind
+    if measured.air_free:
+      lo, hi = lo * math.sqrt(AIR_RANGE[0]), hi * math.sqrt(AIR_RANGE[1])
+    want['wind_speed'] = (lo, hi, 'the wind reading')
+  weight = _reading_span(measured, 'area_weight')
+  if weight is not None:
+    want['area_weight'] = (*weight, 'the weighed area weight')
+  length = _reading_span(measured, 'bending_length')
+  if length is not None and space.rigidity > 0:
+    w_lo, w_hi = weight if weight is not None else space.area_weight
+    g = physsim.params.GRAVITY
+    b = (length[0] ** 3 * w_lo * g / space.rigidity,
+         length[1] ** 3 * w_hi * g / space.rigidity)  # fmt: skip
+    want['bending_scale'] = (*b, "the strip's bending length")
+  fields, said = {}, []
+  for name, (lo, hi, what) in want.items():
+    old = getattr(space, name)
+    limit = BOX_LIMITS[name]
+    new = (max(min(old[0], lo), limit[0]), min(max(old[1], hi), limit[1]))
+    new = (min(new[0], old[0]), max(new[1], old[1]))  # never narrower
+    if new != tuple(old):
+      fields[name] = new
+      said.append(
+        f'{SHORT[name]} box {old[0]:.3g}-{old[1]:.3g} widened to '
+        f'{new[0]:.3g}-{new[1]:.3g} to hold {what}'
+      )
+  return dataclasses.replace(space, **fields), said

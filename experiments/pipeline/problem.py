@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from experiments.pipeline import embedding
+from experiments.pipeline import embedding, measurements
 from experiments.pipeline.config import (
   EMBEDDING_DISTANCES,
   SHAPE_DISTANCES,
@@ -165,7 +165,7 @@ def _recording_view(config: EstimateConfig, recording: Recording, shaped: bool):
   distance) its sheet's shape summary (``physsim.shape.summary``, one jitted
   program rather than an eager operation at a time)."""
   sim = config.simulation
-  space = physsim.search_space(sim.material)
+  space = measurements.search_box(sim.material, config.measured, config.search.box)[0]
   h, w = recording.depth.shape[1:]
   key = jax.random.key(config.seed)
   # A known field of view is used even when the pose is unknown.

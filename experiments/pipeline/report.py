@@ -335,6 +335,9 @@ def report_table(result: dict) -> str:
     else "GP 90% interval: the Gaussian process's, not calibrated.",
     calibration_line(result.get('calibration')) if posterior else '',
     median_line(result) if result.get('point') == 'bayes' else '',
+    'search box: ' + '; '.join(result['search_box_widened']) + '.'
+    if result.get('search_box_widened')
+    else '',
     'retrieval: how well the network tells each quantity apart between held-out '
     f'simulations, 1 = chance ({_RETRIEVAL_MEANING}).'
     if retrieval

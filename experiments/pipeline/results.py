@@ -77,6 +77,8 @@ def write_result(
       f: float(np.ravel(v)[0])
       for f, v in zip(posterior_lib.FIELDS, physsim.from_unit(x_best, space), strict=True)
     },
+    'search_box': space.bounds().tolist(),
+    **({'search_box_widened': list(st.widened)} if st.widened else {}),
     'psd_best': float(y_best),
     'evaluations': int(len(res.Y)),
     'failed_evaluations': int(np.sum(~np.isfinite(search_lib.discrepancies(res.Y)))),

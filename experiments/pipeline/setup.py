@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 import physsim
-from experiments.pipeline import calibration_tables, embedding
+from experiments.pipeline import calibration_tables, embedding, measurements
 from experiments.pipeline import objective as obj_lib
 
 
@@ -57,6 +57,8 @@ class Setup(NamedTuple):
     space: the fabric's search box.
     calibration: ``calibration_tables.calibration_note`` of these settings, network and
       mode (None where no calibration is shipped).
+    widened: what widened the fabric's box to ``space`` (a reading outside
+      it: ``measurements.search_box``), a line each.
   """
 
   config: obj_lib.EstimateConfig
@@ -65,6 +67,7 @@ class Setup(NamedTuple):
   pin_centre: np.ndarray
   space: physsim.SearchSpace
   calibration: dict | None
+  widened: tuple[str, ...] = ()
 
 
 def check_material(net: Network, material: str, allow_other: bool = False) -> None:
@@ -169,11 +172,25 @@ def resolve(
     net = network_record
     check_material(net, config.simulation.material, allow_other_material)
   mesh = obj_lib.mesh(config.simulation)
+  space, widened = measurements.search_box(
+    config.simulation.material, config.measured, config.search.box
+  )
+  if config.search.box and tuple(config.search.box) != tuple(
+    physsim.search_space(config.simulation.material).bounds().ravel()
+  ):
+    widened = [f'search box set to {tuple(config.search.box)} (--box)']
   return Setup(
     config=config,
     network=net,
     mesh=mesh,
     pin_centre=mesh.vertices[mesh.pinned].mean(0),
-    space=physsim.search_space(config.simulation.material),
-    calibration=calibration(config, net, joint=joint, recordings=recordings),
+    space=space,
+    calibration=calibration(
+      config,
+      net,
+      joint=joint,
+      recordings=recordings,
+      uncalibrated=("a search box other than the fabric's",) if widened else (),
+    ),  # fmt: skip
+    widened=tuple(widened),
   )

@@ -25,7 +25,7 @@ from experiments.studies import tables
 # config was always ``--sim_fps``), with the bending-length reading (and its law) and the
 # joint's shared discrepancy and a hem's known mass added since.
 FLAT_FLAGS = [
-  'air_coefficient', 'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd', 'calibration', 'camera_sd_deg',
+  'air_coefficient', 'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd', 'box', 'calibration', 'camera_sd_deg',
   'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size', 'distance', 'frames',
   'garment', 'garment_spacing', 'gusts', 'hem_mass', 'likelihood', 'material', 'max_iter',
   'min_iter', 'model_error', 'n_init', 'point', 'posterior_grid', 'q', 'replicates', 'seed',
@@ -37,7 +37,7 @@ FLAT_FLAGS = [
 ESTIMATE_FLAGS = [
   'air_coefficient', 'alignment_sd', 'allow_guessed_up', 'allow_no_camera', 'allow_other_material',
   'area_weight', 'area_weight_sd', 'backend', 'bending_length', 'bending_length_dof', 'bending_length_sd',
-  'calibration', 'camera_json',
+  'box', 'calibration', 'camera_json',
   'camera_sd_deg', 'camera_sd_m', 'cameras', 'cloth_resolution', 'cloth_size',
   'cloth_sizes', 'depth_range', 'depth_scale', 'depth_topic', 'distance', 'fps',
   'frame_glob', 'frames', 'garment', 'garment_spacing', 'gusts', 'hem_mass', 'image_size',

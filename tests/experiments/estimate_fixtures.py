@@ -169,11 +169,15 @@ def _pose() -> physsim.Pose:
   return physsim.look_at((0.6, -1.8, 1.0), (0.0, 0.1, 0.9))
 
 
-def write_recording(root: str, truth: dict, config=CONFIG, rgb: bool = False) -> str:
+def write_recording(
+  root: str, truth: dict, config=CONFIG, rgb: bool = False, air: float = 1.0
+) -> str:
   """Simulates ``truth`` with the estimate's settings; writes a sequence folder
-  (with colour frames ``cam0/rgb_*.png`` if ``rgb``)."""
+  (with colour frames ``cam0/rgb_*.png`` if ``rgb``). ``air``: the fabric's
+  air coefficient, a multiplier on the wind's density (ArcSim's sheet: 1)."""
   mesh = physsim.square(config.simulation.cloth_resolution)
-  cloth = physsim.build(mesh, config.simulation.material)
+  sim = physsim.SimConfig(air_density=air * physsim.SimConfig().air_density)
+  cloth = physsim.build(mesh, config.simulation.material, config=sim)
   space = physsim.search_space(config.simulation.material)
   out = physsim.simulate(
     cloth,
