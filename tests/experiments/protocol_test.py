@@ -231,7 +231,9 @@ def test_cached_slopes_are_kept_apart_by_the_settings_that_made_them(
 
   def fake(c, bending, area_weight, config, key):
     calls.append(config.clip)
-    return {'clip': config.clip}
+    # a row as simulate_candidate makes it: the cache checks what it reads
+    return {'clip': config.clip, 'wind': c.wind, 'slopes': [[1.0, 0.5, 0.2]],
+            'noise_cov': [[0.1]]}  # fmt: skip
 
   monkeypatch.setattr(protocol, 'simulate_candidate', fake)
   c = protocol.parse('sheet_100cm_2ms_r9')
