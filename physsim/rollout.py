@@ -25,14 +25,15 @@ recompile. Frame count, substeps, mesh and batch size are static.
 Two ways in: ``simulate`` (NumPy in, NumPy out, validated) for sweeps and
 studies, and ``world_inputs`` + ``rollout_fn`` (traceable, not jitted) for a
 pipeline that fuses simulation with rendering and scoring under one ``jit``.
-A ``ClothModel`` keeps what it compiles (``ClothModel.programs``).
+A ``ClothModel`` keeps what it compiles (``ClothModel.programs``). The
+inputs are in ``rollout_inputs``, the forces in ``rollout_forces``; this module
+runs them on each backend.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import contextlib
-import dataclasses
 import importlib
 import os
 import threading
@@ -48,11 +49,39 @@ from physsim import forces, interrupt
 from physsim import params as params_lib
 from physsim.cloth import ClothModel, build, reference_rigidity
 from physsim.devices import mesh_key, shard_worlds, world_mesh
+from physsim.rollout_forces import (
+  applied_forces,
+  applied_forces_np,
+  consts,
+  np_consts,
+)
+from physsim.rollout_inputs import (
+  MAX_DISPLACEMENT,
+  MAX_SPEED,
+  Wind,
+  WorldInputs,
+  check_wind,
+  frame_plan,
+  valid_worlds,
+  world_inputs,
+  world_keys,
+)
 
-# A vertex further than this from its rest position, or faster than this, means
-# the integration blew up (the cloth is 1 m; real flapping is a few m/s).
-MAX_DISPLACEMENT = 5.0  # m
-MAX_SPEED = 100.0  # m/s
+# The inputs' names, importable from here as before.
+__all__ = [
+  'BACKENDS', 'MAX_DISPLACEMENT', 'MAX_SPEED', 'Rollout', 'Wind', 'WorldInputs',
+  'check_wind', 'cpu_only_children', 'jit_program', 'material_ratio', 'prefetch',
+  'resolve_backend', 'rollout_fn', 'simulate', 'world_inputs',
+]  # fmt: skip
+# The rollout's parts under the names they had here: the backends below call
+# the forces through these (tests and benchmarks swap them in).
+_applied_forces = applied_forces
+_applied_forces_np = applied_forces_np
+_consts = consts
+_np_consts = np_consts
+_frame_plan = frame_plan
+_world_keys = world_keys
+_valid = valid_worlds
 
 
 class Rollout(NamedTuple):
@@ -74,168 +103,6 @@ class Rollout(NamedTuple):
     if bad.size:
       raise ValueError(f'simulation blew up (NaN or runaway) in worlds {bad.tolist()}')
     return self
-
-
-@dataclasses.dataclass(frozen=True)
-class Wind:
-  """Wind settings shared by a batch (arrays may carry a leading batch axis).
-
-  Attributes:
-    direction: (3,) or (B, 3) flow direction; normalised. Default +y, normal to
-      the resting cloth (the paper's tables quote this normal component).
-    gust_intensity: RMS relative fluctuation; 0 for steady wind.
-    gust_modes: number of frozen-turbulence modes.
-  """
-
-  direction: tuple[float, float, float] | np.ndarray = (0.0, 1.0, 0.0)
-  gust_intensity: float = 0.0
-  gust_modes: int = 8
-
-
-class _Consts(NamedTuple):
-  """Static arrays of a ``ClothModel`` as JAX arrays (closed over by jit)."""
-
-  rest: jax.Array  # (V, 3)
-  faces: jax.Array  # (F, 3)
-  face_area: jax.Array  # (F,)
-  moving: np.ndarray  # (Vm,) vertices with dofs
-  qidx: jax.Array  # (Vm, 3) qpos/qvel indices of those vertices
-  body: jax.Array  # (Vm,) their body ids
-  hinge_verts: jax.Array
-  hinge_coef: jax.Array
-  hinge_c16: jax.Array
-
-
-def _consts(model: ClothModel, dtype) -> _Consts:
-  moving = np.flatnonzero(model.vert_qadr >= 0)
-  return _Consts(
-    rest=jnp.asarray(model.mesh.vertices, dtype),
-    faces=jnp.asarray(model.mesh.faces, jnp.int32),
-    face_area=jnp.asarray(model.mesh.face_areas, dtype),
-    moving=moving,
-    qidx=jnp.asarray(model.vert_qadr[moving][:, None] + np.arange(3), jnp.int32),
-    body=jnp.asarray(model.vert_body[moving], jnp.int32),
-    hinge_verts=jnp.asarray(model.hinge_verts, jnp.int32),
-    hinge_coef=jnp.asarray(model.hinge_coef, dtype),
-    hinge_c16=jnp.asarray(model.hinge_c16, dtype),
-  )
-
-
-def _applied_forces(c: _Consts, model: ClothModel, qpos, qvel, t, w):
-  """(Vm, 3) wind + bending forces on the moving vertices at time ``t``."""
-  x = c.rest.at[c.moving].add(qpos[c.qidx])
-  v = jnp.zeros_like(c.rest).at[c.moving].set(qvel[c.qidx])
-  centroid = x[c.faces].mean(axis=1)
-  u = forces.wind_velocity(centroid, t, w.speed, w.direction, w.gusts)
-  cfg = model.config
-  f = forces.face_wind_forces(
-    x, v, c.faces, c.face_area, u, cfg.air_density, cfg.air_drag
-  ) + forces.bending_forces(
-    x, v, c.hinge_verts, c.hinge_coef, c.hinge_c16, w.bending, cfg.bending_damping
-  )
-  return f[c.moving]
-
-
-class WorldInputs(NamedTuple):
-  """Per-world arrays a rollout takes (leading axis B; a pytree of JAX arrays).
-
-  Attributes:
-    speed: (B,) mean wind speed, m/s.
-    direction: (B, 3) unit flow direction.
-    bending: (B,) bending scale relative to the model's reference rigidity.
-    gusts: ``forces.Gusts`` with a leading B axis.
-    body_mass: (B, nbody) MuJoCo body masses, kg.
-  """
-
-  speed: jax.Array
-  direction: jax.Array
-  bending: jax.Array
-  gusts: forces.Gusts
-  body_mass: jax.Array
-
-
-def check_wind(wind: Wind) -> np.ndarray:
-  """The wind's unit direction(s); raises ValueError on a bad direction or
-  gust intensity (host-side, before anything is traced)."""
-  direction = np.asarray(wind.direction, np.float64)
-  norm = np.linalg.norm(direction, axis=-1, keepdims=True)
-  if not np.all(np.isfinite(direction)) or np.any(norm < 1e-9):
-    raise ValueError(
-      f'wind direction must be finite and non-zero, got {wind.direction}'
-    )
-  if not (0.0 <= wind.gust_intensity <= 1.0):
-    raise ValueError(f'gust_intensity must be in [0, 1], got {wind.gust_intensity}')
-  return direction / norm
-
-
-def world_inputs(
-  model: ClothModel,
-  bending_scale,
-  wind_speed,
-  area_weight,
-  keys: jax.Array,
-  wind: Wind,
-  rigidity_ratio=1.0,
-) -> WorldInputs:
-  """Per-world rollout inputs, traceable (no host round trip).
-
-  Args:
-    model: the compiled cloth.
-    bending_scale, wind_speed, area_weight: (B,) physical parameters (trusted:
-      validate at the boundary, e.g. ``params.validate``).
-    keys: (B,) gust keys, one per world.
-    wind: shared wind settings (checked with ``check_wind``).
-    rigidity_ratio: scalar or (B,): the worlds' fabrics' reference rigidity
-      over the model's (``reference_rigidity``), so one compiled model
-      simulates every fabric of its mesh.
-
-  Returns:
-    ``WorldInputs`` in float32.
-  """
-  direction = check_wind(wind)
-  b = jnp.shape(wind_speed)[0]
-  gusts = jax.vmap(
-    lambda k: forces.sample_gusts(k, wind.gust_intensity, wind.gust_modes)
-  )(keys)
-  f32 = lambda a: jnp.asarray(a, jnp.float32)
-  return WorldInputs(
-    speed=f32(wind_speed),
-    direction=jnp.broadcast_to(f32(direction), (b, 3)),
-    bending=f32(bending_scale) * f32(rigidity_ratio),
-    gusts=jax.tree.map(f32, gusts),
-    body_mass=model.body_masses_jax(area_weight),
-  )
-
-
-def _world_keys(key, b: int, wind: Wind):
-  """(B,) gust keys from one key (split) or B keys (used as given)."""
-  if wind.gust_intensity > 0 and key is None:
-    raise ValueError('gusty wind needs a PRNG key (simulate(..., key=...))')
-  key = jax.random.key(0) if key is None else key
-  typed = jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
-  if key.ndim == (1 if typed else 2):  # one key per world, used as given
-    if key.shape[0] != b:
-      raise ValueError(f'got {key.shape[0]} gust keys for {b} worlds')
-    return key
-  return jax.random.split(key, b)
-
-
-def _frame_plan(model: ClothModel, frames: int, fps: float, warmup: float):
-  if frames < 1 or not fps > 0 or warmup < 0:
-    raise ValueError(
-      f'need frames >= 1, fps > 0, warmup >= 0; got {frames}, {fps}, {warmup}'
-    )
-  dt = model.config.timestep
-  substeps = round(1.0 / (fps * dt))
-  if abs(substeps * dt * fps - 1.0) > 1e-6:
-    raise ValueError(f'frame period 1/{fps} s is not a multiple of the timestep {dt} s')
-  return substeps, round(warmup * fps)
-
-
-def _valid(positions, rest):
-  finite = jnp.all(jnp.isfinite(positions), axis=(1, 2, 3))
-  disp = jnp.max(jnp.abs(positions - rest), axis=(1, 2, 3))
-  return finite & (disp < MAX_DISPLACEMENT)
 
 
 # ---------------------------------------------------------------- MJX backend
@@ -309,53 +176,6 @@ def _warp_rollout(model: ClothModel, frames: int, substeps: int, warm_frames: in
 # ------------------------------------------------------------ MuJoCo C backend
 
 
-def _cross(a, b):
-  """Row-wise cross product of (N, 3) arrays (``np.cross`` costs more in
-  overhead than arithmetic at a cloth's sizes)."""
-  a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
-  b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-  return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
-
-
-def _gather_add(index, values, n):
-  """(n, 3) sums of the rows of ``values`` (m, 3) at ``index`` (m,)."""
-  return np.stack([np.bincount(index, values[:, k], minlength=n) for k in range(3)], 1)
-
-
-def _applied_forces_np(c, model, qpos, qvel, t, w):
-  """``_applied_forces`` in float64 NumPy for the MuJoCo C backend."""
-  x = c.rest.copy()
-  v = np.zeros_like(x)
-  x[c.moving] += qpos[c.qidx]
-  v[c.moving] = qvel[c.qidx]
-  faces = c.faces
-  p0, p1, p2 = x[faces[:, 0]], x[faces[:, 1]], x[faces[:, 2]]
-  g = w['gusts']
-  cen = (p0 + p1 + p2) / 3.0
-  arg = (cen - w['speed'] * t * w['direction']) @ g.wavevector.T + g.phase
-  u = w['speed'] * (w['direction'] + (np.sin(arg) * g.amplitude) @ g.direction)
-  n = _cross(p1 - p0, p2 - p0)
-  n /= np.maximum(np.sqrt(np.sum(n * n, axis=1, keepdims=True)), 1e-12)
-  vrel = u - (v[faces[:, 0]] + v[faces[:, 1]] + v[faces[:, 2]]) / 3.0
-  vn = np.sum(n * vrel, axis=1, keepdims=True)
-  cfg = model.config
-  fface = c.face_area * (
-    cfg.air_density * np.abs(vn) * vn * n + cfg.air_drag * (vrel - vn * n)
-  )
-  nv = x.shape[0]
-  out = _gather_add(c.face_index, np.repeat(fface / 3.0, 3, axis=0), nv)
-  hv = model.hinge_verts
-  ph = x[hv]
-  e0, e1, e2 = ph[:, 1] - ph[:, 0], ph[:, 2] - ph[:, 0], ph[:, 3] - ph[:, 0]
-  c1, c2, c3 = _cross(e1, e2), _cross(e2, e0), _cross(e0, e1)
-  curved = np.stack([-(c1 + c2 + c3), c1, c2, c3], axis=1)
-  fb = model.hinge_coef @ ph + model.hinge_c16[:, None, None] * curved
-  if cfg.bending_damping:
-    fb += cfg.bending_damping * (model.hinge_coef @ v[hv])
-  out += _gather_add(c.hinge_index, -w['bending'] * fb.reshape(-1, 3), nv)
-  return out[c.moving]
-
-
 @contextlib.contextmanager
 def cpu_only_children():
   """Processes spawned inside keep JAX on the CPU (they must not grab the GPU)."""
@@ -371,34 +191,6 @@ def cpu_only_children():
         os.environ.pop(k, None)
       else:
         os.environ[k] = v
-
-
-class _NpConsts(NamedTuple):
-  """Static arrays of a ``ClothModel`` for the NumPy forces."""
-
-  moving: np.ndarray
-  qidx: np.ndarray
-  body: np.ndarray
-  rest: np.ndarray  # (V, 3)
-  faces: np.ndarray  # (F, 3)
-  face_area: np.ndarray  # (F, 1)
-  face_index: np.ndarray  # (3F,) the faces' vertices, flat
-  hinge_index: np.ndarray  # (4H,) the hinges' vertices, flat
-
-
-def _np_consts(model: ClothModel) -> _NpConsts:
-  moving = np.flatnonzero(model.vert_qadr >= 0)
-  faces = np.asarray(model.mesh.faces)
-  return _NpConsts(
-    moving=moving,
-    qidx=model.vert_qadr[moving][:, None] + np.arange(3),
-    body=model.vert_body[moving],
-    rest=np.asarray(model.mesh.vertices, np.float64),
-    faces=faces,
-    face_area=np.asarray(model.mesh.face_areas, np.float64)[:, None],
-    face_index=faces.ravel(),
-    hinge_index=np.asarray(model.hinge_verts).ravel(),
-  )
 
 
 def _c_world(model: ClothModel, w: dict, frames: int, substeps: int, warm_frames: int):
