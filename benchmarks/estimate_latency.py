@@ -149,68 +149,60 @@ def against_lockstep(args: Args) -> None:
   print(json.dumps({'out': args.out}))
 
 
-def main(args: Args) -> None:
-  logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint at INFO
-  if args.against:
-    return against_lockstep(args)
-  if not args.recording:
-    raise ValueError('missing --recording (or --against=a calibration workdir)')
-  unknown = sorted(set(args.settings) - set(SETTINGS))
-  if unknown or not args.settings:
-    raise ValueError(f'unknown --settings {unknown}; known: {list(SETTINGS)}')
-  rows = []
-  for name in args.settings:
-    preset, overrides, kwargs = SETTINGS[name]
-    config = objective_lib.PRESETS[preset].replace(
-      material=args.material, backend=args.backend,
-      **overrides,
-    )  # fmt: skip
-    shape = config.scoring.distance == 'shape'
-    if not shape and not args.model:
-      raise ValueError(f'--settings={name} embeds frames: it needs --model')
-    model = '' if shape else args.model
-    net = (
-      None if shape else embedding.load_embedding(model)
-    )  # the shape distance reads the frames at --image_size
-    rec = recording_lib.load_recording(
-      args.recording, fps=config.simulation.fps,
-      size=(args.image_size,) * 2 if shape else net.image_size,
-      frames=config.simulation.frames,
-      rgb=net is not None and net.modality == 'rgb',
-    )  # fmt: skip
-    runs = []
-    evaluator = search.Evaluator()  # one compile per setting, reused by its runs
-    for _ in range(1 + args.repeats):  # the first run compiles
-      with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        r = estimation.estimate(
-          config, rec, model, tmp, progress=False, evaluator=evaluator,
-          **kwargs,
-        )  # fmt: skip
-        runs.append({
-          'seconds': time.perf_counter() - t0,
-          'objective_s': r['seconds_in_objective'],
-          'search_s': r.get('seconds_in_search', float('nan')),
-          'evaluations': r['evaluations'],
-          'iterations': r['iterations'],
-          'errors': r.get('errors', {}).get('estimate'),
-        })  # fmt: skip
-    timed = sorted(runs[1:], key=lambda x: x['seconds'])
-    median = timed[(len(timed) - 1) // 2]  # a run that happened (lower median)
-    row = {
-      'setting': name,
-      'overrides': {**overrides, **kwargs},
-      'first_s': runs[0]['seconds'],
-      'after_compile_s': median['seconds'],
-      'objective_s': median['objective_s'],
-      'search_s': median['search_s'],
-      'evaluations': median['evaluations'],
-      'iterations': median['iterations'],
-      'errors': median['errors'],
-      'timed_runs': runs[1:],
-    }
-    rows.append(row)
-    print(json.dumps(row), flush=True)
+def _setting_row(args: Args, name: str) -> dict:
+  """One setting's runs: the first compiles, the median of the rest."""
+  preset, overrides, kwargs = SETTINGS[name]
+  config = objective_lib.PRESETS[preset].replace(
+    material=args.material, backend=args.backend,
+    **overrides,
+  )  # fmt: skip
+  shape = config.scoring.distance == 'shape'
+  if not shape and not args.model:
+    raise ValueError(f'--settings={name} embeds frames: it needs --model')
+  model = '' if shape else args.model
+  net = (
+    None if shape else embedding.load_embedding(model)
+  )  # the shape distance reads the frames at --image_size
+  rec = recording_lib.load_recording(
+    args.recording, fps=config.simulation.fps,
+    size=(args.image_size,) * 2 if shape else net.image_size,
+    frames=config.simulation.frames,
+    rgb=net is not None and net.modality == 'rgb',
+  )  # fmt: skip
+  runs = []
+  evaluator = search.Evaluator()  # one compile per setting, reused by its runs
+  for _ in range(1 + args.repeats):  # the first run compiles
+    with tempfile.TemporaryDirectory() as tmp:
+      t0 = time.perf_counter()
+      r = estimation.estimate(
+        config, rec, model, tmp, progress=False, evaluator=evaluator,
+        **kwargs,
+      )  # fmt: skip
+      runs.append({
+        'seconds': time.perf_counter() - t0,
+        'objective_s': r['seconds_in_objective'],
+        'search_s': r.get('seconds_in_search', float('nan')),
+        'evaluations': r['evaluations'],
+        'iterations': r['iterations'],
+        'errors': r.get('errors', {}).get('estimate'),
+      })  # fmt: skip
+  timed = sorted(runs[1:], key=lambda x: x['seconds'])
+  median = timed[(len(timed) - 1) // 2]  # a run that happened (lower median)
+  return {
+    'setting': name,
+    'overrides': {**overrides, **kwargs},
+    'first_s': runs[0]['seconds'],
+    'after_compile_s': median['seconds'],
+    'objective_s': median['objective_s'],
+    'search_s': median['search_s'],
+    'evaluations': median['evaluations'],
+    'iterations': median['iterations'],
+    'errors': median['errors'],
+    'timed_runs': runs[1:],
+  }
+
+
+def _print(rows: list[dict]) -> None:
   base = rows[0]['after_compile_s']
   print(
     f'| setting | first run s | after compile s | vs {rows[0]["setting"]} | '
@@ -227,6 +219,22 @@ def main(args: Args) -> None:
       f'{r["search_s"]:.1f} | {out - r["search_s"]:.1f} | {r["evaluations"]} | '
       f'{r["iterations"]} |'
     )
+
+
+def main(args: Args) -> None:
+  logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint at INFO
+  if args.against:
+    return against_lockstep(args)
+  if not args.recording:
+    raise ValueError('missing --recording (or --against=a calibration workdir)')
+  unknown = sorted(set(args.settings) - set(SETTINGS))
+  if unknown or not args.settings:
+    raise ValueError(f'unknown --settings {unknown}; known: {list(SETTINGS)}')
+  rows = []
+  for name in args.settings:
+    rows.append(_setting_row(args, name))
+    print(json.dumps(rows[-1]), flush=True)
+  _print(rows)
   files.write_json(
     args.out,
     {'recording': args.recording, 'backend': args.backend, 'rows': rows},
