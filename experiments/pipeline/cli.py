@@ -296,13 +296,18 @@ def _flag_name(f: dataclasses.Field) -> str:
   return f.metadata.get(_FLAG, f.name)
 
 
+# The largest int a flag may hold (64-bit signed).
+MAX_INT = 2**63 - 1
+
+
 def check_numbers(config) -> None:
   """One check for every numeric field of a config and the configs nested in
-  it: each float (or element of a tuple of them) must be finite.
+  it: each float (or element of a tuple of them) must be finite, each int
+  within 64 bits (no count or size is larger; a longer one is a typo).
 
   Raises:
-    ValueError: ``--flag=value: ...`` naming the first field that is NaN or
-      infinite (or not a number at all).
+    ValueError: ``--flag=value: ...`` naming the first field that is NaN,
+      infinite, too large (or not a number at all).
   """
   for f in dataclasses.fields(config):
     value = getattr(config, f.name)
@@ -313,9 +318,14 @@ def check_numbers(config) -> None:
     for v in items:
       if isinstance(v, bool | str) or v is None:
         continue
+      if isinstance(v, int) and not -MAX_INT <= v <= MAX_INT:
+        raise ValueError(
+          f'--{_flag_name(f)}={str(v)[:20]}...: {len(str(v))} digits, too large '
+          f'(at most {MAX_INT})'
+        )
       try:
         finite = math.isfinite(v)
-      except TypeError:
+      except (TypeError, OverflowError):
         finite = False
       if not finite:
         shown = ','.join(map(str, items)) if isinstance(value, tuple) else str(v)

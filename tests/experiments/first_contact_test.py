@@ -130,3 +130,12 @@ def test_a_line_break_in_a_list_flag_is_one_line_and_exit_status_2(tmp_path):
   lines = [x for x in out.stderr.splitlines() if x.startswith('error')]
   assert out.returncode == 2, out.stderr[-2000:]
   assert len(lines) == 1 and lines[0].startswith('error: flag --candidates=a; b,c')
+
+
+def test_an_int_flag_of_hundreds_of_digits_is_refused_by_name():
+  """check_numbers raised OverflowError (a traceback) on such an int."""
+  from experiments import plan  # noqa: PLC0415
+
+  argv = ['plan', '--workdir=w', '--nodes=' + '9' * 400]
+  with pytest.raises(ValueError, match=r'^--nodes=9{20}\.\.\.: 400 digits, too large'):
+    cli.parse(plan.Args, plan.PRESETS, argv)

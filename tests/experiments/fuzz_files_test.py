@@ -43,7 +43,7 @@ _BIG = int(os.environ.get('PHYSNET_FUZZ_EXAMPLES', '0') or 0)
 # An error line's longest; a reader's answer's slowest (s: a hang guard on a
 # loaded machine; the alias bomb's own bound is takes_test's).
 MAX_LINE = cli.MAX_LINE
-MAX_SECONDS = 5.0
+MAX_SECONDS = 10.0
 
 
 def _settings(name, *, shrink: bool = True):
