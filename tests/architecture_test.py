@@ -24,7 +24,7 @@ STAGES = (
   ('config', 'problem', 'objective'),
   ('calibration_tables', 'setup'),
   ('search',),
-  ('posterior',),
+  ('posterior', 'fit_check'),
   ('report', 'results', 'joint'),
   ('estimation', 'user_recordings'),
 )  # fmt: skip

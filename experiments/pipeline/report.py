@@ -338,6 +338,7 @@ def report_table(result: dict) -> str:
     'search box: ' + '; '.join(result['search_box_widened']) + '.'
     if result.get('search_box_widened')
     else '',
+    fit_line(result.get('fit_check'), result.get('config', {}).get('measured', {})),
     'retrieval: how well the network tells each quantity apart between held-out '
     f'simulations, 1 = chance ({_RETRIEVAL_MEANING}).'
     if retrieval
@@ -751,3 +752,43 @@ def next_recording_note(shared: dict, config, workdir: str) -> str | None:
     f'python -m experiments.plan --workdir={workdir} ranks what to record next '
     'with the simulator'
   )
+
+
+_READING_UNITS = {'wind_speed': ('wind', 'm/s', 1.0), 'area_weight': ('area weight', 'g/m^2', 1e3),
+                  'bending_length': ('bending length', 'mm', 1e3)}  # fmt: skip
+
+
+def fit_line(check: dict | None, measured: dict) -> str:
+  """The fit check (``fit_check``) as a note: how far simulations at the point
+  lie from the recording against the gust floor, and each reading the video
+  disagrees with, with what would reconcile them. '' without a check."""
+  if not check:
+    return ''
+  parts = []
+  p = check.get('predictive')
+  if p:
+    parts.append(
+      f'fit: {p["simulations"]} simulations at the point lie {p["ratio"]:.2g}x the '
+      'gust floor from the recording'
+      + (
+        ' (as close as the gusts allow)'
+        if p['fits']
+        else ': FARTHER than the gusts allow; no fabric in the box reproduces '
+        'this recording with these settings and readings'
+      )
+    )
+  for c in check.get('conflicts', []):
+    word, unit, k = _READING_UNITS[c['reading']]
+    lo, hi = c['video']
+    line = (
+      f'the video disagrees with the {word} reading: alone it puts the {word} at '
+      f'{k * lo:.3g}-{k * hi:.3g} {unit} (99%), the reading was '
+      f'{k * c["value"]:.3g} +- {k * c["sd"]:.2g} {unit}'
+    )
+    if c['reading'] == 'wind_speed' and measured.get('air_coefficient') != 'free':
+      line += (
+        '; if both hold, this fabric takes the wind differently from an ArcSim '
+        'sheet: estimate its air coefficient (--air_coefficient=free)'
+      )
+    parts.append(line)
+  return '; '.join(parts) + '.' if parts else ''

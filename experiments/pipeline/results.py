@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import functools
 import os
+from collections.abc import Callable
 
 import jax
 import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import files, layout, measurements, report
+from experiments.pipeline import files, fit_check, layout, measurements, report
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import search as search_lib
 from experiments.pipeline import setup as setup_lib
+from experiments.pipeline.config import SHAPE_DISTANCES
 
 
 def write_result(
@@ -30,6 +32,7 @@ def write_result(
   best_frames: np.ndarray,
   figures: bool = True,
   pictures: list | None = None,
+  simulate: Callable | None = None,
   **timing,
 ) -> dict:
   """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
@@ -48,6 +51,9 @@ def write_result(
     figures: draw the pictures (else only the JSON and ``posterior.npz``).
     pictures: where to put the pictures' drawing, as callables, instead of
       drawing them here (``estimate_many``).
+    simulate: ``simulate(u (k, 3))`` scores more candidates of the search's
+      problem (``objective.Scores``): the fit check's gust draws at the point
+      (``fit_check.predictive``); None: no check.
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
   st, recording, workdir = job.setup, job.recording, job.workdir
@@ -88,6 +94,16 @@ def write_result(
     **{k: float(v) for k, v in timing.items()},
     'config': config.flat(),
   })  # fmt: skip
+  if config.posterior and config.scoring.distance in SHAPE_DISTANCES:
+    result['fit_check'] = {
+      'predictive': None if simulate is None else fit_check.predictive(
+        simulate, result['point_unit']
+      ),
+      'conflicts': fit_check.conflicts(
+        res.log_lik, search_lib.posterior_config(config).grid, space,
+        config.measured,
+      ),
+    }  # fmt: skip
   if recording.truth is not None:
     result['truth'] = recording.truth
     est = result['estimate']

@@ -501,9 +501,11 @@ def run(
 
   Args:
     jobs: the recordings.
-    write: ``write(job, search, result, best_frames, **timing) -> dict``, what
-      a finished search leaves (``results.write_result``: the stages after
-      the search, which this one does not import).
+    write: ``write(job, search, result, best_frames, simulate=..., **timing)
+      -> dict``, what a finished search leaves (``results.write_result``: the
+      stages after the search, which this one does not import);
+      ``simulate(u (k, 3))`` scores more candidates of its problem (the fit
+      check's).
     progress: print one line per step.
     gp_on_cpu: fit the GPs and propose on the CPU.
     nets: networks the caller has loaded already, by ``model_dir``.
@@ -629,10 +631,18 @@ class _Lockstep:
         seconds_in_search=self.gp_seconds + t_result,
         recordings_in_batch=len(self.jobs),
       )
+      simulate = functools.partial(self._at, s)  # for the fit check's draws
       with physsim.devices.on_host():  # the read-out's small eager work
-        self.out[s.index] = self.write(job, s, res, frames[s.index], **timing)
+        self.out[s.index] = self.write(
+          job, s, res, frames[s.index], simulate=simulate, **timing
+        )
       if self.progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
+
+  def _at(self, s: LiveSearch, u) -> obj_lib.Scores:
+    """Scores of candidates ``u (k, 3)`` of a finished search's problem, with
+    keys past its own evaluations (fresh gusts and sensor noise)."""
+    return self.evaluate([s.problem], [np.asarray(u, np.float64)], [len(s.state.Y)])[0]
 
   def step(self, active: list[LiveSearch]) -> None:
     """One step of every unfinished search: ask, score together, tell."""
