@@ -65,13 +65,14 @@ NO_LOAD = Load()
 
 
 def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False,
-           load: Load = NO_LOAD):  # fmt: skip
+           load: Load = NO_LOAD, root_moment: bool = False):  # fmt: skip
   """From the free end (s = L, angle ``alpha``, no moment) back to the edge,
   in units of c: (theta(0), reach, droop), the last two over L; with
   ``path``, also the (steps + 1, ..., 2) centre line (reach, droop) over L
-  from the edge (s = 0) to the free end (s = L). ``y[1]`` is the moment over
-  D: it sets the curvature except under the load's span, where the strip
-  stays straight."""
+  from the edge (s = 0) to the free end (s = L); with ``root_moment``, last,
+  the moment over D at the edge (its curvature times c). ``y[1]`` is the
+  moment over D: it sets the curvature except under the load's span, where
+  the strip stays straight."""
   h = ratio / _STEPS
   mass, at, span = (np.asarray(v, np.float64) for v in (load.mass, load.at, load.span))
 
@@ -101,11 +102,11 @@ def _shoot(ratio: np.ndarray, alpha: np.ndarray, path: bool = False,
       trail.append(y[2:])
   # integrated backwards, x and z hold minus the integrals over [s, L]
   out = (y[0], -y[2] / ratio, -y[3] / ratio)
-  if not path:
-    return out
-  # from the edge: int_0^s = int_0^L - int_s^L, that is y(s) - y(0)
-  xz = np.stack(trail[::-1])  # (steps + 1, 2, ...), s = 0 first
-  return (*out, np.moveaxis((xz - xz[:1]) / ratio, 1, -1))
+  if path:
+    # from the edge: int_0^s = int_0^L - int_s^L, that is y(s) - y(0)
+    xz = np.stack(trail[::-1])  # (steps + 1, 2, ...), s = 0 first
+    out = (*out, np.moveaxis((xz - xz[:1]) / ratio, 1, -1))
+  return (*out, y[1]) if root_moment else out
 
 
 # A load's shot from a free end this close to vertical (rad) has lost its
@@ -193,6 +194,42 @@ def shape(ratio, load: Load = NO_LOAD) -> np.ndarray:
     3
   ]  # (steps + 1, R, 2)
   return np.moveaxis(xz, 0, 1).reshape(*shape_, _STEPS + 1, 2)
+
+
+_LEAVING_BISECTIONS = 32  # on the free end's angle: to 4e-10 rad
+
+
+def leaving(ratio, angle) -> tuple[np.ndarray, np.ndarray]:
+  """A strip that leaves its support at ``angle`` (rad below the horizontal,
+  0 to pi / 2; each broadcasting with ``ratio`` = L / c of its free part): the
+  centre line of its free part, (..., _STEPS + 1, 2) points (reach, drop)
+  over L from where it leaves, and its curvature there times c (what it asks
+  of the support: over a rounded edge of radius R it leaves where this is
+  c / R). ``angle`` 0 is ``shape``'s flat clamp.
+
+  Raises:
+    ValueError: a ratio that is not within (0, ``MAX_RATIO``] or an angle
+      outside [0, pi / 2).
+  """
+  ratio, angle = np.broadcast_arrays(
+    np.asarray(ratio, np.float64), np.asarray(angle, np.float64)
+  )
+  shape_ = ratio.shape
+  ratio, angle = np.atleast_1d(ratio).ravel(), np.atleast_1d(angle).ravel()
+  if not np.all(np.isfinite(ratio) & (ratio > 0) & (ratio <= MAX_RATIO)):
+    raise ValueError(
+      f'need overhangs of 0 to {MAX_RATIO:g} bending lengths, got {ratio}'
+    )
+  if not np.all((angle >= 0) & (angle < np.pi / 2)):
+    raise ValueError(f'need angles of 0 to pi / 2, got {angle}')
+  lo, hi = angle.copy(), np.full_like(ratio, np.pi / 2)  # the free end's angle
+  for _ in range(_LEAVING_BISECTIONS):
+    mid = (lo + hi) / 2
+    above = _shoot(ratio, mid)[0] > angle
+    hi = np.where(above, mid, hi)
+    lo = np.where(above, lo, mid)
+  _, _, _, xz, moment = _shoot(ratio, (lo + hi) / 2, path=True, root_moment=True)
+  return np.moveaxis(xz, 0, 1).reshape(*shape_, _STEPS + 1, 2), moment.reshape(shape_)
 
 
 def _broadcast(ratio, load: Load) -> tuple[np.ndarray, Load]:

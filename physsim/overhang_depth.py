@@ -48,7 +48,10 @@ from physsim import scene as scene_lib
 from physsim.camera import Intrinsics
 
 PLANE_TOL = 0.005  # m: a plane's inliers (depth noise at 1 m with margin)
-BELOW_TOL = 0.004  # m: below the top / in front of the face by more than this
+BELOW_TOL = 0.004  # m: below the top by more than this
+# m: the strip's points in front of the face by more than this (a soft strip
+# on a rounded edge hangs 2-4 mm in front of it)
+STRIP_OUT = 0.002
 PARALLEL_COS = math.cos(math.radians(5.0))  # planes this close are parallel
 VERTICAL_SIN = math.sin(math.radians(8.0))  # the face's normal off horizontal
 MIN_FACE_POINTS = 200
@@ -95,6 +98,9 @@ class Reading:
     face_points: the front face's.
     camera_height_m: the camera above the table's top, m.
     profile: (N, 2) the strip's (reach, drop) points, m (for figures).
+    edge_radius: the table edge's rounding fitted beside the strip, m: the
+      strip bends from that far behind the face (``fit``).
+    edge_radius_sd: its sd, m (in ``bending_length_sd``).
   """
 
   bending_length: float
@@ -110,6 +116,8 @@ class Reading:
   face_points: int
   camera_height_m: float
   profile: np.ndarray = dataclasses.field(repr=False, compare=False)
+  edge_radius: float = 0.0
+  edge_radius_sd: float = 0.0
 
   def to_dict(self) -> dict:
     out = dataclasses.asdict(self)
@@ -145,30 +153,44 @@ def _oriented(plane: scene_lib.Plane) -> scene_lib.Plane:
   return plane
 
 
+UP_IN_IMAGE = 0.7  # a plane seen from 20-40 degrees above: its normal this up the image
+
+
 def table_top(points: np.ndarray, seed: int = 0) -> tuple[scene_lib.Plane, np.ndarray]:
-  """The table's top among (N, 3) camera-frame points: the largest plane, or
-  the one parallel to it nearest the camera (the top over a larger floor).
+  """The table's top among (N, 3) camera-frame points: of the three largest
+  planes, those seen from above (their normal up the image: a camera 20-40
+  degrees above them), the nearest the camera (the top over a larger floor;
+  not the top board's front face, which from 20 degrees may be larger than
+  the top); the largest plane when none is.
 
   Returns:
     (plane with its normal towards the camera, (N,) inlier mask).
   """
-  first, inliers = scene_lib.fit_plane(points, PLANE_TOL, seed=seed)
-  best, best_in = _oriented(first), inliers
-  rest = ~inliers
-  if rest.sum() >= 0.05 * len(points):
-    second, in2 = scene_lib.fit_plane(points[rest], PLANE_TOL, seed=seed + 1)
-    second = _oriented(second)
-    if abs(second.normal @ best.normal) > PARALLEL_COS and second.offset < best.offset:
-      mask = np.zeros(len(points), bool)
-      mask[np.flatnonzero(rest)[in2]] = True
-      best, best_in = second, mask
-  return best, best_in
+  rest = np.ones(len(points), bool)
+  found = []
+  for k in range(3):
+    if rest.sum() < max(0.05 * len(points), 3):
+      break
+    plane, inl = scene_lib.fit_plane(points[rest], PLANE_TOL, seed=seed + k)
+    mask = np.zeros(len(points), bool)
+    mask[np.flatnonzero(rest)[inl]] = True
+    if k and mask.sum() < 0.05 * len(points):
+      break
+    found.append((_oriented(plane), mask))
+    rest &= ~mask
+  above = [f for f in found if -f[0].normal[1] > UP_IN_IMAGE]
+  if not above:
+    return found[0]
+  return min(above, key=lambda f: f[0].offset)
 
 
-def _line_ransac(q: np.ndarray, tol: float, iters: int, rng) -> tuple[np.ndarray, ...]:
-  """The 2-D line with the most of (N, 2) points within ``tol``, refined by
-  total least squares: (a point on it, unit normal, inlier mask)."""
-  best, best_count = None, -1
+def _line_ransac(q: np.ndarray, tol: float, iters: int, rng,
+                 bin_m: float = 0.0) -> tuple[np.ndarray, ...]:  # fmt: skip
+  """The 2-D line with the most of (N, 2) points within ``tol`` (with
+  ``bin_m``: the longest, by how many ``bin_m`` stretches along it hold one,
+  ties by count), refined by total least squares: (a point on it, unit
+  normal, inlier mask)."""
+  best, best_score = None, (-1, -1)
   for _ in range(iters):
     a, b = q[rng.choice(len(q), 2, replace=False)]
     d = b - a
@@ -176,19 +198,25 @@ def _line_ransac(q: np.ndarray, tol: float, iters: int, rng) -> tuple[np.ndarray
     if norm < 1e-6:
       continue
     n = np.array([-d[1], d[0]]) / norm
-    count = int((np.abs((q - a) @ n) < tol).sum())
-    if count > best_count:
-      best, best_count = (a, n), count
+    near = np.abs((q - a) @ n) < tol
+    count = int(near.sum())
+    span = 0
+    if bin_m > 0 and count:
+      span = len(np.unique(np.floor((q[near] - a) @ (d / norm) / bin_m)))
+    if (span, count) > best_score:
+      best, best_score = (a, n), (span, count)
   a, n = best
   inl = np.abs((q - a) @ n) < tol
-  for _ in range(2):
-    centre = q[inl].mean(axis=0)
-    n = np.linalg.svd(q[inl] - centre, full_matrices=False)[2][-1]
+  for _ in range(2):  # within half the tolerance: not what hangs just in front
+    near = np.abs((q - a) @ n) < tol / 2
+    centre = q[near].mean(axis=0)
+    n = np.linalg.svd(q[near] - centre, full_matrices=False)[2][-1]
     a = centre
     inl = np.abs((q - a) @ n) < tol
   return a, n, inl
 
 
+FACE_BIN = 0.005  # m: the face's line is scored by its length in these
 OFFSET_RANGE = (-0.001, 0.003)  # m: the seen face off the centre line
 COARSE_POINTS = 400  # the coarse grid's points; the fine grid takes them all
 
@@ -224,13 +252,15 @@ def _fine_grid(j: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
   return ratios, _curve_set(ratios)
 
 
-def _misfit(profile: np.ndarray, length: float, curves) -> tuple[np.ndarray, ...]:
-  """Per curve of ``curves`` (``_curve_set``'s, scaled by ``length``): the
-  sum of the points' squared signed distances (m^2) from it, positive up and
-  out (by the nearest of its points, 1/200 of L apart), once the seen face's
-  offset from the centre line (the fabric's half thickness, its curl) is
-  taken out; and that offset, within ``OFFSET_RANGE``."""
-  p = (profile / length).astype(np.float32)
+def _misfit(profile: np.ndarray, length: float, curves,
+            setback: float = 0.0) -> tuple[np.ndarray, ...]:  # fmt: skip
+  """Per curve of ``curves`` (``_curve_set``'s, scaled by ``length`` and
+  starting ``setback`` behind the face, where a rounded edge lets the strip
+  bend): the sum of the points' squared signed distances (m^2) from it,
+  positive up and out (by the nearest of its points, 1/200 of L apart), once
+  the seen face's offset from the centre line (the fabric's half thickness,
+  its curl) is taken out; and that offset, within ``OFFSET_RANGE``."""
+  p = ((profile + np.array([setback, 0.0])) / length).astype(np.float32)
   line, normal = curves
   d = np.empty((len(line), len(p)), np.float32)
   sq = (line**2).sum(-1)  # (R, S)
@@ -255,11 +285,21 @@ def _ruler(overhang: float, overhang_sd: float, nodes: int = 9):
   return ls, weight / weight.sum()
 
 
-def _posterior(profile, length, ratios, curves, point_sd):
+def _setbacks(setback: float, setback_sd: float):
+  """The strip's setback behind the face (a rounded edge's radius) at three
+  Gauss-Hermite nodes of its Gaussian (none below 0) and their weights; the
+  given one alone when its sd is 0."""
+  if setback_sd <= 0:
+    return np.array([setback]), np.ones(1)
+  nodes = setback + setback_sd * math.sqrt(3.0) * np.array([-1.0, 0.0, 1.0])
+  return np.maximum(nodes, 0.0), np.array([1.0, 4.0, 1.0]) / 6.0
+
+
+def _posterior(profile, length, ratios, curves, point_sd, setback=0.0):
   """The (R,) posterior over the curves of ``ratios`` scaled by ``length``
-  (the grid's log-uniform prior), the best fit's index, its RMS residual and
-  the seen face's offset there."""
-  sq, offsets = _misfit(profile, length, curves)
+  and set ``setback`` behind the face (the grid's log-uniform prior), the
+  best fit's index, its RMS residual and the seen face's offset there."""
+  sq, offsets = _misfit(profile, length, curves, setback)
   j = int(np.argmin(sq))
   residual = math.sqrt(sq[j] / len(profile))
   sd = point_sd or max(residual, 1e-5)
@@ -269,8 +309,10 @@ def _posterior(profile, length, ratios, curves, point_sd):
 
 
 def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
-        point_sd: float | None = None, seed: int = 0) -> dict:  # fmt: skip
-  """The elastica fitted to (N, 2) (reach, drop) points, m.
+        point_sd: float | None = None, seed: int = 0, setback: float = 0.0,
+        setback_sd: float = 0.0) -> dict:  # fmt: skip
+  """The elastica fitted to (N, 2) (reach, drop) points, m, from the front
+  face's plane and the top's.
 
   The curve gives the strip's shape, L / c, and the ruler its length: the
   shape is fitted at the given overhang L, and c = L / (L / c) with L
@@ -279,44 +321,107 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
   besides L (the sensor's noise along its rays, the strip's thickness, curl,
   and fibres of unequal overhang when it lies askew) moved a refined L by
   3-8% on short strips, more than the ruler's 1 mm, and c with it
-  (docs/protocol.md, "Limits"). L / c is log-uniform over ``RATIOS``; the
-  seen face lies at an unknown offset from the centre line (fitted, within
-  ``OFFSET_RANGE``). Each point's distance to the curve is Gaussian with sd
-  ``point_sd`` (default: the RMS distance at the best fit). A coarse grid
-  (``RATIOS``, ``COARSE_POINTS`` points) finds the best fit, a fine one
-  around it (81 ratios over 8 coarse steps) gives the posterior.
+  (docs/protocol.md, "Limits"). On a rounded edge the strip bends from
+  ``setback`` behind the face (the rounding's radius, Gaussian with sd
+  ``setback_sd``, at three nodes): the elastica starts there, flat, its
+  free length L + setback, and c = (L + setback) / (its L / c). L / c is
+  log-uniform over ``RATIOS``; the seen face lies at an unknown offset from
+  the centre line (fitted, within ``OFFSET_RANGE``). Each point's distance
+  to the curve is Gaussian with sd ``point_sd`` (default: the RMS distance
+  at the best fit). A coarse grid (``RATIOS``, ``COARSE_POINTS`` points)
+  finds the best fit, a fine one around it (81 ratios over 8 coarse steps)
+  gives the posterior.
 
   Returns:
     dict: ``c`` and ``c_sd`` (posterior mean and sd, m), ``length`` (L's
-    mean: ``overhang``), ``ratio``, ``reach``, ``drop``, ``offset`` and
-    ``residual`` (the best fit's), ``edge_mass`` (the coarse posterior's
-    share in the two outermost ratios at either end: the reading cannot
-    bound c there).
+    mean: ``overhang``), ``ratio``, ``reach``, ``drop`` (from the face and
+    the top), ``offset`` and ``residual`` (the best fit's at the setback's
+    middle node), ``edge_mass`` (the coarse posterior's share in the two
+    outermost ratios at either end: the reading cannot bound c there).
   """
   rng = np.random.default_rng(seed)
   few = profile
   if len(few) > COARSE_POINTS:
     few = profile[rng.choice(len(profile), COARSE_POINTS, replace=False)]
-  p, j, _, _ = _posterior(few, overhang, RATIOS, _coarse_curves(), point_sd)
+  p, j, _, _ = _posterior(
+    few, overhang + setback, RATIOS, _coarse_curves(), point_sd, setback
+  )
   edge_mass = float(p[:2].sum() + p[-2:].sum())
   ratios, curves = _fine_grid(j)
-  p, j, residual, offset = _posterior(profile, overhang, ratios, curves, point_sd)
   ls, weight = _ruler(overhang, overhang_sd)
-  joint = weight[:, None] * p[None, :]  # (L, R): the ruler's L, apart from L / c
-  c = ls[:, None] / ratios[None, :]
+  nodes, node_weight = _setbacks(setback, setback_sd)
+  c, joint = [], []
+  for k, (back, w) in enumerate(zip(nodes, node_weight, strict=True)):
+    p, jk, res, off = _posterior(
+      profile, overhang + back, ratios, curves, point_sd, back
+    )
+    if k == len(nodes) // 2:
+      j, residual, offset = jk, res, off
+    # (L, R): the ruler's L, apart from L / c, at this setback
+    joint.append(w * weight[:, None] * p[None, :])
+    c.append((ls[:, None] + back) / ratios[None, :])
+  c, joint = np.stack(c), np.stack(joint)
   mean = float((joint * c).sum())
   reach, drop = cantilever.tip(ratios[j])
+  free = overhang + setback
   return {
     'c': mean,
     'c_sd': float(math.sqrt(max((joint * (c - mean) ** 2).sum(), 0.0))),
     'length': float(overhang),
     'ratio': float(ratios[j]),
-    'reach': float(reach[0] * overhang),
-    'drop': float(drop[0] * overhang),
+    'reach': float(reach[0] * free - setback),
+    'drop': float(drop[0] * free),
     'offset': float(offset),
     'residual': residual,
     'edge_mass': edge_mass,
   }
+
+
+EDGE_WINDOW = 0.008  # m: the edge's points, this far either side of its corner
+EDGE_RADII = np.arange(0.0, 0.00601, 0.0001)  # m: the rounding's radii tried
+EDGE_CLIP = 0.0025  # m: a point further than this from the profile counts this much
+EDGE_STRIP_MARGIN = 0.02  # m: along the edge, beyond the strip's own points
+# The edge's points are not independent (the depth's 1 mm steps, the planes'
+# own error, the sensor's pattern): its likelihood counts them as this many
+# (``benchmarks.overhang_check --tune``). A rounding under about 1.5 mm is
+# then as likely as a sharp edge at 0.35-0.55 m: the radius's posterior over
+# the envelope's 0-3 mm keeps it (the reading's sd carries it).
+EDGE_POINTS = 100.0
+EDGE_PRIOR_MAX = 0.003  # m: radii above this only where the points ask for them
+
+
+def _corner_distance(out: np.ndarray, up: np.ndarray, radius: float) -> np.ndarray:
+  """Signed distance (m, positive outside the table) of points ``out`` from
+  the face's plane and ``up`` above the top's to the table's section, its
+  corner rounded by ``radius``."""
+  on_arc = (out > -radius) & (up > -radius)
+  arc = np.hypot(out + radius, up + radius) - radius
+  return np.where(on_arc, arc, np.where(out <= -radius, np.maximum(up, out), out))
+
+
+def edge_radius(out: np.ndarray, up: np.ndarray) -> tuple[float, float]:
+  """The rounding of the table's edge from its points (not the strip's:
+  ``out`` from the face's plane, ``up`` above the top's, m): its posterior
+  (mean, sd), m, over ``EDGE_RADII``, uniform to ``EDGE_PRIOR_MAX`` and
+  falling off beyond, its likelihood the points' squared distances to the
+  rounded section (each clipped at ``EDGE_CLIP``: a stray point weighs no
+  more) as ``EDGE_POINTS`` independent points of their own scatter."""
+  near = (np.abs(out) < EDGE_WINDOW) & (np.abs(up) < EDGE_WINDOW)
+  out, up = out[near], up[near]
+  prior = np.where(
+    EDGE_RADII <= EDGE_PRIOR_MAX, 0.0, -(((EDGE_RADII - EDGE_PRIOR_MAX) / 0.001) ** 2)
+  )
+  if len(out) >= MIN_FACE_POINTS:
+    loss = np.array([
+      np.minimum(_corner_distance(out, up, r) ** 2, EDGE_CLIP**2).mean()
+      for r in EDGE_RADII
+    ])  # fmt: skip
+    var = max(float(loss.min()), 1e-10)  # the points' scatter about the best
+    prior = prior - 0.5 * EDGE_POINTS * (loss - loss.min()) / var
+  p = np.exp(prior - prior.max())
+  p /= p.sum()
+  mean = float(p @ EDGE_RADII)
+  return mean, float(math.sqrt(max(p @ (EDGE_RADII - mean) ** 2, 0.0)))
 
 
 def _edge(flat, top: scene_lib.Plane, overhang: float, rng, name: str):
@@ -331,12 +436,15 @@ def _edge(flat, top: scene_lib.Plane, overhang: float, rng, name: str):
       f'{name}: nothing under the table top in view (found {int(below.sum())} '
       "points): film the edge from in front, a little above the table's top"
     )
-  a, n, on_face = _line_ransac(q[below], PLANE_TOL, 300, rng)
+  # the face: the longest line under the top (the strip's hanging part makes
+  # a short one, which may hold more points than a thin board's face)
+  a, n, on_face = _line_ransac(q[below], PLANE_TOL, 300, rng, FACE_BIN)
   if on_face.sum() < MIN_FACE_POINTS:
     raise ValueError(
-      f"{name}: no front face of the table's top found under its edge "
-      f'({int(on_face.sum())} points on the best line; need {MIN_FACE_POINTS}): '
-      "film the edge from in front, 20-40 degrees above the table's top"
+      f"{name}: the front face of the table's top board shows "
+      f'{int(on_face.sum())} points under its edge (need {MIN_FACE_POINTS}): '
+      'a thin board (under 1 cm) seen from far or high; film it nearer or lower, '
+      "20-40 degrees above the table's top, the board's front face in view"
     )
   if (0.0 - a) @ n < 0:  # the camera (the origin, projected) on its + side
     n = -n
@@ -344,11 +452,13 @@ def _edge(flat, top: scene_lib.Plane, overhang: float, rng, name: str):
 
 
 def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
-         overhang_sd: float = 0.001, seed: int = 0, name: str = 'the recording'
-         ) -> Reading:  # fmt: skip
+         overhang_sd: float = 0.001, seed: int = 0, name: str = 'the recording',
+         known_radius: float | None = None) -> Reading:  # fmt: skip
   """The bending length of the strip in (H, W) or (T, H, W) depth frames, m
   (0 invalid), filmed by a camera of ``intrinsics``, with ``overhang`` (m)
-  of it past the edge (ruler sd ``overhang_sd``).
+  of it past the front face of the table's top (ruler sd ``overhang_sd``);
+  the edge's rounding fitted (``edge_radius``) or ``known_radius`` (m: 0
+  for a sharp edge).
 
   Raises:
     ValueError: naming ``name`` and what was not found (the table, its front
@@ -383,15 +493,17 @@ def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
     behind = on_top & (out < -2 * PLANE_TOL) & (np.abs(height) < PLANE_TOL)
     if behind.sum() < MIN_FACE_POINTS:
       raise ValueError(
-        f"{name}: {int(behind.sum())} points of the table's top behind its edge; "
-        'film the edge with the table top in the upper part of the frame'
+        f"{name}: {int(behind.sum())} points of the table's top behind the edge "
+        f'found under it ({face_points} points on its front face): film the '
+        "edge with the table's top in the upper part of the frame and the top "
+        "board's front face under it"
       )
     centre = flat[behind].mean(axis=0)
     normal = np.linalg.svd(flat[behind] - centre, full_matrices=False)[2][-1]
     top = _oriented(scene_lib.Plane(normal, float(-normal @ centre)))
   height, below, q, (a, n, face_points) = _edge(flat, top, overhang, rng, name)
   out = (q - a) @ n
-  strip = below & (out > BELOW_TOL)
+  strip = below & (out > STRIP_OUT)
   mask = np.zeros(depth.shape, np.uint8)
   mask[valid] = strip
   count, labels = cv2.connectedComponents(mask, connectivity=8)
@@ -410,10 +522,22 @@ def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
       f'{MIN_STRIP_POINTS} (move the camera nearer, or slide more over)'
     )
   profile = np.stack([out[keep], -height[keep]], axis=1)
+  # the edge's rounding, from the table's points beside the strip
+  along = q @ np.array([-n[1], n[0]])
+  lo, hi = along[keep].min(), along[keep].max()
+  beside = (along < lo - EDGE_STRIP_MARGIN) | (along > hi + EDGE_STRIP_MARGIN)
+  if known_radius is not None and not (
+    math.isfinite(known_radius) and 0 <= known_radius <= EDGE_RADII[-1]
+  ):
+    raise ValueError(f'--edge_radius={known_radius}: need 0 to {EDGE_RADII[-1]} m')
+  if known_radius is None:
+    radius, radius_sd = edge_radius(out[beside], height[beside])
+  else:
+    radius, radius_sd = known_radius, 0.0
   sub = profile
   if len(sub) > MAX_FIT_POINTS:
     sub = profile[rng.choice(len(profile), MAX_FIT_POINTS, replace=False)]
-  f = fit(sub, overhang, overhang_sd, seed=seed)
+  f = fit(sub, overhang, overhang_sd, seed=seed, setback=radius, setback_sd=radius_sd)
   if f['residual'] > MAX_RESIDUAL:
     raise ValueError(
       f'{name}: the points over the edge lie {1000 * f["residual"]:.1f} mm (RMS) '
@@ -432,7 +556,8 @@ def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
     bending_length_dof=DOF, fit_sd=f['c_sd'],
     overhang=f['length'], ratio=f['ratio'], reach=f['reach'], drop=f['drop'],
     residual_m=f['residual'], points=int(keep.sum()), face_points=face_points,
-    camera_height_m=float(top.offset), profile=profile,
+    camera_height_m=float(top.offset), profile=profile, edge_radius=radius,
+    edge_radius_sd=radius_sd,
   )  # fmt: skip
 
 

@@ -11,7 +11,20 @@ the tests render and ``physsim.overhang_depth`` reads.
 
 A strip can differ from the ideal one the way a real one does: its
 cross-section curls (``curl``), it has a thickness (the camera sees its upper
-face), and it may leave the edge at an angle (``yaw_deg``).
+face), and it may leave the edge at an angle (``yaw_deg``). A real table's
+edge is rounded (``Table.edge_radius``): the top stops being flat that far
+behind the line where its plane meets the front face's, and a strip lying on
+it starts to bend there (its root curvature is below the rounding's for
+radii of a few mm: it leaves the top where the rounding starts).
+
+Where the overhang and the reach are measured (``physsim.overhang_depth`` and
+``experiments.overhang`` read them so): from the front face's plane, the
+table's outermost line seen from above. The overhang ``L`` is the strip's
+length past the point of it above that plane (where a ruler laid along the
+strip meets the edge), the reach its free end's horizontal distance out
+from that plane. On a sharp edge both are the elastica's own; on a rounded
+one the strip's free length is ``L`` plus the bit of it over the rounding
+(about the radius).
 """
 
 from __future__ import annotations
@@ -39,12 +52,23 @@ class Table:
     thickness: the top board's, m: the front face's height below the edge.
     width: along the edge (x), m.
     depth: back from the edge (y < 0), m.
+    edge_radius: the rounding of the edge between the top and the front
+      face, m (0: sharp): the top flat to y = -radius, the face flat from
+      radius under the top.
   """
 
   height: float = 0.75
   thickness: float = 0.03
   width: float = 0.8
   depth: float = 0.6
+  edge_radius: float = 0.0
+
+  def __post_init__(self):
+    r = self.edge_radius
+    if not (math.isfinite(r) and 0.0 <= r < min(self.thickness, self.depth)):
+      raise ValueError(
+        f'Table.edge_radius must be >= 0 m and under the board, got {r!r}'
+      )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,13 +140,60 @@ def table_mesh(table: Table, floor_to_y: float = 0.4) -> tuple[np.ndarray, np.nd
   """(vertices, faces) of the table's top, its front face and the floor (the
   floor from behind the table to ``floor_to_y``: keep it in front of the
   camera)."""
-  h, w = table.height, table.width
-  parts = [
-    _rect((-w / 2, -table.depth, h), (w, 0, 0), (0, table.depth, 0), 8, 6),
-    _rect((-w / 2, 0, h - table.thickness), (w, 0, 0), (0, 0, table.thickness), 8, 1),
-    _rect((-3, -5, 0), (6, 0, 0), (0, 5 + floor_to_y, 0), 12, 12),
-  ]
-  return _join(parts)
+  h, w, r = table.height, table.width, table.edge_radius
+  # the top's section (y, z), back to front, over the rounding and down the face
+  angle = np.linspace(0.0, np.pi / 2, 13 if r > 0 else 1)
+  section = np.concatenate([
+    np.stack([np.linspace(-table.depth, -r, 7)[:-1], np.full(6, h)], 1),
+    np.stack([-r + r * np.sin(angle), h - r + r * np.cos(angle)], 1),
+    [[0.0, h - table.thickness]],
+  ])  # fmt: skip
+  x = np.linspace(-w / 2, w / 2, 9)
+  top = np.stack(np.broadcast_arrays(
+    x[:, None], section[None, :, 0], section[None, :, 1]), -1)  # fmt: skip
+  top = (top.reshape(-1, 3), _grid_faces(9, len(section)))
+  floor = _rect((-3, -5, 0), (6, 0, 0), (0, 5 + floor_to_y, 0), 12, 12)
+  return _join([top, floor])
+
+
+def drape(strip: Strip, table: Table) -> tuple[float, float]:
+  """How the strip's middle lies over the edge's rounding: (the angle below
+  the horizontal at which it leaves the rounding, rad; its length from where
+  the rounding starts to where its centre line is above the front face's
+  plane, m, which ``strip_mesh`` adds to each fibre's overhang). The strip
+  follows the rounding (its centre line a circle of the radius and half its
+  thickness) as long as the free part's root curvature would exceed the
+  circle's, and leaves it where they are equal (``cantilever.leaving``): a
+  stiff strip at once, flat, a soft one some way round. (0, 0) on a sharp
+  edge."""
+  r = table.edge_radius
+  if r <= 0:
+    return 0.0, 0.0
+  big = strip.thickness / 2 + r  # the centre line's radius over the rounding
+  c = strip.bending_length
+  ahead = r / math.cos(math.radians(strip.yaw_deg))  # to the face, along the fibre
+  setback, angle = ahead, 0.0
+  for _ in range(2):  # the setback holds the bit before the face, and sets it
+    total = strip.overhang + setback
+    flat, moment = cantilever.leaving(total / c, 0.0)
+    angle = 0.0
+    if moment > c / big:  # its root would bend tighter than the rounding
+      angles = np.linspace(0.0, min(total / big, 1.5), 24)[1:]
+      angles = angles[total - big * angles > 0.05 * c]
+      _, moment = cantilever.leaving((total - big * angles) / c, angles)
+      ask = np.concatenate([[1.0], moment - c / big])  # falls as it goes round
+      k = int(np.argmax(ask <= 0)) or len(ask) - 1  # the first angle past it
+      angle = float(np.interp(0.0, ask[[k, k - 1]], np.r_[0.0, angles][[k, k - 1]]))
+    if big * math.sin(angle) >= ahead:  # above the face while on the rounding
+      setback = big * math.asin(ahead / big)
+      continue
+    free = total - big * angle
+    line = (cantilever.leaving(free / c, angle)[0] if angle else flat) * free
+    arc = np.linspace(0.0, free, len(line))
+    setback = big * angle + float(
+      np.interp(ahead - big * math.sin(angle), line[:, 0], arc)
+    )
+  return angle, setback
 
 
 def _join(parts) -> tuple[np.ndarray, np.ndarray]:
@@ -154,19 +225,33 @@ def strip_mesh(strip: Strip, table: Table, rows: int = 80,
                cols: int = 9) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
   """(vertices, faces) of the strip's upper face: ``rows`` points along its
   hanging part, a few on the table, ``cols`` across. Each fibre (a column)
-  bends at the edge, where the table stops holding it, and hangs as the
-  heavy elastica of its own overhang (``fibre_overhangs``; one length for
-  all when the strip is square to the edge), its centre line half the
-  thickness above the top."""
+  bends at the edge, where the table stops holding it (where a rounded
+  edge's rounding starts), and hangs as the heavy elastica of its own
+  overhang (``fibre_overhangs``; one length for all when the strip is square
+  to the edge), over a rounded edge first round the rounding as far as it
+  follows it and with the bit before the face added (``drape``), its centre
+  line half the thickness above the top."""
   t, lengths = fibre_overhangs(strip, cols)
-  line = cantilever.shape(lengths / strip.bending_length) * lengths[:, None, None]
+  angle, setback = drape(strip, table)
+  big = strip.thickness / 2 + table.edge_radius
+  free = lengths + setback - big * angle  # past where it leaves the rounding
+  line = cantilever.leaving(free / strip.bending_length, angle)[0]
+  line = line * free[:, None, None]
   pick = np.unique(np.round(np.linspace(0, line.shape[1] - 1, rows)).astype(int))
   along, drop = line[:, pick, 0].T, line[:, pick, 1].T  # (rows, cols)
+  # over the rounding, a circle from where it starts to where the strip leaves
+  a = np.linspace(0.0, angle, 9)[:-1, None] if angle > 0 else np.zeros((0, 1))
+  along = np.concatenate([big * np.sin(a) + 0 * t, along + big * math.sin(angle)])
+  drop = np.concatenate(
+    [big * (1 - np.cos(a)) + 0 * t, drop + big * (1 - math.cos(angle))]
+  )
   # the tangent's angle below the horizontal, and the upper face's normal
   theta = np.arctan2(np.gradient(drop, axis=0), np.gradient(along, axis=0))
   n_along, n_up = np.sin(theta), np.cos(theta)
   yaw = math.radians(strip.yaw_deg)
-  start = t * math.tan(yaw)  # (cols,) where each fibre meets the edge, along it
+  # (cols,) where each fibre leaves the top, along it: at the edge, or where
+  # its rounding starts
+  start = t * math.tan(yaw) - table.edge_radius / math.cos(yaw)
   back = np.linspace(-strip.on_table, 0.0, 6)[:-1, None] + np.zeros_like(start)
   along = np.concatenate([back, along]) + start
   drop = np.concatenate([np.zeros_like(back), drop])
@@ -207,7 +292,8 @@ def camera(table: Table, distance: float, elevation_deg: float, azimuth_deg: flo
 def mjcf(strip: Strip, pose: camera_lib.Pose, table: Table = Table(),
          fovy_deg: float = 45.0) -> str:  # fmt: skip
   """The same scene for MuJoCo's own OpenGL renderer (an independent check of
-  the ray-caster's): the table's top a box, the floor a box, the strip's
+  the ray-caster's): the table's top a box (a rounded edge: a box under a
+  cylinder), the floor a box, the strip's
   upper face a two-sided mesh, and a camera ``cam`` at ``pose`` (OpenCV axes)
   with a vertical field of view of ``fovy_deg``."""
   v, f = strip_mesh(strip, table)
@@ -218,7 +304,18 @@ def mjcf(strip: Strip, pose: camera_lib.Pose, table: Table = Table(),
   def fmt(a):
     return ' '.join(f'{x:.9g}' for x in np.ravel(a))
 
-  h, t = table.height, table.thickness
+  h, t, r = table.height, table.thickness, table.edge_radius
+  # a rounded edge: the board set back by r, a board under the rounding and
+  # a cylinder along the edge
+  rounding = (
+    f"""
+    <geom name="under" type="box" size="{table.width / 2} {r / 2} {(t - r) / 2}"
+      pos="0 {-r / 2} {h - (t + r) / 2}" contype="0" conaffinity="0"/>
+    <geom name="rounding" type="cylinder" size="{r} {table.width / 2}"
+      pos="0 {-r} {h - r}" euler="0 90 0" contype="0" conaffinity="0"/>"""
+    if r > 0
+    else ''
+  )
   return f"""
 <mujoco>
   <visual><map znear="0.01" zfar="30"/></visual>
@@ -227,8 +324,8 @@ def mjcf(strip: Strip, pose: camera_lib.Pose, table: Table = Table(),
   </asset>
   <worldbody>
     <geom name="strip" type="mesh" mesh="strip" contype="0" conaffinity="0"/>
-    <geom name="top" type="box" size="{table.width / 2} {table.depth / 2} {t / 2}"
-      pos="0 {-table.depth / 2} {h - t / 2}" contype="0" conaffinity="0"/>
+    <geom name="top" type="box" size="{table.width / 2} {(table.depth - r) / 2} {t / 2}"
+      pos="0 {-(table.depth + r) / 2} {h - t / 2}" contype="0" conaffinity="0"/>{rounding}
     <geom name="floor" type="box" size="4 4 0.05" pos="0 0 -0.05" contype="0"
       conaffinity="0"/>
     <camera name="cam" pos="{fmt(pose.position)}" xyaxes="{fmt(xyaxes)}" fovy="{fovy_deg}"/>

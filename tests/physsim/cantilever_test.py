@@ -171,3 +171,18 @@ def test_a_load_out_of_range_is_refused():
     cantilever.tip(3.0, cantilever.Load(mass=1e4))
   with pytest.raises(ValueError, match='straight down'):  # the looped root
     cantilever.tip(4.0, cantilever.Load(mass=200.0))
+
+
+def test_a_strip_leaving_flat_is_the_clamped_one_and_its_root_bends_as_its_moment():
+  """``leaving`` at angle 0 is ``shape``; its root curvature times c is the
+  moment of the strip's weight about the root over D, by hand from the centre
+  line: int_0^L x(s) ds over c^3 (a rectangle rule on its 200 steps); at an
+  angle, the line leaves at that angle."""
+  line, moment = cantilever.leaving(3.0, 0.0)
+  np.testing.assert_allclose(line, cantilever.shape(3.0), atol=1e-12)
+  x = line[:, 0] * 3.0  # in units of c
+  lever = (x[1:] + x[:-1]) / 2 * (3.0 / 200)  # x ds
+  assert float(moment) == pytest.approx(lever.sum(), rel=2e-3)
+  tilted, _ = cantilever.leaving(2.0, 0.4)
+  d = tilted[1] - tilted[0]
+  assert np.arctan2(d[1], d[0]) == pytest.approx(0.4, abs=0.01)

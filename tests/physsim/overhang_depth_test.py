@@ -187,3 +187,59 @@ def test_a_strip_short_of_the_protocols_overhang_is_told_how_far_to_slide_it():
   assert hint.startswith('the strip hangs 2.0 bending lengths over the edge')
   assert f'about 3 ({100 * 3 * r.bending_length:.1f} cm' in hint
   assert overhang_depth.advice(dataclasses.replace(r, ratio=3.0)) is None
+
+
+def _within(r, c, level=0.9):
+  """Whether ``c`` lies in the reading's central ``level`` interval (its t
+  law: the sd over sqrt(dof / (dof - 2)) its scale)."""
+  from scipy import stats
+
+  dof = r.bending_length_dof
+  scale = r.bending_length_sd / np.sqrt(dof / (dof - 2.0))
+  return abs(r.bending_length - c) <= stats.t.ppf((1 + level) / 2, dof) * scale
+
+
+def test_a_rounded_edge_is_read_within_its_interval():
+  """A 3 mm rounding: the strip bends from 3 mm behind the face (where the
+  overhang is measured from). Read as a sharp edge (``known_radius=0``, the
+  reader before issue 77) c comes out low; with the rounding fitted beside
+  the strip, within its 90% interval and the radius to 0.5 mm."""
+  table = tabletop.Table(edge_radius=0.003)
+  strip = tabletop.Strip(overhang=0.036, bending_length=0.012, thickness=0.0005)
+  pose = tabletop.camera(table, 0.45, 30.0, 10.0)
+  depth = tabletop.depth_frames(strip, pose, table, INTR, 3, jax.random.key(5))
+  r = overhang_depth.read(depth, INTR, 0.036, 0.001)
+  assert r.edge_radius == pytest.approx(0.003, abs=0.0005)
+  assert _within(r, 0.012), r
+  sharp = overhang_depth.read(depth, INTR, 0.036, 0.001, known_radius=0.0)
+  # 3 mm more strip bending: about 3 mm / 36 mm of c, less what the shape takes
+  assert sharp.bending_length < 0.012 * 0.97 < r.bending_length
+
+
+def test_a_thin_board_far_and_high_is_read_within_its_interval():
+  """A 1 cm top board from 0.55 m, 40 degrees above (the envelope's far
+  corner): its face, a few pixels tall, is the longest line under the top
+  (the strip's hanging part holds more points on a shorter one); read within
+  its interval."""
+  strip = tabletop.Strip(overhang=0.045, bending_length=0.015, thickness=0.0005)
+  thin = tabletop.Table(thickness=0.01)
+  pose = tabletop.camera(thin, 0.55, 40.0, 10.0)
+  depth = tabletop.depth_frames(strip, pose, thin, INTR, 3, jax.random.key(6))
+  r = overhang_depth.read(depth, INTR, 0.045, 0.001)
+  assert _within(r, 0.015), r
+
+
+def test_a_strip_over_a_rounded_edge_leaves_it_where_the_rounding_bends_it_no_more():
+  """A stiff strip leaves a 2 mm rounding at once, flat, its length to above
+  the face about the radius; a soft one (root curvature over 1/R at a flat
+  start) follows a 3 mm rounding round to where its free part's root
+  curvature is the centre line's 1/R (to the angle grid's 4 degrees)."""
+  stiff = tabletop.Strip(overhang=0.06, bending_length=0.02)
+  angle, setback = tabletop.drape(stiff, tabletop.Table(edge_radius=0.002))
+  assert angle == 0.0 and setback == pytest.approx(0.002, rel=0.02)
+  soft = tabletop.Strip(overhang=0.021, bending_length=0.006, thickness=0.001)
+  angle, setback = tabletop.drape(soft, tabletop.Table(edge_radius=0.003))
+  big = 0.0035
+  assert 0.1 < angle < 1.0
+  _, moment = cantilever.leaving((0.021 + setback - big * angle) / 0.006, angle)
+  assert float(moment) == pytest.approx(0.006 / big, rel=0.05)
