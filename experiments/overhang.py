@@ -9,8 +9,12 @@ r"""A fabric's bending length from an overhang: a ruler's reading or a depth rec
       --reach=0.045,0.043,0.046,0.044      # both ends, face up and down (ASTM D1388)
 
 Slide a strip of the fabric over a table's edge by ``--overhang`` metres
-(measured along the strip), then read how far its free end reaches out from
-the edge, horizontally (``--reach``). The heavy elastica
+(measured along the strip from the point of it above the table's front face),
+then read how far its free end reaches out from that face, horizontally
+(``--reach``). On a rounded edge the strip bends from where the rounding
+starts, about its radius behind the face: give the radius
+(``--edge_radius``, with ``--edge_radius_sd``) and the elastica starts there,
+its overhang and reach that much longer. The heavy elastica
 (``physsim.cantilever``) turns the pair into the bending length
 c = (D / (w g))^(1/3), with the spread a ruler's ``--ruler_sd`` gives it; any
 overhang of 0.05 to 5 bending lengths works, not only Peirce's 41.5 degree
@@ -67,6 +71,10 @@ class Args:
       older name).
     depth_scale: metres per unit of 16-bit PNG frames.
     figure: a PNG of what was read from the recordings ('' for none).
+    edge_radius: the rounding of the table's edge, m, where measured (0: a
+      sharp edge); negative (the default): not measured, a depth reading
+      fits it from the frames and a ruler's takes the edge as sharp.
+    edge_radius_sd: its standard uncertainty, m (a ruler's reading).
   """
 
   overhang: tuple[float, ...] = ()
@@ -79,6 +87,8 @@ class Args:
   camera: str = cli.renamed('', 'camera_json', aliases=('camera',))
   depth_scale: float = 0.001
   figure: str = ''
+  edge_radius: float = -1.0
+  edge_radius_sd: float = 0.0
 
 
 PRESETS = {'default': Args()}
@@ -101,7 +111,7 @@ def reading(args: Args) -> dict:
       f'--overhang={",".join(map(str, args.overhang))} {what}='
       f'{",".join(map(str, readings))}: need one {what[2:]} per overhang, at least one'
     )
-  for name in ('ruler_sd', 'area_weight', 'area_weight_sd'):
+  for name in ('ruler_sd', 'area_weight', 'area_weight_sd', 'edge_radius_sd'):
     v = getattr(args, name)
     if not (math.isfinite(v) and v >= 0):
       raise ValueError(f'--{name}={v}: need a finite value >= 0 (metres, kg/m^2)')
@@ -118,7 +128,8 @@ def reading(args: Args) -> dict:
   else:
     found = []
     each = [
-      _one(o, r, args.ruler_sd) for o, r in zip(args.overhang, args.reach, strict=True)
+      _one(o, r, args.ruler_sd, max(args.edge_radius, 0.0), args.edge_radius_sd)
+      for o, r in zip(args.overhang, args.reach, strict=True)
     ]
   cs = np.array([c for c, _ in each])
   c = float(cs.mean())
@@ -145,13 +156,20 @@ def _from_depth(overhang: float, path: str, args: Args) -> overhang_depth.Readin
   """One depth recording's reading, refusals naming the file or flag."""
   if not args.camera:
     raise ValueError(f"--depth={path}: needs --camera_json (the depth camera's file)")
+  known = args.edge_radius if args.edge_radius >= 0 else None
   return overhang_depth.read_recording(
-    path, args.camera, overhang, args.ruler_sd, args.depth_scale
-  )
+    path, args.camera, overhang, args.ruler_sd, args.depth_scale,
+    known_radius=known,
+  )  # fmt: skip
 
 
-def _one(overhang: float, reach: float, ruler_sd: float) -> tuple[float, float]:
-  """One reading's bending length and its sd, refusals naming the flags."""
+def _one(overhang: float, reach: float, ruler_sd: float, radius: float = 0.0,
+         radius_sd: float = 0.0) -> tuple[float, float]:  # fmt: skip
+  """One reading's bending length and its sd, refusals naming the flags. Both
+  are measured from the front face; on an edge rounded by ``radius`` the
+  strip bends from that far behind it (``physsim.tabletop``), so the
+  elastica's overhang and reach are each ``radius`` longer; its sd
+  (``radius_sd``) adds by a secant over +-1 sd, as the ruler's do."""
   flags_ = f'--overhang={overhang} --reach={reach}'
   if not (math.isfinite(overhang) and 0 < overhang <= 1.0):
     raise ValueError(f'{flags_}: need 0 < overhang <= 1 m')
@@ -159,10 +177,21 @@ def _one(overhang: float, reach: float, ruler_sd: float) -> tuple[float, float]:
     raise ValueError(
       f'{flags_}: the free end reaches out less than the overhang and more than 0'
     )
+  if not (math.isfinite(radius) and 0 <= radius < overhang):
+    raise ValueError(f'--edge_radius={radius}: need 0 <= radius < the overhang (m)')
   try:
-    return cantilever.bending_length_sd(overhang, reach, ruler_sd, ruler_sd)
+    c, sd = cantilever.bending_length_sd(
+      overhang + radius, reach + radius, ruler_sd, ruler_sd
+    )
+    if radius_sd > 0:
+      up, down = (
+        cantilever.bending_length(overhang + r, reach + r)
+        for r in (radius + radius_sd, max(radius - radius_sd, 0.0))
+      )
+      sd = math.hypot(sd, (up - down) / 2)
   except ValueError as e:
     raise ValueError(f'{flags_}: {e}') from None
+  return c, sd
 
 
 def main(args: Args) -> None:

@@ -563,7 +563,8 @@ def read(depth: np.ndarray, intrinsics: Intrinsics, overhang: float,
 
 def read_recording(path: str, camera_file: str, overhang: float,
                    overhang_sd: float = 0.001, depth_scale: float = 0.001,
-                   seed: int = 0) -> Reading:  # fmt: skip
+                   seed: int = 0, known_radius: float | None = None
+                   ) -> Reading:  # fmt: skip
   """``read`` of a depth recording as a camera's tools write it (a folder of
   16-bit PNG frames, an .npy/.npz or a video: ``physsim.video``) and its
   camera file (``physsim.camera_files``; frames of another size scale it,
@@ -585,4 +586,5 @@ def read_recording(path: str, camera_file: str, overhang: float,
     cam = camera_files.scaled_to(cam, w, h)
   if cam.distorted:
     depth = camera_files.undistort(depth, cam)
-  return read(depth, cam.intrinsics, overhang, overhang_sd, seed=seed, name=path)
+  return read(depth, cam.intrinsics, overhang, overhang_sd, seed=seed, name=path,
+              known_radius=known_radius)  # fmt: skip

@@ -120,3 +120,24 @@ def test_bad_depth_readings_name_their_flag(change, flag, tmp_path):
   )
   with pytest.raises(ValueError, match=flag):
     overhang.reading(args)
+
+
+def test_a_rounded_edges_overhang_and_reach_are_from_the_face():
+  """On an edge rounded by 2 mm the strip bends from 2 mm behind the face,
+  where the overhang and reach are measured from: with ``--edge_radius`` the
+  elastica of L + 2 mm whose tip reaches 2 mm further gives c back; taken as
+  sharp, c is read short. Its sd adds the radius's by a secant."""
+  c, length, radius = 0.015, 0.045, 0.002
+  free = length + radius
+  reach = free * cantilever.tip(free / c)[0][0] - radius  # from the face
+  args = overhang.Args(overhang=(length,), reach=(reach,), edge_radius=radius)
+  r = overhang.reading(args)
+  assert r['bending_length'] == pytest.approx(c, rel=1e-5)
+  sharp = overhang.reading(dataclasses.replace(args, edge_radius=-1.0))
+  assert sharp['bending_length'] < 0.98 * c
+  wide = overhang.reading(dataclasses.replace(args, edge_radius_sd=0.001))
+  up = cantilever.bending_length(length + 0.003, reach + 0.003)
+  down = cantilever.bending_length(length + 0.001, reach + 0.001)
+  assert wide['bending_length_sd'] == pytest.approx(
+    math.hypot(r['bending_length_sd'], (up - down) / 2), rel=1e-6
+  )
