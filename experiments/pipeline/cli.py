@@ -273,6 +273,8 @@ def from_flags(
     if flag.present:
       value = flag.value
       kind, elem = _parser(leaf.type, name)
+      if kind == 'int':
+        check_count(name, value)
       if kind == 'str' and not value.strip():
         # '--workdir=' (a shell variable that was never set): refused by name,
         # where the field wants a value or has one by default.
@@ -294,6 +296,36 @@ def from_flags(
 
 def _flag_name(f: dataclasses.Field) -> str:
   return f.metadata.get(_FLAG, f.name)
+
+
+# Every count and size an int flag gives on the command line is bounded here,
+# before any script allocates by it (a library's own check may bound it
+# tighter): these flags by name, any other int flag (seeds aside) to
+# [0, MAX_COUNT].
+MAX_COUNT = 10**7
+INT_LIMITS = {
+  'frames': (1, 10_000), 'cameras': (1, 64), 'image_size': (0, 8192),
+  'shape_image_size': (0, 8192), 'resolution': (0, 8192),
+  'cloth_resolution': (2, 1024), 'batch_size': (1, 1 << 16),
+  'eval_batch_size': (1, 1 << 16), 'q': (1, 100_000), 'n_init': (1, 100_000),
+  'workers': (0, 4096), 'processes': (1, 4096), 'gpus_per_process': (0, 64),
+  'port': (1, 65535), 'nodes': (1, 1000), 'draws': (0, 1_000_000),
+}  # fmt: skip
+
+
+def check_count(name: str, value: int) -> None:
+  """Refuses an int flag's value outside its bounds (``INT_LIMITS``), seeds
+  aside (any 64-bit value).
+
+  Raises:
+    ValueError: ``--name=value: need lo to hi``.
+  """
+  if 'seed' in name:
+    return
+  lo, hi = INT_LIMITS.get(name, (0, MAX_COUNT))
+  if not lo <= value <= hi:
+    shown = str(value) if len(str(value)) <= 24 else f'{str(value)[:20]}...'
+    raise ValueError(f'--{name}={shown}: need {lo} to {hi}')
 
 
 # The largest int a flag may hold (64-bit signed).

@@ -136,6 +136,33 @@ def test_an_int_flag_of_hundreds_of_digits_is_refused_by_name():
   """check_numbers raised OverflowError (a traceback) on such an int."""
   from experiments import plan  # noqa: PLC0415
 
-  argv = ['plan', '--workdir=w', '--nodes=' + '9' * 400]
-  with pytest.raises(ValueError, match=r'^--nodes=9{20}\.\.\.: 400 digits, too large'):
+  argv = ['plan', '--workdir=w', '--seed=' + '9' * 400]
+  with pytest.raises(ValueError, match=r'^--seed=9{20}\.\.\.: 400 digits, too large'):
     cli.parse(plan.Args, plan.PRESETS, argv)
+  argv = ['plan', '--workdir=w', '--nodes=' + '9' * 400]
+  with pytest.raises(ValueError, match=r'^--nodes=9{20}\.\.\.: need 1 to 1000'):
+    cli.parse(plan.Args, plan.PRESETS, argv)
+
+
+@pytest.mark.parametrize('name', SCRIPTS)
+def test_every_count_flag_is_bounded_before_the_script_runs(name):
+  """A count or size of a billion on the command line is refused by cli
+  before any script allocates by it (plan --nodes=1e9 ran out of memory)."""
+  import importlib  # noqa: PLC0415
+
+  script = importlib.import_module(f'experiments.{name}')
+  presets = getattr(script, 'PRESETS', {'default': script.Args()})
+  ints = [
+    leaf.flag for leaf in cli.leaves(script.Args)
+    if cli._parser(leaf.type, leaf.flag)[0] == 'int' and 'seed' not in leaf.flag
+  ]  # fmt: skip
+  for flag in ints:
+    for value in (10**9, -1):
+      argv = [name, '--workdir=w', '--out=o', f'--{flag}={value}']
+      argv = [a for a in argv if a.split('=')[0][2:] in _flags_of(script) or a == name]
+      with pytest.raises(ValueError, match=rf'^--{flag}={value}: need'):
+        cli.parse(script.Args, presets, argv)
+
+
+def _flags_of(script) -> set[str]:
+  return {leaf.flag for leaf in cli.leaves(script.Args)}

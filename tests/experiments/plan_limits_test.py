@@ -18,8 +18,9 @@ from experiments.studies import protocol
 
 @pytest.mark.parametrize(
   ('flag', 'message'),
-  [('--nodes=1000000000', r'--nodes=1000000000: need 1 to 16'),
-   ('--nodes=0', r'--nodes=0: need 1 to 16'),
+  [('--nodes=1000000000', r'--nodes=1000000000: need 1 to 1000'),
+   ('--nodes=17', r'--nodes=17: need 1 to 16'),
+   ('--nodes=0', r'--nodes=0: need 1 to'),
    ('--draws=0', r'--draws=0: need 3 to 64'),
    ('--draws=2', r'--draws=2: need 3 to 64'),
    ('--clip=1e9', r'--clip=1e\+09: need 0.25 to 10 s'),
@@ -30,10 +31,10 @@ from experiments.studies import protocol
 )  # fmt: skip
 def test_counts_and_sizes_are_bounded_before_anything_is_read(tmp_path, flag, message):
   workdir = tmp_path / 'nowhere'
-  args = cli.parse(script.Args, script.PRESETS, ['plan', f'--workdir={workdir}', flag])
   t0 = time.perf_counter()
   with pytest.raises(ValueError, match=message) as e:
-    script.main(args)
+    argv = ['plan', f'--workdir={workdir}', flag]
+    script.main(cli.parse(script.Args, script.PRESETS, argv))
   assert time.perf_counter() - t0 < 1.0 and len(str(e.value)) <= 300
   assert not workdir.exists()
 
