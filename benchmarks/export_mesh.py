@@ -2,8 +2,10 @@
 
 For each mesh of a strip (``--strip`` metres a side, N vertices a side), the
 flex's bending is fitted as the export fits it (``physsim.mesh_fit.fit``: a
-9-column cantilever at that spacing), once at the export's default overhang
-(three bending lengths) and once at the strip's own, and each is then checked
+9-column cantilever at that spacing), once at three bending lengths (the
+export's default for a sheet wider than 4.5 of them) and once at the strip's
+own side (its default for this strip, ``fabric_files.fit_overhang``), and each
+is then checked
 on the strip as the export writes it: ``--strip`` metres over a table's edge,
 as wide as the strip (at most ``--check_columns`` vertices: wider ones bend
 alike), its tip's reach against the heavy elastica of the measured bending
@@ -89,7 +91,8 @@ def main(args: Args) -> None:
   )
   print(
     '| mesh | spacing mm | nominal | fitted at 3 c: flex scale, reach | '
-    f'fitted at {100 * args.strip:g} cm: flex scale, reach | fit s (3 c, strip) |'
+    f'fitted at {100 * args.strip:g} cm (the default here): flex scale, reach | '
+    'fit s (3 c, strip) |'
   )
   print('|---:|---:|---:|---:|---:|---:|')
   for r in rows:

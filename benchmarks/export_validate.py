@@ -85,6 +85,7 @@ def main(args: Args) -> None:
       for k in ('cloth_resolution', 'frames', 'fps', 'warmup', 'width', 'height', 'focal')
     })  # fmt: skip
   estimate = args.estimate or _truth_estimate(base, args.workdir, 20.0)
+  path = os.path.join(args.workdir, 'export_validate.json')
   rows = []
   for n in (int(r) for r in args.resolutions):
     t0 = time.perf_counter()
@@ -107,7 +108,14 @@ def main(args: Args) -> None:
       rows.append({'resolution': n, 'wind_speed': wind, **result.record(),
                    'fit': record['simulator']['fit'],
                    'seconds': time.perf_counter() - t0})  # fmt: skip
-      print(f'{n}x{n}, {wind:g} m/s: {rows[-1]["seconds"]:.0f} s', flush=True)
+      r = rows[-1]
+      print(
+        f'{n}x{n}, {wind:g} m/s: distance {r["distance_mm"]:.1f} mm, floor '
+        f'{r["floor_mm"]:.1f} mm ({r["distance_over_floor"]:.2f}x; the library '
+        f'{r["library_over_floor"]:.2f}x), {r["seconds"]:.0f} s', flush=True,
+      )  # fmt: skip
+      files.write_json(path, {'rows': rows, 'args': dataclasses.asdict(args),
+                              'hardware': 'CPU, MuJoCo C'})  # fmt: skip
   print(
     f'{base.material} (bending x{base.bending_scale:g}, {1e3 * base.area_weight:.0f} '
     f'g/m^2), rig recipe {args.recipe!r}, exported from '
@@ -124,9 +132,6 @@ def main(args: Args) -> None:
       f'{r["distance_mm"]:.1f} | {r["floor_mm"]:.1f} | {r["distance_over_floor"]:.2f} | '
       f'{r["library_over_floor"]:.2f} |'
     )
-  path = os.path.join(args.workdir, 'export_validate.json')
-  files.write_json(path, {'rows': rows, 'args': dataclasses.asdict(args),
-                          'hardware': 'CPU, MuJoCo C'})  # fmt: skip
   print(f'wrote {path}')
 
 

@@ -34,8 +34,9 @@ class Args:
       bending is fitted at that mesh's spacing (3-200).
     resolution: the same as --mesh (its older name; 0: --mesh).
     cloth_size: the exported sheet's side, m (0: the estimate's; 0.05-3).
-    overhang: the fitted cantilever's overhang, m (0: three bending lengths,
-      as a reading of the bending length is made).
+    overhang: the fitted cantilever's overhang, m (0: the sheet's own side
+      where it is 1-4.5 bending lengths, a swatch or strip; else three bending
+      lengths, as a reading of the bending length is made).
     draws: posterior draws to write (0: none; at most 100000).
     seed: which saved draws are written when there are more.
   """

@@ -203,8 +203,19 @@ def check_flags(draws: int, cloth_size: float, resolution: int, overhang: float,
     )
   if not (math.isfinite(overhang) and 0 <= overhang <= 1.0):
     raise ValueError(
-      f'--overhang={overhang}: need 0 (three bending lengths) or a length up to 1 m'
+      f'--overhang={overhang}: need 0 (the default, fit_overhang) or a length up to 1 m'
     )
+
+
+def fit_overhang(size: float, bending_length: float) -> float:
+  """The overhang the export fits its bending at, by default (m; 0:
+  ``mesh_fit.OVERHANG_RATIO`` bending lengths): the sheet's own side where it
+  is ``mesh_fit.MIN_RATIO``-``MAX_RATIO`` bending lengths (a swatch or strip,
+  what it shows hanging over an edge; the flex's effective rigidity at a coarse
+  mesh differs from one overhang to another), else three bending lengths (the
+  cantilever test a reading of the bending length is made from)."""
+  ratio = size / bending_length
+  return size if mesh_fit.MIN_RATIO <= ratio <= mesh_fit.MAX_RATIO else 0.0
 
 
 def _units(point: Point) -> dict:
@@ -246,7 +257,7 @@ def write(
       without saved draws, the paper's argmin, writes none).
     cloth_size, resolution: the exported sheet's side (m) and vertices a
       side (0: the estimate's own); the bending is fitted at its spacing.
-    overhang: the fit's cantilever overhang, m (0: three bending lengths).
+    overhang: the fit's cantilever overhang, m (0: ``fit_overhang``).
     seed: which of the saved draws (a random subset when it holds more).
     mesh_flag: the mesh's flag, for a refusal.
 
@@ -263,6 +274,7 @@ def write(
   mesh = physsim.square(n, size)
   config = physsim.config_for_mesh(mesh, point.fps)
   spacing = size / (n - 1)
+  overhang = overhang or fit_overhang(size, point.bending_length)
   fit = mesh_fit.fit(point.material, point.rigidity, point.area_weight, spacing,
                      config, overhang=overhang)  # fmt: skip
   config = dataclasses.replace(

@@ -143,6 +143,8 @@ def test_an_export_at_two_meshes_reproduces_one_cantilever_reach(tmp_path):
     )
     fit = record['simulator']['fit']
     assert fit['fitted'] and abs(fit['reach_error']) < 0.02, fit
+    # a strip of 2.9 bending lengths is fitted at its own overhang
+    assert fit['overhang_mm'] == pytest.approx(50.0)
     s = _flex_scale(record['files']['mujoco'])
     assert s == pytest.approx(record['simulator']['flex_bending_scale'], rel=1e-6)
     # the strip simulated again from the file's own number, 5 columns wide
@@ -292,6 +294,12 @@ def test_an_export_writes_all_of_its_files_or_none(tmp_path, monkeypatch):
     fabric_files.write(str(tmp_path / 'e'), str(out), draws=7)
   assert {f: (out / f).read_text() for f in os.listdir(out)} == before
   assert sorted(os.listdir(tmp_path)) == ['e', 'f']
+
+
+def test_a_sheet_many_bending_lengths_wide_is_fitted_at_three_of_them():
+  assert fabric_files.fit_overhang(1.0, 0.013) == 0.0  # mesh_fit's 3 c
+  assert fabric_files.fit_overhang(0.05, 0.013) == 0.05
+  assert fabric_files.fit_overhang(0.01, 0.013) == 0.0  # under one: 3 c
 
 
 def test_an_export_of_a_fabric_too_fine_for_the_mesh_says_so(tmp_path):
