@@ -144,11 +144,13 @@ def flying_pixels(depth: np.ndarray, rng: np.random.Generator,
   neighbour over ``JUMP`` nearer or further) given a depth between the
   nearest and furthest of their 3 x 3 neighbours, as time-of-flight and
   smoothed sensors mix the two sides."""
-  pad = np.pad(np.where(depth > 0, depth, np.nan), 1, mode='edge')
+  valid = depth > 0
   h, w = depth.shape
-  stack = np.stack([pad[i : i + h, j : j + w] for i in range(3) for j in range(3)])
-  lo, hi = np.nanmin(stack, 0), np.nanmax(stack, 0)
-  jump = (depth > 0) & (hi - lo > JUMP) & (rng.uniform(size=depth.shape) < share)
+  near = np.pad(np.where(valid, depth, np.inf), 1, mode='edge')
+  far = np.pad(np.where(valid, depth, -np.inf), 1, mode='edge')
+  lo = np.min([near[i : i + h, j : j + w] for i in range(3) for j in range(3)], 0)
+  hi = np.max([far[i : i + h, j : j + w] for i in range(3) for j in range(3)], 0)
+  jump = valid & (hi - lo > JUMP) & (rng.uniform(size=depth.shape) < share)
   mixed = lo + rng.uniform(size=depth.shape) * (hi - lo)
   return np.where(jump, mixed, depth)
 
