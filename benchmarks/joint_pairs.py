@@ -49,9 +49,16 @@ import numpy as np
 from absl import logging
 
 import physsim
-from experiments.pipeline import cli, datasets, embedding, estimation, files, objective
+from experiments.pipeline import (
+  cli,
+  datasets,
+  embedding,
+  estimation,
+  files,
+  measurements,
+  objective,
+)
 from experiments.pipeline import joint as joint_lib
-from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
 from experiments.studies import calibration
 
@@ -282,12 +289,14 @@ def _plan(args: Args, config, net, groups: list[list[dict]]) -> list[tuple]:
       recs.append(rec)
       if args.reading_sd:  # one fan setting, one reading: the pair's first's
         seq = group[0]['seq'] if args.hem_mass else r['seq']
-        m = posterior_lib.simulated_reading(
+        m = measurements.simulated_reading(
           'wind_speed', rec.truth, args.reading_sd, args.seed, seq
         )
         winds.append((m.wind_speed, m.wind_speed_sd))
     wd = os.path.join(args.workdir, f'pair_{group[0]["seq"] // args.group:02d}')
-    jobs = joint_lib.joint_jobs(config, recs, args.model, wd, winds or None, nets=nets,
+    # the calibrated pair's model: the fabric takes the air as ArcSim's sheet
+    fixed = config.replace(air_coefficient='fixed')
+    jobs = joint_lib.joint_jobs(fixed, recs, args.model, wd, winds or None, nets=nets,
                                 overrides=overrides, fans=fans)  # fmt: skip
     plan.append((group, recs, winds, wd, jobs))
   return plan

@@ -68,7 +68,10 @@ def joint_jobs(
     )
   if winds is not None and len(winds) != len(recordings):
     raise ValueError(f'{len(winds)} wind readings for {len(recordings)} recordings')
-  if config.measured.air_free and (winds is None or any(sd <= 0 for _, sd in winds)):
+  read = winds is not None and all(sd > 0 for _, sd in winds)
+  if config.measured.air_coefficient == 'auto':  # the protocol's fabric: its own
+    config = config.replace(air_coefficient='free' if read else 'fixed')
+  if config.measured.air_free and not read:
     raise ValueError(
       "--air_coefficient=free: a joint estimate reads the fabric's air from each "
       "recording's wind reading (--wind_speeds, --wind_speed_sds); without "

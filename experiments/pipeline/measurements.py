@@ -27,7 +27,7 @@ SHORT = {'bending_scale': 'bending', 'wind_speed': 'wind', 'area_weight': 'weigh
 # ``air_density`` times c makes such a fabric: only the flutter's air damping,
 # c |v - u| against sqrt(c) |v_eff - u|, tells them apart). Its prior:
 # log-uniform over AIR_RANGE, integrated on AIR_NODES nodes.
-AIR_MODES = ('fixed', 'free')
+AIR_MODES = ('auto', 'fixed', 'free')
 AIR_RANGE = (0.3, 1.5)
 AIR_NODES = 96
 
@@ -53,10 +53,12 @@ class Measured:
       reading, ``physsim.overhang_depth.DOF``: most readings closer than a
       Gaussian of that sd would put them, a few further off).
     air_coefficient: 'fixed': the fabric takes the wind as ArcSim's sheet does
-      (today's model, what the shipped calibration holds); 'free': its own air
-      coefficient c, log-uniform over 0.3-1.5, read from the wind readings and
-      the load the video sees (a joint of fan settings shares one c; without a
-      reading c stays the prior's and the wind widens by it; not calibrated).
+      (what the shipped calibration holds); 'free': its own air coefficient c,
+      log-uniform over 0.3-1.5, read from the wind readings and the load the
+      video sees (a joint of fan settings shares one c; without a reading c
+      stays the prior's and the wind widens by it; not calibrated); 'auto':
+      free in a joint estimate whose every recording has a wind reading (the
+      protocol: what its fan recordings measure), else fixed.
   """
 
   wind_speed: float = 0.0
@@ -66,7 +68,7 @@ class Measured:
   bending_length: float = 0.0
   bending_length_sd: float = 0.0
   bending_length_dof: float = 0.0
-  air_coefficient: str = cli.choice('fixed', AIR_MODES)
+  air_coefficient: str = cli.choice('auto', AIR_MODES)
 
   @property
   def air_free(self) -> bool:
