@@ -11,10 +11,14 @@ at its first alias by ``load_yaml``; no file this project reads needs one.
 from __future__ import annotations
 
 import os
+import re
 import stat
 
 # Longest repr of a value quoted in an error line; longer ones are described.
 MAX_SHOWN = 60
+# The deepest YAML nesting read (no file of ours nests over ten): deeper is
+# refused as it is met, before the recursion and time a deep one costs.
+MAX_DEPTH = 100
 
 
 def kind(mode: int) -> str:
@@ -91,11 +95,13 @@ def load_yaml(text: str, path: str):
 
   Raises:
     ValueError: naming ``path``: an alias (``*name``), unreadable YAML or
-      nesting too deep; one line.
+      nesting over ``MAX_DEPTH``; one line.
   """
   import yaml  # noqa: PLC0415 - only YAML files need it
 
   class _NoAliases(yaml.SafeLoader):
+    depth = 0
+
     def compose_node(self, parent, index):
       if self.check_event(yaml.AliasEvent):
         event = self.peek_event()
@@ -104,8 +110,22 @@ def load_yaml(text: str, path: str):
           f'{path}: YAML aliases (*{shown(event.anchor)}, line {line}) are not '
           'accepted; write the values out'
         )
-      return super().compose_node(parent, index)
+      self.depth += 1
+      if self.depth > MAX_DEPTH:
+        raise ValueError(f'{path}: not readable YAML (nested over {MAX_DEPTH} deep)')
+      try:
+        return super().compose_node(parent, index)
+      finally:
+        self.depth -= 1
 
+  # PyYAML's scanner takes time quadratic in the depth of flow collections
+  # ([[[...]]]): refused from the brackets alone (in a string they would
+  # rarely nest a hundred deep).
+  depth = 0
+  for c in re.findall(r'[\[\]{}]', text):
+    depth += 1 if c in '[{' else -1
+    if depth > MAX_DEPTH:
+      raise ValueError(f'{path}: not readable YAML (nested over {MAX_DEPTH} deep)')
   try:
     return yaml.load(text, Loader=_NoAliases)  # noqa: S506 - a SafeLoader
   except yaml.YAMLError as e:
