@@ -203,7 +203,8 @@ def main(args: Args) -> None:
       print(
         f'{path}: {d.points} strip pixels, the elastica of {d.overhang:.4f} m over '
         f'{d.ratio:.2f} bending lengths fits them to {1000 * d.residual_m:.2f} mm '
-        f'(RMS): reach {d.reach:.4f} m, drop {d.drop:.4f} m'
+        f'(RMS): reach {d.reach:.4f} m, drop {d.drop:.4f} m (from the front face); '
+        f'the edge rounded {1000 * d.edge_radius:.1f} mm (sd {1000 * d.edge_radius_sd:.1f})'
       )
       if hint := overhang_depth.advice(d):
         print(f'{path}: {hint}')

@@ -99,6 +99,7 @@ def test_a_depth_recording_instead_of_a_ruler(tmp_path, capsys):
   overhang.main(args)
   out = capsys.readouterr().out
   assert 'strip pixels' in out and '--bending_length=' in out and 'bending scale' in out
+  assert 'the edge rounded' in out  # a sharp edge: its radius, read near 0
   # the law goes with the reading to the estimate
   assert f'--bending_length_dof={overhang_depth.DOF:g}' in out
   assert f'"bending_length_dof": {overhang_depth.DOF:g}' in out
