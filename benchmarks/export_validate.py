@@ -100,12 +100,13 @@ def main(args: Args) -> None:
       )
       validation.check_set_up(exported, paths['depth'], paths['camera'],
                               recipe.cloth_size, wind)  # fmt: skip
-      _, rec = validation.take_in(
+      taken, rec = validation.take_in(
         exported, paths['depth'], paths['camera'], intake.IntakeConfig(world_up='z'),
         args.settings,
       )  # fmt: skip
       result = validation.predict(exported, rec, wind, args.settings)
       rows.append({'resolution': n, 'wind_speed': wind, **result.record(),
+                   'alignment_sd': list(taken.alignment_sd),
                    'fit': record['simulator']['fit'],
                    'seconds': time.perf_counter() - t0})  # fmt: skip
       r = rows[-1]

@@ -59,11 +59,11 @@ def main(args: Args) -> dict:
     exported, args.recording, args.camera_json, args.cloth_size or exported.size,
     args.wind_speed,
   )  # fmt: skip
-  _, rec = validation.take_in(
+  taken, rec = validation.take_in(
     exported, args.recording, args.camera_json, args.intake, args.settings
   )
   result = validation.predict(exported, rec, args.wind_speed, args.settings)
-  for line in validation.report(exported, args.recording, result):
+  for line in validation.report(exported, args.recording, result, taken.alignment_sd):
     print(line)
   name = os.path.basename(os.path.normpath(args.recording)) or 'recording'
   out = args.out or os.path.join(args.fabric, f'validate_{name}')
@@ -71,6 +71,7 @@ def main(args: Args) -> dict:
     'fabric': os.path.abspath(args.fabric), 'recording': os.path.abspath(args.recording),
     'camera_json': os.path.abspath(args.camera_json) if args.camera_json else '',
     **result.record(), 'verdict': validation.verdict(result),
+    'alignment_sd': {'m': taken.alignment_sd[0], 'deg': taken.alignment_sd[1]},
     'settings': dataclasses.asdict(args.settings),
   }  # fmt: skip
   files.write_json(os.path.join(out, validation.RESULT_FILE), record)

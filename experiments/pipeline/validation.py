@@ -380,10 +380,21 @@ def verdict(result: Result) -> str:
   )
 
 
-def report(exported: Exported, recording: str, result: Result) -> list[str]:
-  """The lines ``experiments.validate`` prints."""
+def report(
+  exported: Exported, recording: str, result: Result, alignment_sd=(0.0, 0.0)
+) -> list[str]:
+  """The lines ``experiments.validate`` prints; ``alignment_sd`` (metres,
+  degrees): the intake's own placement error of the camera, 1 sd, which
+  moves the recording's summary and not the floor."""
   y, z = 1e3 * result.recording
   b, w = result.library_params
+  placed = []
+  if any(alignment_sd):
+    placed = [
+      f"the camera's placement (the intake's own error, 1 sd): "
+      f'{1e3 * alignment_sd[0]:.0f} mm and {alignment_sd[1]:.2g} degrees, which '
+      'the distance carries and the floor does not'
+    ]
   return [
     f"{recording}: the sheet's mean place (wind-wise, up) {y:.1f}, {z:.1f} mm in "
     "the simulator's world",
@@ -397,6 +408,7 @@ def report(exported: Exported, recording: str, result: Result) -> list[str]:
     f'{1e3 * w:.4g} g/m^2; internal bending scale {b:g}): '
     f'{1e3 * result.library_distance:.1f} mm, '
     f'{result.library_distance / result.floor:.2f}x the floor',
+    *placed,
     verdict(result),
   ]
 

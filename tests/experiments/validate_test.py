@@ -117,7 +117,8 @@ def test_a_folder_that_is_no_export_is_refused_naming_the_file(made, tmp_path):
 def test_the_export_is_read_against_the_recordings_noise_floor(made, tmp_path, capsys):
   record = script.main(_args(made, out=str(tmp_path / 'v')))
   out = capsys.readouterr().out
-  assert 'noise floor' in out and 'library fabric' in out
+  assert 'noise floor' in out and 'library fabric' in out and 'placement' in out
+  assert record['alignment_sd']['m'] > 0
   assert os.path.isfile(tmp_path / 'v' / validation.RESULT_FILE)
   assert os.path.getsize(tmp_path / 'v' / validation.FIGURE_FILE) > 1000
   assert len(record['predicted_summaries_mm']) == _SETTINGS.seeds
