@@ -46,6 +46,8 @@ class Bar:
     """``n`` items found done: counted, not timed."""
     if not n:
       return
+    if not self._warm and self._bar.n + n >= (self._bar.total or 0):
+      self._bar.set_postfix_str('all found done')  # nothing left to compile
     if self._log:
       self._bar.restart(at=self._bar.n + n)
       self._bar.update(n)

@@ -1079,6 +1079,9 @@ def check_plan(candidates, nodes: int, reading: float, config: Config) -> None:
   lo, hi = PLAN_READING
   if not lo <= reading <= hi:
     raise ValueError(f'--reading={reading:g}: need {lo:g} to {hi:g} (relative sd)')
+  twice = sorted({n for n in candidates if list(candidates).count(n) > 1})
+  if twice:
+    raise ValueError(f'--candidates: {twice[0][:64]} listed twice')
   for name in candidates:
     if len(name) > 64:
       raise ValueError(f'--candidates: a name of {len(name)} characters is none')
@@ -1111,21 +1114,26 @@ def plan(workdir: str, candidates=PLAN_CANDIDATES, nodes: int = 1,
     f'clip{config.clip:g}_draws{config.draws}_seed{config.seed}',
   )
   key = jax.random.key(config.seed)
-  rows = {}
-  total = len(candidates) * len(points)
-  with progress.Bar(total, 'plan: slopes', 'sim', disable=not show_progress) as bar:
-    for name in candidates:
-      c = parse(name)
-      rows[name] = []
-      for k, (b, w) in enumerate(points):
-        bending, area_weight = float(np.exp(b)), float(np.exp(w))
-        cached = os.path.exists(slope_path(c, bending, area_weight, config, cache))
-        rows[name].append(
-          candidate_slopes(
-            c, bending, area_weight, config, cache, jax.random.fold_in(key, k)
-          )
+  jobs = [
+    (name, k, float(np.exp(b)), float(np.exp(w)))
+    for name in candidates
+    for k, (b, w) in enumerate(points)
+  ]
+  cached = [
+    os.path.exists(slope_path(parse(name), b, w, config, cache))
+    for name, _, b, w in jobs
+  ]  # fmt: skip
+  rows = {name: [] for name in candidates}
+  with progress.Bar(len(jobs), 'plan: slopes', 'sim', disable=not show_progress) as bar:
+    bar.skip(sum(cached))  # read back, not timed
+    for (name, k, bending, area_weight), done in zip(jobs, cached, strict=True):
+      rows[name].append(
+        candidate_slopes(
+          parse(name), bending, area_weight, config, cache, jax.random.fold_in(key, k)
         )
-        (bar.skip if cached else bar.done)(1)
+      )
+      if not done:
+        bar.done(1)
   ranked = rank_candidates(draws, weights, rows, points, reading, material)
   best = ranked[0]
   line = recommendation(best, config.clip)

@@ -26,7 +26,9 @@ from experiments.studies import protocol
    ('--clip=1e9', r'--clip=1e\+09: need 0.25 to 10 s'),
    ('--reading=-1', r'--reading=-1: need 0 to 1'),
    ('--candidates=sheet_1e9cm_2ms_r9', r'--candidates: candidate .sheet_1e9cm'),
-   ('--candidates=' + ','.join(['sheet_100cm_2ms_r9'] * 40),
+   ('--candidates=sheet_100cm_2ms_r9,sheet_100cm_2ms_r9',
+    r'--candidates: sheet_100cm_2ms_r9 listed twice'),
+   ('--candidates=' + ','.join([f'sheet_100cm_{v}ms_r9' for v in range(1, 41)]),
     r'--candidates=40 given: need 1 to 32')],
 )  # fmt: skip
 def test_counts_and_sizes_are_bounded_before_anything_is_read(tmp_path, flag, message):
@@ -71,7 +73,7 @@ def test_plan_shows_its_progress_and_time_left(tmp_path, monkeypatch, capsys):
   script.main(args)
   assert len(calls) == 6  # the real one would read its cache: counted, not timed
   err = capsys.readouterr().err
-  assert '6/6 (100%)' in err
+  assert '6/6 (100%)' in err and 'all found done' in err and 'compiling' not in err
 
 
 @pytest.mark.parametrize(
