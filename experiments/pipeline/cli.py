@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import logging
 import math
 import os
 import re
@@ -439,6 +440,9 @@ def run(
   from physsim import interrupt  # noqa: PLC0415 - imports jax
 
   host_devices()
+  # JAX's "Unable to initialize backend 'tpu'" (INFO, on every machine without
+  # one) was the first line a newcomer read; its warnings and errors still show.
+  logging.getLogger('jax._src.xla_bridge').setLevel(logging.WARNING)
   # SIGTERM (a batch system's time limit, a launcher stopping its processes,
   # whose SIGINT a background job ignores) ends the run as Ctrl-C does; both
   # wait for the simulator's callback to return (physsim.interrupt).

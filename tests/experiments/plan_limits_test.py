@@ -91,3 +91,43 @@ def test_a_damaged_cached_slope_file_is_named(tmp_path, content):
   with pytest.raises(ValueError, match=r'a damaged cached slope file') as e:
     protocol.candidate_slopes(c, 1.0, 0.2, config, str(tmp_path), None)
   assert str(e.value).startswith(path) and len(str(e.value)) <= 300
+
+
+def test_the_command_leads_with_its_progress_not_jaxs_tpu_line(tmp_path):
+  """A rerun from cached slopes: its first line is the bar's, not JAX's
+  "Unable to initialize backend 'tpu'"."""
+  import dataclasses  # noqa: PLC0415
+  import pathlib  # noqa: PLC0415
+  import subprocess  # noqa: PLC0415
+  import sys  # noqa: PLC0415
+
+  from experiments.pipeline import layout  # noqa: PLC0415
+
+  space = physsim.search_space('gray_interlock')
+  u = np.random.default_rng(0).uniform(-1, 1, (200, 3))
+  np.savez(tmp_path / 'posterior.npz', samples=u, bounds=space.bounds())
+  (tmp_path / 'estimate.json').write_text(json.dumps({'material': 'gray_interlock'}))
+  smoke = script.PRESETS['smoke']
+  material, draws, _ = layout.read_draws(str(tmp_path))
+  config = protocol.Config(draws=smoke.draws, clip=smoke.clip, warmup=0.25, seed=0)
+  config = dataclasses.replace(config, material=material)
+  b, w = np.exp(protocol.node_values(draws, 1)[0])
+  cache = tmp_path / protocol.PLAN_CACHE_DIR / f'clip{smoke.clip:g}_draws3_seed0'
+  for name in smoke.candidates:
+    c = protocol.parse(name)
+    path = protocol.slope_path(c, float(b), float(w), config, str(cache))
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    row = {'wind': c.wind, 'slopes': [[1.0, 0.5, 0.2]] if c.wind else [[1.0, 0.5]],
+           'noise_cov': [[0.1]]}  # fmt: skip
+    pathlib.Path(path).write_text(json.dumps(row))
+  root = pathlib.Path(__file__).resolve().parents[2]
+  out = subprocess.run(
+    [sys.executable, '-m', 'experiments.plan', f'--workdir={tmp_path}',
+     '--preset=smoke'],
+    capture_output=True, text=True, cwd=root, timeout=300,
+    env=dict(os.environ, PYTHONPATH=str(root)),
+  )  # fmt: skip
+  assert out.returncode == 0, out.stderr[-2000:]
+  first = out.stderr.splitlines()[0]
+  assert first.startswith('plan: slopes: 2/2 (100%)') and 'all found done' in first
+  assert "backend 'tpu'" not in out.stderr and 'Next recording' in out.stdout
