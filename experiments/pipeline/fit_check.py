@@ -15,30 +15,27 @@ Two questions a person asks of an estimate, answered after the posterior:
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 import bo
 import physsim
 from experiments.pipeline.measurements import FIELDS, Measured
 
-SIMULATIONS = 8  # gust draws at the point
 # Mean distance to the recording over the gust floor beyond which the fit is
 # flagged: the recording is one more gust draw when the simulator fits, so
-# the ratio scatters about 1 (K = 8 draws: a few tenths); a sensor's noise and
+# the ratio scatters about 1 (8 draws: a few tenths); a sensor's noise and
 # the point's own uncertainty add a little more.
 MISFIT_RATIO = 3.0
 VIDEO_LEVEL = 0.99  # the video alone's central range a reading is read against
 READING_SDS = 2.0  # ... widened by this many of the reading's own sd
 
 
-def predictive(simulate: Callable, point_unit, k: int = SIMULATIONS) -> dict | None:
-  """The gust-floor check at ``point_unit`` (3,): ``simulate(u (k, 3))``
-  scores k candidates of the estimate's problem (``objective.Scores``,
-  with the shape summaries' residuals to the recording). None where fewer
-  than three simulations survived or the distance has no shape part."""
-  scores = simulate(np.tile(np.asarray(point_unit, np.float64), (k, 1)))
+def predictive(scores) -> dict | None:
+  """The gust-floor check of ``scores`` (``objective.Scores``): simulations
+  at one point that differ only in their gusts, with their shape summaries'
+  residuals to the recording (``search.run``'s replicas at the posterior's
+  median). None where fewer than three survived or the distance has no
+  shape part."""
   ok = np.asarray(scores.valid) & np.isfinite(scores.psd)
   r = np.asarray(scores.residual, np.float64)[ok]
   if len(r) < 3 or not np.any(r):

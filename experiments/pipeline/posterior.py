@@ -340,7 +340,9 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
       wind, and the (nv,) effective winds of the grid's wind cells, m/s. Each
       recording's prior of its effective wind is then its reading's given c
       (``measurements.effective_wind_log_density``) and c is drawn with
-      (b, w) from their joint, its prior log-uniform (``measurements.air_nodes``).
+      (b, w) from their joint, its prior log-uniform (``measurements.air_nodes``);
+      a shared discrepancy (``shared_bias_sd``) spreads its draws by the same
+      log-normal factor.
 
   Returns:
     ``{'samples': [(n, 3) unit draws of (b, v_k, w) per recording],
@@ -411,6 +413,11 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     ratio = c[1] / c[0] if len(c) > 1 else 1.0
     u = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, 99), (n,)))
     out['air'] = c[ic] * ratio ** (u - 0.5)  # within its log step
+    if shared_bias_sd > 0:  # the pressure the simulator puts on every
+      # recording errs by one common factor too (the fan's angle, drag): the
+      # fabric's own c is the simulator's times exp(d), d ~ N(0, sd^2)
+      z = np.asarray(jax.random.normal(jax.random.fold_in(k_jit, 98), (n,)))
+      out['air'] = out['air'] * np.exp(shared_bias_sd * z)
   return out
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Callable
 
 import jax
 import numpy as np
@@ -32,7 +31,7 @@ def write_result(
   best_frames: np.ndarray,
   figures: bool = True,
   pictures: list | None = None,
-  simulate: Callable | None = None,
+  replicas=None,
   **timing,
 ) -> dict:
   """Writes ``estimate.json``, ``trace.png``, ``montage.png`` (and for a
@@ -51,8 +50,8 @@ def write_result(
     figures: draw the pictures (else only the JSON and ``posterior.npz``).
     pictures: where to put the pictures' drawing, as callables, instead of
       drawing them here (``estimate_many``).
-    simulate: ``simulate(u (k, 3))`` scores more candidates of the search's
-      problem (``objective.Scores``): the fit check's gust draws at the point
+    replicas: ``objective.Scores`` of simulations at the posterior's median
+      that differ only in their gusts (``search.run``'s): the fit check's
       (``fit_check.predictive``); None: no check.
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
@@ -96,9 +95,7 @@ def write_result(
   })  # fmt: skip
   if config.posterior and config.scoring.distance in SHAPE_DISTANCES:
     result['fit_check'] = {
-      'predictive': None if simulate is None else fit_check.predictive(
-        simulate, result['point_unit']
-      ),
+      'predictive': None if replicas is None else fit_check.predictive(replicas),
       'conflicts': fit_check.conflicts(
         res.log_lik, search_lib.posterior_config(config).grid, space,
         config.measured,

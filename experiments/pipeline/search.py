@@ -266,6 +266,10 @@ def _pad(n: int) -> int:
   return -(-n // step) * step
 
 
+# Simulations at each finished posterior's median, for the fit check: the
+# gusts' scatter between them against their distance to the recording.
+REPLICAS = 8
+
 # On a GPU a fused call of up to this many worlds (rows x candidates) costs
 # what one of 24 does: the simulation's steps wait on kernel launches, not on
 # arithmetic (physsim.devices; such a call also runs on one device).
@@ -501,11 +505,12 @@ def run(
 
   Args:
     jobs: the recordings.
-    write: ``write(job, search, result, best_frames, simulate=..., **timing)
+    write: ``write(job, search, result, best_frames, replicas=..., **timing)
       -> dict``, what a finished search leaves (``results.write_result``: the
-      stages after the search, which this one does not import);
-      ``simulate(u (k, 3))`` scores more candidates of its problem (the fit
-      check's).
+      stages after the search, which this one does not import); ``replicas``:
+      ``objective.Scores`` of simulations at its posterior's median that differ
+      only in their gusts (``REPLICAS``; None: not a posterior of a shape
+      distance), the fit check's.
     progress: print one line per step.
     gp_on_cpu: fit the GPs and propose on the CPU.
     nets: networks the caller has loaded already, by ``model_dir``.
@@ -623,6 +628,7 @@ class _Lockstep:
       min_rows=len(self.live),
     )  # fmt: skip
     t_result = time.perf_counter() - t0
+    replicas = self._replicas(ok, results)
     for s, res in zip(ok, results, strict=True):
       job = self.jobs[s.index]
       timing = dict(
@@ -631,18 +637,31 @@ class _Lockstep:
         seconds_in_search=self.gp_seconds + t_result,
         recordings_in_batch=len(self.jobs),
       )
-      simulate = functools.partial(self._at, s)  # for the fit check's draws
       with physsim.devices.on_host():  # the read-out's small eager work
         self.out[s.index] = self.write(
-          job, s, res, frames[s.index], simulate=simulate, **timing
+          job, s, res, frames[s.index], replicas=replicas.get(s.index), **timing
         )
       if self.progress:
         print(f'{job.recording.source}: {s.describe()}', flush=True)
 
-  def _at(self, s: LiveSearch, u) -> obj_lib.Scores:
-    """Scores of candidates ``u (k, 3)`` of a finished search's problem, with
-    keys past its own evaluations (fresh gusts and sensor noise)."""
-    return self.evaluate([s.problem], [np.asarray(u, np.float64)], [len(s.state.Y)])[0]
+  def _replicas(self, ok: list[LiveSearch], results) -> dict:
+    """Per finished posterior search of a shape distance, ``REPLICAS``
+    simulations at its posterior's median that differ only in their gusts
+    and sensor noise (keys past its own evaluations), all in one call: what
+    the fit check (``fit_check.predictive``) reads."""
+    mine = [
+      (s, np.tile(np.median(np.asarray(r.samples), axis=0), (REPLICAS, 1)))
+      for s, r in zip(ok, results, strict=True)
+      if hasattr(r, 'samples')
+      and s.problem.config.scoring.distance in obj_lib.SHAPE_DISTANCES
+    ]
+    if not mine:
+      return {}
+    scores = self.evaluate(
+      [s.problem for s, _ in mine], [u for _, u in mine],
+      [len(s.state.Y) for s, _ in mine],
+    )  # fmt: skip
+    return {s.index: sc for (s, _), sc in zip(mine, scores, strict=True)}
 
   def step(self, active: list[LiveSearch]) -> None:
     """One step of every unfinished search: ask, score together, tell."""

@@ -31,7 +31,7 @@ def test_a_recording_that_is_one_more_gust_draw_fits():
   ratios = []
   for seed in range(200):
     rec = np.random.default_rng(1000 + seed).normal(0.0, 0.01, 2)
-    p = fit_check.predictive(_simulate_around(rec, 0.01, seed), np.zeros(3))
+    p = fit_check.predictive(_simulate_around(rec, 0.01, seed)(np.zeros((8, 3))))
     ratios.append(p['ratio'])
   assert np.mean(ratios) == pytest.approx(1.0, abs=0.15)
   assert np.mean(np.array(ratios) <= fit_check.MISFIT_RATIO) > 0.95
@@ -39,7 +39,7 @@ def test_a_recording_that_is_one_more_gust_draw_fits():
 
 def test_a_recording_far_beyond_the_gusts_is_flagged_with_its_ratio_by_hand():
   rec = np.array([0.05, 0.0])  # 5 sd off along y
-  p = fit_check.predictive(_simulate_around(rec, 0.01), np.zeros(3), k=8)
+  p = fit_check.predictive(_simulate_around(rec, 0.01)(np.zeros((8, 3))))
   s = np.random.default_rng(0).normal(0.0, 0.01, (8, 2))
   fit = np.mean(np.sum((s - rec) ** 2, axis=1))
   i, j = np.triu_indices(8, 1)

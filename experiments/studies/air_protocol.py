@@ -1,0 +1,253 @@
+"""Does the protocol's video measure the fabric's air? A study (issue 76).
+
+Protocol sets of one fabric each: three fan settings between ``--winds``,
+each recording read by a 2% anemometer, the fabric weighed (1%) and its
+bending length read (3%), every fabric with its own air coefficient c drawn
+log-uniform in ``--air_range`` and never told to the estimator. The
+recordings are simulated in the evaluation recipe's world
+(``physsim.MISMATCHES[--physics]``: fan off the normal, drag along the
+cloth, damped bending, softer edges) with the wind's density times c, seen
+by a camera of known pose through the depth sensor's noise. Each set is
+estimated jointly twice, in one lockstep: with the air coefficient free
+(the protocol's default, ``--air_coefficient=auto``) and held at ArcSim's 1
+('fixed', today's model). Prints and writes:
+
+- free: c's error and its 90%/50% intervals' coverage; each wind, the
+  bending rigidity and the area weight against the truth;
+- fixed: how often the fit check (``fit_check``: a reading the video
+  disagrees with, or simulations farther than the gust floor) flags a set,
+  for fabrics with c below 0.7 and within 0.9-1.1.
+
+  python -m experiments.air_protocol --preset=smoke            # CPU, minutes
+  python -m experiments.air_protocol --sets=40 --out=$OUT/air_protocol.json  # GPU
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import physsim
+from experiments.pipeline import cli, estimation, files, joint, objective
+from experiments.pipeline import recording as recording_lib
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+  """The sets and how they are estimated.
+
+  Attributes:
+    sets: protocol sets (fabrics), three fan settings each.
+    material: the fabric whose box the truths are drawn in.
+    air_range: the air coefficients' log-uniform range.
+    winds: the fan settings' range, m/s (low, middle and high thirds).
+    physics: the recordings' world (``physsim.MISMATCHES``).
+    estimate: the estimate's preset (``objective.PRESETS``).
+    image: the recordings' frame size, pixels a side.
+    seed: of the truths, cameras, gusts and readings.
+    modes: the air coefficient's modes estimated ('free', 'fixed').
+    workdir: where the searches keep their files.
+    out: JSON path ('' for none).
+  """
+
+  sets: int = 40
+  material: str = 'gray_interlock'
+  air_range: tuple[float, ...] = (0.4, 1.25)
+  winds: tuple[float, ...] = (1.5, 4.0)
+  physics: str = cli.choice('mismatched', tuple(physsim.MISMATCHES))
+  estimate: str = 'default'
+  image: int = 64
+  seed: int = 0
+  modes: tuple[str, ...] = ('free', 'fixed')
+  workdir: str = 'out/benchmarks/air_protocol'
+  out: str = ''
+
+
+PRESETS = {
+  'default': Study(),
+  'smoke': Study(sets=2, estimate='smoke', image=32, modes=('free',)),
+}
+READ = {'wind_speed': 0.02, 'area_weight': 0.01, 'bending_length': 0.03}
+
+
+def truths(args: Study) -> list[dict]:
+  """Per set: bending (log-uniform), area weight (uniform) in the box, c
+  (log-uniform in ``air_range``) and three fan winds, one per third."""
+  rng = np.random.default_rng([args.seed, 41])
+  space = physsim.search_space(args.material)
+  lo, hi = args.winds
+  third = (hi - lo) / 3
+  out = []
+  for _ in range(args.sets):
+    b = math.exp(rng.uniform(*np.log(space.bending_scale)))
+    w = rng.uniform(*space.area_weight)
+    c = math.exp(rng.uniform(*np.log(args.air_range)))
+    v = [lo + third * (k + rng.uniform(0.1, 0.9)) for k in range(3)]
+    out.append({'bending_scale': b, 'area_weight': w, 'air_coefficient': c, 'winds': v})
+  return out
+
+
+def record(args: Study, config, truth: dict, k: int) -> list:
+  """The set's three recordings (``recording.Recording``, in memory)."""
+  sim = config.simulation
+  mesh = physsim.square(sim.cloth_resolution, size=sim.cloth_size)
+  world = physsim.MISMATCHES[args.physics]
+  base = physsim.config_for_mesh(mesh, sim.fps, **world.sim_fields())
+  air = dataclasses.replace(
+    base, air_density=base.air_density * truth['air_coefficient']
+  )
+  cloth = physsim.build(mesh, sim.material, config=air)
+  space = physsim.search_space(sim.material)
+  key = jax.random.key(args.seed * 1000 + k)
+  p = physsim.params.make(
+    bending_scale=[truth['bending_scale']] * 3, wind_speed=truth['winds'],
+    area_weight=[truth['area_weight']] * 3,
+  )  # fmt: skip
+  out = physsim.simulate(
+    cloth, p, frames=sim.frames, fps=sim.fps, warmup=sim.warmup,
+    wind=world.wind(sim.gusts), key=jax.random.fold_in(key, 1), space=space,
+  )  # fmt: skip
+  intr = physsim.Intrinsics(width=args.image, height=args.image)
+  ranges = physsim.PoseRanges().for_cloth(sim.cloth_size)
+  poses = physsim.sample_poses(jax.random.fold_in(key, 2), 3, ranges)
+  render = physsim.make_depth_renderer(mesh.faces, intr)
+  recs = []
+  for j in range(3):
+    pose = jax.tree.map(lambda a, j=j: a[j], poses)
+    depth = render(
+      jnp.asarray(out.positions[j : j + 1]), jax.tree.map(lambda a: a[None, None], pose)
+    )[0, 0]  # (T, H, W)
+    keys = jax.random.split(jax.random.fold_in(key, 10 + j), depth.shape[0])
+    noisy = jax.vmap(lambda kk, d: physsim.sensor.apply_noise(kk, d, intr))(keys, depth)
+    truth_j = {
+      'bending_scale': truth['bending_scale'], 'wind_speed': truth['winds'][j],
+      'area_weight': truth['area_weight'], 'air_coefficient': truth['air_coefficient'],
+    }  # fmt: skip
+    recs.append(recording_lib.Recording(
+      np.asarray(noisy, np.float32), sim.fps, intr, pose, f'set_{k:02d}/fan_{j}',
+      truth_j,
+    ))  # fmt: skip
+  if not bool(np.all(out.valid)):
+    raise ValueError(f'set {k}: a simulation blew up ({truth})')
+  return recs
+
+
+def readings(args: Study, truth: dict, space) -> tuple[dict, list]:
+  """The scale's and the strip's readings (shared) and each fan's anemometer's."""
+  rng = np.random.default_rng([args.seed, 43, int(1e6 * truth['bending_scale'])])
+  c = float(physsim.params.bending_length(
+    truth['bending_scale'], truth['area_weight'], space.rigidity
+  ))  # fmt: skip
+  w = truth['area_weight']
+  shared = {
+    'area_weight': w * (1 + READ['area_weight'] * rng.standard_normal()),
+    'area_weight_sd': READ['area_weight'] * w,
+    'bending_length': c * (1 + READ['bending_length'] * rng.standard_normal()),
+    'bending_length_sd': READ['bending_length'] * c,
+  }
+  winds = [(v * (1 + READ['wind_speed'] * rng.standard_normal()),
+            READ['wind_speed'] * v) for v in truth['winds']]  # fmt: skip
+  return shared, winds
+
+
+def _flagged(result: dict) -> bool:
+  check = result.get('fit_check') or {}
+  p = check.get('predictive')
+  return bool(check.get('conflicts')) or (p is not None and not p['fits'])
+
+
+def summarise(rows: list[dict]) -> dict:
+  """Per mode, the measures the module doc names."""
+  out = {}
+  for mode in sorted({r['mode'] for r in rows}):
+    mine = [r for r in rows if r['mode'] == mode]
+    s = {'sets': len(mine)}
+    s['bending_factor_median'] = float(np.median([r['bending_factor'] for r in mine]))
+    s['area_weight_pct_mean'] = float(np.mean([r['area_weight_pct'] for r in mine]))
+    s['wind_pct_mean'] = float(np.mean([e for r in mine for e in r['wind_pct']]))
+    if mode == 'free':
+      s['air_pct_mean'] = float(np.mean([r['air_pct'] for r in mine]))
+      for level in (90, 50):
+        s[f'air_held_{level}'] = float(np.mean([r[f'air_in_{level}'] for r in mine]))
+    low = [r['flagged'] for r in mine if r['c'] < 0.7]
+    near = [r['flagged'] for r in mine if 0.9 <= r['c'] <= 1.1]
+    s['flagged_c_below_0.7'] = [int(sum(low)), len(low)]
+    s['flagged_c_0.9_1.1'] = [int(sum(near)), len(near)]
+    out[mode] = s
+  return out
+
+
+def run(args: Study) -> dict:
+  """Records and estimates every set (one lockstep over all their searches);
+  prints each set's line and the table; writes and returns the JSON."""
+  t0 = time.perf_counter()
+  base = objective.PRESETS[args.estimate].replace(
+    material=args.material, distance='shape'
+  )
+  space = physsim.search_space(args.material)
+  sets = truths(args)
+  plan = []
+  for k, truth in enumerate(sets):
+    shared, winds = readings(args, truth, space)
+    recs = record(args, base, truth, k)
+    for mode in args.modes:
+      config = base.replace(air_coefficient=mode, **shared)
+      wd = os.path.join(args.workdir, mode, f'set_{k:02d}')
+      plan.append((k, mode, wd, joint.joint_jobs(config, recs, '', wd, winds)))
+    print(f'set {k}: recorded (c {truth["air_coefficient"]:.2f})', flush=True)
+  done = estimation.estimate_many([j for *_, jobs in plan for j in jobs], figures=False)
+  rows, i = [], 0
+  for k, mode, wd, jobs in plan:
+    mine, i = done[i : i + len(jobs)], i + len(jobs)
+    out = joint.combine_joint(jobs, mine, wd)
+    t = sets[k]
+    row = {'set': k, 'mode': mode, 'c': t['air_coefficient']}
+    row['bending_factor'] = math.exp(abs(math.log(
+      out['bending_scale']['median'] / t['bending_scale'])))  # fmt: skip
+    row['area_weight_pct'] = 100 * abs(
+      out['area_weight']['median'] / t['area_weight'] - 1
+    )
+    row['wind_pct'] = [100 * abs(r['wind_speed']['median'] / v - 1)
+                       for r, v in zip(out['recordings'], t['winds'], strict=True)]  # fmt: skip
+    if 'air_coefficient' in out:
+      a = out['air_coefficient']
+      row['air'] = a['median']
+      row['air_pct'] = 100 * abs(a['median'] / row['c'] - 1)
+      for level in (90, 50):
+        lo, hi = a[f'interval_{level}']
+        row[f'air_in_{level}'] = bool(lo <= row['c'] <= hi)
+    row['flagged'] = any(_flagged(r) for r in mine)
+    rows.append(row)
+    print(
+      f'set {k} {mode}: c {row["c"]:.2f} -> {row.get("air", float("nan")):.2f}, '
+      f'bending x{row["bending_factor"]:.2f}, weight {row["area_weight_pct"]:.1f}%, '
+      f'wind {np.mean(row["wind_pct"]):.1f}%, flagged {row["flagged"]}', flush=True,
+    )  # fmt: skip
+  summary = summarise(rows)
+  seconds = time.perf_counter() - t0
+  print('| mode | sets | c error | c 90% / 50% held | wind | bending | weight | '
+        'flagged c<0.7 | flagged 0.9-1.1 |')  # fmt: skip
+  print('|---|---|---|---|---|---|---|---|---|')
+  for mode, s in summary.items():
+    held = (f'{100 * s["air_held_90"]:.0f}% / {100 * s["air_held_50"]:.0f}%'
+            if 'air_held_90' in s else '-')  # fmt: skip
+    print(
+      f'| {mode} | {s["sets"]} | {s.get("air_pct_mean", float("nan")):.1f}% | {held} | '
+      f'{s["wind_pct_mean"]:.1f}% | x{s["bending_factor_median"]:.2f} | '
+      f'{s["area_weight_pct_mean"]:.2f}% | {s["flagged_c_below_0.7"]} | '
+      f'{s["flagged_c_0.9_1.1"]} |'
+    )
+  print(f'{seconds:.0f} s')
+  out = {
+    'args': dataclasses.asdict(args), 'summary': summary, 'rows': rows,
+    'seconds': seconds, 'device': str(jax.devices()[0]),
+  }  # fmt: skip
+  if args.out:
+    files.write_json(args.out, out)
+  return out
