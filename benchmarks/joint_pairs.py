@@ -4,7 +4,7 @@ Makes ``--pairs`` groups of ``--group`` real-like recordings of one fabric
 (the ``generate_dataset --preset=eval`` recipe at the network's image size; a
 group shares bending and area weight and draws a wind per recording, as
 ``experiments.calibrate`` draws its pairs: ``calibration.truths``), gives each
-recording a simulated anemometer reading (``posterior.simulated_reading``,
+recording a simulated anemometer reading (``measurements.simulated_reading``,
 ``--reading_sd``) and estimates every group jointly: all recordings' searches
 in lockstep (``joint.joint_jobs``, one ``estimation.estimate_many``), each
 steered by its reading, then each group's joint posterior

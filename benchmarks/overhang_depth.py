@@ -60,7 +60,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, files, report  # noqa: E402
+from experiments.pipeline import calibration_tables, cli, files, measurements  # noqa: E402
 from experiments.pipeline import posterior as posterior_lib  # noqa: E402
 from physsim import cantilever, gl_depth, overhang_depth, sensor, tabletop  # noqa: E402
 
@@ -327,7 +327,7 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
   rng = np.random.default_rng([seed, run['seq']])
   wind = truth['wind_speed'] * (1 + WIND_SD * rng.standard_normal())
   modes = {
-    'sheet, anemometer': posterior_lib.Measured(
+    'sheet, anemometer': measurements.Measured(
       wind_speed=wind, wind_speed_sd=WIND_SD * truth['wind_speed']
     ),
   }
@@ -346,7 +346,7 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
                                 rng.uniform(-1, 1, (4000, 3)))  # fmt: skip
   out = {}
   for mode, m in modes.items():
-    lp = posterior_lib.log_prior(pts, space, m, grid)
+    lp = measurements.log_prior(pts, space, m, grid)
     post = np.asarray(bo.posterior.log_normalise(lp + ll))
     draws = _grid_draws(rng, pts, grid, post, space, m, run['seq'])
     prior = _grid_draws(rng, pts, grid, lp, space, m, run['seq'] + 1)
@@ -540,7 +540,7 @@ def earlier_rows(path: str, args: Args, n: int) -> list[dict]:
 def main(args: Args) -> None:
   floor = overhang_depth.FLOOR if args.floor < 0 else args.floor
   dof = args.dof or overhang_depth.DOF
-  posterior_lib.check_dof(dof, 'dof')
+  measurements.check_dof(dof, 'dof')
   if not (math.isfinite(floor) and 0 <= floor < 1):
     raise ValueError(f'--floor={args.floor}: a relative floor in [0, 1)')
   rng = np.random.default_rng([args.seed, 39])
@@ -550,7 +550,7 @@ def main(args: Args) -> None:
   earlier = earlier_rows(args.readings, args, n) if args.readings else None
   unused = list(range(n))
   tables = shipped_tables(
-    args.calibration or report.shipped_calibration('shape', 'paper')
+    args.calibration or calibration_tables.shipped_calibration('shape', 'paper')
   ) if runs else {}  # fmt: skip
   rows, sets = [], []
   example = None

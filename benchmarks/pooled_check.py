@@ -28,19 +28,19 @@ This script adds up the counts of several such runs, each with its own seed
 
 The shipped calibration file keeps each seed's check (the device's
 ``check.json``, whose video cells are what the estimates printed) and an
-estimate quotes them pooled (``report.quoted_checks``):
+estimate quotes them pooled (``calibration_tables.quoted_checks``):
 
   python -c "import json; from experiments.pipeline import report; \
     from experiments.studies import calibration_check as c; \
-    [report.record_check(report.SHAPE_PAPER_CALIBRATION_FILE, \
+    [calibration_tables.record_check(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE, \
       c.check_record(json.load(open(f'/tmp/chk{s}/check.json')))) for s in (2, 3, 4)]"
 
 and the pool of those checks fabric by fabric, which an estimate of one
-fabric quotes beside them (``report.fabric_check``: "This fabric alone ...";
+fabric quotes beside them (``calibration_tables.fabric_check``: "This fabric alone ...";
 the shipped one is benchmarks/results/pooled_check_h200/pooled_check.json's):
 
   python -c "import json; from experiments.pipeline import report; \
-    report.record_fabric_checks(report.SHAPE_PAPER_CALIBRATION_FILE, \
+    calibration_tables.record_fabric_checks(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE, \
       json.load(open('out/pooled_check/pooled_check.json'))['checks'])"
 
 Nothing is fitted here. The counts are exact (each check's coverage times
@@ -67,7 +67,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
 import physsim  # noqa: E402
-from experiments.pipeline import cli, files, posterior, report  # noqa: E402
+from experiments.pipeline import calibration_tables, cli, files, posterior  # noqa: E402
 
 FIELDS = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
 SET_FIELDS = ('bending_scale', 'wind_speed', 'area_weight')
@@ -160,7 +160,7 @@ def pool_checks(paths: list[str]) -> dict:
   n = sum(ns)
   out = {}
   for mode in modes:
-    pooled = report.pooled_cells([d['modes'][mode] for d in docs], ns)
+    pooled = calibration_tables.pooled_cells([d['modes'][mode] for d in docs], ns)
     out[mode] = {}
     for q in FIELDS:
       cells = [d['modes'][mode][q] for d in docs]

@@ -102,7 +102,7 @@ class Reading:
     bending_length: posterior mean of c, m.
     bending_length_sd: its standard deviation, m: of a t law of
       ``bending_length_dof`` degrees of freedom whose scale is the fit's
-      spread and ``FLOOR`` in quadrature (``posterior.Measured`` reads it so).
+      spread and ``FLOOR`` in quadrature (``measurements.Measured`` reads it so).
     bending_length_dof: that law's degrees of freedom (``DOF``).
     fit_sd: the fit's own part, m.
     overhang: L, m (the given one: the ruler's, not refined by the curve).

@@ -58,6 +58,10 @@ def _read_npz(path: str, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
       if missing:
         raise ValueError(f'{path}: incomplete, no {missing} (rerun the estimate)')
       return {k: np.asarray(z[k]) for k in keys}
+  except ValueError as e:  # an object array (never unpickled), a bad header
+    if str(e).startswith(path):
+      raise
+    raise ValueError(f'{path}: not a readable .npz ({str(e)[:80]})') from e
   except (OSError, EOFError, zipfile.BadZipFile) as e:
     raise ValueError(f'{path}: not a readable .npz ({type(e).__name__})') from e
 
@@ -98,7 +102,7 @@ def read_draws(workdir: str) -> tuple[str, np.ndarray, np.ndarray]:
   est = os.path.join(workdir, about)
   if os.path.exists(est):
     material = read_json(est).get('material', material)
-    if material not in physsim.FABRICS:
+    if not isinstance(material, str) or material not in physsim.FABRICS:
       raise ValueError(f'{est}: material {str(material)[:40]!r} is no known fabric')
   space = physsim.SearchSpace(*(tuple(float(v) for v in b) for b in bounds))
   p = physsim.params.from_unit(np.clip(samples.astype(np.float64), -1, 1), space)

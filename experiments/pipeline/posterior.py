@@ -20,20 +20,14 @@ from jax.scipy.special import logsumexp
 import bo
 import physsim
 from experiments.pipeline import files, measurements
-
-# Moved to the stages they belong to; still reachable here for the benchmarks
-# and studies that name them so (``layout``, ``measurements``).
-from experiments.pipeline.layout import read_draws  # noqa: E402, F401
-from experiments.pipeline.measurements import (  # noqa: E402, F401
+from experiments.pipeline.measurements import (
   FIELDS,
   Measured,
   cell_offsets,
-  check_dof,
   length_term,
   log_prior,
   physical,
   reading_range,
-  simulated_reading,
 )
 
 LEVELS = (50, 90)

@@ -16,18 +16,6 @@ import physsim
 from experiments.pipeline import files, measurements
 from experiments.pipeline import objective as obj_lib
 
-# Moved to ``calibration_tables`` (before the search, where ``setup`` reads
-# them); still reachable here for the benchmarks that name them so.
-from experiments.pipeline.calibration_tables import (  # noqa: E402, F401
-  SHAPE_PAPER_CALIBRATION_FILE,
-  fabric_check,
-  pooled_cells,
-  quoted_checks,
-  record_check,
-  record_fabric_checks,
-  shipped_calibration,
-)
-
 LABELS = {
   'bending_scale': 'bending (x measured)',
   'wind_speed': 'wind speed (m/s)',

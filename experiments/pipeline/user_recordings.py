@@ -209,6 +209,7 @@ def prepare(
           rgb=net.modality == 'rgb',
         )  # fmt: skip
       )
+      intake.check_clip(take.path, len(recs[-1].depth), own.simulation)
     # each recording carries its own intake's alignment error
     own, line = with_alignment_error(own, intakes[-1:], carry_alignment)
     configs.append(own)

@@ -57,8 +57,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import physsim  # noqa: E402
 from bo import design  # noqa: E402
-from experiments.pipeline import files, progress  # noqa: E402
-from experiments.pipeline import posterior as posterior_lib  # noqa: E402
+from experiments.pipeline import files, layout, progress  # noqa: E402
 from physsim import cantilever  # noqa: E402
 
 RESULT_FILE = 'protocol.json'
@@ -1094,7 +1093,7 @@ def check_plan(candidates, nodes: int, reading: float, config: Config) -> None:
 def plan(workdir: str, candidates=PLAN_CANDIDATES, nodes: int = 1,
          reading: float = 0.0, config: Config | None = None, *,
          show_progress: bool = True) -> dict:  # fmt: skip
-  """Ranks ``candidates`` for the estimate in ``workdir`` (``posterior.read_draws``);
+  """Ranks ``candidates`` for the estimate in ``workdir`` (``layout.read_draws``);
   slopes simulated at ``nodes`` posterior points with ``config``'s settings,
   cached in ``<workdir>/plan_slopes/``, with a progress bar and its time left
   (``show_progress``); writes ``plan.json``.
@@ -1105,7 +1104,7 @@ def plan(workdir: str, candidates=PLAN_CANDIDATES, nodes: int = 1,
   """
   config = config or Config()
   check_plan(candidates, nodes, reading, config)
-  material, draws, weights = posterior_lib.read_draws(workdir)
+  material, draws, weights = layout.read_draws(workdir)
   config = dataclasses.replace(config, material=material)
   points = node_values(draws, nodes)
   cache = os.path.join(

@@ -100,7 +100,7 @@ class Config:
     report_only: write the tables of what has finished; run nothing.
     wind_reading_sd: with > 0, every recording is estimated as if the wind had
       also been measured (an anemometer): a reading drawn around its truth with
-      this relative standard error (``posterior.simulated_reading``) enters
+      this relative standard error (``measurements.simulated_reading``) enters
       the search as a prior, so the search spends its simulations on that
       slice. Needs recordings with a truth.
     area_weight_reading_sd: the same for area weight (a scale and a ruler).
@@ -148,7 +148,7 @@ class Config:
 
 
 def simulated_measurement(config: Config, rec: dict, truth: dict | None):
-  """The ``posterior.Measured`` a recording is estimated with under
+  """The ``measurements.Measured`` a recording is estimated with under
   ``config``'s simulated readings (none: nothing measured)."""
   readings = {'wind_speed': config.wind_reading_sd,
               'area_weight': config.area_weight_reading_sd}  # fmt: skip

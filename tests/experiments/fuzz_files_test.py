@@ -293,12 +293,7 @@ def _damage(data, raw: bytes) -> bytes:
   return bytes(raw)
 
 
-@pytest.mark.xfail(
-  strict=False,
-  reason="layout.read_draws (the lead's): a posterior.npz cut to 1 byte is refused "
-  'as "pickled (object) data" without naming the file (issue 78)',
-)
-@_settings('estimate_files', shrink=False)
+@_settings('estimate_files')
 @given(data=st.data())
 def test_damaged_estimate_files_are_read_or_refused_by_name(
   scratch, estimate_files, data

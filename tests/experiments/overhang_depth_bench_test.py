@@ -9,7 +9,7 @@ import pytest
 
 import physsim
 from benchmarks import overhang_depth as bench
-from experiments.pipeline import report
+from experiments.pipeline import calibration_tables
 
 
 def test_the_law_scales_the_fit_and_floor_and_counts_holds_by_t_quantiles():
@@ -92,7 +92,9 @@ def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
     'gp_mean': np.zeros(g), 'gp_var': np.full(g, 1e-4), 'floor': 0.0, 'noise_sd': 1.0,
   }  # fmt: skip
   reading = {'c_hat': c, 'sd': 0.03 * c, 'dof': 4.0}
-  tables = bench.shipped_tables(report.shipped_calibration('shape', 'paper'))
+  tables = bench.shipped_tables(
+    calibration_tables.shipped_calibration('shape', 'paper')
+  )
   assert set(tables) == set(bench.MODE_OF_SET)  # the shipped file calibrates both
   out = bench.joint_estimate(run, reading, bench.Args(), seed=0, tables=tables)
   for how in ('raw', 'printed'):  # nominal levels, and as an estimate prints it
