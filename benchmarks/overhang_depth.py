@@ -379,7 +379,7 @@ def joint_estimate(run: dict, reading: dict, args: Args, seed: int,
 
 # Bending lengths below this (soft fabrics, overhangs of 1.3-2.3 cm) are
 # reported apart: before the reader kept the ruler's overhang, their intervals
-# held the truth less often than they said (docs/protocol.md, "Limits").
+# held the truth less often than they said (docs/studies/protocol.md, "Limits").
 SHORT_C = 0.009  # m
 
 

@@ -337,7 +337,7 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
   besides L (the sensor's noise along its rays, the strip's thickness, curl,
   and fibres of unequal overhang when it lies askew) moved a refined L by
   3-8% on short strips, more than the ruler's 1 mm, and c with it
-  (docs/protocol.md, "Limits"). On a rounded edge the strip bends from
+  (docs/studies/protocol.md, "Limits"). On a rounded edge the strip bends from
   ``setback`` behind the face (the rounding's radius, Gaussian with sd
   ``setback_sd``, at three nodes): the elastica starts there, flat, its
   free length L + setback, and c = (L + setback) / (its L / c). L / c is

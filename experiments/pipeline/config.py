@@ -78,7 +78,7 @@ class Scoring:
       summary's two components and the Gaussian likelihood their scatter
       implies (bo.synthetic).
     sharpness: the likelihood's constant, calibrated on simulations
-      (experiments/calibrate.py; docs/calibration.md): the default is the
+      (experiments/calibrate.py; docs/studies/calibration.md): the default is the
       value the shipped calibration chose. For 'synthetic', the exponent
       that tempers its likelihood (1: untempered).
     model_error: the likelihood's model-discrepancy term ('gibbs',

@@ -41,7 +41,7 @@ ERROR_LOSS = {'bending_scale': 'factor', 'wind_speed': 'relative',
 # For the wind and the load ratio, which the video measures, the median
 # (``'log'``): the percent error's action leans to the low tail of a wide
 # posterior, and on recordings of another physics (224, four seeds) and of the
-# windy rig the median was the closer of the two (docs/calibration.md, "The
+# windy rig the median was the closer of the two (docs/studies/calibration.md, "The
 # point"); on the estimator's own physics the two tie.
 POINT_LOSS = {**ERROR_LOSS, 'wind_speed': 'log', 'load_ratio': 'log',
               'air_coefficient': 'log'}  # fmt: skip

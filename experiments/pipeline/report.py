@@ -664,7 +664,7 @@ def synthetic_warning(config) -> str | None:
 
 # One clip reads the load ratio about twice as poorly above STRONG_LOAD_RATIO as
 # below GENTLE_LOAD_RATIO, and a longer clip helps only below (the sheet blown
-# nearly flat; benchmarks/gust_floor.py, BENCHMARKS.md).
+# nearly flat; benchmarks/gust_floor.py at c465b0e, docs/studies/benchmarks.md).
 STRONG_LOAD_RATIO = 10.0
 GENTLE_LOAD_RATIO = 8.0
 
@@ -709,7 +709,7 @@ def next_recording_note(shared: dict, config, workdir: str) -> str | None:
   """The one line ``estimate`` prints after every estimate whose bending or
   area weight the recordings left near the prior (``shared``: an estimate's
   ``estimate`` entries, or a joint estimate's shared ones): what to record or
-  measure next by the protocol study's bound (docs/protocol.md), and the
+  measure next by the protocol study's bound (docs/studies/protocol.md), and the
   command that ranks candidates with the simulator from this posterior."""
   # narrowing is the video's over the prior with the readings: a parameter a
   # reading measured (the strip's bending length, a scale's area weight) is

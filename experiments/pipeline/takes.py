@@ -19,7 +19,7 @@ as a protocol file (JSON or YAML)::
 A sheet filmed twice at one fan setting, once with a known mass taped along
 its free hem, shares that setting's one wind (``"fan"``: a label; the hem's
 ``"hem_mass"`` in kg): the hem then weighs the cloth against a known mass
-rather than through the simulator's drag law (docs/protocol.md)::
+rather than through the simulator's drag law (docs/studies/protocol.md)::
 
   {"recordings": [
     {"recording": "plain/depth", "camera_json": "cam.json", "fan": "low"},

@@ -106,7 +106,7 @@ class Config:
     area_weight_reading_sd: the same for area weight (a scale and a ruler).
     reading_seed: seed of the simulated readings (recording ``seq_id`` k
       gets the reading ``experiments.calibrate`` and
-      ``benchmarks/measured_modes.py`` draw for recording k with this seed).
+      ``benchmarks/measured_modes.py`` (at c465b0e) draw for recording k with this seed).
       Recording k of every evaluation set gets the same relative error for
       one seed: pooling several sets, give each its own.
     camera_error_m: with > 0, every recording's camera is given misplaced, as
