@@ -79,6 +79,9 @@ class Point:
       material's reference rigidity, ``physsim.reference_rigidity``).
     intervals: each parameter's 90% interval.
     cloth_size, cloth_resolution, fps: the estimate's sheet and clock.
+    air: the fabric's air coefficient and its 90% interval where the estimate
+      read one (``measurements``; the normal wind pressure over an ArcSim
+      sheet's), else None: ArcSim's 1.
   """
 
   source: str
@@ -89,6 +92,7 @@ class Point:
   cloth_size: float
   cloth_resolution: int
   fps: float
+  air: dict | None = None
 
   @property
   def rigidity(self) -> float:
@@ -173,8 +177,29 @@ def read_point(workdir: str) -> Point:
       )
     ),  # fmt: skip
     fps=in_range(path, 'config.fps', config.get('fps', 20.0), *FPS_RANGE),
+    air=_air(path, shared.get('air_coefficient')),
     **point,
   )
+
+
+AIR_RANGE = (0.05, 10.0)  # an air coefficient beyond it is no fabric's
+
+
+def _air(path: str, entry) -> dict | None:
+  """An estimate's air coefficient entry as ``{'value', 'interval_90'}``
+  (None: not read), refused naming the file if not finite or out of range."""
+  if entry is None:
+    return None
+  if not isinstance(entry, dict) or 'interval_90' not in entry:
+    raise ValueError(f'{path}: air_coefficient is no estimate entry')
+  value = in_range(
+    path, 'air_coefficient', entry.get('value', entry.get('median')), *AIR_RANGE
+  )
+  iv = [in_range(path, 'air_coefficient.interval_90', v, *AIR_RANGE)
+        for v in list(entry['interval_90'])[:3]]  # fmt: skip
+  if len(iv) != 2 or iv[0] > iv[1]:
+    raise ValueError(f'{path}: air_coefficient.interval_90 is not a (low, high) pair')
+  return {'value': value, 'interval_90': iv}
 
 
 def check_flags(draws: int, cloth_size: float, resolution: int, overhang: float,
@@ -292,7 +317,12 @@ def write(
     f'made for a {size:g} m sheet of {n} x {n} vertices ({1e3 * spacing:.3g} mm '
     f'apart): flex bending scale {s:.6g} ({_fit_words(fit)})',
     f'from {os.path.abspath(point.source)}; pinned at its top corners; no air '
-    '(add your own wind: physsim.face_wind_forces)',
+    '(add your own wind: physsim.face_wind_forces'
+    + (
+      f", density={point.air['value']:.4g}: this fabric's air coefficient)"
+      if point.air
+      else ')'
+    ),
     'load with physsim.export.load (or copy the custom numeric '
     f"{export.INVWEIGHT_KEY} into flexedge_invweight0) for the estimator's edges",
   ]
@@ -332,6 +362,17 @@ def write(
     },
     'point': {'bending_scale': b, 'area_weight': w},
     'interval_90': point.intervals,
+    **(
+      {
+        'air_coefficient': {
+          **point.air,
+          'meaning': "the normal wind pressure on this fabric over an ArcSim sheet's: "
+          'blow it with physsim.face_wind_forces(..., density=value)',
+        }
+      }
+      if point.air
+      else {}
+    ),  # fmt: skip
     'files': written,
   }
   texts[FABRIC_FILE] = _json(record, FABRIC_FILE)
@@ -378,6 +419,12 @@ def summary(record: dict) -> list[str]:
     )
   if fit['note']:
     out.append(fit['note'])
+  if 'air_coefficient' in record:
+    a = record['air_coefficient']
+    out.append(
+      f'air coefficient {a["value"]:.3g}{iv(a)}: blow it with '
+      f'physsim.face_wind_forces(..., density={a["value"]:.3g})'
+    )
   out.append(
     f'internal bending scale (x the reference {sim["reference_rigidity_uNm"]:.3g} '
     f"uN m): the flex's {sim['flex_bending_scale']:.4g}, the estimate's "

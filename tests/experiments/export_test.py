@@ -309,3 +309,28 @@ def test_an_export_of_a_fabric_too_fine_for_the_mesh_says_so(tmp_path):
   assert not fit['fitted'] and fit['reach_error'] is None
   assert math.isclose(record['simulator']['flex_bending_scale'], 2.5)
   assert any('not fitted' in line for line in fabric_files.summary(record))
+
+
+@pytest.mark.parametrize('joint', [False, True])
+def test_an_estimated_air_coefficient_travels_with_the_fabric(tmp_path, joint):
+  """Issue 76: the fabric's air coefficient, where the estimate read one, is in
+  fabric.json, the printout and the MJCF's note as the density to blow it with;
+  one out of range is refused naming the file, nothing written."""
+  _estimate(tmp_path / 'e', joint=joint, point={'air_coefficient': _entry(0.55)})
+  record = fabric_files.write(str(tmp_path / 'e'), str(tmp_path / 'f'), draws=5)
+  assert record['air_coefficient']['value'] == 0.55
+  assert record['air_coefficient']['interval_90'] == pytest.approx([0.495, 0.605])
+  assert any('density=0.55' in line for line in fabric_files.summary(record))
+  xml = (tmp_path / 'f' / fabric_files.MJCF_FILE).read_text()
+  assert "density=0.55: this fabric's air coefficient" in xml
+  _estimate(tmp_path / 'bad', point={'air_coefficient': _entry(1e9)})
+  with pytest.raises(
+    ValueError, match='estimate.json: air_coefficient=1e\\+09 outside'
+  ):
+    fabric_files.write(str(tmp_path / 'bad'), str(tmp_path / 'g'), draws=5)
+  assert _listing(tmp_path / 'g') is None
+  plain = tmp_path / 'plain'
+  _estimate(plain)
+  assert 'air_coefficient' not in fabric_files.write(
+    str(plain), str(tmp_path / 'h'), draws=5
+  )
