@@ -533,17 +533,29 @@ def iterations_of(n_evals: int, n_init: int, q: int) -> np.ndarray:
   return it
 
 
-def plot_trace(X_unit, Y, iteration, space, truth, path: str) -> None:
-  """PSD and each parameter per iteration (the paper's Figure 3).
+# What each distance's trace calls its score (a shape distance uses no network).
+DISTANCE_WORDS = {
+  'shape': ("distance of the sheet's mean shape (m$^2$)", 'shape distance'),
+  'energy': ('physics similarity distance (PSD)', 'PSD'),
+  'centroid': ('physics similarity distance (centroid)', 'PSD'),
+  'energy+shape': ('PSD and shape distance, geometric mean', 'distance'),
+}
+
+
+def plot_trace(X_unit, Y, iteration, space, truth, path: str,
+               distance: str = 'energy') -> None:  # fmt: skip
+  """The distance and each parameter per iteration (the paper's Figure 3).
 
   Args:
     X_unit: (n, 3) evaluated unit-cube points, in order.
-    Y: (n,) their PSDs (NaN: blew up).
+    Y: (n,) their distances (NaN: blew up).
     iteration: (n,) the iteration of each (``iterations_of``).
     space: the search space (axis limits).
     truth: true parameters or None.
     path: PNG path.
+    distance: the estimate's distance (``DISTANCE_WORDS``), for the labels.
   """
+  long_name, short_name = DISTANCE_WORDS.get(distance, DISTANCE_WORDS['energy'])
   X = np.asarray(physsim.from_unit(X_unit, space))  # (3, n)
   Y = np.asarray(Y, np.float64)
   ok = np.isfinite(Y)
@@ -563,8 +575,7 @@ def plot_trace(X_unit, Y, iteration, space, truth, path: str) -> None:
   if (~ok).any():
     ax.plot(xs[~ok], np.full((~ok).sum(), np.nanmax(Y) if ok.any() else 1), 'x',
             color='r', label='blew up')  # fmt: skip
-  ax.set(xlabel='iteration (0 = initial design)',
-         ylabel='physics similarity distance', yscale='log')  # fmt: skip
+  ax.set(xlabel='iteration (0 = initial design)', ylabel=long_name, yscale='log')
   ax.legend(fontsize=8)
   colour = np.log10(np.where(ok, Y, np.nan))
   for i, (ax, name) in enumerate(zip(axes[1:], physsim.Params._fields, strict=True)):
@@ -575,8 +586,10 @@ def plot_trace(X_unit, Y, iteration, space, truth, path: str) -> None:
       ax.set_yscale('log')
     if truth is not None:
       ax.axhline(truth[name], color='r', lw=1, label='truth')
-      ax.legend(fontsize=8, loc='best')
-  fig.colorbar(sc, ax=axes[1:], label='log$_{10}$ PSD (dark: low)', shrink=0.9)
+      ax.legend(fontsize=8, loc='upper left', bbox_to_anchor=(0, -0.18), frameon=False)
+  fig.colorbar(
+    sc, ax=axes[1:], label=f'log$_{{10}}$ {short_name} (dark: low)', shrink=0.9
+  )
   files.savefig(fig, path, dpi=90)
   plt.close(fig)
 

@@ -120,6 +120,7 @@ def write_result(
   draws.append(functools.partial(
     report.plot_trace, res.X, search_lib.discrepancies(res.Y), iteration, space,
     recording.truth, os.path.join(workdir, layout.TRACE_PNG),
+    distance=config.scoring.distance,
   ))  # fmt: skip
   draws.append(functools.partial(
     report.plot_montage,

@@ -246,9 +246,12 @@ class LiveSearch:
     if h is None or not len(h):
       return 'initial design scored'
     q = measurements.physical(h[-1], space)  # (3, 3): 5/50/95% x fields
-    return 'posterior so far, before recalibration: median [90%] ' + ', '.join(
-      f'{measurements.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
-      for i, f in enumerate(measurements.FIELDS)
+    return (
+      'posterior so far (uncalibrated; the table gives the estimate): median [90%] '
+      + ', '.join(
+        f'{measurements.SHORT[f]} {q[1, i]:.3g} [{q[0, i]:.3g}, {q[2, i]:.3g}]'
+        for i, f in enumerate(measurements.FIELDS)
+      )
     )
 
 
