@@ -513,8 +513,9 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
     if true is not None:
       ax.axvline(true[j], color='r', lw=1.5, label='truth')
     ax.set(xlabel=LABELS[name], yticks=[], xscale='log' if log else 'linear')
-    if j == 0:
-      ax.legend(fontsize=7)
+    if j == 0:  # above the panel: the histogram's bars stay in view
+      ax.legend(fontsize=7, loc='lower left', bbox_to_anchor=(0, 1.02), ncol=3,
+                frameon=False)  # fmt: skip
   pairs = ((1, 2), (0, 1), (0, 2))
 
   def edges(k):  # the posterior's range (padded), equal bins in the plotted scale
