@@ -10,13 +10,32 @@ free and held at ArcSim's: ``experiments.studies.air_protocol``.
 
 from __future__ import annotations
 
+import dataclasses
+
+from absl import logging
+
 from experiments.pipeline import cli
 from experiments.studies import air_protocol
 
 
-def main(study: air_protocol.Study) -> None:
-  air_protocol.run(study)
+@dataclasses.dataclass(frozen=True)
+class Args:
+  """The air protocol study from the command line.
+
+  Attributes:
+    study: the sets, their world and how they are estimated.
+  """
+
+  study: air_protocol.Study = air_protocol.Study()
+
+
+PRESETS = {k: Args(study=v) for k, v in air_protocol.PRESETS.items()}
+
+
+def main(args: Args) -> None:
+  logging.set_verbosity(logging.WARNING)
+  air_protocol.run(args.study)
 
 
 if __name__ == '__main__':
-  cli.run(air_protocol.Study, air_protocol.PRESETS, main)
+  cli.run(Args, PRESETS, main)
