@@ -40,8 +40,6 @@ def test_docstring_examples_keep_their_line_continuations(name):
   """A backslash at a line's end in a plain docstring is an escape: Python
   drops it and the newline, so --help showed the example's lines run
   together. Raw docstrings (or doubled backslashes) keep them."""
-  if name == 'validate':
-    pytest.skip('experiments/validate.py: owned by the export work (issue 78)')
   path = _ROOT / 'experiments' / f'{name}.py'
   seg = _module_docstring_source(path)
   raw = seg[:1].lower() == 'r'
