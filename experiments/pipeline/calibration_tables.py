@@ -492,7 +492,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
     return {'matches': True, **head, 'coverage': cal['coverage']}
   differs = _differing_fields(config, cal) + list(uncalibrated)
   if getattr(config.measured, 'air_free', False):
-    differs.append('air coefficient free (the tables hold it at ArcSim\'s 1)')
+    differs.append("air coefficient free (the tables hold it at ArcSim's 1)")
   mode = calibration_mode(config.measured, joint)
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')

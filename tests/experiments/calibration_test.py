@@ -191,7 +191,9 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
     PSD_ESTIMATE.replace(sharpness=0.7, q=8)
   )  # the budget
   assert other['differs'] == ['q']
-  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
+  monkeypatch.setattr(
+    calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json')
+  )
   assert 'not measured' in report.calibration_line(
     calibration_tables.calibration_note()
   )
@@ -707,7 +709,9 @@ def test_an_estimate_applies_the_calibration_file_it_is_given(tmp_path, monkeypa
   mine = tmp_path / 'mine.json'
   cal['recalibration']['n_calibration_recordings'] = 77
   mine.write_text(json.dumps(cal))
-  monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json'))
+  monkeypatch.setattr(
+    calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json')
+  )
   assert (
     calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7)) is None
   )
