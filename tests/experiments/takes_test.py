@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 import time
 
 import numpy as np
@@ -16,6 +15,7 @@ import pytest
 from experiments import estimate
 from experiments.pipeline import takes, user_recordings
 from physsim import overhang_depth
+from tests import blocking
 from tests.experiments import overhang_fixtures
 
 
@@ -142,32 +142,13 @@ def test_a_fifo_is_refused_by_name_never_opened(folder):
   fifo = str(folder / 'p.json')
   os.mkfifo(fifo)
   with pytest.raises(ValueError, match='FIFO') as e:
-    _in_thread(lambda: takes.read(fifo))
+    blocking.in_thread(lambda: takes.read(fifo))
   assert str(e.value).startswith(fifo)
   os.mkfifo(folder / 'sheet' / 'cam.json')
   path = _write(folder / 'q.json', {'recordings': [
     {'recording': 'sheet', 'camera_json': 'sheet/cam.json'}]})  # fmt: skip
   with pytest.raises(ValueError, match=r'recordings\[0\]: "camera_json" .*FIFO'):
-    _in_thread(lambda: takes.read(path))
-
-
-def _in_thread(fn, timeout: float = 10.0):
-  """fn() in a daemon thread, failing (not hanging) where it blocks."""
-  out = {}
-
-  def target():
-    try:
-      out['value'] = fn()
-    except BaseException as e:  # noqa: BLE001 - handed back to the test
-      out['error'] = e
-
-  t = threading.Thread(target=target, daemon=True)
-  t.start()
-  t.join(timeout)
-  assert not t.is_alive(), f'blocked for {timeout} s'
-  if 'error' in out:
-    raise out['error']
-  return out.get('value')
+    blocking.in_thread(lambda: takes.read(path))
 
 
 def test_flags_give_one_size_per_recording():

@@ -2,13 +2,13 @@
 
 import json
 import os
-import threading
 import time
 
 import numpy as np
 import pytest
 
 from physsim import camera, camera_files
+from tests import blocking
 
 _TOL = 1e-6
 W, H, FX, FY, CX, CY = 320, 240, 300.0, 310.0, 170.3, 110.2
@@ -225,25 +225,5 @@ def test_a_fifo_named_as_camera_file_is_refused_without_opening(tmp_path):
   os.mkfifo(fifo)
   t0 = time.perf_counter()
   with pytest.raises(ValueError, match='FIFO') as e:
-    _in_thread(lambda: camera_files.read_camera(fifo))
+    blocking.in_thread(lambda: camera_files.read_camera(fifo))
   assert str(e.value).startswith(fifo) and time.perf_counter() - t0 < 5
-
-
-def _in_thread(fn, timeout: float = 10.0):
-  """fn() in a daemon thread: a call that blocks (open() on a FIFO) fails the
-  test instead of hanging it."""
-  out = {}
-
-  def target():
-    try:
-      out['value'] = fn()
-    except BaseException as e:  # noqa: BLE001 - handed back to the test
-      out['error'] = e
-
-  t = threading.Thread(target=target, daemon=True)
-  t.start()
-  t.join(timeout)
-  assert not t.is_alive(), f'blocked for {timeout} s'
-  if 'error' in out:
-    raise out['error']
-  return out.get('value')
