@@ -490,10 +490,24 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   head['networks'] = len(cal.get('network', {}).get('seeds', [0]))
   if config is None:
     return {'matches': True, **head, 'coverage': cal['coverage']}
+  mode = calibration_mode(config.measured, joint)
+  differs = _differences(config, cal, mode, joint, recordings, network, uncalibrated)
+  if differs:
+    return {'matches': False, 'differs': differs, **head}
+  rec = cal.get('recalibration')
+  if not rec or mode not in rec['modes']:  # a calibration without tables
+    return {'matches': True, **head, 'coverage': cal['coverage']}
+  return _recalibrated(cal, head, mode, config.simulation.material, accuracy)
+
+
+def _differences(config, cal: dict, mode: str | None, joint: bool, recordings: int,
+                 network: dict | None, uncalibrated: tuple[str, ...]) -> list[str]:  # fmt: skip
+  """What keeps calibration ``cal``'s tables from an estimate with ``config``
+  in ``mode`` (``calibration_note``'s arguments), each in words; empty where
+  they apply."""
   differs = _differing_fields(config, cal) + list(uncalibrated)
   if getattr(config.measured, 'air_free', False):
     differs.append("air coefficient free (the tables hold it at ArcSim's 1)")
-  mode = calibration_mode(config.measured, joint)
   if joint and recordings != 2:
     differs.append(f'joint estimate of {recordings} recordings (calibrated: 2)')
   elif mode is None:
@@ -510,8 +524,17 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   rec = cal.get('recalibration')
   if rec and mode is not None and mode not in rec['modes']:
     differs.append(f'{mode} (not in this calibration)')
-  for name in _readings_of(mode) if rec else ():
-    value, sd = getattr(config.measured, name), getattr(config.measured, f'{name}_sd')
+  if rec:
+    differs += _reading_differences(config.measured, rec, mode)
+  return differs
+
+
+def _reading_differences(measured, rec: dict, mode: str | None) -> list[str]:
+  """The readings of ``mode`` whose uncertainty (or a bending length's error
+  law) lies outside what the tables ``rec`` were drawn with, each in words."""
+  differs = []
+  for name in _readings_of(mode):
+    value, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
     lo, hi = _calibrated_range(rec, name)
     if lo is None or not lo <= sd / value <= hi:
       differs.append(
@@ -519,28 +542,40 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
         + (f'{_pct_range(rec, name)})' if lo is not None else 'none)')
       )
     if name == 'bending_length':  # the reading's error law, as the tables drew it
-      dof = config.measured.bending_length_dof
+      dof = measured.bending_length_dof
       theirs = 0.0 if mode.endswith('(ruler)') else rec.get('length_dof', 0.0)
       if dof != theirs:
         differs.append(
           f'bending length error law ({_law(dof)}; calibrated: {_law(theirs)})'
         )
-  if differs:
-    return {'matches': False, 'differs': differs, **head}
-  if not rec or mode not in rec['modes']:  # a calibration without tables
-    return {'matches': True, **head, 'coverage': cal['coverage']}
-  held = cal['held_out'][mode]
-  levels = np.asarray(rec['modes'][mode])  # (len(PROBS), fields)
+  return differs
+
+
+def _weaker_network(cal: dict, accuracy: float | None) -> dict | None:
+  """``accuracy`` and the calibration networks' range where the estimate's
+  network is weaker than every one of them (its coverage was not measured);
+  else None."""
   calibrated_acc = [a for a in cal.get('network', {}).get('triplet_accuracy', [])
                     if a is not None]  # fmt: skip
-  weaker = (
+  return (
     {'accuracy': accuracy, 'calibrated': [min(calibrated_acc), max(calibrated_acc)]}
     if accuracy is not None and calibrated_acc and accuracy < min(calibrated_acc)
     else None
   )
+
+
+def _recalibrated(cal: dict, head: dict, mode: str, material: str,
+                  accuracy: float | None) -> dict:  # fmt: skip
+  """The note of an estimate the tables of ``mode`` cover: its recalibrated
+  levels and weights, the coverage they had held out, the readings they
+  were drawn with, and the checks on other physics (with ``material``'s own)."""
+  rec = cal['recalibration']
+  held = cal['held_out'][mode]
+  levels = np.asarray(rec['modes'][mode])  # (len(PROBS), fields)
+  weaker = _weaker_network(cal, accuracy)
   checks = quoted_checks(cal, mode)
   for c in checks:
-    if mine := fabric_check(cal, c, mode, config.simulation.material):
+    if mine := fabric_check(cal, c, mode, material):
       c['this_fabric'] = mine
   return {
     'matches': True, **head, 'mode': mode, 'recalibrated': True,

@@ -8,6 +8,7 @@ out (``combine_joint``, with ``posterior.joint``).
 
 from __future__ import annotations
 
+import functools
 import os
 
 import jax
@@ -160,28 +161,12 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   Raises:
     ValueError: a recording whose estimate failed (named).
   """
-  for job, r in zip(jobs, results, strict=True):
-    if isinstance(r, Exception):
-      raise ValueError(f'{job.recording.source}: {r}') from r
+  first = _finished_setup(jobs, results)
   configs = [job.config for job in jobs]
-  (first,) = resolve_jobs(jobs[:1])  # the joint_jobs' own setup, kept
-  if isinstance(first, Exception):
-    raise ValueError(f'{jobs[0].recording.source}: {first}') from first
-  winds = None
-  if any(c.measured.wind_speed_sd > 0 for c in configs):  # readings (some may lack)
-    winds = [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
   # The settings the recordings share.
   config = configs[0].replace(wind_speed=0.0, wind_speed_sd=0.0)
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
-  uncalibrated = []
-  if fans is not None and len(set(fans)) < len(fans):
-    uncalibrated.append('recordings sharing one fan setting')
-  if any(c.simulation.hem_mass for c in configs[1:]) and not config.simulation.hem_mass:
-    uncalibrated.append('hem_mass (a recording with a known mass at its hem)')
-  note = setup_lib.calibration(
-    configs[0], first.setup.network, joint=True, recordings=len(jobs),
-    uncalibrated=tuple(uncalibrated),
-  )  # fmt: skip
+  note = _joint_note(configs, first.setup.network, fans)
   # A joint the shipped tables cover was calibrated, and checked on another
   # physics, without a shared discrepancy; elsewhere the discrepancy keeps its
   # recordings from averaging away the simulator's error.
@@ -190,49 +175,23 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   air = _air_of(configs, space, first.setup.config.search.posterior_grid)
   combined, npz = joint_posterior(jobs, key, shared_sd, fans, air)
   grid = tuple(int(g) for g in npz[0]['grid'])
-  shared_air = lambda k: (  # the shared c's draws beside recording k's prior's
-    None if air is None else (combined['air'], npz[k]['air_prior_samples'])
-  )
   combined['samples'] = [  # a bending length places (b, w) within their cells
     posterior_lib.refine_draws(x, grid, space, c.measured, config.seed + k)
     for k, (x, c) in enumerate(zip(combined['samples'], configs, strict=True))
   ]
-  levels = results_lib.levels_of(note)
+  summary = functools.partial(_summary, combined, npz, space, note, air is not None)
+  winds = _wind_readings(configs)
   per = []
-  for k, (job, samples) in enumerate(zip(jobs, combined['samples'], strict=True)):
-    s = posterior_lib.summarise(
-      samples, space, npz[k]['prior_samples'], levels, results_lib.weights_of(note),
-      job.config.measured, air=shared_air(k),
-    )  # fmt: skip
-    per.append({
-      'recording': job.recording.source,
-      'alone': results[k]['estimate'],
-      'wind_speed': s['wind_speed'],
-      'load_ratio': s['load_ratio'],
-      **({'measured_wind': list(winds[k])} if winds and winds[k][1] > 0 else {}),
-      **({'fan': fans[k]} if fans is not None else {}),
-      **({'hem_mass': job.config.simulation.hem_mass}
-         if job.config.simulation.hem_mass else {}),
-      **({'truth': job.recording.truth} if job.recording.truth else {}),
-    })  # fmt: skip
+  for k, job in enumerate(jobs):
+    s = summary(k, job.config.measured)
+    per.append(_recording_entry(job, results[k]['estimate'], s, winds, fans, k))
     posterior_lib.plot(
-      samples, npz[k]['prior_samples'], space, job.recording.truth,
+      combined['samples'][k], npz[k]['prior_samples'], space, job.recording.truth,
       os.path.join(workdir, f'joint_recording_{k}.png'),
       title=f'{config.simulation.material}: joint posterior, recording {k}',
     )  # fmt: skip
-  shared = posterior_lib.summarise(
-    combined['samples'][0], space, npz[0]['prior_samples'], levels,
-    results_lib.weights_of(note), configs[0].measured, air=shared_air(0),
-  )  # fmt: skip
-  files.write_atomic(
-    os.path.join(workdir, layout.JOINT_POSTERIOR_FILE),
-    lambda p: np.savez(
-      p,
-      samples=combined['samples'][0],
-      bounds=space.bounds(),
-      **({'air_samples': combined['air']} if air else {}),
-    ),  # fmt: skip
-  )
+  shared = summary(0, configs[0].measured)
+  _write_joint_samples(workdir, combined, space, air_samples=bool(air))
   out = {
     'material': config.simulation.material,
     'recordings': per,
@@ -245,6 +204,88 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   }
   files.write_json(os.path.join(workdir, layout.JOINT_FILE), out)
   return out
+
+
+def _finished_setup(jobs: list[Job], results: list) -> Job:
+  """The first job with its setup (``joint_jobs``' own, kept), once every
+  recording's estimate has finished; raises ValueError naming one that
+  failed (its exception in ``results``) or whose setup is refused."""
+  for job, r in zip(jobs, results, strict=True):
+    if isinstance(r, Exception):
+      raise ValueError(f'{job.recording.source}: {r}') from r
+  (first,) = resolve_jobs(jobs[:1])  # the joint_jobs' own setup, kept
+  if isinstance(first, Exception):
+    raise ValueError(f'{jobs[0].recording.source}: {first}') from first
+  return first
+
+
+def _joint_note(configs: list, network: setup_lib.Network,
+                fans: list[str] | None) -> dict | None:  # fmt: skip
+  """The calibration note of a joint of recordings with ``configs``
+  (``setup.calibration``), naming what no calibration measured: recordings
+  sharing a fan setting, a known hem mass the first recording lacks."""
+  uncalibrated = []
+  if fans is not None and len(set(fans)) < len(fans):
+    uncalibrated.append('recordings sharing one fan setting')
+  hem_masses = [c.simulation.hem_mass for c in configs]
+  if any(hem_masses[1:]) and not hem_masses[0]:
+    uncalibrated.append('hem_mass (a recording with a known mass at its hem)')
+  return setup_lib.calibration(
+    configs[0], network, joint=True, recordings=len(configs),
+    uncalibrated=tuple(uncalibrated),
+  )  # fmt: skip
+
+
+def _wind_readings(configs: list) -> list[tuple[float, float]] | None:
+  """Each recording's wind reading (m/s, sd; (0, 0) where it has none), or
+  None where no recording was read."""
+  if not any(c.measured.wind_speed_sd > 0 for c in configs):
+    return None
+  return [(c.measured.wind_speed, c.measured.wind_speed_sd) for c in configs]
+
+
+def _summary(combined: dict, npz: list, space: physsim.SearchSpace, note,
+             air: bool, k: int, measured) -> dict:  # fmt: skip
+  """Recording ``k``'s joint draws summarised (``posterior.summarise``) at the
+  calibration ``note``'s levels and weights, with the shared air
+  coefficient's draws beside its prior's where the air was free (``air``)."""
+  return posterior_lib.summarise(
+    combined['samples'][k], space, npz[k]['prior_samples'],
+    results_lib.levels_of(note), results_lib.weights_of(note), measured,
+    air=(combined['air'], npz[k]['air_prior_samples']) if air else None,
+  )  # fmt: skip
+
+
+def _recording_entry(job: Job, alone: dict, s: dict, winds, fans, k: int) -> dict:
+  """Recording ``k``'s part of ``joint.json``: its estimate alone (``alone``),
+  its own wind and load ratio in the joint (``s``, its summary), and what
+  was known of it (wind reading, fan setting, hem mass, truth)."""
+  hem_mass = job.config.simulation.hem_mass
+  return {
+    'recording': job.recording.source,
+    'alone': alone,
+    'wind_speed': s['wind_speed'],
+    'load_ratio': s['load_ratio'],
+    **({'measured_wind': list(winds[k])} if winds and winds[k][1] > 0 else {}),
+    **({'fan': fans[k]} if fans is not None else {}),
+    **({'hem_mass': hem_mass} if hem_mass else {}),
+    **({'truth': job.recording.truth} if job.recording.truth else {}),
+  }
+
+
+def _write_joint_samples(workdir: str, combined: dict, space: physsim.SearchSpace,
+                         air_samples: bool) -> None:  # fmt: skip
+  """Writes the shared draws (``joint_posterior.npz``: bending and area weight
+  with the first recording's wind, and the air coefficient's where free)."""
+  files.write_atomic(
+    os.path.join(workdir, layout.JOINT_POSTERIOR_FILE),
+    lambda p: np.savez(
+      p,
+      samples=combined['samples'][0],
+      bounds=space.bounds(),
+      **({'air_samples': combined['air']} if air_samples else {}),
+    ),  # fmt: skip
+  )
 
 
 def _air_of(configs, space: physsim.SearchSpace, grid) -> tuple | None:
