@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from physsim import camera_files, input_files, video
+from physsim import camera_files, input_files, video_files
 
 IMAGE = ('sensor_msgs/msg/Image', 'sensor_msgs/Image')
 INFO = ('sensor_msgs/msg/CameraInfo', 'sensor_msgs/CameraInfo')
@@ -294,8 +294,11 @@ def _read(reader, path, depth_topic, info_topic, imu_topic, start) -> BagRecordi
     msg = reader.deserialize(raw, c.msgtype)
     if first is None:
       first = (int(msg.width), int(msg.height))
-      header = video.Header(max(depth_c.msgcount - start, 1), first[1], first[0])
-      if max(first) > video.MAX_SIDE or header.decoded_bytes > video.MAX_BYTES:
+      header = video_files.Header(max(depth_c.msgcount - start, 1), first[1], first[0])
+      if (
+        max(first) > video_files.MAX_SIDE
+        or header.decoded_bytes > video_files.MAX_BYTES
+      ):
         raise ValueError(
           f'{path}: {depth_c.topic}: {header.frames} frames of {first[0]} x '
           f'{first[1]} px ({header.decoded_bytes / 2**30:.1f} GiB decoded): too large'

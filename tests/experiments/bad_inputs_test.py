@@ -22,7 +22,7 @@ import pytest
 
 from experiments import estimate
 from experiments.pipeline import cli, files, intake, objective
-from physsim import camera_files, video
+from physsim import camera_files, video, video_files
 
 _ROOT = pathlib.Path(__file__).resolve().parents[2]
 _SMOKE = objective.PRESETS['smoke']
@@ -145,7 +145,7 @@ def test_frame_sizes_are_checked_from_headers_before_decoding(tmp_path):
   for t in range(3):
     png_header_only(folder / f'{t}.png', 12000, 9000)
   with pytest.raises(ValueError, match='12000 x 9000 px; no depth camera'):
-    video.read_header(str(folder))
+    video_files.read_header(str(folder))
   cam = camera(tmp_path / 'cam.json', 640, 360)
   with pytest.raises(ValueError, match='big: frames of 12000 x 9000'):
     intake.take_in(str(folder), intake.IntakeConfig(), cam, _SMOKE.simulation)
@@ -154,7 +154,7 @@ def test_frame_sizes_are_checked_from_headers_before_decoding(tmp_path):
     png_header_only(folder / f'{t}.png', 1200, 900)
   with pytest.raises(ValueError, match='cam.json: the camera is 640 x 360 but the f'):
     intake.take_in(str(folder), intake.IntakeConfig(), cam, _SMOKE.simulation)
-  assert video.read_header(str(folder)) == video.Header(3, 900, 1200)
+  assert video_files.read_header(str(folder)) == video_files.Header(3, 900, 1200)
   # A .npy header claiming 400 GB of frames, with no data behind it.
   npy = tmp_path / 'huge.npy'
   with open(npy, 'wb') as f:

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from physsim import dataset, video
+from physsim import dataset, video, video_files
 
 # MJPG is lossy; flat grey frames come back within a few intensity levels.
 _VIDEO_TOLERANCE = 4 / 255
@@ -223,7 +223,7 @@ def test_frame_names_natural_order_and_non_frames_skipped(tmp_path):
   np.testing.assert_allclose(
     out.depth[:, 0, 0], 1.0 + 0.001 * np.arange(1, 11), atol=1e-6
   )
-  assert video.frame_files(str(folder))[:3] == ['1.png', '2.png', '3.png']
+  assert video_files.frame_files(str(folder))[:3] == ['1.png', '2.png', '3.png']
   clip = video.load_depth_video(
     str(folder), source_fps=20, fps=None, size=None, start=4
   )
@@ -280,7 +280,7 @@ def test_a_fifo_named_like_a_frame_is_refused_by_name(tmp_path):
   os.mkfifo(folder / '0006.png')
   msg = _returns_within(lambda: video.load_depth_video(str(folder), source_fps=20))
   assert msg.startswith(str(folder / '0006.png')) and 'FIFO' in msg
-  msg = _returns_within(lambda: video.read_header(str(folder)))
+  msg = _returns_within(lambda: video_files.read_header(str(folder)))
   assert 'FIFO' in msg
   # A FIFO as the recording itself, and as the fps.txt beside frames.
   os.mkfifo(tmp_path / 'rec.npy')
