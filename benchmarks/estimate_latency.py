@@ -37,7 +37,7 @@ import time
 from absl import logging
 
 import physsim
-from experiments.pipeline import cli, embedding, estimation, files, layout, search
+from experiments.pipeline import cli, embedding, estimation, evaluation, files, layout
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import recording as recording_lib
@@ -114,7 +114,7 @@ def _summary(result: dict) -> dict:
 def against_lockstep(args: Args) -> None:
   """Each of ``args.seqs`` of the study ``args.against`` estimated alone,
   beside its estimate in the study's lockstep; a table and JSON (a list)."""
-  evaluator = search.Evaluator()
+  evaluator = evaluation.Evaluator()
   rows = []
   for seq in args.seqs:
     batched = recording_lib.read_json(
@@ -170,7 +170,7 @@ def _setting_row(args: Args, name: str) -> dict:
     rgb=net is not None and net.modality == 'rgb',
   )  # fmt: skip
   runs = []
-  evaluator = search.Evaluator()  # one compile per setting, reused by its runs
+  evaluator = evaluation.Evaluator()  # one compile per setting, reused by its runs
   for _ in range(1 + args.repeats):  # the first run compiles
     with tempfile.TemporaryDirectory() as tmp:
       t0 = time.perf_counter()

@@ -23,7 +23,7 @@ STAGES = (
   ('measurements',),
   ('config', 'problem', 'objective'),
   ('calibration_tables', 'setup'),
-  ('search',),
+  ('evaluation', 'searcher', 'resume', 'search'),
   ('posterior', 'fit_check'),
   ('report', 'results', 'joint'),
   ('estimation', 'user_recordings'),

@@ -145,7 +145,7 @@ class Search:
 
   point: str = cli.choice('bayes', POINTS)
   # 120 simulations in three calls of 40: on a GPU a call of up to ~48 worlds
-  # costs one call's fixed time (search.FLAT_WORLDS), so fewer, larger steps
+  # costs one call's fixed time (evaluation.FLAT_WORLDS), so fewer, larger steps
   # are faster; the shipped paper-size tables were fitted with this budget.
   q: int = 40
   n_init: int = 40

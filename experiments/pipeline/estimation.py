@@ -19,9 +19,10 @@ import functools
 
 from experiments.pipeline import embedding, joint, results, search
 from experiments.pipeline import setup as setup_lib
+from experiments.pipeline.evaluation import Evaluator
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import Recording
-from experiments.pipeline.search import Evaluator, Job
+from experiments.pipeline.searcher import Job
 
 
 def estimate(

@@ -21,7 +21,7 @@ from experiments.pipeline import results as results_lib
 from experiments.pipeline import setup as setup_lib
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import Recording
-from experiments.pipeline.search import Job, resolve_jobs
+from experiments.pipeline.searcher import Job, resolve_jobs
 
 # The settings a joint estimate's recordings may each have their own of; the
 # rest (material, likelihood, grid, search) they share.

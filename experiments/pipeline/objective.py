@@ -366,7 +366,7 @@ SIM_BUCKETS = 16
 # On a device a call simulates its distinct worlds alone only where that saves
 # at least this many times FLAT_WORLDS worlds: a call of up to FLAT_WORLDS costs
 # one step's fixed time however many it simulates (a padded call runs the
-# design's program, ``search._call_size``), and a new program shape costs its
+# design's program, ``evaluation._call_size``), and a new program shape costs its
 # compile and the simulator's graph, about 6 s on an H200 (an estimate's first
 # step against its later ones, BENCHMARKS.md), what some 200 worlds take to
 # simulate there at scale (28 a second).

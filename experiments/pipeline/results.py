@@ -19,7 +19,7 @@ import bo
 import physsim
 from experiments.pipeline import files, fit_check, layout, measurements, report
 from experiments.pipeline import posterior as posterior_lib
-from experiments.pipeline import search as search_lib
+from experiments.pipeline import searcher as search_lib
 from experiments.pipeline import setup as setup_lib
 from experiments.pipeline.config import SHAPE_DISTANCES
 

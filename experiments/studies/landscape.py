@@ -37,7 +37,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 import physsim  # noqa: E402
-from experiments.pipeline import cli, embedding, files, progress, search  # noqa: E402
+from experiments.pipeline import cli, embedding, evaluation, files, progress  # noqa: E402
 from experiments.pipeline import objective as est  # noqa: E402
 from experiments.pipeline import recording as recording_lib  # noqa: E402
 from experiments.studies import separability  # noqa: E402
@@ -154,7 +154,7 @@ def _signature(
 
 def evaluate_points(problem: est.Problem, U, batch, state_path, signature):
   """(N,) PSD and (N, len(STATS)) motion stats of unit points ``U``, resumable."""
-  evaluate = search.Evaluator()
+  evaluate = evaluation.Evaluator()
   mesh, fps = evaluate.objective(problem).mesh, problem.config.simulation.fps
   n = len(U)
   psd = np.full(n, np.nan)

@@ -17,7 +17,16 @@ import pytest
 
 import physsim
 from experiments import estimate
-from experiments.pipeline import cli, files, layout, objective, search
+from experiments.pipeline import (
+  cli,
+  evaluation,
+  files,
+  layout,
+  objective,
+  resume,
+  search,
+  searcher,
+)
 from experiments.pipeline.posterior import Measured
 from experiments.studies import tables
 
@@ -151,30 +160,30 @@ def test_a_design_is_scored_in_calls_of_q_only_on_mujoco_c():
   # the C backend: time grows with the worlds, a second program shape compiles
   # for seconds; a GPU scores 48 as fast as 24 (BENCHMARKS.md)
   paper = objective.EstimateConfig().replace(q=24, n_init=48)
-  assert search._call_size([paper.replace(backend='c')], 48) == 24
-  assert search._call_size([paper.replace(backend='c')], 24) == 24
-  assert search._call_size([paper.replace(backend='c')], 1) == 1
-  assert search._call_size([paper.replace(backend='warp')], 48) == 48
-  assert search._call_size([paper.replace(backend='mjx')], 48) == 48
+  assert evaluation._call_size([paper.replace(backend='c')], 48) == 24
+  assert evaluation._call_size([paper.replace(backend='c')], 24) == 24
+  assert evaluation._call_size([paper.replace(backend='c')], 1) == 1
+  assert evaluation._call_size([paper.replace(backend='warp')], 48) == 48
+  assert evaluation._call_size([paper.replace(backend='mjx')], 48) == 48
   mixed = [paper.replace(backend='c'), paper.replace(backend='c', q=8)]
-  assert search._call_size(mixed, 48) == 24
+  assert evaluation._call_size(mixed, 48) == 24
 
 
 def test_a_small_gpu_call_is_padded_to_the_design_but_a_lockstep_is_not():
   # one estimate on a GPU: its steps of q and a resumed search's one
   # candidate run the design's program shape (within FLAT_WORLDS worlds)
   paper = objective.EstimateConfig().replace(q=24, n_init=48, backend='warp')
-  assert search.FLAT_WORLDS == 48
-  assert search._call_size([paper], 24) == 48
-  assert search._call_size([paper], 1) == 48
-  assert search._call_size([paper], 48) == 48
+  assert evaluation.FLAT_WORLDS == 48
+  assert evaluation._call_size([paper], 24) == 48
+  assert evaluation._call_size([paper], 1) == 48
+  assert evaluation._call_size([paper], 48) == 48
   # two searches' rows: 2 x 48 worlds is past the flat cost, no padding
-  assert search._call_size([paper, paper], 24, rows=2) == 24
+  assert evaluation._call_size([paper, paper], 24, rows=2) == 24
   small = paper.replace(q=4, n_init=8)
-  assert search._call_size([small], 4, rows=4) == 8
-  assert search._call_size([small], 4, rows=8) == 4
+  assert evaluation._call_size([small], 4, rows=4) == 8
+  assert evaluation._call_size([small], 4, rows=8) == 4
   # MuJoCo C never pads past q
-  assert search._call_size([paper.replace(backend='c')], 1) == 1
+  assert evaluation._call_size([paper.replace(backend='c')], 1) == 1
 
 
 def test_the_default_distance_is_the_shape_and_the_papers_the_psd():
@@ -212,7 +221,7 @@ def test_check_numbers_names_the_flag_in_every_section():
 
 
 def _fake_problem():
-  """What ``search.check_run`` reads of a problem and its recording."""
+  """What ``resume.check_run`` reads of a problem and its recording."""
   pose = physsim.Pose(rotation=np.eye(3)[None], position=np.zeros((1, 3)))
   problem = types.SimpleNamespace(
     data=types.SimpleNamespace(poses=pose),
@@ -226,7 +235,7 @@ def _fake_problem():
 def test_an_old_workdirs_run_resumes(tmp_path):
   problem, rec = _fake_problem()
   workdir = str(tmp_path)
-  search.check_run(search.Job(SMOKE, rec, '', workdir), problem)
+  resume.check_run(search.Job(SMOKE, rec, '', workdir), problem)
   path = os.path.join(workdir, layout.RUN_FILE)
   with open(path) as f:
     run = json.load(f)
@@ -236,15 +245,15 @@ def test_an_old_workdirs_run_resumes(tmp_path):
   # same run for that distance; today's default is another, named
   run['config'] = {k: v for k, v in OLD_SMOKE.items() if k not in resumable}
   files.write_json(path, run)
-  search.check_run(
+  resume.check_run(
     search.Job(OLD_SMOKE_CONFIG.replace(workers=3), rec, '', workdir), problem
   )
   with pytest.raises(ValueError, match=r'config\.gusts'):
-    search.check_run(
+    resume.check_run(
       search.Job(OLD_SMOKE_CONFIG.replace(gusts=0.3), rec, '', workdir), problem
     )
   with pytest.raises(ValueError, match=r'config\.distance'):
-    search.check_run(search.Job(SMOKE, rec, '', workdir), problem)
+    resume.check_run(search.Job(SMOKE, rec, '', workdir), problem)
 
 
 def test_a_bending_length_enters_the_files_only_when_given():
@@ -258,7 +267,7 @@ def test_a_bending_length_enters_the_files_only_when_given():
 
 def test_the_model_error_reaches_the_search_and_is_checked():
   config = objective.EstimateConfig().replace(model_error=0.3)
-  assert search.posterior_config(config).model_error == 0.3
+  assert searcher.posterior_config(config).model_error == 0.3
   for bad in (-0.1, float('nan'), float('inf')):
     with pytest.raises(ValueError, match='model_error'):
       config.replace(model_error=bad).check()

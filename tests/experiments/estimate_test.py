@@ -19,7 +19,16 @@ import pytest
 
 import model as model_lib
 import physsim
-from experiments.pipeline import embedding, estimation, layout, report, results, search
+from experiments.pipeline import (
+  embedding,
+  estimation,
+  evaluation,
+  layout,
+  report,
+  results,
+  resume,
+  search,
+)
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -45,7 +54,7 @@ _FUSED_TOLERANCE = 1e-4
 
 # One evaluator for the whole file: each fused program compiles once (per
 # structure and shape), as it would for a user's many estimates in one process.
-EVALUATOR = search.Evaluator()
+EVALUATOR = evaluation.Evaluator()
 
 
 def _estimate(config, rec, model, workdir, **kw):
@@ -85,12 +94,12 @@ def test_a_design_larger_than_q_is_scored_in_calls_of_q(env, monkeypatch):
   # call of all ten (the reference: the same problem told q = 10).
   config = CONFIG.replace(point='median', sensor_noise=True)
   u = np.random.default_rng(0).uniform(-1, 1, (10, 3))
-  whole = search.score(
+  whole = evaluation.score(
     obj_lib.make_problem(config.replace(q=10), env['net'], env['rec']), u,
     first=3, frames=True, positions=True,
   )  # fmt: skip
   counting = _CountCalls(monkeypatch)
-  chunked = search.score(
+  chunked = evaluation.score(
     obj_lib.make_problem(config, env['net'], env['rec']), u,
     first=3, frames=True, positions=True,
   )  # fmt: skip
@@ -351,7 +360,7 @@ def test_resume_refuses_another_run(env, recovery):
   # the C worker count does not change results: it may differ on resume
   workers = CONFIG.replace(workers=2)
   job = search.Job(workers, env['rec'], env['model'], full)
-  search.check_run(job, obj_lib.make_problem(workers, env['net'], env['rec']))
+  resume.check_run(job, obj_lib.make_problem(workers, env['net'], env['rec']))
 
 
 def _blow_up(monkeypatch, worlds):
@@ -588,7 +597,7 @@ def test_fused_objective_on_mjx_matches_mujoco_c(env):
   np.testing.assert_allclose(mjx.psd, c.psd, rtol=0.2, atol=5e-3)
   assert mjx.psd[0, 0] < 0.5 * mjx.psd[0, 1]  # the truth still scores best
   # Off MuJoCo C one candidate is scored in a call padded to the design's
-  # size (search.FLAT_WORLDS): the program above, the same score (common
+  # size (evaluation.FLAT_WORLDS): the program above, the same score (common
   # random numbers: a candidate's score does not depend on its neighbours).
   shapes = []
 
@@ -596,9 +605,9 @@ def test_fused_objective_on_mjx_matches_mujoco_c(env):
     shapes.append(np.shape(u))
     return objective(data, u, *args, **kw)
 
-  evaluator = search.Evaluator()
+  evaluator = evaluation.Evaluator()
   evaluator.objectives[problem.structure()] = spy
-  one = search.score(problem, u[:1], evaluator=evaluator)
+  one = evaluation.score(problem, u[:1], evaluator=evaluator)
   assert shapes == [(1, 2, 3)]  # (problems, candidates, 3)
   assert one.psd.shape == (1,)
   np.testing.assert_allclose(one.psd, mjx.psd[0, :1], rtol=1e-5)
@@ -626,7 +635,7 @@ def test_a_program_compiled_ahead_is_the_one_the_call_runs(env):
     np.stack([_u_truth(), np.zeros(3)]),
     np.array([[0.3, -0.2, 0.1], [-0.5, 0.4, 0.6]]),
   ]
-  ahead, late = search.Evaluator(), search.Evaluator()
+  ahead, late = evaluation.Evaluator(), evaluation.Evaluator()
   t = threading.Thread(
     target=ahead.compile, args=(problems, [2, 2]), kwargs=dict(frames=True)
   )

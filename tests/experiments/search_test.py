@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import estimation, layout
+from experiments.pipeline import estimation, evaluation, layout
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import search as em
 from tests.experiments.estimate_fixtures import (
@@ -123,14 +123,14 @@ def test_a_search_lands_as_soon_as_it_stops(env, tmp_path, monkeypatch):
     em.Job(config, rec, env['model'], str(tmp_path / 'long')),
     em.Job(config.replace(max_iter=1), rec, env['model'], short),
   ]
-  real = em.Evaluator.__call__
+  real = evaluation.Evaluator.__call__
   seen = []
 
   def watching(self, problems, us, firsts, **kw):
     seen.append((len(problems), os.path.isfile(os.path.join(short, 'estimate.json'))))
     return real(self, problems, us, firsts, **kw)
 
-  monkeypatch.setattr(em.Evaluator, '__call__', watching)
+  monkeypatch.setattr(evaluation.Evaluator, '__call__', watching)
   out = estimation.estimate_many(jobs, progress=False)
   # steps: initial design (both), iteration 1 (both; the short one stops),
   # then the long one alone, with the short one's result already written
@@ -149,9 +149,9 @@ def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
   config, rec = env['recs'][0]
   config = config.replace(max_iter=1)
   jobs = [em.Job(config, rec, env['model'], str(tmp_path / f'w{i}')) for i in (0, 1)]
-  monkeypatch.setattr(em, '_on_mujoco_c', lambda configs: False)
+  monkeypatch.setattr(evaluation, '_on_mujoco_c', lambda configs: False)
   compiled, compiles_in_call, lowered, design_first = [], [], [], []
-  real_compile, real_call = em.Evaluator.compile, em.Evaluator.__call__
+  real_compile, real_call = evaluation.Evaluator.compile, evaluation.Evaluator.__call__
   real_init = obj_lib.Objective.__init__
 
   class Lowering:  # an objective's program, its lowerings counted
@@ -184,8 +184,8 @@ def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
     return out
 
   monkeypatch.setattr(obj_lib.Objective, '__init__', init)
-  monkeypatch.setattr(em.Evaluator, 'compile', compile_)
-  monkeypatch.setattr(em.Evaluator, '__call__', call)
+  monkeypatch.setattr(evaluation.Evaluator, 'compile', compile_)
+  monkeypatch.setattr(evaluation.Evaluator, '__call__', call)
   out = estimation.estimate_many(jobs, progress=False)
   assert compiled == [[config.search.q] * 2] and design_first == [True]
   assert len(compiles_in_call) == 2  # the design, then step 1
@@ -198,11 +198,15 @@ def test_lockstep_rows_pad_by_at_most_an_eighth_beyond_sixteen():
   # Up to 16 searches: the next power of two (few shapes where a compile costs
   # more than the padding); beyond, at most 1/8 more rows and at most eight
   # shapes per doubling (210 -> 224, where a power of two gave 256).
-  assert [em._pad(n) for n in (1, 2, 3, 5, 9, 16)] == [1, 2, 4, 8, 16, 16]
-  assert em._pad(210) == 224 and em._pad(17) == 18 and em._pad(256) == 256
+  assert [evaluation._pad(n) for n in (1, 2, 3, 5, 9, 16)] == [1, 2, 4, 8, 16, 16]
+  assert (
+    evaluation._pad(210) == 224
+    and evaluation._pad(17) == 18
+    and evaluation._pad(256) == 256
+  )
   for lo in (16, 32, 64, 128, 256):
     ns = np.arange(lo + 1, 2 * lo + 1)
-    rows = np.array([em._pad(int(n)) for n in ns])
+    rows = np.array([evaluation._pad(int(n)) for n in ns])
     assert (rows >= ns).all() and (rows / ns).max() <= 1.125
     assert len(set(rows)) <= 8
 
@@ -296,7 +300,7 @@ def test_a_time_limit_stops_between_steps_and_the_rerun_resumes(
   # it is paid for), and the same call resumes to the uninterrupted result.
   from experiments.pipeline import deadline
 
-  real = em.Evaluator.__call__
+  real = evaluation.Evaluator.__call__
   clock = {'t': 0.0}
   monkeypatch.setattr(deadline.time, 'monotonic', lambda: clock['t'])
   steps = []
@@ -306,7 +310,7 @@ def test_a_time_limit_stops_between_steps_and_the_rerun_resumes(
     clock['t'] += 100.0  # each step "takes" 100 s of the budget
     return real(self, problems, us, firsts, **kw)
 
-  monkeypatch.setattr(em.Evaluator, '__call__', slow)
+  monkeypatch.setattr(evaluation.Evaluator, '__call__', slow)
   deadline.set_limit(250.0, start=0.0)
   try:
     with pytest.raises(deadline.Reached, match='stopped before step 3'):
@@ -315,5 +319,5 @@ def test_a_time_limit_stops_between_steps_and_the_rerun_resumes(
     deadline.set_limit(0.0)
   # steps 0-2 began inside the budget (300 s on the clock); step 3 did not
   assert len(steps) == 3
-  monkeypatch.setattr(em.Evaluator, '__call__', real)
+  monkeypatch.setattr(evaluation.Evaluator, '__call__', real)
   _resumes_to(env, 'limited', batched)

@@ -61,7 +61,7 @@ def _job(config, model_dir='', **kw):
 def test_jobs_resolve_once_per_network_folder(monkeypatch):
   # Three jobs of one network folder and one without: the network is restored
   # and its record read once; the shape job compares at the recording's size.
-  from experiments.pipeline import search
+  from experiments.pipeline import searcher
 
   loads = []
   net = embedding.no_network((32, 32))._replace(materials=('gray_interlock',))
@@ -70,24 +70,24 @@ def test_jobs_resolve_once_per_network_folder(monkeypatch):
   monkeypatch.setattr(embedding, 'network_accuracy', lambda d: 0.8)
   monkeypatch.setattr(embedding, 'network_retrieval', lambda d: None)
   jobs = [_job(SHAPE, 'runs/gray') for _ in range(3)] + [_job(SHAPE)]
-  out = search.resolve_jobs(jobs)
+  out = searcher.resolve_jobs(jobs)
   assert loads == ['runs/gray']
   assert all(o.setup.network.embedding is net for o in out[:3])
   assert out[3].setup.network.embedding.image_size == (24, 32)
   # A job that has its setup keeps it (nothing read again).
-  assert search.resolve_jobs(out)[0].setup is out[0].setup and loads == ['runs/gray']
+  assert searcher.resolve_jobs(out)[0].setup is out[0].setup and loads == ['runs/gray']
   # Each setup's calibration is the one resolve gives for its settings.
   assert out[3].setup.calibration == setup.resolve(SHAPE, '', image_size=32).calibration
 
 
 def test_a_job_that_cannot_be_set_up_is_its_error_not_the_batchs(monkeypatch):
-  from experiments.pipeline import search
+  from experiments.pipeline import searcher
 
   net = embedding.no_network((32, 32))._replace(materials=('black_denim',))
   monkeypatch.setattr(embedding, 'load_embedding', lambda d: net)
   for name in ('network_recipe', 'network_accuracy', 'network_retrieval'):
     monkeypatch.setattr(embedding, name, lambda d: None)
-  out = search.resolve_jobs([_job(SHAPE, 'runs/denim'), _job(SHAPE)])
+  out = searcher.resolve_jobs([_job(SHAPE, 'runs/denim'), _job(SHAPE)])
   assert isinstance(out[0], ValueError) and 'not gray_interlock' in str(out[0])
   assert out[1].setup is not None
 

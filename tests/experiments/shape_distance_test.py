@@ -20,7 +20,7 @@ import pytest
 
 import physsim
 from experiments import estimate as estimate_cli
-from experiments.pipeline import embedding, estimation, layout, report, search
+from experiments.pipeline import embedding, estimation, evaluation, layout, report
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -209,7 +209,7 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   n = config.search.n_init + config.search.q * config.search.max_iter
   assert z['Y'].shape == (n, 2) and np.isfinite(z['Y']).all()
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
-  again = search.score(problem, z['X'][:1])  # the first simulation, rescored
+  again = evaluation.score(problem, z['X'][:1])  # the first simulation, rescored
   np.testing.assert_allclose(again.residual[0], z['Y'][0], atol=_RESIDUAL_ATOL_M)
   wind = out['estimate']['wind_speed']
   assert wind['narrowing_90'] > 1.5, wind
