@@ -24,7 +24,13 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import cli, files
-from experiments.studies import protocol
+from experiments.studies import (
+  protocol_camera,
+  protocol_candidates,
+  protocol_config,
+  protocol_elastica,
+  protocol_slopes,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,17 +69,18 @@ PRESETS = {
 
 
 def main(args: Args) -> None:
-  bendings = protocol.floats('bendings', args.bendings)
+  bendings = protocol_config.floats('bendings', args.bendings)
   resolutions = [int(r) for r in args.resolutions]
   if min(resolutions) < 4 or not args.overhang > 0:
     raise ValueError('need --resolutions >= 4 and --overhang > 0')
   d0 = physsim.reference_rigidity(physsim.fabric(args.material).material)
-  config = protocol.Config(material=args.material, fps=args.fps)
+  config = protocol_config.Config(material=args.material, fps=args.fps)
   rows = []
   for n in resolutions:
-    cand = protocol.Candidate(args.overhang, 0.0, 2, n, overhang=True)
-    mesh = protocol.mesh(cand)
-    model = physsim.build(mesh, args.material, protocol.sim_config(cand, config))
+    cand = protocol_candidates.Candidate(args.overhang, 0.0, 2, n, overhang=True)
+    mesh = protocol_candidates.mesh(cand)
+    sim = protocol_slopes.sim_config(cand, config)
+    model = physsim.build(mesh, args.material, sim)
     t0 = time.time()
     out = physsim.simulate(
       model,
@@ -81,16 +88,19 @@ def main(args: Args) -> None:
         np.array(bendings), np.zeros(len(bendings)), np.full(len(bendings), args.area_weight)
       ),
       frames=round(args.clip * args.fps), fps=args.fps, warmup=args.warmup,
-      backend='c', workers=args.workers, space=protocol.SPACE, key=jax.random.key(0),
+      backend='c', workers=args.workers, space=protocol_config.SPACE,
+      key=jax.random.key(0),
     )  # fmt: skip
     if not np.all(out.valid):
       raise RuntimeError(f'{cand.name}: a simulation blew up')
-    reach = protocol.summaries(out.positions, mesh.vertices, n, args.overhang)[:, 2]
+    stats = protocol_camera.summaries(out.positions, mesh.vertices, n, args.overhang)
+    reach = stats[:, 2]
     for b, r in zip(bendings, reach, strict=True):
       rows.append({
         'resolution': n, 'spacing_mm': 1000 * args.overhang / (n - 2),
         'seconds': time.time() - t0,
-        **protocol.elastica_check(args.overhang, b, args.area_weight, float(r), d0),
+        **protocol_elastica.elastica_check(args.overhang, b, args.area_weight,
+                                           float(r), d0),
       })  # fmt: skip
     print(f'{cand.name}: {time.time() - t0:.0f} s', flush=True)
   print(f'{args.material}, {100 * args.overhang:g} cm over the edge, area weight '

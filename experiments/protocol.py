@@ -20,7 +20,7 @@ import os
 import shutil
 
 from experiments.pipeline import cli, files
-from experiments.studies import protocol
+from experiments.studies import protocol, protocol_config, protocol_report
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,23 +35,23 @@ class Args:
 
   workdir: str = cli.required()
   figure: str = ''
-  study: protocol.Config = protocol.Config()
+  study: protocol_config.Config = protocol_config.Config()
 
 
-PRESETS = {k: Args(study=v) for k, v in protocol.PRESETS.items()}
+PRESETS = {k: Args(study=v) for k, v in protocol_config.PRESETS.items()}
 
 
 def main(args: Args) -> None:
   result = protocol.run(args.study, args.workdir)
-  print(protocol.markdown(result))
+  print(protocol_report.markdown(result))
   for pair in result['convergence']:
-    print('mesh convergence (first truth):', protocol.convergence_line(pair))
+    print('mesh convergence (first truth):', protocol_report.convergence_line(pair))
   print(f'{result["seconds"]:.0f} s ({result["simulation_seconds"]:.0f} s of simulation '
-        f'from scratch); wrote {args.workdir}/{protocol.RESULT_FILE} '
-        f'and {protocol.FIGURE_FILE}')  # fmt: skip
+        f'from scratch); wrote {args.workdir}/{protocol_report.RESULT_FILE} '
+        f'and {protocol_report.FIGURE_FILE}')  # fmt: skip
   if args.figure:
     os.makedirs(os.path.dirname(args.figure) or '.', exist_ok=True)
-    src = os.path.join(args.workdir, protocol.FIGURE_FILE)
+    src = os.path.join(args.workdir, protocol_report.FIGURE_FILE)
     files.write_atomic(args.figure, lambda tmp: shutil.copyfile(src, tmp))
     print(f'copied the figure to {args.figure}')
 

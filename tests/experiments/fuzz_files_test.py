@@ -30,7 +30,7 @@ from hypothesis import strategies as st
 
 from experiments import plan as plan_script
 from experiments.pipeline import cli, layout, takes
-from experiments.studies import protocol
+from experiments.studies import protocol_config, protocol_plan
 
 N_EXAMPLES = {
   'protocol': 40,
@@ -232,7 +232,7 @@ _FLAG_VALUES = st.one_of(
                    '-inf', '', ' ', '0x10', '1_000', '3.5', '1e-300', '10' * 200]),
   st.floats(allow_nan=True, allow_infinity=True).map(repr),
   st.lists(
-    st.one_of(st.sampled_from(protocol.PLAN_CANDIDATES), st.text(max_size=30)),
+    st.one_of(st.sampled_from(protocol_plan.PLAN_CANDIDATES), st.text(max_size=30)),
     min_size=0, max_size=40,
   ).map(','.join),
 )  # fmt: skip
@@ -252,8 +252,8 @@ def test_plan_settings_are_taken_or_refused_by_name(chosen):
   t0 = time.perf_counter()
   try:
     args = cli.parse(plan_script.Args, plan_script.PRESETS, argv)
-    config = protocol.Config(draws=args.draws, clip=args.clip, seed=args.seed)
-    protocol.check_plan(list(args.candidates), args.nodes, args.reading, config)
+    config = protocol_config.Config(draws=args.draws, clip=args.clip, seed=args.seed)
+    protocol_plan.check_plan(list(args.candidates), args.nodes, args.reading, config)
   except absl_flags.Error as e:  # cli.run prints it as one line (exit 2)
     refused_by_name(e, *names)
     return
@@ -262,7 +262,7 @@ def test_plan_settings_are_taken_or_refused_by_name(chosen):
     return
   finally:
     assert time.perf_counter() - t0 < MAX_SECONDS
-  lo, hi = protocol.PLAN_LIMITS['nodes']
+  lo, hi = protocol_plan.PLAN_LIMITS['nodes']
   assert lo <= args.nodes <= hi and 3 <= args.draws <= 64
   assert 1 <= len(args.candidates) <= 32 and np.isfinite(args.clip)
 

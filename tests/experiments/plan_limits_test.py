@@ -13,7 +13,12 @@ import pytest
 import physsim
 from experiments import plan as script
 from experiments.pipeline import cli
-from experiments.studies import protocol
+from experiments.studies import (
+  protocol_candidates,
+  protocol_config,
+  protocol_plan,
+  protocol_slopes,
+)
 
 
 @pytest.mark.parametrize(
@@ -54,7 +59,7 @@ def test_plan_shows_its_progress_and_time_left(tmp_path, monkeypatch, capsys):
   def fake(c, bending, area_weight, config, cache_dir, key):
     calls.append(c.name)
     time.sleep(0.01)
-    path = protocol.slope_path(c, bending, area_weight, config, cache_dir)
+    path = protocol_slopes.slope_path(c, bending, area_weight, config, cache_dir)
     os.makedirs(cache_dir, exist_ok=True)
     row = {'wind': c.wind, 'slopes': [[1.0, 0.5, 0.2]] if c.wind else [[1.0, 0.5]],
            'noise_cov': [[0.1]]}  # fmt: skip
@@ -62,7 +67,7 @@ def test_plan_shows_its_progress_and_time_left(tmp_path, monkeypatch, capsys):
       json.dump(row, f)
     return row
 
-  monkeypatch.setattr(protocol, 'candidate_slopes', fake)
+  monkeypatch.setattr(protocol_slopes, 'candidate_slopes', fake)
   names = ('sheet_100cm_2ms_r5', 'swatch_20cm_still_r5', 'sheet_100cm_5ms_r5')
   args = script.Args(workdir=str(tmp_path), candidates=names, nodes=2, draws=3)
   script.main(args)
@@ -83,13 +88,13 @@ def test_plan_shows_its_progress_and_time_left(tmp_path, monkeypatch, capsys):
    '"noise_cov": [[1]]}', '\xff\xfe'],
 )  # fmt: skip
 def test_a_damaged_cached_slope_file_is_named(tmp_path, content):
-  c = protocol.parse('swatch_20cm_still_r5')
-  config = protocol.Config(draws=3, clip=0.5)
-  path = protocol.slope_path(c, 1.0, 0.2, config, str(tmp_path))
+  c = protocol_candidates.parse('swatch_20cm_still_r5')
+  config = protocol_config.Config(draws=3, clip=0.5)
+  path = protocol_slopes.slope_path(c, 1.0, 0.2, config, str(tmp_path))
   with open(path, 'w', encoding='latin-1') as f:
     f.write(content)
   with pytest.raises(ValueError, match=r'a damaged cached slope file') as e:
-    protocol.candidate_slopes(c, 1.0, 0.2, config, str(tmp_path), None)
+    protocol_slopes.candidate_slopes(c, 1.0, 0.2, config, str(tmp_path), None)
   assert str(e.value).startswith(path) and len(str(e.value)) <= 300
 
 
@@ -109,13 +114,15 @@ def test_the_command_leads_with_its_progress_not_jaxs_tpu_line(tmp_path):
   (tmp_path / 'estimate.json').write_text(json.dumps({'material': 'gray_interlock'}))
   smoke = script.PRESETS['smoke']
   material, draws, _ = layout.read_draws(str(tmp_path))
-  config = protocol.Config(draws=smoke.draws, clip=smoke.clip, warmup=0.25, seed=0)
+  config = protocol_config.Config(
+    draws=smoke.draws, clip=smoke.clip, warmup=0.25, seed=0
+  )
   config = dataclasses.replace(config, material=material)
-  b, w = np.exp(protocol.node_values(draws, 1)[0])
-  cache = tmp_path / protocol.PLAN_CACHE_DIR / f'clip{smoke.clip:g}_draws3_seed0'
+  b, w = np.exp(protocol_plan.node_values(draws, 1)[0])
+  cache = tmp_path / protocol_plan.PLAN_CACHE_DIR / f'clip{smoke.clip:g}_draws3_seed0'
   for name in smoke.candidates:
-    c = protocol.parse(name)
-    path = protocol.slope_path(c, float(b), float(w), config, str(cache))
+    c = protocol_candidates.parse(name)
+    path = protocol_slopes.slope_path(c, float(b), float(w), config, str(cache))
     os.makedirs(os.path.dirname(path), exist_ok=True)
     row = {'wind': c.wind, 'slopes': [[1.0, 0.5, 0.2]] if c.wind else [[1.0, 0.5]],
            'noise_cov': [[0.1]]}  # fmt: skip

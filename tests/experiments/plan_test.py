@@ -12,7 +12,7 @@ import pytest
 import physsim
 from experiments import plan as script
 from experiments.pipeline import layout
-from experiments.studies import protocol
+from experiments.studies import protocol_plan
 
 
 def _posterior(workdir, bending_u, area_u, n=400, seed=0):
@@ -41,8 +41,8 @@ def test_the_candidate_that_sees_the_widest_parameter_wins_by_hand(tmp_path):
     'slopes': [[1.0 * (i == 0), 1.0 * (i == 1)]],
     'noise_cov': [[sigma**2]],
   }
-  nodes = protocol.node_values(draws, 1)
-  ranked = protocol.rank_candidates(
+  nodes = protocol_plan.node_values(draws, 1)
+  ranked = protocol_plan.rank_candidates(
     draws,
     weights,
     {'bending': [sees(0)], 'area weight': [sees(1)]},
@@ -74,7 +74,7 @@ def test_plan_end_to_end_with_the_simulator(tmp_path, capsys):
   script.main(
     type(args)(**{**args.__dict__, 'workdir': str(tmp_path), 'reading': 0.02})
   )
-  with open(tmp_path / protocol.PLAN_FILE) as f:
+  with open(tmp_path / protocol_plan.PLAN_FILE) as f:
     result = json.load(f)
   ranked = {r['candidate']: r for r in result['ranked']}
   assert result['ranked'][0]['candidate'] == 'sheet_100cm_2ms_r5'
@@ -85,6 +85,6 @@ def test_plan_end_to_end_with_the_simulator(tmp_path, capsys):
 
 
 def test_an_overhang_is_described_as_the_depth_reader_wants_it_filmed():
-  words = protocol.describe('overhang_3cm_r9', 2.0)
+  words = protocol_plan.describe('overhang_3cm_r9', 2.0)
   assert '3 cm of it over the edge' in words and 'in front of the edge' in words
   assert 'experiments.overhang --depth' in words

@@ -12,7 +12,17 @@ import pytest
 
 import physsim
 from experiments import protocol as script
-from experiments.studies import protocol
+from experiments.studies import (
+  protocol,
+  protocol_bound,
+  protocol_camera,
+  protocol_candidates,
+  protocol_config,
+  protocol_elastica,
+  protocol_plan,
+  protocol_report,
+  protocol_slopes,
+)
 from physsim import cantilever
 
 
@@ -23,15 +33,15 @@ def test_smoke_preset_end_to_end(tmp_path, capsys):
   script.main(
     type(args)(workdir=str(tmp_path / 'w'), figure=str(figure), study=args.study)
   )
-  with open(tmp_path / 'w' / protocol.RESULT_FILE) as f:
+  with open(tmp_path / 'w' / protocol_report.RESULT_FILE) as f:
     result = json.load(f)
-  assert os.path.getsize(tmp_path / 'w' / protocol.FIGURE_FILE) > 1000
+  assert os.path.getsize(tmp_path / 'w' / protocol_report.FIGURE_FILE) > 1000
   assert figure.exists()
-  with open(tmp_path / 'w' / protocol.SUMMARY_FILE) as f:
+  with open(tmp_path / 'w' / protocol_report.SUMMARY_FILE) as f:
     assert 'slopes' not in json.load(f)  # the small file to commit
   assert {e['set'] for e in result['table']} == {'sheet', 'swatch', 'both'}
   for e in result['table']:
-    for mode in protocol.MODES:
+    for mode in protocol_bound.MODES:
       # a Fisher bound with a prior: never wider than the prior
       assert e[mode]['bending'] >= 1 - 1e-9 and e[mode]['area_weight'] >= 1 - 1e-9
     # weighing the fabric to 2%: at least the prior's sd over 2%
@@ -49,15 +59,15 @@ def test_smoke_preset_end_to_end(tmp_path, capsys):
 def test_set_narrowing_by_hand():
   # one recording seeing log bending with noise sd 0.5, one seeing log area
   # weight + log wind with sd 0.05: widths 1/sqrt(1/prior^2 + 1/sigma^2)
-  prior = protocol.priors('gray_interlock', 0.02)
+  prior = protocol_bound.priors('gray_interlock', 0.02)
   a = {'wind': 0.0, 'slopes': [[1.0, 0.0]], 'noise_cov': [[0.25]]}
   b = {'wind': 2.0, 'slopes': [[0.0, 1.0, 1.0]], 'noise_cov': [[0.0025]]}
-  r = protocol.set_narrowing([a], prior, 'video')
+  r = protocol_bound.set_narrowing([a], prior, 'video')
   sb = prior['log_bending']
   assert r['bending'] == pytest.approx(sb * np.sqrt(1 / sb**2 + 4), rel=1e-9)
   assert r['area_weight'] == pytest.approx(1.0)
   # with the wind read, the second pins area weight down: sd^-2 = prior^-2 + 1/(0.05^2 + reading^2)
-  r = protocol.set_narrowing([a, b], prior, 'anemometer')
+  r = protocol_bound.set_narrowing([a, b], prior, 'anemometer')
   sw, rd = prior['log_area_weight'], prior['reading']
   assert r['area_weight'] == pytest.approx(
     sw * np.sqrt(1 / sw**2 + 1 / (0.0025 + rd**2)), rel=1e-9
@@ -73,44 +83,46 @@ def test_a_hem_at_one_fan_setting_weighs_the_cloth_whatever_the_drag_law():
   # sd^-2 = prior^-2 + (1 - a)^2 / (2 sigma^2). The fan moved between them (a
   # wind each), nothing is learnt of w.
   sigma, a = 0.02, 0.6
-  prior = {**protocol.priors('gray_interlock', 0.02), 'log_wind': 1e4}
+  prior = {**protocol_bound.priors('gray_interlock', 0.02), 'log_wind': 1e4}
   rows = [
     {'wind': 2.0, 'slopes': [[0.0, -1.0, 2.0]], 'noise_cov': [[sigma**2]]},
     {'wind': 2.0, 'slopes': [[0.0, -a, 2.0]], 'noise_cov': [[sigma**2]]},
   ]
   sw = prior['log_area_weight']
-  one = protocol.set_narrowing(rows, prior, 'video', [False, True], drag_sd=1e4)
+  one = protocol_bound.set_narrowing(rows, prior, 'video', [False, True], drag_sd=1e4)
   assert one['area_weight'] == pytest.approx(
     sw * np.sqrt(1 / sw**2 + (1 - a) ** 2 / (2 * sigma**2)), rel=1e-6
   )
-  moved = protocol.set_narrowing(rows, prior, 'video', [False, False], drag_sd=1e4)
+  moved = protocol_bound.set_narrowing(
+    rows, prior, 'video', [False, False], drag_sd=1e4
+  )
   assert moved['area_weight'] == pytest.approx(1.0, abs=1e-6)
   # with the winds read to 2% but the drag law unknown, one recording says
   # nothing of w either: the load ratio is Cd v^2 / w
-  read = protocol.set_narrowing(rows[:1], prior, 'anemometer', drag_sd=1e4)
+  read = protocol_bound.set_narrowing(rows[:1], prior, 'anemometer', drag_sd=1e4)
   assert read['area_weight'] == pytest.approx(1.0, abs=1e-6)
-  trusted = protocol.set_narrowing(rows[:1], prior, 'anemometer')
+  trusted = protocol_bound.set_narrowing(rows[:1], prior, 'anemometer')
   assert trusted['area_weight'] > 2
 
 
 def test_sets_sharing_a_fan_setting():
   names = ['sheet_100cm_2ms_r9', 'sheet_100cm_2ms_hem100g_r9', 'sheet_100cm_3.5ms_r9',
            'overhang_3cm_r9']  # fmt: skip
-  sets = protocol.parse_sets(
+  sets = protocol_config.parse_sets(
     'a=sheet_100cm_2ms&sheet_100cm_2ms_hem100g+sheet_100cm_3.5ms', names
   )
   assert sets == {'a': [names[0], '&' + names[1], names[2]]}
-  assert protocol.shares_wind(sets['a'][1]) == (names[1], True)
+  assert protocol_config.shares_wind(sets['a'][1]) == (names[1], True)
   for bad in ('b=sheet_100cm_2ms&sheet_100cm_3.5ms', 'c=overhang_3cm&overhang_3cm'):
     with pytest.raises(ValueError, match='shares the wind'):
-      protocol.parse_sets(bad, names)
+      protocol_config.parse_sets(bad, names)
 
 
 def test_camera_distance_and_names():
-  assert protocol.camera_distance(1.0) == pytest.approx(
+  assert protocol_camera.camera_distance(1.0) == pytest.approx(
     1.0 / (0.6 * 2 * np.tan(np.radians(29)))
   )
-  assert protocol.camera_distance(0.2) == protocol.MIN_RANGE_M
+  assert protocol_camera.camera_distance(0.2) == protocol_camera.MIN_RANGE_M
   for name in (
     'sheet_100cm_3.5ms_r9',
     'swatch_20cm_still_r17',
@@ -119,17 +131,17 @@ def test_camera_distance_and_names():
     'sheet_100cm_2ms_hem100g_r9',
     'swatch_20cm_2ms_1pin_hem7.5g_r17',
   ):
-    assert protocol.parse(name).name == name
-  assert protocol.parse('sheet_100cm_2ms_hem100g_r9').hem == 100.0
+    assert protocol_candidates.parse(name).name == name
+  assert protocol_candidates.parse('sheet_100cm_2ms_hem100g_r9').hem == 100.0
   for bad in ('swatch_20_r9', 'sheet_100cm_2ms_hemg_r9', 'sheet_100cm_2ms_hem-5g_r9'):
     with pytest.raises(ValueError):
-      protocol.parse(bad)
+      protocol_candidates.parse(bad)
 
 
 def test_an_overhang_lies_flat_with_its_first_two_rows_held():
-  c = protocol.parse('overhang_5cm_r9')
+  c = protocol_candidates.parse('overhang_5cm_r9')
   assert c.overhang and c.wind == 0 and c.size == 0.05
-  m = protocol.mesh(c)
+  m = protocol_candidates.mesh(c)
   v = m.vertices
   np.testing.assert_allclose(v[:, 2], v[0, 2])  # flat, at the table's height
   # row 1 on the table's edge, row 0 a spacing back: 5 cm overhang the edge
@@ -138,16 +150,16 @@ def test_an_overhang_lies_flat_with_its_first_two_rows_held():
   )
   assert sorted(m.pinned) == list(range(18))  # rows 0 and 1: clamped
   # its swing after release carries no information (a resting strip is still)
-  sd = protocol.sensor_sd(c, 1.5, 30.0, 2.0, 0.05)
-  assert sd[5] == protocol.UNUSED_SD and np.all(sd[:5] < 1)
-  assert 'over the edge' in protocol.describe(c.name, 1.5)
+  sd = protocol_camera.sensor_sd(c, 1.5, 30.0, 2.0, 0.05)
+  assert sd[5] == protocol_camera.UNUSED_SD and np.all(sd[:5] < 1)
+  assert 'over the edge' in protocol_plan.describe(c.name, 1.5)
 
 
 def test_robust_slope_keeps_smooth_and_drops_scrambled():
   near = np.array([1.0, 1.0, 0.0])
   far = np.array([1.02, -3.0, 0.0])
   np.testing.assert_allclose(
-    protocol.robust_slope(near, far), [1.02 * (1 - 0.02**2 / 1.02**2), 0, 0]
+    protocol_slopes.robust_slope(near, far), [1.02 * (1 - 0.02**2 / 1.02**2), 0, 0]
   )
 
 
@@ -160,11 +172,11 @@ def test_an_overhang_shows_bending_more_than_the_sheet_in_wind():
   move with log bending by more, relative to their noise (set-up and sensor;
   it has no gusts and its swing is left out), than the sheet's. Could fail:
   if bending did nothing to the overhang (or its clamp let it fall)."""
-  config = protocol.Config(draws=3, clip=1.0, warmup=0.5)
+  config = protocol_config.Config(draws=3, clip=1.0, warmup=0.5)
   signal, reach = {}, {}
   for name in ('overhang_5cm_r9', 'sheet_100cm_2ms_r9'):
-    r = protocol.simulate_candidate(
-      protocol.parse(name), 1.0, 0.185, config, jax.random.key(0)
+    r = protocol_slopes.simulate_candidate(
+      protocol_candidates.parse(name), 1.0, 0.185, config, jax.random.key(0)
     )
     j = np.array(r['slopes'])[:, 0]
     signal[name] = float(np.max(np.abs(j) / np.sqrt(np.diag(r['noise_cov']))))
@@ -190,7 +202,7 @@ def test_an_overhang_is_compared_with_the_elastica_of_its_rigidity():
     {'candidate': 'overhang_10cm_r9', 'bending': 0.3, 'area_weight': 0.185,
      'summary': [0, 0, 0.05, 0, 0, 0]},
   ]  # fmt: skip
-  out = protocol.against_elastica(rows, 'gray_interlock')
+  out = protocol_elastica.against_elastica(rows, 'gray_interlock')
   assert len(out) == 2 and out[0]['elastica_reach'] == pytest.approx(reach)
   assert out[0]['rigidity_ratio'] == pytest.approx(1.0, rel=1e-4)
   assert out[1]['rigidity_ratio'] < 0.9
@@ -208,15 +220,17 @@ def test_the_simulated_overhang_hangs_near_the_elastica_of_its_rigidity():
   (1.6 bending lengths) reaches out as the heavy elastica says, within
   ``_ELASTICA_REACH_TOL``, and further than the elastica of half its
   rigidity would. Could fail: a wrong clamp, bending scale or mass."""
-  cand = protocol.parse('overhang_3cm_r9')
-  config = protocol.Config()
-  mesh = protocol.mesh(cand)
-  model = physsim.build(mesh, 'gray_interlock', protocol.sim_config(cand, config))
+  cand = protocol_candidates.parse('overhang_3cm_r9')
+  config = protocol_config.Config()
+  mesh = protocol_candidates.mesh(cand)
+  model = physsim.build(
+    mesh, 'gray_interlock', protocol_slopes.sim_config(cand, config)
+  )
   out = physsim.simulate(
     model, physsim.params.make(3.0, 0.0, 0.185), frames=30, fps=20.0, warmup=1.0,
-    backend='c', workers=1, space=protocol.SPACE, key=jax.random.key(0)[None],
+    backend='c', workers=1, space=protocol_config.SPACE, key=jax.random.key(0)[None],
   )  # fmt: skip
-  reach = protocol.summaries(out.positions, mesh.vertices, 9, 0.03)[0, 2]
+  reach = protocol_camera.summaries(out.positions, mesh.vertices, 9, 0.03)[0, 2]
   d0 = physsim.reference_rigidity(physsim.fabric('gray_interlock').material)
   c = (3.0 * d0 / (0.185 * cantilever.G)) ** (1 / 3)
   want = cantilever.tip(0.03 / c)[0][0]
@@ -235,15 +249,15 @@ def test_cached_slopes_are_kept_apart_by_the_settings_that_made_them(
     return {'clip': config.clip, 'wind': c.wind, 'slopes': [[1.0, 0.5, 0.2]],
             'noise_cov': [[0.1]]}  # fmt: skip
 
-  monkeypatch.setattr(protocol, 'simulate_candidate', fake)
-  c = protocol.parse('sheet_100cm_2ms_r9')
+  monkeypatch.setattr(protocol_slopes, 'simulate_candidate', fake)
+  c = protocol_candidates.parse('sheet_100cm_2ms_r9')
   for clip in (1.5, 5.0, 1.5, 5.0):
-    config = protocol.Config(clip=clip)
-    row = protocol.candidate_slopes(c, 1.0, 0.185, config, str(tmp_path), None)
+    config = protocol_config.Config(clip=clip)
+    row = protocol_slopes.candidate_slopes(c, 1.0, 0.185, config, str(tmp_path), None)
     assert row['clip'] == clip  # never another clip's slopes
   assert calls == [1.5, 5.0]  # each simulated once, then read back
   names = sorted(os.listdir(tmp_path))
-  assert len(names) == 2 and any(n.endswith(f'_v{protocol.CACHE_VERSION}.json')
+  assert len(names) == 2 and any(n.endswith(f'_v{protocol_slopes.CACHE_VERSION}.json')
                                  and '_b1_w0.185_v' in n for n in names)  # fmt: skip
 
 
@@ -255,18 +269,18 @@ def test_the_bias_another_physics_causes_by_hand():
   # the same fan setting, the wind unknown: the wind takes it (2 log v = d),
   # the area weight does not move.
   d, a, sigma = 0.05, 0.6, 0.02
-  prior = {**protocol.priors('gray_interlock', 1e-4), 'log_area_weight': 1e3}
+  prior = {**protocol_bound.priors('gray_interlock', 1e-4), 'log_area_weight': 1e3}
   rows = [
     {'wind': 2.0, 'slopes': [[0.0, -1.0, 2.0]], 'noise_cov': [[sigma**2]]},
     {'wind': 2.0, 'slopes': [[0.0, -a, 2.0]], 'noise_cov': [[sigma**2]]},
   ]
-  read = protocol.set_bias(rows[:1], [[d]], prior, 'anemometer')
+  read = protocol_bound.set_bias(rows[:1], [[d]], prior, 'anemometer')
   assert read['area_weight_bias_log'] == pytest.approx(-d, rel=1e-3)
   loose = {**prior, 'log_wind': 1e3}
-  pair = protocol.set_bias(rows, [[d], [d]], loose, 'video', [False, True])
+  pair = protocol_bound.set_bias(rows, [[d], [d]], loose, 'video', [False, True])
   assert abs(pair['area_weight_bias_log']) < 1e-6
   # its sd is set_narrowing's, the same model of the set
-  narrow = protocol.set_narrowing(rows, loose, 'video', [False, True])
+  narrow = protocol_bound.set_narrowing(rows, loose, 'video', [False, True])
   assert pair['area_weight_sd_log'] == pytest.approx(
     narrow['area_weight_sd_log'], rel=1e-9
   )
@@ -275,7 +289,7 @@ def test_the_bias_another_physics_causes_by_hand():
 @pytest.mark.parametrize('drag', [-0.1, float('nan'), float('inf')])
 def test_a_bad_drag_law_sd_is_refused_by_name(tmp_path, drag):
   with pytest.raises(ValueError, match='--drag_sd'):
-    protocol.run(protocol.Config(drag_sd=drag), str(tmp_path))
+    protocol.run(protocol_config.Config(drag_sd=drag), str(tmp_path))
 
 
 def test_the_bound_on_fewer_statistics_reads_only_those():
@@ -284,21 +298,21 @@ def test_the_bound_on_fewer_statistics_reads_only_those():
   (sd 0.05), the two uncorrelated: reading the first alone narrows bending
   and leaves area weight at the prior's, by hand; unknown or repeated names
   are refused by name."""
-  prior = protocol.priors('gray_interlock', 0.02)
-  n = len(protocol.STATS)
+  prior = protocol_bound.priors('gray_interlock', 0.02)
+  n = len(protocol_camera.STATS)
   slopes = np.zeros((n, 2))
   slopes[0, 0], slopes[2, 1] = 1.0, 1.0
   cov = np.diag([0.25, 1.0, 0.0025, 1.0, 1.0, 1.0])
   row = {'wind': 0.0, 'slopes': slopes.tolist(), 'noise_cov': cov.tolist()}
   sb, sw = prior['log_bending'], prior['log_area_weight']
-  first = protocol.set_narrowing([row], prior, 'video', stats=('centroid_out',))
+  first = protocol_bound.set_narrowing([row], prior, 'video', stats=('centroid_out',))
   assert first['bending'] == pytest.approx(sb * np.sqrt(1 / sb**2 + 4), rel=1e-9)
   assert first['area_weight'] == pytest.approx(1.0, rel=1e-12)
-  both = protocol.set_narrowing([row], prior, 'video')
+  both = protocol_bound.set_narrowing([row], prior, 'video')
   assert both['area_weight'] == pytest.approx(sw * np.sqrt(1 / sw**2 + 400), rel=1e-9)
-  bias = protocol.set_bias([row], [[0.0, 0.0, 0.01, 0, 0, 0]], prior, 'video',
-                           stats=('centroid_out',))  # fmt: skip
+  bias = protocol_bound.set_bias([row], [[0.0, 0.0, 0.01, 0, 0, 0]], prior, 'video',
+                                 stats=('centroid_out',))  # fmt: skip
   assert bias['area_weight_bias_log'] == 0.0  # the misfit is on a statistic not read
   for bad in (('centroid',), ('centroid_out', 'centroid_out')):
     with pytest.raises(ValueError, match='--stats='):
-      protocol.stat_index(bad)
+      protocol_bound.stat_index(bad)
