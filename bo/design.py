@@ -27,7 +27,8 @@ multimodal posterior is summarised by its covariance, and a noise covariance
 estimated from few replicates is itself noisy (``shrink``).
 
 Everything here is NumPy (``eig_nested_mc`` and ``linearize`` use JAX), pure,
-and free of the simulator: ``experiments.studies.protocol`` supplies the slopes.
+and free of the simulator: ``experiments.studies.protocol_slopes`` supplies the
+slopes.
 """
 
 from __future__ import annotations

@@ -17,8 +17,8 @@ area weight w (a Fisher bound, docs/studies/protocol.md, says how well: too
 poorly to build a reader). ``tip`` solves it in float64 (RK4 from the free
 end, bisection on the tip's angle; NumPy, vectorised over ratios): the
 reference the simulator's overhang is checked against
-(``experiments.studies.protocol``), and, inverted (``bending_length``), what a
-measured overhang says about D.
+(``experiments.studies.protocol_elastica``), and, inverted
+(``bending_length``), what a measured overhang says about D.
 """
 
 from __future__ import annotations
