@@ -99,26 +99,7 @@ def mujoco_xml(
   """
   check(bending_scale, area_weight)
   placeholder = cloth.build(mesh, material, config).mj_model
-  pinned = set(int(i) for i in mesh.pinned)
-  masses = area_weight * mesh.vertex_areas
-  bodies, names, vertex = [], [], []
-  for v, (x, m) in enumerate(zip(mesh.vertices, masses, strict=True)):
-    if v in pinned:
-      names.append('world')
-      vertex.append(x)
-      continue
-    name = f'cloth_{v}'
-    names.append(name)
-    vertex.append(np.zeros(3))
-    inertia = 0.4 * m * cloth.FLEX_RADIUS**2  # a solid ball of the flex's radius
-    bodies.append(
-      f'    <body name="{name}" pos="{_num(x, _GEOMETRY_DIGITS)}">\n'
-      f'      <inertial pos="0 0 0" mass="{_num(m)}" diaginertia="{_num([inertia] * 3)}"/>\n'
-      '      <joint type="slide" axis="1 0 0"/>\n'
-      '      <joint type="slide" axis="0 1 0"/>\n'
-      '      <joint type="slide" axis="0 0 1"/>\n'
-      '    </body>'
-    )
+  bodies, names, vertex = _bodies(mesh, area_weight)
   note = f'  <!-- {comment.replace("--", "- -")} -->\n' if comment else ''
   c = config
   young = young_modulus(bending_scale, material)
@@ -146,6 +127,35 @@ def mujoco_xml(
   </equality>
 </mujoco>
 """
+
+
+def _bodies(mesh: Mesh, area_weight: float) -> tuple[list, list, list]:
+  """The MJCF of ``mesh``'s vertices at ``area_weight``: ``(bodies, names,
+  vertex)``, each free vertex's body (its mass, a ball's inertia, three slide
+  joints), the flex's body per vertex ('world' for a pinned one) and its
+  position in that body (a pinned one's in the world, a free one's at its
+  body's origin)."""
+  pinned = set(int(i) for i in mesh.pinned)
+  masses = area_weight * mesh.vertex_areas
+  bodies, names, vertex = [], [], []
+  for v, (x, m) in enumerate(zip(mesh.vertices, masses, strict=True)):
+    if v in pinned:
+      names.append('world')
+      vertex.append(x)
+      continue
+    name = f'cloth_{v}'
+    names.append(name)
+    vertex.append(np.zeros(3))
+    inertia = 0.4 * m * cloth.FLEX_RADIUS**2  # a solid ball of the flex's radius
+    bodies.append(
+      f'    <body name="{name}" pos="{_num(x, _GEOMETRY_DIGITS)}">\n'
+      f'      <inertial pos="0 0 0" mass="{_num(m)}" diaginertia="{_num([inertia] * 3)}"/>\n'
+      '      <joint type="slide" axis="1 0 0"/>\n'
+      '      <joint type="slide" axis="0 1 0"/>\n'
+      '      <joint type="slide" axis="0 0 1"/>\n'
+      '    </body>'
+    )
+  return bodies, names, vertex
 
 
 def load(source: str) -> mujoco.MjModel:

@@ -223,94 +223,20 @@ def fit(
     ValueError: a value not finite and > 0, or a given overhang outside
       ``MIN_RATIO``-``MAX_RATIO`` bending lengths (named).
   """
-  for name, v in (('rigidity', rigidity), ('area_weight', area_weight),
-                  ('spacing', spacing)):  # fmt: skip
-    if not (math.isfinite(v) and v > 0):
-      raise ValueError(f'{name}={v}: need a finite value > 0')
-  if not (math.isfinite(overhang) and overhang >= 0):
-    raise ValueError(f'overhang={overhang}: need a finite value >= 0 (0: default)')
-  d0 = cloth.reference_rigidity(material)
-  nominal = rigidity / d0
+  _check(rigidity, area_weight, spacing, overhang)
+  nominal = rigidity / cloth.reference_rigidity(material)
   c = (rigidity / (area_weight * GRAVITY)) ** (1 / 3)
-  if overhang and not MIN_RATIO <= overhang / c <= MAX_RATIO:
-    raise ValueError(
-      f'overhang={overhang:g} m is {overhang / c:.2f} bending lengths ({1e3 * c:.1f} '
-      f'mm): need {MIN_RATIO:g}-{MAX_RATIO:g} for a reach that reads the bending'
-    )
-  free = max(MIN_FREE, round((overhang or OVERHANG_RATIO * c) / spacing))
+  free = _free_spacings(overhang, c, spacing)
   length = free * spacing
   base = Fit(nominal, nominal, False, spacing, length, c)
   if length / c > MAX_RATIO:
-    return dataclasses.replace(
-      base,
-      overhang=0.0,
-      note=(
-        f'not fitted: a spacing of {1e3 * spacing:.1f} mm is {spacing / c:.2f} '
-        f'bending lengths ({1e3 * c:.1f} mm); a strip of {MIN_FREE} spacings '
-        'hangs straight down at this mesh, so its bending reads nothing: the '
-        'nominal scale (refine the mesh to fit it)'
-      ),
-    )
+    return dataclasses.replace(base, overhang=0.0, note=_too_coarse_note(spacing, c))
   mesh = strip(spacing, free, columns)
   target_reach = float(cantilever.tip(length / c)[0][0]) * length
-  rollouts = 0
-
-  def reach_at(scale):
-    nonlocal config, rollouts
-    for _ in range(MAX_HALVINGS + 1):
-      rollouts += 1
-      x = settle(mesh, material, scale, area_weight, config, c)
-      if x is not None:
-        return x
-      step = config.timestep / 2
-      config = dataclasses.replace(
-        config, timestep=step, edge_solref=max(config.edge_solref, 2 * step)
-      )
-    raise ValueError(
-      f'the strip at bending scale {scale:.3g} blew up down to a step of '
-      f'{config.timestep:.3g} s'
-    )
-
-  def error(x):
-    return math.log(max(x[-1, 1], 1e-12) / target_reach)
-
-  lo_x, hi_x = math.log(nominal / SCALE_RANGE), math.log(nominal * SCALE_RANGE)
-  xs, fs, shapes = [math.log(nominal)], [], []
-  shapes.append(reach_at(nominal))
-  fs.append(error(shapes[0]))
-  nominal_reach = float(shapes[0][-1, 1])
-  while abs(fs[-1]) > tolerance and len(fs) < MAX_ROLLOUTS:
-    below = [i for i, f in enumerate(fs) if f < 0]
-    above = [i for i, f in enumerate(fs) if f > 0]
-    if below and above:  # bracketed: the secant of the closest pair on each side
-      i = max(below, key=lambda k: fs[k])
-      j = min(above, key=lambda k: fs[k])
-      x = xs[i] - fs[i] * (xs[j] - xs[i]) / (fs[j] - fs[i])
-    elif len(fs) == 1:  # the reach's bending length, as if the ratio were constant
-      try:
-        found = cantilever.bending_length(length, float(shapes[0][-1, 1]))
-        x = xs[0] + 3.0 * math.log(c / found)
-      except ValueError:
-        x = xs[0] + (math.log(2.0) if fs[0] < 0 else -math.log(2.0))
-    else:  # one side only: the secant of the last two, at most x4
-      slope = (fs[-1] - fs[-2]) / (xs[-1] - xs[-2])
-      step = -fs[-1] / slope if slope > 0 else math.copysign(math.log(2.0), -fs[-1])
-      x = xs[-1] + max(-math.log(4.0), min(math.log(4.0), step))
-    x = min(hi_x, max(lo_x, x))
-    if any(abs(x - v) < 1e-9 for v in xs):
-      break
-    xs.append(x)
-    shapes.append(reach_at(math.exp(x)))
-    fs.append(error(shapes[-1]))
+  strips = _Strips(mesh, material, area_weight, config, c)
+  xs, fs, shapes = _secant_search(strips, nominal, target_reach, length, c, tolerance)
   best = min(range(len(fs)), key=lambda k: abs(fs[k]))
   x = shapes[best]
-  line = x[1:, 1:] - x[1, 1:]  # from the edge: (reach, height)
-  sim = np.stack([line[:, 0], -line[:, 1]], axis=1)
-  rms = float(
-    np.sqrt(
-      np.mean(np.sum((sim - _elastica_shape(length / c, length, len(x))) ** 2, 1))
-    )
-  )
   note = ''
   if abs(fs[best]) > tolerance:
     note = (
@@ -319,6 +245,130 @@ def fit(
     )
   return dataclasses.replace(
     base, flex_scale=math.exp(xs[best]), fitted=True, reach=float(x[-1, 1]),
-    elastica_reach=target_reach, nominal_reach=nominal_reach,
-    shape_rms=rms / length, rollouts=rollouts, timestep=config.timestep, note=note,
+    elastica_reach=target_reach, nominal_reach=float(shapes[0][-1, 1]),
+    shape_rms=_shape_rms(x, length, c) / length, rollouts=strips.rollouts,
+    timestep=strips.config.timestep, note=note,
   )  # fmt: skip
+
+
+def _check(rigidity: float, area_weight: float, spacing: float, overhang: float):
+  """Raises ValueError (naming it) unless each of ``fit``'s values is finite
+  and > 0 (the overhang >= 0: 0 is the default)."""
+  for name, v in (('rigidity', rigidity), ('area_weight', area_weight),
+                  ('spacing', spacing)):  # fmt: skip
+    if not (math.isfinite(v) and v > 0):
+      raise ValueError(f'{name}={v}: need a finite value > 0')
+  if not (math.isfinite(overhang) and overhang >= 0):
+    raise ValueError(f'overhang={overhang}: need a finite value >= 0 (0: default)')
+
+
+def _free_spacings(overhang: float, c: float, spacing: float) -> int:
+  """Spacings over the edge: the given ``overhang`` (m; 0: ``OVERHANG_RATIO``
+  bending lengths ``c``) in whole spacings, at least ``MIN_FREE``. Raises
+  ValueError where a given overhang is outside ``MIN_RATIO``-``MAX_RATIO``
+  bending lengths: its reach would read nothing of the bending."""
+  if overhang and not MIN_RATIO <= overhang / c <= MAX_RATIO:
+    raise ValueError(
+      f'overhang={overhang:g} m is {overhang / c:.2f} bending lengths ({1e3 * c:.1f} '
+      f'mm): need {MIN_RATIO:g}-{MAX_RATIO:g} for a reach that reads the bending'
+    )
+  return max(MIN_FREE, round((overhang or OVERHANG_RATIO * c) / spacing))
+
+
+def _too_coarse_note(spacing: float, c: float) -> str:
+  """Why a mesh of ``spacing`` is not fitted to a bending length ``c``."""
+  return (
+    f'not fitted: a spacing of {1e3 * spacing:.1f} mm is {spacing / c:.2f} '
+    f'bending lengths ({1e3 * c:.1f} mm); a strip of {MIN_FREE} spacings '
+    'hangs straight down at this mesh, so its bending reads nothing: the '
+    'nominal scale (refine the mesh to fit it)'
+  )
+
+
+class _Strips:
+  """The fit's strip, settled at one flex scale after another (``settle``),
+  counting its rollouts and halving the step (``MAX_HALVINGS`` times at
+  most) where one blows up; later rollouts keep the shorter step."""
+
+  def __init__(self, mesh: Mesh, material: str, area_weight: float,
+               config: cloth.SimConfig, bending_length: float):  # fmt: skip
+    self.mesh, self.material, self.area_weight = mesh, material, area_weight
+    self.config, self.bending_length = config, bending_length
+    self.rollouts = 0
+
+  def __call__(self, scale: float) -> np.ndarray:
+    """The strip's rest shape at ``scale`` (``settle``). Raises ValueError
+    where it blows up at every step tried."""
+    for _ in range(MAX_HALVINGS + 1):
+      self.rollouts += 1
+      x = settle(self.mesh, self.material, scale, self.area_weight, self.config,
+                 self.bending_length)  # fmt: skip
+      if x is not None:
+        return x
+      step = self.config.timestep / 2
+      self.config = dataclasses.replace(
+        self.config, timestep=step, edge_solref=max(self.config.edge_solref, 2 * step)
+      )
+    raise ValueError(
+      f'the strip at bending scale {scale:.3g} blew up down to a step of '
+      f'{self.config.timestep:.3g} s'
+    )
+
+
+def _secant_search(strips: _Strips, nominal: float, target_reach: float,
+                   length: float, c: float, tolerance: float):  # fmt: skip
+  """Log flex scales tried from ``nominal`` until a strip's reach is within
+  ``tolerance`` of ``target_reach`` (or ``MAX_ROLLOUTS`` strips, or a step
+  that repeats one): ``(xs, fs, shapes)``, each scale's log, its log reach
+  error and its strip's rest shape."""
+
+  def error(x):
+    return math.log(max(x[-1, 1], 1e-12) / target_reach)
+
+  lo_x, hi_x = math.log(nominal / SCALE_RANGE), math.log(nominal * SCALE_RANGE)
+  xs, shapes = [math.log(nominal)], [strips(nominal)]
+  fs = [error(shapes[0])]
+  while abs(fs[-1]) > tolerance and len(fs) < MAX_ROLLOUTS:
+    x = min(hi_x, max(lo_x, _next_log_scale(xs, fs, shapes[0], length, c)))
+    if any(abs(x - v) < 1e-9 for v in xs):
+      break
+    xs.append(x)
+    shapes.append(strips(math.exp(x)))
+    fs.append(error(shapes[-1]))
+  return xs, fs, shapes
+
+
+def _next_log_scale(xs: list, fs: list, first: np.ndarray, length: float,
+                    c: float) -> float:  # fmt: skip
+  """The next log scale to try, from the log scales ``xs`` tried and their log
+  reach errors ``fs`` (``first``: the nominal scale's rest shape): the secant
+  of the closest pair on each side once bracketed; after one strip, the scale
+  of its reach's bending length (as if the flex's ratio were constant); else
+  the secant of the last two, at most x4."""
+  below = [i for i, f in enumerate(fs) if f < 0]
+  above = [i for i, f in enumerate(fs) if f > 0]
+  if below and above:
+    i = max(below, key=lambda k: fs[k])
+    j = min(above, key=lambda k: fs[k])
+    return xs[i] - fs[i] * (xs[j] - xs[i]) / (fs[j] - fs[i])
+  if len(fs) == 1:
+    try:
+      found = cantilever.bending_length(length, float(first[-1, 1]))
+      return xs[0] + 3.0 * math.log(c / found)
+    except ValueError:
+      return xs[0] + (math.log(2.0) if fs[0] < 0 else -math.log(2.0))
+  slope = (fs[-1] - fs[-2]) / (xs[-1] - xs[-2])
+  step = -fs[-1] / slope if slope > 0 else math.copysign(math.log(2.0), -fs[-1])
+  return xs[-1] + max(-math.log(4.0), min(math.log(4.0), step))
+
+
+def _shape_rms(x: np.ndarray, length: float, c: float) -> float:
+  """RMS distance, m, of a settled strip's centre line (``settle``'s rows)
+  from the elastica's at its rows."""
+  line = x[1:, 1:] - x[1, 1:]  # from the edge: (reach, height)
+  sim = np.stack([line[:, 0], -line[:, 1]], axis=1)
+  return float(
+    np.sqrt(
+      np.mean(np.sum((sim - _elastica_shape(length / c, length, len(x))) ** 2, 1))
+    )
+  )

@@ -297,8 +297,33 @@ def write(
   out = out or out_dir(workdir, n)
   log_draws = _read_draws(workdir) if draws > 0 else None
   mesh = physsim.square(n, size)
+  fit, config = _fitted(point, mesh, size, size / (n - 1), overhang)
+  b, w, s = point.bending_scale, point.area_weight, fit.flex_scale
+  units = _units(point)
+  comment = '; '.join(_comment(point, units, size, n, fit))
+  xml = export.mujoco_xml(mesh, point.material, s, w, config, comment=comment)
+  texts = {
+    MJCF_FILE: xml,
+    ARCSIM_FILE: json.dumps(export.arcsim_material(point.material, b, w), indent=1),
+    LICENSE_FILE: physsim.materials.license_text(),
+  }
+  if log_draws is not None:
+    texts[DRAWS_FILE] = _draws_table(log_draws, point, s / b, draws, seed)
+  kinds = {MJCF_FILE: 'mujoco', ARCSIM_FILE: 'arcsim', DRAWS_FILE: 'draws'}
+  written = {kinds[f]: os.path.join(out, f) for f in texts if f in kinds}
+  record = {**_record(point, units, fit, config, mesh, size, n), 'files': written}
+  texts[FABRIC_FILE] = _json(record, FABRIC_FILE)
+  _commit(texts, out)
+  return record
+
+
+def _fitted(point: Point, mesh: physsim.Mesh, size: float, spacing: float,
+            overhang: float) -> tuple[mesh_fit.Fit, physsim.SimConfig]:  # fmt: skip
+  """The flex's bending fitted at the spacing of ``mesh`` (a sheet of side
+  ``size``: ``mesh_fit.fit``, at ``overhang`` m or 0: ``fit_overhang``) and
+  the mesh's simulation config, its step no longer than the one the fit held
+  at and its edges no stiffer than that step resolves."""
   config = physsim.config_for_mesh(mesh, point.fps)
-  spacing = size / (n - 1)
   overhang = overhang or fit_overhang(size, point.bending_length)
   fit = mesh_fit.fit(point.material, point.rigidity, point.area_weight, spacing,
                      config, overhang=overhang)  # fmt: skip
@@ -308,14 +333,21 @@ def write(
   config = dataclasses.replace(
     config, edge_solref=max(config.edge_solref, 2 * config.timestep)
   )
-  b, w, s = point.bending_scale, point.area_weight, fit.flex_scale
-  units = _units(point)
-  lines = [
+  return fit, config
+
+
+def _comment(point: Point, units: dict, size: float, n: int,
+             fit: mesh_fit.Fit) -> list[str]:  # fmt: skip
+  """The lines of ``fabric.xml``'s comment: the fabric in a lab's units
+  (``units``: ``_units``), the sheet of ``n`` vertices a side over ``size`` m
+  it was made for and its fit, where it came from and how to load it."""
+  spacing = size / (n - 1)
+  return [
     f'{point.material}: bending rigidity {units["bending_rigidity_uNm"]["value"]:.4g} '
     f'uN m, bending length {units["bending_length_mm"]["value"]:.3g} mm, area '
     f'weight {units["area_weight_gsm"]["value"]:.4g} g/m^2',
     f'made for a {size:g} m sheet of {n} x {n} vertices ({1e3 * spacing:.3g} mm '
-    f'apart): flex bending scale {s:.6g} ({_fit_words(fit)})',
+    f'apart): flex bending scale {fit.flex_scale:.6g} ({_fit_words(fit)})',
     f'from {os.path.abspath(point.source)}; pinned at its top corners; no air '
     '(add your own wind: physsim.face_wind_forces'
     + (
@@ -326,17 +358,16 @@ def write(
     'load with physsim.export.load (or copy the custom numeric '
     f"{export.INVWEIGHT_KEY} into flexedge_invweight0) for the estimator's edges",
   ]
-  xml = export.mujoco_xml(mesh, point.material, s, w, config, comment='; '.join(lines))
-  texts = {
-    MJCF_FILE: xml,
-    ARCSIM_FILE: json.dumps(export.arcsim_material(point.material, b, w), indent=1),
-    LICENSE_FILE: physsim.materials.license_text(),
-  }
-  if log_draws is not None:
-    texts[DRAWS_FILE] = _draws_table(log_draws, point, s / b, draws, seed)
-  kinds = {MJCF_FILE: 'mujoco', ARCSIM_FILE: 'arcsim', DRAWS_FILE: 'draws'}
-  written = {kinds[f]: os.path.join(out, f) for f in texts if f in kinds}
-  record = {
+
+
+def _record(point: Point, units: dict, fit: mesh_fit.Fit, config: physsim.SimConfig,
+            mesh: physsim.Mesh, size: float, n: int) -> dict:  # fmt: skip
+  """``fabric.json``'s record but its ``files``: the fabric in a lab's units
+  (``units``), the sheet ``mesh`` (``n`` vertices a side over ``size`` m) and
+  its step, the simulator's internal scales and the fit (labelled), the
+  estimate's point and intervals, and its air coefficient where it read one."""
+  s = fit.flex_scale
+  return {
     'source': os.path.abspath(point.source),
     'material': point.material,
     'fabric': units,
@@ -344,7 +375,7 @@ def write(
       'name': mesh.name,
       'vertices_per_side': n,
       'size_m': size,
-      'spacing_mm': 1e3 * spacing,
+      'spacing_mm': 1e3 * (size / (n - 1)),
       'timestep_s': config.timestep,
       'fps': point.fps,
     },  # fmt: skip
@@ -360,7 +391,7 @@ def write(
       ),
       'fit': fit.record(),
     },
-    'point': {'bending_scale': b, 'area_weight': w},
+    'point': {'bending_scale': point.bending_scale, 'area_weight': point.area_weight},
     'interval_90': point.intervals,
     **(
       {
@@ -373,11 +404,7 @@ def write(
       if point.air
       else {}
     ),  # fmt: skip
-    'files': written,
   }
-  texts[FABRIC_FILE] = _json(record, FABRIC_FILE)
-  _commit(texts, out)
-  return record
 
 
 def _fit_words(fit: mesh_fit.Fit) -> str:
