@@ -86,9 +86,9 @@ class Args:
     alignment_sd: where the intake placed the camera (a camera file in the
       user's world) and --camera_sd_m and --camera_sd_deg are both 0, the
       posterior carries the intake's estimate of its own error
-      (intake.alignment_error: large in tilt when up came from the cloth's
-      plane) as camera_sd_m and camera_sd_deg; --noalignment_sd: trust the
-      placement exactly.
+      (intake_alignment.alignment_error: large in tilt when up came from the
+      cloth's plane) as camera_sd_m and camera_sd_deg; --noalignment_sd: trust
+      the placement exactly.
     allow_guessed_up: estimate from a recording whose up is a guess from the
       cloth's own plane (no floor in view, no --world_up, --up or "gravity"):
       a cloth the wind swings in the first frames tilts that guess by the

@@ -19,7 +19,8 @@ _P = 'experiments.pipeline.'
 STAGES = (
   ('files', 'layout', 'cli', 'progress', 'deadline', 'distributed', 'jax_cache',
    'embedding', 'simulation', 'recording'),
-  ('intake', 'takes', 'rig'),
+  ('intake', 'intake_record', 'intake_frames', 'intake_alignment', 'intake_files',
+   'cloth_view', 'takes', 'rig'),
   ('measurements',),
   ('config', 'problem', 'objective'),
   ('calibration_tables', 'setup'),

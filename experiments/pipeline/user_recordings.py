@@ -21,6 +21,9 @@ from experiments.pipeline import (
   estimation,
   files,
   intake,
+  intake_files,
+  intake_frames,
+  intake_record,
   joint,
   layout,
   setup,
@@ -78,7 +81,7 @@ def alignment_record(intakes: list, config) -> dict | None:
   taken = [ik for ik in intakes if ik is not None]
   if not taken:
     return None
-  guesses = [intake.guess_note(ik) for ik in taken if ik.up_is_guess]
+  guesses = [intake_record.guess_note(ik) for ik in taken if ik.up_is_guess]
   return {
     'up_from': [ik.up_from for ik in taken],
     'up_is_guess': bool(guesses),
@@ -94,7 +97,7 @@ def alignment_record(intakes: list, config) -> dict | None:
 def needs_intake(take: takes.Take) -> bool:
   """Everything but this project's own simulated sequences without a camera
   file is taken in."""
-  return bool(take.camera_json) or not intake.is_sequence(take.path)
+  return bool(take.camera_json) or not intake_frames.is_sequence(take.path)
 
 
 def intake_dir(workdir: str, i: int, n: int) -> str:
@@ -122,7 +125,7 @@ def check_workdirs(
   n = len(recorded)
   for i, take in enumerate(recorded):
     if all_taken_in or needs_intake(take):
-      intake.check_workdir(
+      intake_files.check_workdir(
         intake_dir(workdir, i, n), take.path, take.camera_json, layout.RUN_FILE
       )
 
@@ -134,8 +137,8 @@ def take_in(take: takes.Take, ik: intake.IntakeConfig, config, workdir: str):
   out = intake.take_in(
     take.path, ik, take.camera_json, config.simulation, workdir=workdir
   )
-  print(intake.summary(out))
-  intake.write(out, workdir, config.simulation)
+  print(intake_record.summary(out))
+  intake_files.write(out, workdir, config.simulation)
   return out
 
 
@@ -194,7 +197,7 @@ def prepare(
         raise guess_refused(take.path)
       intakes.append(taken)
       recs.append(
-        intake.to_recording(
+        intake_files.to_recording(
           taken, own.simulation.fps, net.image_size, own.simulation.frames
         )
       )
@@ -209,7 +212,7 @@ def prepare(
           rgb=net.modality == 'rgb',
         )  # fmt: skip
       )
-      intake.check_clip(take.path, len(recs[-1].depth), own.simulation)
+      intake_frames.check_clip(take.path, len(recs[-1].depth), own.simulation)
     # each recording carries its own intake's alignment error
     own, line = with_alignment_error(own, intakes[-1:], carry_alignment)
     configs.append(own)

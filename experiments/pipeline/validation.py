@@ -37,7 +37,14 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from experiments.pipeline import embedding, fabric_files, files, intake, layout
+from experiments.pipeline import (
+  embedding,
+  fabric_files,
+  files,
+  intake,
+  intake_files,
+  layout,
+)
 from experiments.pipeline import objective as objective_lib
 from physsim import bags
 
@@ -296,7 +303,7 @@ def take_in(
   settings: Settings,
 ):  # fmt: skip
   """The recording taken in as an estimate of the export's sheet takes it, at
-  ``settings.image_size``: (``intake.Intake``, ``recording.Recording``).
+  ``settings.image_size``: (``intake_record.Intake``, ``recording.Recording``).
 
   Raises:
     ValueError: the intake's refusals (named): pins at another spacing than
@@ -310,7 +317,7 @@ def take_in(
       '--camera_json'
     )
   size = (settings.image_size, settings.image_size)
-  return taken, intake.to_recording(taken, sim.fps, size, sim.frames)
+  return taken, intake_files.to_recording(taken, sim.fps, size, sim.frames)
 
 
 def predict(exported: Exported, rec, wind_speed: float, settings: Settings) -> Result:

@@ -18,7 +18,7 @@ import pytest
 
 import physsim
 from experiments import estimate
-from experiments.pipeline import intake
+from experiments.pipeline import cloth_view, intake, intake_files, intake_record
 from tests.experiments import estimate_fixtures as ef
 from tests.experiments import scene_fixtures
 
@@ -76,7 +76,7 @@ def test_intake_finds_the_pins_and_only_the_cloth(scene):
     scene.frames, intake.IntakeConfig(fps=40), scene.camera_json, ef.CONFIG.simulation
   )
   assert fast.fps == 40.0 and len(fast.depth) == 7
-  text = intake.summary(ik)
+  text = intake_record.summary(ik)
   assert 'up from the floor' in text and '160 x 120' in text
 
 
@@ -247,10 +247,10 @@ def test_a_full_disk_is_said_and_leaves_no_overlay_without_intake_json(
     w = tmp_path / f'w{suffix}'
     monkeypatch.setattr(dataset, 'open', full_at(suffix), raising=False)
     with pytest.raises(ValueError, match=r'^disk full: .*\(No space left on device\)'):
-      intake.write(ik, str(w), ef.CONFIG.simulation)
+      intake_files.write(ik, str(w), ef.CONFIG.simulation)
     assert os.listdir(w) == [], os.listdir(w)  # all of its files or none
   monkeypatch.undo()
-  intake.write(ik, str(tmp_path / 'ok'), ef.CONFIG.simulation)
+  intake_files.write(ik, str(tmp_path / 'ok'), ef.CONFIG.simulation)
   assert sorted(os.listdir(tmp_path / 'ok')) == ['intake', 'intake.json', 'overlay.png']
 
 
@@ -328,7 +328,7 @@ def test_a_dataset_sequence_with_its_own_camera_file_keeps_its_pose_and_truth(tm
   pose = physsim.pose_from_dict(meta['extrinsics'][0])
   np.testing.assert_allclose(ik.pose.position, pose.position, atol=1e-6)
   # The simulator's pins, seen from that camera, come back as the pins.
-  pins = intake.outer_pins(physsim.square(ef.CONFIG.simulation.cloth_resolution))
+  pins = cloth_view.outer_pins(physsim.square(ef.CONFIG.simulation.cloth_resolution))
   want = (pins - np.asarray(pose.position)) @ np.asarray(pose.rotation, np.float64)
   np.testing.assert_allclose(ik.pins_camera, want, atol=1e-5)
   passthrough = intake.take_in(seq, intake.IntakeConfig(), '', ef.CONFIG.simulation)
@@ -337,9 +337,9 @@ def test_a_dataset_sequence_with_its_own_camera_file_keeps_its_pose_and_truth(tm
 
 def test_the_overlay_has_a_legend_of_its_colours():
   img = np.zeros((40, 64, 3), np.uint8)
-  out = intake.with_legend(img)
-  assert out.shape[1] == 64 and out.shape[0] > 40 + 18 * len(intake.LEGEND)
+  out = intake_files.with_legend(img)
+  assert out.shape[1] == 64 and out.shape[0] > 40 + 18 * len(intake_files.LEGEND)
   np.testing.assert_array_equal(out[:40], img)  # the picture itself untouched
   band = out[40:].reshape(-1, 3)
-  for colour, _ in intake.LEGEND:
+  for colour, _ in intake_files.LEGEND:
     assert (band == colour).all(axis=1).any(), colour

@@ -16,7 +16,14 @@ import numpy as np
 import pytest
 
 from experiments import estimate
-from experiments.pipeline import intake, objective, user_recordings
+from experiments.pipeline import (
+  intake,
+  intake_alignment,
+  intake_files,
+  intake_record,
+  objective,
+  user_recordings,
+)
 from physsim import alignment, camera, camera_files, scene
 from tests.physsim.alignment_test import _INTR, _PINS_WORLD, _pose, _scene_depth
 
@@ -131,7 +138,7 @@ def test_the_intake_takes_up_from_the_rig_not_the_swung_cloth(recording):
   for ik in (rigged, imu):
     assert _rotation_error_deg(ik.pose, pose) < 2.0
     np.testing.assert_allclose(ik.pose.position, pose.position, atol=0.05)
-  assert 'up from --world_up' in intake.summary(rigged)
+  assert 'up from --world_up' in intake_record.summary(rigged)
   # Both, agreeing: no warning; an IMU 10 degrees off: reported, and the
   # rig's axis (more trusted) used.
   both = take(_camera(root, cam, 'imu', gravity=list(down)), world_up='z')
@@ -143,8 +150,10 @@ def test_the_intake_takes_up_from_the_rig_not_the_swung_cloth(recording):
   off = take(_camera(root, cam, 'off', gravity=list(turn @ down)), world_up='z')
   assert off.up_from == 'world_up' and len(off.warnings) == 1
   assert 'differ by 10.0 degrees' in off.warnings[0]
-  assert 'warning: up from --world_up and from the camera file' in intake.summary(off)
-  assert intake.to_json(off)['warnings'] == list(off.warnings)
+  assert (
+    'warning: up from --world_up and from the camera file' in intake_record.summary(off)
+  )
+  assert intake_files.to_json(off)['warnings'] == list(off.warnings)
 
 
 def test_the_alignment_error_follows_where_up_came_from(recording):
@@ -156,13 +165,13 @@ def test_the_alignment_error_follows_where_up_came_from(recording):
     path, dataclasses.replace(config, world_up='z'), plain, _CONFIG.simulation
   )
   assert guessed.up_is_guess and not rigged.up_is_guess
-  assert guessed.alignment_sd[1] == intake.UP_SD_DEG['cloth plane'] == 20.0
-  assert rigged.alignment_sd[1] == intake.UP_SD_DEG['world_up'] == 1.0
+  assert guessed.alignment_sd[1] == intake_alignment.UP_SD_DEG['cloth plane'] == 20.0
+  assert rigged.alignment_sd[1] == intake_alignment.UP_SD_DEG['world_up'] == 1.0
   # Two pixels at the pins' ~2.1 m with fx 150: about 2.8 cm.
   assert rigged.alignment_sd[0] == pytest.approx(2 * 2.1 / 150, rel=0.1)
-  assert 'up is a guess' in intake.summary(guessed)
-  assert 'up is a guess' not in intake.summary(rigged)
-  assert intake.to_json(guessed)['up_is_guess'] is True
+  assert 'up is a guess' in intake_record.summary(guessed)
+  assert 'up is a guess' not in intake_record.summary(rigged)
+  assert intake_files.to_json(guessed)['up_is_guess'] is True
   # The estimate carries it unless the user gave a camera error or said no.
   carried, line = user_recordings.with_alignment_error(_CONFIG, [guessed, None])
   assert (
