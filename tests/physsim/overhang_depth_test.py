@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import physsim
-from physsim import cantilever, gl_depth, overhang_depth, tabletop
+from physsim import cantilever, gl_depth, overhang_depth, overhang_fit, tabletop
 
 INTR = physsim.Intrinsics(320, 240, 58.0, 45.0)
 TABLE = tabletop.Table()
@@ -118,7 +118,7 @@ def test_the_fits_spread_is_the_spread_over_noise():
     s = rng.uniform(0.25, 1.0, 200)  # the visible part: not the root
     i = np.round(s * (len(line) - 1)).astype(int)
     pts = line[i] + rng.normal(0.0, sd, (200, 2))
-    f = overhang_depth.fit(pts, length, 0.0, point_sd=sd)
+    f = overhang_fit.fit(pts, length, 0.0, point_sd=sd)
     estimates.append(f['c'])
     sds.append(f['c_sd'])
   spread = float(np.std(estimates, ddof=1))
