@@ -25,7 +25,7 @@ STAGES = (
   ('config', 'problem', 'objective'),
   ('calibration_tables', 'setup'),
   ('evaluation', 'searcher', 'resume', 'search'),
-  ('posterior', 'fit_check'),
+  ('posterior', 'posterior_figure', 'fit_check'),
   ('report', 'results', 'joint'),
   ('estimation', 'user_recordings'),
 )  # fmt: skip

@@ -19,7 +19,7 @@ from jax.scipy.special import logsumexp
 
 import bo
 import physsim
-from experiments.pipeline import files, measurements
+from experiments.pipeline import files, measurements, posterior_figure
 from experiments.pipeline.measurements import (
   FIELDS,
   Measured,
@@ -349,30 +349,42 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     ValueError: priors or fans for another number of recordings, or two
       recordings of one fan setting with different priors.
   """
-  nb, nv, nw = grid
   ll, lp, groups, members = _by_fan(log_liks, log_prior_grid, grid, fans)
   fans = list(range(len(log_liks))) if fans is None else list(fans)
-  # The prior of (b, w) (each recording's wind summed out: the same up to a
-  # constant), and each fan setting's of v given (b, w).
+  c, log_c, lp_v = _wind_priors(lp, members, air)
+  log_bwc = _log_joint_bw(ll, lp, lp_v, log_c, shared_bias_sd, area_weight_range)
+  k_bw, k_v, k_jit = jax.random.split(key, 3)
+  idx = np.asarray(jax.random.categorical(k_bw, log_bwc.ravel(), shape=(n,)))
+  ic, ib, iw = np.unravel_index(idx, log_bwc.shape)
+  draws = [
+    _draw_wind(
+      x,
+      (ic, ib, iw),
+      [lv[k] for lv in lp_v],
+      air is not None,
+      grid,
+      jax.random.fold_in(k_v, k),
+      jax.random.fold_in(k_jit, k),
+    )
+    for k, x in enumerate(ll)
+  ]  # fmt: skip  each fan setting's
+  out = {
+    'samples': [draws[groups.index(f)] for f in fans],
+    'log_post_bw': np.asarray(logsumexp(log_bwc, axis=0)),
+  }
+  if air is not None:
+    out['air'] = _air_draws(c, ic, shared_bias_sd, k_jit)
+  return out
+
+
+def _log_joint_bw(ll: list, lp: list, lp_v: list, log_c, shared_bias_sd: float,
+                  area_weight_range) -> np.ndarray:  # fmt: skip
+  """(C, nb, nw) the joint's normalised log posterior of (air node, b, w): the
+  prior of (b, w) (each fan setting's wind summed out of its prior ``lp``:
+  the same up to a constant), the air node's (``log_c``), and each fan
+  setting's evidence ``ll`` for (b, w), its wind integrated out over its prior
+  given them (``lp_v``, ``_wind_priors``) and the shared discrepancy too."""
   lp_bw = logsumexp(lp[0], axis=1)  # (nb, nw)
-  if air is None:
-    lp_v = [[p - logsumexp(p, axis=1)[:, None, :] for p in lp]]  # log p(v_k | b, w)
-    log_c = np.zeros(1)
-  else:
-    readings, winds = air
-    c, log_c = measurements.air_nodes()
-    step = float(np.abs(np.diff(winds[:2]))[0]) if len(winds) > 1 else 1.0
-    lp_v = [
-      [
-        measurements.effective_wind_log_density(winds, *readings[ks[0]], ci)[
-          None, :, None
-        ]
-        + np.log(step)
-        for ks in members
-      ]
-      for ci in c
-    ]  # per c, per fan setting: log p(v_k | c) on the grid's cells
-  # Each fan setting's evidence for (b, w), its wind integrated out, per c.
   log_bwc = np.stack(
     [
       lp_bw
@@ -385,34 +397,67 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
       for lc, lv in zip(log_c, lp_v, strict=True)
     ]
   )  # fmt: skip  (C, nb, nw)
-  log_bwc = log_bwc - logsumexp(log_bwc)
-  k_bw, k_v, k_jit = jax.random.split(key, 3)
-  idx = np.asarray(jax.random.categorical(k_bw, log_bwc.ravel(), shape=(n,)))
-  ic, ib, iw = np.unravel_index(idx, log_bwc.shape)
-  winds_out = []
-  for k, x in enumerate(ll):  # each fan setting's
-    if air is None:  # (n, nv): wind given (b, w)
-      cond = x[ib, :, iw] + lp_v[0][k][ib, :, iw]
-    else:  # ... and c
-      cond = x[ib, :, iw] + np.stack([lv[k][0, :, 0] for lv in lp_v])[ic]
-    iv = np.asarray(jax.random.categorical(jax.random.fold_in(k_v, k), cond, axis=1))
-    cells = np.stack([ib, iv, iw], axis=1).astype(np.float64)
-    jit = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, k), (n, 3)))
-    winds_out.append(-1.0 + 2.0 * (cells + jit) / np.asarray(grid, np.float64))
-  out = {
-    'samples': [winds_out[groups.index(f)] for f in fans],
-    'log_post_bw': np.asarray(logsumexp(log_bwc, axis=0)),
-  }
-  if air is not None:
-    ratio = c[1] / c[0] if len(c) > 1 else 1.0
-    u = np.asarray(jax.random.uniform(jax.random.fold_in(k_jit, 99), (n,)))
-    out['air'] = c[ic] * ratio ** (u - 0.5)  # within its log step
-    if shared_bias_sd > 0:  # the pressure the simulator puts on every
-      # recording errs by one common factor too (the fan's angle, drag): the
-      # fabric's own c is the simulator's times exp(d), d ~ N(0, sd^2)
-      z = np.asarray(jax.random.normal(jax.random.fold_in(k_jit, 98), (n,)))
-      out['air'] = out['air'] * np.exp(shared_bias_sd * z)
-  return out
+  return log_bwc - logsumexp(log_bwc)
+
+
+def _wind_priors(lp: list, members: list, air) -> tuple:
+  """``(c, log c, lp_v)``: the air coefficient's nodes (``[1], [0]`` without
+  ``air``) and, per node and fan setting, the log prior of its wind on the
+  grid: given (b, w) from its prior (``lp``, per fan setting) where the air
+  coefficient is fixed, else its anemometer reading's given c
+  (``joint``'s ``air``; ``members``: each fan setting's recordings), one row
+  over the grid's wind cells."""
+  if air is None:
+    lp_v = [[p - logsumexp(p, axis=1)[:, None, :] for p in lp]]  # log p(v_k | b, w)
+    return np.ones(1), np.zeros(1), lp_v
+  readings, winds = air
+  c, log_c = measurements.air_nodes()
+  step = float(np.abs(np.diff(winds[:2]))[0]) if len(winds) > 1 else 1.0
+  lp_v = [
+    [
+      measurements.effective_wind_log_density(winds, *readings[ks[0]], ci)[
+        None, :, None
+      ]
+      + np.log(step)
+      for ks in members
+    ]
+    for ci in c
+  ]  # per c, per fan setting: log p(v_k | c) on the grid's cells
+  return c, log_c, lp_v
+
+
+def _draw_wind(ll: np.ndarray, cells: tuple, lp_v: list, free_air: bool, grid,
+               key_v, key_jit) -> np.ndarray:  # fmt: skip
+  """(n, 3) unit draws of one fan setting: the joint's (b, w) cells (``cells``:
+  the air node, bending and area weight cell of each draw) with its wind cell
+  drawn from its likelihood ``ll`` (nb, nv, nw) times its prior given them
+  (``lp_v``: per air node, ``_wind_priors``'s; ``free_air``: it varies with
+  the air coefficient, not with (b, w)), each uniform within its cell."""
+  ic, ib, iw = cells
+  if not free_air:  # (n, nv): wind given (b, w)
+    cond = ll[ib, :, iw] + lp_v[0][ib, :, iw]
+  else:  # ... and c
+    cond = ll[ib, :, iw] + np.stack([lv[0, :, 0] for lv in lp_v])[ic]
+  iv = np.asarray(jax.random.categorical(key_v, cond, axis=1))
+  cell = np.stack([ib, iv, iw], axis=1).astype(np.float64)
+  jit = np.asarray(jax.random.uniform(key_jit, (len(ib), 3)))
+  return -1.0 + 2.0 * (cell + jit) / np.asarray(grid, np.float64)
+
+
+def _air_draws(c: np.ndarray, ic: np.ndarray, shared_bias_sd: float, key) -> np.ndarray:
+  """(n,) the shared air coefficient's draws: its nodes ``c`` at the draws'
+  node ``ic``, each spread uniformly within its log step, and by the shared
+  discrepancy's log-normal factor where there is one."""
+  n = len(ic)
+  ratio = c[1] / c[0] if len(c) > 1 else 1.0
+  u = np.asarray(jax.random.uniform(jax.random.fold_in(key, 99), (n,)))
+  air = c[ic] * ratio ** (u - 0.5)  # within its log step
+  if shared_bias_sd > 0:  # the pressure the simulator puts on every
+    # recording errs by one common factor too (the fan's angle, drag): the
+    # fabric's own c is the simulator's times exp(d), d ~ N(0, sd^2)
+    z = np.asarray(jax.random.normal(jax.random.fold_in(key, 98), (n,)))
+    air = air * np.exp(shared_bias_sd * z)
+  return air
 
 
 def _by_fan(log_liks, log_prior_grid, grid, fans):
@@ -464,13 +509,6 @@ def _evidence(ev: list, shared_bias_sd: float, area_weight_range) -> np.ndarray:
 
 # -------------------------------------------------------------------- figures
 
-LABELS = {
-  'bending_scale': 'bending (x measured)',
-  'wind_speed': 'wind speed (m/s)',
-  'area_weight': 'area weight (kg/m$^2$)',
-  'load_ratio': r'load ratio $\rho v^2/(w g)$',
-}
-
 
 def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
          summary: dict | None = None, point: str = 'median') -> None:  # fmt: skip
@@ -480,81 +518,31 @@ def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
   (``summary[name][point]``: 'median' or 'bayes'), median and intervals, the
   iso-lines included, are ``summary``'s (``summarise``, e.g. recalibrated:
   what the table prints) where given, else the draws' own."""
-  post, prior = physical(samples_unit, space), physical(prior_unit, space)
-  ratio = lambda p: physsim.load_ratio(p[:, 1], p[:, 2])
-  cols = [*(post[:, i] for i in range(3)), ratio(post)]
-  pcols = [*(prior[:, i] for i in range(3)), ratio(prior)]
-  names = [*FIELDS, 'load_ratio']
-  stats = {}
-  plt = files.pyplot()
-  fig, axes = plt.subplots(2, 4, figsize=(17, 7.4), layout='constrained')
+  fig = figure(samples_unit, prior_unit, space, truth, title, summary, point)
+  files.savefig(fig, path, dpi=80)
+  files.pyplot().close(fig)
+
+
+def figure(samples_unit, prior_unit, space, truth, title: str = '',
+           summary: dict | None = None, point: str = 'median'):  # fmt: skip
+  """``plot``'s figure (matplotlib), not saved: the draws and the prior's in
+  physical values with the load ratio, each one's summary and the truth's
+  (``posterior_figure.draw``)."""
+  with_ratio = lambda p: {
+    **{name: p[:, i] for i, name in enumerate(FIELDS)},
+    'load_ratio': physsim.load_ratio(p[:, 1], p[:, 2]),
+  }
+  post = with_ratio(physical(samples_unit, space))
+  prior = with_ratio(physical(prior_unit, space))
+  stats = {
+    name: summary[name] if summary else _stats(post[name], prior[name], name)
+    for name in posterior_figure.NAMES
+  }
   true = None
   if truth is not None:
-    true = [truth[f] for f in FIELDS]
-    true.append(float(physsim.load_ratio(truth['wind_speed'], truth['area_weight'])))
-  for j, (ax, x, px, name) in enumerate(zip(axes[0], cols, pcols, names, strict=True)):
-    log = name in LOG_SCALED
-    lo, hi = np.quantile(np.concatenate([x, px]), [0.001, 0.999])
-    bins = np.geomspace(lo, hi, 40) if log else np.linspace(lo, hi, 40)
-    # probability per bin, bins equal in the plotted scale: a log-uniform
-    # prior is flat on a log axis
-    ax.hist(px, bins=bins, weights=np.full(len(px), 1 / len(px)), color='0.85',
-            label='prior')  # fmt: skip
-    ax.hist(x, bins=bins, weights=np.full(len(x), 1 / len(x)), alpha=0.75,
-            color='C0', label='posterior')  # fmt: skip
-    s = summary[name] if summary else _stats(x, px, name)
-    stats[name] = s
-    for level, ls in ((90, ':'), (50, '--')):
-      for v in s[f'interval_{level}']:
-        ax.axvline(v, color='C0', ls=ls, lw=1)
-    ax.axvline(s['median'], color='C0', lw=1.5, label='median; 50%, 90%')
-    if point != 'median' and point in s:
-      ax.axvline(s[point], color='k', lw=1.5, label='point')
-    if true is not None:
-      ax.axvline(true[j], color='r', lw=1.5, label='truth')
-    ax.set(xlabel=LABELS[name], yticks=[], xscale='log' if log else 'linear')
-    if j == 0:  # above the panel: the histogram's bars stay in view
-      ax.legend(fontsize=7, loc='lower left', bbox_to_anchor=(0, 1.02), ncol=3,
-                frameon=False)  # fmt: skip
-  pairs = ((1, 2), (0, 1), (0, 2))
-
-  def edges(k):  # the posterior's range (padded), equal bins in the plotted scale
-    lo, hi = np.quantile(post[:, k], [0.005, 0.995])
-    blo, bhi = space.bounds()[k]
-    if k == 0:
-      pad = (np.log(hi) - np.log(lo)) * 0.15
-      return np.geomspace(max(blo, lo * np.exp(-pad)), min(bhi, hi * np.exp(pad)), 41)
-    pad = (hi - lo) * 0.15 + 1e-9
-    return np.linspace(max(blo, lo - pad), min(bhi, hi + pad), 41)
-
-  for ax, (i, j) in zip(axes[1], pairs, strict=False):
-    ex, ey = edges(i), edges(j)
-    ax.hist2d(post[:, i], post[:, j], bins=[ex, ey], cmap='viridis')
-    if (i, j) == (1, 2):  # iso-lines of the load ratio: w = rho v^2 / (g r)
-      v = np.linspace(ex[0], ex[-1], 100)
-      lr = stats['load_ratio']
-      for r in (lr['interval_90'][0], lr['median'], lr['interval_90'][1]):
-        w = physsim.params.AIR_DENSITY * v**2 / (physsim.params.GRAVITY * r)
-        ax.plot(v, w, 'w--', lw=0.8)
-      ax.set_ylim(ey[0], ey[-1])
-    if true is not None:
-      ax.plot(true[i], true[j], 'r+', ms=14, mew=2)
-    key = point if point in stats[FIELDS[i]] else 'median'
-    ax.plot(stats[FIELDS[i]][key], stats[FIELDS[j]][key], 'wx', ms=10, mew=2)
-    ax.set(xlabel=LABELS[FIELDS[i]], ylabel=LABELS[FIELDS[j]])
-    if i == 0:
-      ax.set_xscale('log')
-  axes[1, 3].axis('off')
-  axes[1, 3].text(
-    0.0, 0.9,
-    'grey: prior (the search box, times any\nmeasured wind or area weight)\n'
-    'blue: posterior given the video\n'
-    'white dashes: the load ratio\'s median\nand 90% interval (iso-lines)\n'
-    'white x: the point; black line: the point\nwhere it is not the median\n'
-    'red: truth (simulated recordings)',
-    va='top', fontsize=9,
-  )  # fmt: skip
-  if title:
-    fig.suptitle(title)
-  files.savefig(fig, path, dpi=80)
-  plt.close(fig)
+    true = {f: truth[f] for f in FIELDS}
+    true['load_ratio'] = float(
+      physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
+    )
+  return posterior_figure.draw(post, prior, stats, true, space.bounds(), LOG_SCALED,
+                               point, title)  # fmt: skip
