@@ -13,13 +13,20 @@ estimated jointly twice, in one lockstep: with the air coefficient free
 ('fixed', today's model). Prints and writes:
 
 - free: c's error and its 90%/50% intervals' coverage; each wind, the
-  bending rigidity and the area weight against the truth;
+  bending rigidity and the area weight against the truth, and how often
+  their printed intervals held it (the protocol joint's coverage, measured
+  on recordings of another physics);
 - fixed: how often the fit check (``fit_check``: a reading the video
   disagrees with, or simulations farther than the gust floor) flags a set,
   for fabrics with c below 0.7 and within 0.9-1.1.
 
   python -m experiments.air_protocol --preset=smoke            # CPU, minutes
   python -m experiments.air_protocol --sets=40 --out=$OUT/air_protocol.json  # GPU
+
+``--write_sets=N`` also writes the first N sets as a user would hand them
+in (depth ``.npy`` in metres, a camera file, ``protocol.json`` with the
+readings), so that ``experiments.estimate --protocol=...`` can be timed and
+checked on them.
 """
 
 from __future__ import annotations
@@ -52,6 +59,8 @@ class Study:
     image: the recordings' frame size, pixels a side.
     seed: of the truths, cameras, gusts and readings.
     modes: the air coefficient's modes estimated ('free', 'fixed').
+    write_sets: write the first this many sets as protocol folders under
+      ``<workdir>/sets`` (0: none).
     workdir: where the searches keep their files.
     out: JSON path ('' for none).
   """
@@ -65,6 +74,7 @@ class Study:
   image: int = 64
   seed: int = 0
   modes: tuple[str, ...] = ('free', 'fixed')
+  write_sets: int = 0
   workdir: str = 'out/benchmarks/air_protocol'
   out: str = ''
 
@@ -175,12 +185,61 @@ def summarise(rows: list[dict]) -> dict:
       s['air_pct_mean'] = float(np.mean([r['air_pct'] for r in mine]))
       for level in (90, 50):
         s[f'air_held_{level}'] = float(np.mean([r[f'air_in_{level}'] for r in mine]))
+    held = [r['held'] for r in mine if 'held' in r]
+    if held:  # each quantity's intervals, wind over every recording
+      s['held'] = {
+        k: float(np.mean([x for h in held for x in np.atleast_1d(h[k])]))
+        for k in held[0]
+      }
     low = [r['flagged'] for r in mine if r['c'] < 0.7]
     near = [r['flagged'] for r in mine if 0.9 <= r['c'] <= 1.1]
     s['flagged_c_below_0.7'] = [int(sum(low)), len(low)]
     s['flagged_c_0.9_1.1'] = [int(sum(near)), len(near)]
     out[mode] = s
   return out
+
+
+def _held(interval, truth) -> bool:
+  lo, hi = interval
+  return bool(lo <= truth <= hi)
+
+
+def intervals_held(out: dict, truth: dict) -> dict:
+  """Whether each printed interval of a joint (``combine_joint``'s) holds
+  the truth: bending, area weight, and each recording's wind."""
+  h = {}
+  for level in (90, 50):
+    key = f'interval_{level}'
+    h[f'bending_{level}'] = _held(out['bending_scale'][key], truth['bending_scale'])
+    h[f'area_weight_{level}'] = _held(out['area_weight'][key], truth['area_weight'])
+    h[f'wind_{level}'] = [
+      _held(r['wind_speed'][key], v)
+      for r, v in zip(out['recordings'], truth['winds'], strict=True)
+    ]
+  return h
+
+
+def write_set(folder: str, recs: list, shared: dict, winds: list) -> str:
+  """One set as a user hands it in: per recording its depth (``.npy``,
+  metres) and camera file (project form, with fps), and ``protocol.json``
+  with the anemometer's, the scale's and the strip's readings. Returns the
+  protocol file's path."""
+  os.makedirs(folder, exist_ok=True)
+  entries = []
+  for j, (rec, (v, sd)) in enumerate(zip(recs, winds, strict=True)):
+    depth, camera = f'fan_{j}.npy', f'fan_{j}_camera.json'
+    files.write_atomic(
+      os.path.join(folder, depth), lambda p, d=rec.depth: np.save(p, d)
+    )
+    files.write_json(os.path.join(folder, camera), {
+      'intrinsics': rec.intrinsics.to_dict(), 'fps': rec.fps,
+      'extrinsics': physsim.pose_to_dict(rec.pose),
+    })  # fmt: skip
+    entries.append({'recording': depth, 'camera_json': camera, 'world_up': 'z',
+                    'wind_speed': v, 'wind_speed_sd': sd})  # fmt: skip
+  path = os.path.join(folder, 'protocol.json')
+  files.write_json(path, {'recordings': entries, 'fabric': shared})
+  return path
 
 
 def run(args: Study) -> dict:
@@ -196,12 +255,18 @@ def run(args: Study) -> dict:
   for k, truth in enumerate(sets):
     shared, winds = readings(args, truth, space)
     recs = record(args, base, truth, k)
+    if k < args.write_sets:
+      write_set(os.path.join(args.workdir, 'sets', f'set_{k:02d}'), recs, shared, winds)
     for mode in args.modes:
       config = base.replace(air_coefficient=mode, **shared)
       wd = os.path.join(args.workdir, mode, f'set_{k:02d}')
       plan.append((k, mode, wd, joint.joint_jobs(config, recs, '', wd, winds)))
     print(f'set {k}: recorded (c {truth["air_coefficient"]:.2f})', flush=True)
+  seconds = {'record': time.perf_counter() - t0}
+  t1 = time.perf_counter()
   done = estimation.estimate_many([j for *_, jobs in plan for j in jobs], figures=False)
+  seconds['estimate'] = time.perf_counter() - t1
+  t1 = time.perf_counter()
   rows, i = [], 0
   for k, mode, wd, jobs in plan:
     mine, i = done[i : i + len(jobs)], i + len(jobs)
@@ -222,6 +287,7 @@ def run(args: Study) -> dict:
       for level in (90, 50):
         lo, hi = a[f'interval_{level}']
         row[f'air_in_{level}'] = bool(lo <= row['c'] <= hi)
+    row['held'] = intervals_held(out, t)
     row['flagged'] = any(_flagged(r) for r in mine)
     rows.append(row)
     print(
@@ -230,7 +296,8 @@ def run(args: Study) -> dict:
       f'wind {np.mean(row["wind_pct"]):.1f}%, flagged {row["flagged"]}', flush=True,
     )  # fmt: skip
   summary = summarise(rows)
-  seconds = time.perf_counter() - t0
+  seconds['combine'] = time.perf_counter() - t1
+  seconds['total'] = time.perf_counter() - t0
   print('| mode | sets | c error | c 90% / 50% held | wind | bending | weight | '
         'flagged c<0.7 | flagged 0.9-1.1 |')  # fmt: skip
   print('|---|---|---|---|---|---|---|---|---|')
@@ -243,7 +310,14 @@ def run(args: Study) -> dict:
       f'{s["area_weight_pct_mean"]:.2f}% | {s["flagged_c_below_0.7"]} | '
       f'{s["flagged_c_0.9_1.1"]} |'
     )
-  print(f'{seconds:.0f} s')
+  print('| mode | bending 90% / 50% held | area weight | wind |')
+  print('|---|---|---|---|')
+  for mode, s in summary.items():
+    h = s.get('held', {})
+    cells = [f'{100 * h[f"{q}_90"]:.0f}% / {100 * h[f"{q}_50"]:.0f}%'
+             for q in ('bending', 'area_weight', 'wind')]  # fmt: skip
+    print(f'| {mode} | ' + ' | '.join(cells) + ' |')
+  print(', '.join(f'{k} {v:.0f} s' for k, v in seconds.items()))
   out = {
     'args': dataclasses.asdict(args), 'summary': summary, 'rows': rows,
     'seconds': seconds, 'device': str(jax.devices()[0]),

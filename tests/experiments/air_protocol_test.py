@@ -4,6 +4,8 @@ the summary's measures are the rows' own, by hand."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -36,3 +38,54 @@ def test_the_summary_is_the_rows_own_by_hand():
   assert s['free']['flagged_c_below_0.7'] == [1, 1]
   assert s['fixed']['flagged_c_below_0.7'] == [1, 1]
   assert s['fixed']['flagged_c_0.9_1.1'] == [1, 1]
+
+
+def test_a_written_set_reads_back_as_the_protocol_it_was(tmp_path):
+  """write_set's folder is a protocol file the estimate's readers take: each
+  recording's depth, camera and reading, and the fabric's readings, as given."""
+  import physsim
+  from experiments.pipeline import recording as recording_lib
+  from experiments.pipeline import takes
+  from physsim import camera_files
+
+  intr = physsim.Intrinsics(width=8, height=6)
+  pose = physsim.Pose(np.eye(3, dtype=np.float32), np.array([0, -2, 0.5], np.float32))
+  rng = np.random.default_rng(0)
+  recs = [
+    recording_lib.Recording(
+      rng.uniform(1, 3, (4, 6, 8)).astype(np.float32), 30.0, intr, pose, f'f{j}', None
+    )
+    for j in range(2)
+  ]
+  shared = {'area_weight': 0.2, 'area_weight_sd': 0.002,
+            'bending_length': 0.03, 'bending_length_sd': 0.001}  # fmt: skip
+  winds = [(2.0, 0.04), (3.1, 0.06)]
+  path = air_protocol.write_set(str(tmp_path / 'set'), recs, shared, winds)
+  got = takes.read(path)
+  assert [t.wind for t in got] == winds
+  assert takes.fabric_readings(path) == pytest.approx(shared)
+  for t, rec in zip(got, recs, strict=True):
+    cam = camera_files.read_camera(t.camera_json)  # the intake's reader
+    assert cam.fps == 30.0 and cam.intrinsics == intr
+    np.testing.assert_allclose(cam.pose.position, pose.position)
+    back = physsim.video.load_depth_video(
+      t.path, source_fps=cam.fps, fps=30.0, size=None
+    )
+    np.testing.assert_array_equal(back.depth, rec.depth)
+  assert not [p for p in os.listdir(tmp_path / 'set') if p.startswith('.')]
+
+
+def test_intervals_held_reads_each_printed_interval():
+  out = {
+    'bending_scale': {'interval_90': (0.5, 2.0), 'interval_50': (0.9, 1.1)},
+    'area_weight': {'interval_90': (0.1, 0.3), 'interval_50': (0.25, 0.3)},
+    'recordings': [
+      {'wind_speed': {'interval_90': (1.0, 2.0), 'interval_50': (1.4, 1.6)}},
+      {'wind_speed': {'interval_90': (3.0, 4.0), 'interval_50': (3.0, 3.1)}},
+    ],
+  }
+  truth = {'bending_scale': 1.0, 'area_weight': 0.2, 'winds': [1.5, 3.5]}
+  h = air_protocol.intervals_held(out, truth)
+  assert h['bending_90'] and h['bending_50'] and h['area_weight_90']
+  assert not h['area_weight_50']
+  assert h['wind_90'] == [True, True] and h['wind_50'] == [True, False]
