@@ -22,7 +22,7 @@ import os
 import numpy as np
 
 import physsim
-from experiments.pipeline import cli, files, report
+from experiments.pipeline import cli, files, summaries, table_notes
 
 _QUANTITIES = ('bending_scale', 'wind_speed', 'area_weight', 'load_ratio')
 
@@ -62,8 +62,8 @@ def row(result: dict) -> dict:
   """One estimate's line: whether it quoted measured coverage, its errors,
   and which intervals held the truth."""
   note = result.get('calibration') or {}
-  line = report.calibration_line(note or None)
-  cov = report.covered(result, result['truth'])
+  line = table_notes.calibration_line(note or None)
+  cov = summaries.covered(result, result['truth'])
   held = {q: {lv: cov[q][f'interval_{lv}'] for lv in (90, 50)} for q in _QUANTITIES}
   return {
     'distance': result['config']['distance'],

@@ -25,7 +25,7 @@ import json
 import numpy as np
 
 import physsim
-from experiments.pipeline import cli, files, report
+from experiments.pipeline import cli, files, summaries
 from experiments.pipeline import posterior as posterior_lib
 from experiments.studies import tables as tables_lib
 
@@ -62,7 +62,7 @@ def summarise(estimates: list[dict]) -> dict:
     mid = physsim.params.make(
       *(e['estimate'][f]['median'] for f in posterior_lib.FIELDS)
     )
-    med = report.errors(mid, e['truth'], space)['estimate']
+    med = summaries.errors(mid, e['truth'], space)['estimate']
     for k in ERRORS:
       point[k].append(e['errors']['estimate'][k])
       median[k].append(med[k])
@@ -73,8 +73,8 @@ def summarise(estimates: list[dict]) -> dict:
         held[f'{q}_{lvl}'] += bool(e['covered'][q][f'interval_{lvl}'])
   return {
     'n': len(rows),
-    'point': {k: report.mean_error(v, k) for k, v in point.items()},
-    'median': {k: report.mean_error(v, k) for k, v in median.items()},
+    'point': {k: summaries.mean_error(v, k) for k, v in point.items()},
+    'median': {k: summaries.mean_error(v, k) for k, v in median.items()},
     'held': held,
     'load_ratio_half_width_90_pct': float(np.mean(spread)),
   }

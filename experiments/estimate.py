@@ -34,12 +34,14 @@ from absl import logging
 
 import physsim
 from experiments.pipeline import (
+  advice,
   cli,
   files,
   intake,
   layout,
   report,
   setup,
+  summaries,
   takes,
   user_recordings,
 )
@@ -287,10 +289,10 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     recorded, args.intake, config, loaded, args.workdir,
     carry_alignment=args.alignment_sd, allow_guessed_up=args.allow_guessed_up,
   )  # fmt: skip
-  warning = report.shape_camera_warning(
+  warning = advice.shape_camera_warning(
     prepared.configs[0], any(user_recordings.needs_intake(t) for t in recorded)
   )
-  for line in (warning, report.synthetic_warning(prepared.configs[0]), *prepared.lines):
+  for line in (warning, advice.synthetic_warning(prepared.configs[0]), *prepared.lines):
     if line:
       print(line)
   drawings = []  # the pictures, drawn once the answer is printed
@@ -302,18 +304,18 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
   )  # fmt: skip
   if n > 1:
     print(report.joint_table(result), flush=True)
-    ratios = [report.point_of(r['load_ratio']) for r in result['recordings']]
+    ratios = [summaries.point_of(r['load_ratio']) for r in result['recordings']]
   else:
     print(report.report_table(result), flush=True)
-    ratios = [report.point_of(result['load_ratio'])]
+    ratios = [summaries.point_of(result['load_ratio'])]
   record = prepared.record
   for line in (record or {}).get('warnings', []):
     if 'up is a guess' in line:
       print(f'note: {line}')
   for note in (
-    report.fan_setting_note(ratios, config.simulation.material),
+    advice.fan_setting_note(ratios, config.simulation.material),
     # experiments.plan reads the posterior: one recording's, or the joint's
-    report.next_recording_note(
+    advice.next_recording_note(
       result['estimate'] if n == 1 else {k: result[k] for k in JOINT_SHARED},
       prepared.configs[0],
       args.workdir,

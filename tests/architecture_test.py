@@ -26,7 +26,8 @@ STAGES = (
   ('calibration_tables', 'setup'),
   ('evaluation', 'searcher', 'resume', 'search'),
   ('posterior', 'posterior_figure', 'fit_check'),
-  ('report', 'results', 'joint'),
+  ('summaries', 'units', 'table_notes', 'report', 'advice', 'search_figures',
+   'results', 'joint'),
   ('estimation', 'user_recordings'),
 )  # fmt: skip
 

@@ -1,10 +1,10 @@
 """What one finished search leaves: ``estimate.json``, ``posterior.npz`` and its pictures.
 
-The stage after the posterior and the report's pieces: a search's result
+The stage after the posterior: a search's result
 (``bo.Result`` or ``bo.posterior.Result``) read into the estimate a person
 reads (the point, 50% and 90% intervals read at the calibration's levels,
-errors against a known truth) and written beside its trace, montage and
-posterior figures.
+errors against a known truth: ``summaries``) and written beside its trace,
+montage (``search_figures``) and posterior figures.
 """
 
 from __future__ import annotations
@@ -17,7 +17,14 @@ import numpy as np
 
 import bo
 import physsim
-from experiments.pipeline import files, fit_check, layout, measurements, report
+from experiments.pipeline import (
+  files,
+  fit_check,
+  layout,
+  measurements,
+  search_figures,
+  summaries,
+)
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import searcher as search_lib
 from experiments.pipeline import setup as setup_lib
@@ -56,8 +63,8 @@ def write_result(
     **timing: seconds to record (``seconds``, ``seconds_in_objective``, ...).
   """
   st, recording, workdir = job.setup, job.recording, job.workdir
-  config, space = st.config, st.space
-  x_best, y_best = search.argmin()
+  config = st.config
+  best = search.argmin()
   result = {
     'recording': recording.source,
     'material': config.simulation.material,
@@ -66,17 +73,41 @@ def write_result(
   }
   draws = []  # the pictures, each a callable
   if config.search.point == 'argmin':
-    result.update(_argmin_summary(st, res, x_best))
+    result.update(_argmin_summary(st, res, best[0]))
   else:
     result.update(_posterior_summary(
       st, res, workdir, recording.truth, draws if figures else None,
       recording.source,
     ))  # fmt: skip
+  result.update(_search_record(st, res, best, result['point_unit'], timing))
+  if config.posterior and config.scoring.distance in SHAPE_DISTANCES:
+    result['fit_check'] = _fit_check(st, res, replicas)
+  if recording.truth is not None:
+    result.update(_against_truth(result, recording.truth, st.space))
+  files.write_json(os.path.join(workdir, layout.ESTIMATE_FILE), result)
+  if not figures:
+    return result
+  draws += _search_pictures(job, search, res, best_frames)
+  if pictures is not None:
+    pictures.extend(draws)
+  else:
+    for draw in draws:
+      draw()
+  return result
+
+
+def _search_record(st: setup_lib.Setup, res, best: tuple, point, timing: dict) -> dict:
+  """What the search did beside its estimate: the bending matrix at the point
+  (``point``, unit cube), the best evaluation (``best``: its unit point and
+  distance) in physical values, the box it searched, its evaluations,
+  failures and iterations, the network's retrieval, the seconds and the
+  settings."""
+  config, space = st.config, st.space
+  x_best, y_best = best
   retrieval = st.network.retrieval
   material = physsim.load_material(physsim.fabric(config.simulation.material).material)
-  point = result['point_unit']
   bending = float(np.ravel(physsim.from_unit(point, space).bending_scale)[0])
-  result.update({
+  return {
     'bending_matrix_Nm': (bending * material.bending).tolist(),
     'argmin': {
       f: float(np.ravel(v)[0])
@@ -92,48 +123,65 @@ def write_result(
     **({'network_retrieval_vs_chance': retrieval} if retrieval else {}),
     **{k: float(v) for k, v in timing.items()},
     'config': config.flat(),
-  })  # fmt: skip
-  if config.posterior and config.scoring.distance in SHAPE_DISTANCES:
-    result['fit_check'] = {
-      'predictive': None if replicas is None else fit_check.predictive(replicas),
-      'conflicts': fit_check.conflicts(
-        res.log_lik, search_lib.posterior_config(config).grid, space,
-        config.measured,
-      ),
-    }  # fmt: skip
-  if recording.truth is not None:
-    result['truth'] = recording.truth
-    est = result['estimate']
-    result['errors'] = report.errors(
-      physsim.params.make(*(est[f]['value'] for f in measurements.FIELDS))
-      if 'air_coefficient' in est
-      else physsim.from_unit(point, space),
-      recording.truth, space,
-      air=est['air_coefficient']['value'] if 'air_coefficient' in est else None,
-    )  # fmt: skip
-    result['covered'] = report.covered(result, recording.truth)
-  files.write_json(os.path.join(workdir, layout.ESTIMATE_FILE), result)
-  if not figures:
-    return result
-  n_init = config.search.n_init
-  iteration = report.iterations_of(len(res.Y), n_init, config.search.q)
-  draws.append(functools.partial(
-    report.plot_trace, res.X, search_lib.discrepancies(res.Y), iteration, space,
-    recording.truth, os.path.join(workdir, layout.TRACE_PNG),
-    distance=config.scoring.distance,
-  ))  # fmt: skip
-  draws.append(functools.partial(
-    report.plot_montage,
-    recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
-    best_frames, recording.fps, os.path.join(workdir, layout.MONTAGE_PNG),
-    sim_label='best simulation',
-  ))  # fmt: skip
-  if pictures is not None:
-    pictures.extend(draws)
-  else:
-    for draw in draws:
-      draw()
-  return result
+  }  # fmt: skip
+
+
+def _fit_check(st: setup_lib.Setup, res, replicas) -> dict:
+  """Whether the simulations at the point reproduce the recording
+  (``replicas``; None: not checked) and which readings the video alone
+  disagrees with (``fit_check``)."""
+  config = st.config
+  return {
+    'predictive': None if replicas is None else fit_check.predictive(replicas),
+    'conflicts': fit_check.conflicts(
+      res.log_lik, search_lib.posterior_config(config).grid, st.space,
+      config.measured,
+    ),
+  }  # fmt: skip
+
+
+def _against_truth(result: dict, truth: dict, space: physsim.SearchSpace) -> dict:
+  """A known truth, the estimate's errors against it beside the range
+  centre's, and whether each interval held it. With the air coefficient free
+  the point is the estimate's true wind and its c; else the search's point."""
+  est = result['estimate']
+  air = 'air_coefficient' in est
+  point = (
+    physsim.params.make(*(est[f]['value'] for f in measurements.FIELDS))
+    if air
+    else physsim.from_unit(result['point_unit'], space)
+  )
+  return {
+    'truth': truth,
+    'errors': summaries.errors(
+      point, truth, space, air=est['air_coefficient']['value'] if air else None
+    ),
+    'covered': summaries.covered(result, truth),
+  }
+
+
+def _search_pictures(job: search_lib.Job, search: search_lib.LiveSearch, res,
+                     best_frames: np.ndarray) -> list:  # fmt: skip
+  """The drawing of ``trace.png`` and ``montage.png`` (the recording beside
+  the best simulation, in the modality its network saw), as callables."""
+  st, recording, workdir = job.setup, job.recording, job.workdir
+  config = st.config
+  iteration = search_figures.iterations_of(
+    len(res.Y), config.search.n_init, config.search.q
+  )
+  return [
+    functools.partial(
+      search_figures.plot_trace, res.X, search_lib.discrepancies(res.Y), iteration,
+      st.space, recording.truth, os.path.join(workdir, layout.TRACE_PNG),
+      distance=config.scoring.distance,
+    ),
+    functools.partial(
+      search_figures.plot_montage,
+      recording.rgb if search.problem.net.modality == 'rgb' else recording.depth,
+      best_frames, recording.fps, os.path.join(workdir, layout.MONTAGE_PNG),
+      sim_label='best simulation',
+    ),
+  ]  # fmt: skip
 
 
 def _argmin_summary(st: setup_lib.Setup, res: bo.Result, x_best) -> dict:
@@ -146,8 +194,8 @@ def _argmin_summary(st: setup_lib.Setup, res: bo.Result, x_best) -> dict:
   best = physsim.from_unit(x_best, space)
   return {
     'point_unit': np.asarray(x_best, np.float64).tolist(),
-    'estimate': report.summary(samples, best),
-    'load_ratio': report.load_ratio_summary(samples, best),
+    'estimate': summaries.summary(samples, best),
+    'load_ratio': summaries.load_ratio_summary(samples, best),
     'interval_meaning': 'where the GP puts the minimum of the PSD, not where '
     'the parameters are; not calibrated',
   }
@@ -167,40 +215,23 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   ``draws`` (None: no picture). The intervals are read at the levels of
   ``st.calibration`` where it matched these settings, network and mode."""
   config, space, note = st.config, st.space, st.calibration
-  key = jax.random.key(config.seed)
   pc = search_lib.posterior_config(config)
   points = bo.posterior.grid_points(pc.grid)
   lp = measurements.log_prior(points, space, config.measured, pc.grid)
-  prior = posterior_lib.refine_draws(
-    posterior_lib.prior_samples(
-      jax.random.fold_in(key, 7), pc.grid, lp, len(res.samples)
-    ), pc.grid, space, config.measured, config.seed + 1,
+  prior, samples = _refined_draws(config, space, pc.grid, lp, res.samples)
+  summarise = functools.partial(
+    posterior_lib.summarise, samples, space, prior, levels_of(note), weights_of(note),
+    config.measured,
   )  # fmt: skip
-  samples = posterior_lib.refine_draws(
-    res.samples, pc.grid, space, config.measured, config.seed
-  )
-  summary = posterior_lib.summarise(
-    samples, space, prior, levels_of(note), weights_of(note), config.measured
-  )
+  summary = summarise()
   # The point: each parameter's (recalibrated) median or Bayes point, in the
   # search's coordinates (with the air free, its wind is the effective one).
   which = 'bayes' if config.search.point == 'bayes' else 'median'
   point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
   median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
-  air = {}
-  if config.measured.air_free:  # what a person reads: the true wind, and c
-    air = {
-      'air_samples': measurements.air_draws(
-        measurements.physical(samples, space)[:, 1], config.measured, config.seed
-      ),
-      'air_prior_samples': measurements.air_draws(
-        measurements.physical(prior, space)[:, 1], config.measured, config.seed + 1
-      ),
-    }  # fmt: skip
-    summary = posterior_lib.summarise(
-      samples, space, prior, levels_of(note), weights_of(note), config.measured,
-      air=(air['air_samples'], air['air_prior_samples']),
-    )  # fmt: skip
+  air = _air_draws(config, space, samples, prior) if config.measured.air_free else {}
+  if air:  # what a person reads: the true wind, and c
+    summary = summarise(air=(air['air_samples'], air['air_prior_samples']))
   estimate = {}
   for name in [*posterior_lib.FIELDS, *(['air_coefficient'] if air else [])]:
     s = summary[name]
@@ -221,29 +252,71 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
       title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
       summary=summary, point=which,
     ))  # fmt: skip
-  recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
   return {
     'point_unit': np.ravel(median).tolist(),
     'estimate': estimate,
     'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
-    'noise_sd_log_psd': None
-    if config.scoring.likelihood == 'synthetic'
-    else res.noise_sd,
-    **(
-      {'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()}
-      if config.scoring.likelihood == 'synthetic'
-      else {}
+    **_noise_record(config, res),
+    'interval_meaning': _interval_meaning(note),
+    'calibration': note,
+  }
+
+
+def _refined_draws(config, space: physsim.SearchSpace, grid, lp,
+                   samples) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+  """(prior, posterior) draws in the unit cube, each refined off the grid's
+  points (``posterior.refine_draws``): the prior's as many as the
+  posterior's, drawn from the log prior ``lp`` on ``grid``."""
+  key = jax.random.key(config.seed)
+  prior = posterior_lib.refine_draws(
+    posterior_lib.prior_samples(
+      jax.random.fold_in(key, 7), grid, lp, len(samples)
+    ), grid, space, config.measured, config.seed + 1,
+  )  # fmt: skip
+  posterior = posterior_lib.refine_draws(
+    samples, grid, space, config.measured, config.seed
+  )
+  return prior, posterior
+
+
+def _air_draws(config, space: physsim.SearchSpace, samples, prior) -> dict:
+  """The air coefficient's draws beside the posterior's and the prior's: the
+  wind they hold is the effective one, c read from it and the wind reading
+  (``measurements.air_draws``), as ``posterior.npz`` keeps them."""
+  return {
+    'air_samples': measurements.air_draws(
+      measurements.physical(samples, space)[:, 1], config.measured, config.seed
     ),
-    'interval_meaning': 'central credible intervals of the posterior given the '
-    'video (and any measured wind or area weight)'
+    'air_prior_samples': measurements.air_draws(
+      measurements.physical(prior, space)[:, 1], config.measured, config.seed + 1
+    ),
+  }  # fmt: skip
+
+
+def _noise_record(config, res) -> dict:
+  """The noise the likelihood read: the log PSD's spread, or for the
+  'synthetic' likelihood (None there) the shape's spread per summary, m."""
+  synthetic = config.scoring.likelihood == 'synthetic'
+  return {
+    'noise_sd_log_psd': None if synthetic else res.noise_sd,
+    **({'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()} if synthetic else {}),
+  }
+
+
+def _interval_meaning(note: dict | None) -> str:
+  """What the intervals are, as ``estimate.json`` says it: recalibrated where
+  the calibration ``note`` matched and was recalibrated."""
+  recalibrated = bool(note and note.get('recalibrated') and note.get('matches'))
+  return (
+    'central credible intervals of the posterior given the video (and any '
+    'measured wind or area weight)'
     + (
       ', read at levels recalibrated on simulated recordings so that they hold '
       'the truth as often as they say'
       if recalibrated
       else ''
-    ),
-    'calibration': note,
-  }
+    )
+  )
 
 
 def levels_of(note: dict | None) -> dict | None:

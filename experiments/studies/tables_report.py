@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 import physsim
-from experiments.pipeline import eval_set, report
+from experiments.pipeline import eval_set, summaries
 
 # The paper's PhySNet-depth results (percent error of wind speed, area weight).
 PAPER = {
@@ -36,7 +36,7 @@ def rescore(result: dict) -> dict:
     *(result['estimate'][f]['value'] for f in physsim.Params._fields)
   )
   space = physsim.search_space(result['material'])
-  return {**result, 'errors': report.errors(best, result['truth'], space)}
+  return {**result, 'errors': summaries.errors(best, result['truth'], space)}
 
 
 def _values(rows, source, err):
@@ -45,7 +45,7 @@ def _values(rows, source, err):
 
 def _mean(rows, source, err):
   vals = _values(rows, source, err)
-  return report.mean_error(vals, err) if vals else float('nan')
+  return summaries.mean_error(vals, err) if vals else float('nan')
 
 
 def summarise(results: dict, methods) -> dict:

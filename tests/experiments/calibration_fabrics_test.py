@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import calibration_tables, report
+from experiments.pipeline import calibration_tables, table_notes
 from experiments.pipeline import datasets as gen
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration, calibration_check
@@ -304,7 +304,7 @@ def test_the_paper_tables_were_checked_on_another_physics_and_estimates_say_so(
       assert cov['interval_50'] >= 0.35, (mode, field, cov)
     cells = quoted['coverage'].values()
     assert np.mean([c['interval_50'] for c in cells]) >= 0.40, mode
-  line = report.calibration_line(calibration_tables.calibration_note(config))
+  line = table_notes.calibration_line(calibration_tables.calibration_note(config))
   assert f'On {sum(c["n"] for c in video)} recordings of another physics' in line
   reading = dict(wind_speed=3.0, wind_speed_sd=0.06)
   (quoted,) = calibration_tables.calibration_note(config.replace(**reading))['checks']
@@ -353,7 +353,7 @@ def test_a_check_is_recorded_in_the_file_it_checked_and_replaced_by_a_rerun(tmp_
   )
   # one per physics: its seeds pooled, each coverage the recordings' mean
   assert [(c['n'], c['seeds']) for c in note['checks']] == [(22, [3, 4])]
-  line = report.calibration_line(note)
+  line = table_notes.calibration_line(note)
   assert 'On 22 recordings of another physics' in line
   assert 'they held it in bending 70%/50%' in line
   other = json.loads(json.dumps(record))
@@ -638,7 +638,7 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
   mine = quoted['this_fabric']
   assert mine['n'] == 16 and mine['coverage']['wind_speed']['interval_90'] == 11 / 16
   assert _wilson_upper(11, 16) < 0.9 and mine['short'] == ['wind_speed']
-  line = report.calibration_line(white)
+  line = table_notes.calibration_line(white)
   assert (
     'This fabric alone (white tablecloth, 16 of them): bending 88%/50%, wind 69%/50%'
     in line
@@ -646,7 +646,7 @@ def test_an_estimate_quotes_its_own_fabrics_coverage_and_says_where_it_fell_shor
   assert 'Its wind 90% intervals held the truth less often than promised' in line
   denim = calibration_tables.calibration_note(config.replace(material='black_denim'))
   assert denim['checks'][0]['this_fabric']['short'] == []
-  assert 'too narrow' not in report.calibration_line(denim)
+  assert 'too narrow' not in table_notes.calibration_line(denim)
   assert (
     'this_fabric'
     not in calibration_tables.calibration_note(config.replace(material='pink_nylon'))[

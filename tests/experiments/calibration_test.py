@@ -24,7 +24,7 @@ from experiments.pipeline import (
   calibration_tables,
   layout,
   measurements,
-  report,
+  table_notes,
 )
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline.objective import EstimateConfig
@@ -165,10 +165,10 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   path.write_text(json.dumps(cal))
   monkeypatch.setattr(calibration_tables, 'CALIBRATION_FILE', str(path))
   same = calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
-  assert 'wind 88%/48%' in report.calibration_line(same)
+  assert 'wind 88%/48%' in table_notes.calibration_line(same)
   other = calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=1.4))
   assert other['matches'] is False
-  assert 'not for this sharpness' in report.calibration_line(other)
+  assert 'not for this sharpness' in table_notes.calibration_line(other)
   other = calibration_tables.calibration_note(
     PSD_ESTIMATE.replace(sharpness=0.7, likelihood='threshold')
   )
@@ -194,7 +194,7 @@ def test_an_estimate_quotes_coverage_only_for_the_calibrated_settings(
   monkeypatch.setattr(
     calibration_tables, 'CALIBRATION_FILE', str(tmp_path / 'none.json')
   )
-  assert 'not measured' in report.calibration_line(
+  assert 'not measured' in table_notes.calibration_line(
     calibration_tables.calibration_note()
   )
 
@@ -278,7 +278,7 @@ def test_a_matching_estimate_gets_its_modes_recalibrated_levels(tmp_path, monkey
   note = calibration_tables.calibration_note(PSD_ESTIMATE.replace(sharpness=0.7))
   assert note['recalibrated'] and note['mode'] == 'video'
   assert note['levels']['wind_speed'] == [0.01, 0.1, 0.4, 0.9, 0.99]
-  assert 'recalibrated on 200' in report.calibration_line(note)
+  assert 'recalibrated on 200' in table_notes.calibration_line(note)
   wind = PSD_ESTIMATE.replace(
     sharpness=0.7, measured=m(wind_speed=3.0, wind_speed_sd=0.06)
   )
@@ -320,9 +320,9 @@ def test_a_network_weaker_than_the_calibrations_is_said_to_be(tmp_path, monkeypa
   weak = calibration_tables.calibration_note(config, accuracy=0.66)
   assert weak['recalibrated']  # the tables still apply: same recipe
   assert weak['weaker_network'] == {'accuracy': 0.66, 'calibrated': [0.71, 0.88]}
-  line = report.calibration_line(weak)
+  line = table_notes.calibration_line(weak)
   assert '(66%) is below' in line and '(71-88%)' in line
-  assert 'below' not in report.calibration_line(within)
+  assert 'below' not in table_notes.calibration_line(within)
 
 
 def test_recalibrated_summaries_read_the_defensive_mixture_at_the_levels():
@@ -634,12 +634,12 @@ def test_the_tables_apply_only_to_a_network_of_their_recipe(tmp_path, monkeypatc
   other_seed = embedding.network_recipe(_fake_network(tmp_path / 'b', seed=7))
   note = calibration_tables.calibration_note(config, network=other_seed)
   assert note['recalibrated'] and note['networks'] == 2
-  assert 'recordings of networks held out' in report.calibration_line(note)
+  assert 'recordings of networks held out' in table_notes.calibration_line(note)
   longer = embedding.network_recipe(_fake_network(tmp_path / 'c', epochs=20))
   note = calibration_tables.calibration_note(config, network=longer)
   assert note['matches'] is False
   assert note['differs'] == ['network recipe (training.epochs)']
-  assert 'network recipe (training.epochs)' in report.calibration_line(note)
+  assert 'network recipe (training.epochs)' in table_notes.calibration_line(note)
   assert 'levels' not in note  # nothing for the estimate to apply
 
 

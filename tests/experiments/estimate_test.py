@@ -28,6 +28,9 @@ from experiments.pipeline import (
   results,
   resume,
   search,
+  search_figures,
+  summaries,
+  table_notes,
 )
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
@@ -411,7 +414,7 @@ def test_a_blown_up_candidate_is_a_failure_and_the_run_goes_on(
 def test_errors_by_hand():
   truth = {'bending_scale': 2.0, 'wind_speed': 4.0, 'area_weight': 0.2}
   space = physsim.SearchSpace(area_weight=(0.1, 0.3))
-  err = report.errors(physsim.params.make(0.5, 5.0, 0.25), truth, space)
+  err = summaries.errors(physsim.params.make(0.5, 5.0, 0.25), truth, space)
   e = err['estimate']
   assert e['wind_speed_pct'] == pytest.approx(25.0, rel=1e-12)
   assert e['area_weight_pct'] == pytest.approx(25.0, rel=1e-12)
@@ -419,7 +422,7 @@ def test_errors_by_hand():
   # load ratio ~ v^2 / w: (25 / 0.25) / (16 / 0.2) = 1.25
   assert e['load_ratio_pct'] == pytest.approx(25.0, rel=1e-12)
   # wind and weight off along the ratio's iso-line: the ratio is exact
-  on_line = report.errors(physsim.params.make(2.0, 4.4, 0.242), truth, space)
+  on_line = summaries.errors(physsim.params.make(2.0, 4.4, 0.242), truth, space)
   assert on_line['estimate']['load_ratio_pct'] == pytest.approx(0.0, abs=1e-9)
   # range centre: bending 1 (log centre), 3.5 m/s, 0.2 kg/m^2
   c = err['range_centre']
@@ -445,7 +448,7 @@ def test_best_seen():
 
 def test_iterations_of_evaluations():
   np.testing.assert_array_equal(
-    report.iterations_of(11, n_init=3, q=4), [0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2]
+    search_figures.iterations_of(11, n_init=3, q=4), [0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2]
   )
 
 
@@ -465,7 +468,7 @@ def test_network_retrieval_of_the_shipped_epoch(tmp_path):
   assert got == pytest.approx(
     {'bending_scale': 1.0, 'wind_speed': 0.2, 'area_weight': 0.9}
   )
-  assert 'wind_speed 0.20' in report.retrieval_note(got)
+  assert 'wind_speed 0.20' in table_notes.retrieval_note(got)
   from experiments.pipeline import training
 
   line = training.describe_eval({**rows[1], 'test_triplet_accuracy': 0.625})

@@ -146,22 +146,22 @@ def test_a_file_that_is_not_a_result_is_named(tmp_path, text, why):
 
 
 def test_estimate_notes_strong_fan_settings_and_the_gentler_wind():
-  from experiments.pipeline import report
+  from experiments.pipeline import advice
 
-  note = report.fan_setting_note([12.0, 15.0], 'gray_interlock')
+  note = advice.fan_setting_note([12.0, 15.0], 'gray_interlock')
   # load ratio 8 at the middle area weight (0.185 kg/m^2): v = sqrt(8 w g / rho)
   v = np.sqrt(8.0 * 0.185 * 9.81 / 1.0)
   assert f'about {v:.1f} m/s or less for gray_interlock' in note
   assert 'about 12, 15' in note
   assert 'three gentler settings' in note and '--recording=a,b,c' in note
-  assert report.fan_setting_note(12.0, 'gray_interlock') is not None  # a scalar
+  assert advice.fan_setting_note(12.0, 'gray_interlock') is not None  # a scalar
   # one gentle recording among strong ones: nothing to advise
-  assert report.fan_setting_note([12.0, 5.0], 'gray_interlock') is None
-  assert report.fan_setting_note([report.STRONG_LOAD_RATIO], 'gray_interlock') is None
+  assert advice.fan_setting_note([12.0, 5.0], 'gray_interlock') is None
+  assert advice.fan_setting_note([advice.STRONG_LOAD_RATIO], 'gray_interlock') is None
 
 
 def test_the_note_reads_a_posterior_median_or_the_argmin_protocols_value():
-  from experiments.pipeline import report
+  from experiments.pipeline import summaries
 
-  assert report.point_of({'median': 12.0, 'value': 11.0}) == 12.0
-  assert report.point_of({'value': 9.5, 'posterior_median': 9.0}) == 9.5  # argmin
+  assert summaries.point_of({'median': 12.0, 'value': 11.0}) == 12.0
+  assert summaries.point_of({'value': 9.5, 'posterior_median': 9.0}) == 9.5  # argmin

@@ -9,7 +9,7 @@ import pytest
 
 import bo
 import physsim
-from experiments.pipeline import fit_check, measurements, objective, report
+from experiments.pipeline import fit_check, measurements, objective, table_notes
 
 
 def _simulate_around(recording, sd, seed=0):
@@ -45,7 +45,7 @@ def test_a_recording_far_beyond_the_gusts_is_flagged_with_its_ratio_by_hand():
   i, j = np.triu_indices(8, 1)
   floor = np.mean(np.sum((s[i] - s[j]) ** 2, axis=1))
   assert p['ratio'] == pytest.approx(fit / floor, rel=1e-12) and not p['fits']
-  line = report.fit_line({'predictive': p, 'conflicts': []}, {})
+  line = table_notes.fit_line({'predictive': p, 'conflicts': []}, {})
   assert 'FARTHER than the gusts allow' in line
 
 
@@ -65,7 +65,7 @@ def test_a_wind_reading_the_video_disagrees_with_is_named():
   (c,) = fit_check.conflicts(log_lik, grid, space, far)
   assert c['reading'] == 'wind_speed' and c['video'][0] < 3.0 < c['video'][1]
   assert c['video'][1] < 4.2 - 2 * 0.08
-  line = report.fit_line({'conflicts': [c]}, far.to_dict())
+  line = table_notes.fit_line({'conflicts': [c]}, far.to_dict())
   assert 'the video disagrees with the wind reading' in line
   assert '--air_coefficient=free' in line
   near = measurements.Measured(wind_speed=3.05, wind_speed_sd=0.06)

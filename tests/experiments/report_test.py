@@ -7,7 +7,16 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 import physsim
-from experiments.pipeline import calibration_tables, measurements, objective, report
+from experiments.pipeline import (
+  advice,
+  calibration_tables,
+  measurements,
+  objective,
+  report,
+  search_figures,
+  summaries,
+  table_notes,
+)
 
 # Percent errors and factors are ratios of a few floats: exact to rounding.
 TOL = 1e-9
@@ -15,7 +24,7 @@ TOL = 1e-9
 
 def test_stats_reads_quantiles_of_the_samples():
   samples = np.arange(101, dtype=np.float64)  # 0..100: quantiles are the percent
-  s = report.stats(np.array([42.0]), samples)
+  s = summaries.stats(np.array([42.0]), samples)
   assert s['value'] == 42.0
   assert s['posterior_median'] == 50.0
   assert s['interval_90'] == pytest.approx([5.0, 95.0], abs=TOL)
@@ -26,20 +35,20 @@ def test_errors_by_hand():
   space = physsim.SearchSpace()  # wind 1-6, area weight 0.1-0.37, bending 0.1-10
   truth = {'bending_scale': 2.0, 'wind_speed': 4.0, 'area_weight': 0.2}
   best = physsim.Params(0.5, 5.0, 0.25)
-  e = report.errors(best, truth, space)['estimate']
+  e = summaries.errors(best, truth, space)['estimate']
   assert e['wind_speed_pct'] == pytest.approx(25.0, abs=TOL)
   assert e['area_weight_pct'] == pytest.approx(25.0, abs=TOL)
   assert e['bending_factor'] == pytest.approx(4.0, rel=TOL)  # 0.5 vs 2: x4
   # rho v^2 / (w g): (25 / 0.25) / (16 / 0.2) = 100 / 80, 25% high.
   assert e['load_ratio_pct'] == pytest.approx(25.0, rel=TOL)
-  centre = report.errors(best, truth, space)['range_centre']
+  centre = summaries.errors(best, truth, space)['range_centre']
   assert centre['wind_speed_pct'] == pytest.approx(100 * abs(3.5 - 4.0) / 4.0, rel=TOL)
   assert centre['bending_factor'] == pytest.approx(2.0, rel=TOL)  # log centre is 1
 
 
 def test_mean_error_is_geometric_for_the_bending_factor_only():
-  assert report.mean_error([2.0, 8.0], 'bending_factor') == pytest.approx(4.0)
-  assert report.mean_error([2.0, 8.0], 'wind_speed_pct') == pytest.approx(5.0)
+  assert summaries.mean_error([2.0, 8.0], 'bending_factor') == pytest.approx(4.0)
+  assert summaries.mean_error([2.0, 8.0], 'wind_speed_pct') == pytest.approx(5.0)
 
 
 def test_covered_checks_each_interval_and_the_load_ratio():
@@ -53,7 +62,7 @@ def test_covered_checks_each_interval_and_the_load_ratio():
     },
     'load_ratio': {'interval_90': [0.5 * ratio, 2 * ratio]},
   }
-  c = report.covered(result, truth)
+  c = summaries.covered(result, truth)
   assert c['bending_scale'] == {'interval_90': True, 'interval_50': False}
   assert c['wind_speed'] == {'interval_90': False}
   assert c['area_weight'] == {'interval_90': True}
@@ -109,9 +118,9 @@ def test_the_default_estimate_of_every_fabric_quotes_measured_coverage():
     note = calibration_tables.calibration_note(config)
     assert note['matches'] and note['recalibrated'], (fabric, note.get('differs'))
     assert note['mode'] == 'video'
-    assert 'indicative' not in report.calibration_line(note)
+    assert 'indicative' not in table_notes.calibration_line(note)
   psd = objective.EstimateConfig().replace(distance='energy')
-  assert 'indicative' in report.calibration_line(
+  assert 'indicative' in table_notes.calibration_line(
     calibration_tables.calibration_note(psd)
   )
 
@@ -121,8 +130,8 @@ def test_the_distances_table_sets_each_estimate_beside_the_truth():
   psd = _result(
     estimate={**shape['estimate'], 'wind_speed': _entry(4.4, 4.2, 4.6, 4.0, 4.9, 3)}
   )
-  psd['errors'] = report.errors(physsim.Params(0.5, 4.4, 0.25), shape['truth'],
-                                physsim.search_space('gray_interlock'))  # fmt: skip
+  psd['errors'] = summaries.errors(physsim.Params(0.5, 4.4, 0.25), shape['truth'],
+                                   physsim.search_space('gray_interlock'))  # fmt: skip
   table = report.distances_table({'shape (default)': shape, 'PhySNet PSD': psd})
   lines = table.splitlines()
   assert max(map(len, lines)) <= report.WIDTH
@@ -136,7 +145,7 @@ def test_the_distances_table_sets_each_estimate_beside_the_truth():
 
 
 def test_iterations_of_counts_the_initial_design_as_iteration_zero():
-  it = report.iterations_of(n_evals=10, n_init=4, q=2)
+  it = search_figures.iterations_of(n_evals=10, n_init=4, q=2)
   assert list(it) == [0, 0, 0, 0, 1, 1, 2, 2, 3, 3]
 
 
@@ -161,7 +170,7 @@ def _result(**extra):
     },
     'load_ratio': _entry(1.02, 0.9, 1.1, 0.81, 1.23, 3.3),
     'truth': truth,
-    'errors': report.errors(best, truth, space),
+    'errors': summaries.errors(best, truth, space),
     'calibration': {
       'recalibrated': True,
       'mode': 'known wind',
@@ -261,10 +270,12 @@ def test_the_montage_keeps_its_labels_inside_the_canvas(
 ):
   figs = []
   monkeypatch.setattr(
-    report.files, 'savefig', lambda fig, path, dpi=100: figs.append(fig)
+    search_figures.files, 'savefig', lambda fig, path, dpi=100: figs.append(fig)
   )
   depth = np.random.default_rng(0).uniform(1.0, 2.0, (n_frames, 16, 16))
-  report.plot_montage(depth, depth, 20.0, str(tmp_path / 'montage.png'), n=n_frames)
+  search_figures.plot_montage(
+    depth, depth, 20.0, str(tmp_path / 'montage.png'), n=n_frames
+  )
   (fig,) = figs
   assert _texts_inside(fig) == []
   labels = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, 'get_text'))]
@@ -274,7 +285,7 @@ def test_the_montage_keeps_its_labels_inside_the_canvas(
 def test_the_next_recording_line_names_what_was_left_at_the_prior():
   config = objective.EstimateConfig()
   told = {'bending_scale': {'narrowing_90': 1.0}, 'area_weight': {'narrowing_90': 1.1}}
-  line = report.next_recording_note(told, config, 'out/e')
+  line = advice.next_recording_note(told, config, 'out/e')
   assert line.startswith('next: the recording(s) told little about bending and area')
   assert '--area_weight=' in line and '--bending_length=' in line
   assert 'python -m experiments.plan --workdir=out/e' in line and '\n' not in line
@@ -283,19 +294,19 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
     measured=measurements.Measured(area_weight=0.18, area_weight_sd=0.004,
                                 bending_length=0.02, bending_length_sd=0.002),
   )  # fmt: skip
-  assert report.next_recording_note(told, weighed, 'out/e') is None
+  assert advice.next_recording_note(told, weighed, 'out/e') is None
   # the strip measured bending (the video adding nothing to it): area weight only
   strip = config.replace(
     measured=measurements.Measured(bending_length=0.02, bending_length_sd=0.002)
   )
-  line = report.next_recording_note(told, strip, 'out/e')
+  line = advice.next_recording_note(told, strip, 'out/e')
   assert line.startswith('next: the recording(s) told little about area weight;'), line
   assert '--area_weight=' in line and '--bending_length=' not in line
   narrowed = {
     'bending_scale': {'narrowing_90': 3.0},
     'area_weight': {'narrowing_90': 4},
   }
-  assert report.next_recording_note(narrowed, config, 'out/e') is None
+  assert advice.next_recording_note(narrowed, config, 'out/e') is None
 
 
 def test_a_point_far_from_the_median_gets_the_median_in_a_note():

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import fabric_files, intake, layout, objective, report, rig
+from experiments.pipeline import advice, fabric_files, intake, layout, objective, rig
 from physsim import camera, dataset
 
 _CONFIG = objective.PRESETS['smoke'].replace(distance='shape')
@@ -253,7 +253,7 @@ def test_a_sheet_and_a_swatch_share_one_posterior_through_a_protocol_file(tmp_pa
   # one line after every estimate, a joint's too, where the area weight was
   # left near its prior (the bending was measured: not named), and the
   # planner it names reads the joint's shared posterior
-  told = joint['area_weight']['narrowing_90'] < report.LITTLE_NARROWING
+  told = joint['area_weight']['narrowing_90'] < advice.LITTLE_NARROWING
   lines = [ln for ln in done.stdout.splitlines() if ln.startswith('next:')]
   assert len(lines) == int(told), done.stdout[-2000:]
   if told:

@@ -20,7 +20,7 @@ import pytest
 
 import physsim
 from experiments import estimate as estimate_cli
-from experiments.pipeline import embedding, estimation, evaluation, layout, report
+from experiments.pipeline import advice, embedding, estimation, evaluation, layout
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -217,8 +217,8 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   saved = json.load(open(os.path.join(workdir, layout.ESTIMATE_FILE)))
   assert len(saved['noise_sd_shape_m']) == 2 and saved['noise_sd_log_psd'] is None
   assert 0 < min(saved['noise_sd_shape_m']) < 0.05  # metres of centroid scatter
-  assert report.synthetic_warning(config).startswith('warning: --likelihood=synthetic')
-  assert report.synthetic_warning(CONFIG) is None
+  assert advice.synthetic_warning(config).startswith('warning: --likelihood=synthetic')
+  assert advice.synthetic_warning(CONFIG) is None
 
 
 def test_camera_error_out_of_range_is_refused():
@@ -230,7 +230,7 @@ def test_camera_error_out_of_range_is_refused():
 def test_estimate_warns_when_a_shape_distance_trusts_an_aligned_camera():
   base = obj_lib.PRESETS['smoke'].replace(distance='energy')
   shape = base.replace(distance='shape')
-  warn = report.shape_camera_warning
+  warn = advice.shape_camera_warning
   assert 'camera_sd_m=0.02' in warn(shape, aligned=True)
   assert 'energy+shape' in warn(shape.replace(distance='energy+shape'), True)
   assert warn(shape, aligned=False) is None  # a simulated recording's exact camera

@@ -17,8 +17,8 @@ from experiments.pipeline import (
   calibration_tables,
   joint,
   objective,
-  report,
   simulation,
+  table_notes,
   takes,
 )
 from experiments.pipeline import posterior as posterior_lib
@@ -199,10 +199,10 @@ def test_a_protocol_file_names_the_fan_and_the_hem(tmp_path):
 
 def test_the_joint_table_says_which_recordings_shared_a_fan_and_carried_a_hem():
   recs = [{'fan': 'low'}, {'fan': 'low', 'hem_mass': 0.3}, {'fan': '#2'}]
-  assert report._set_up_note(recs) == (
+  assert table_notes._set_up_note(recs) == (
     "recordings 0, 1 share fan setting 'low' (one wind); recording 1 carries 300 g at its hem."
   )
-  assert report._set_up_note([{}, {}]) == ''
+  assert table_notes._set_up_note([{}, {}]) == ''
 
 
 def test_the_joints_shared_discrepancy_caps_what_a_hem_pair_says_of_area_weight():
