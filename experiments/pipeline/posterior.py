@@ -511,20 +511,25 @@ def _evidence(ev: list, shared_bias_sd: float, area_weight_range) -> np.ndarray:
 
 
 def plot(samples_unit, prior_unit, space, truth, path: str, title: str = '',
-         summary: dict | None = None, point: str = 'median') -> None:  # fmt: skip
+         summary: dict | None = None, point: str = 'median',
+         units: tuple[dict, dict] | None = None) -> None:  # fmt: skip
   """Marginals (bending, wind, area weight, load ratio) over the prior, and the
   pairs: wind x area weight with the load ratio's iso-lines (the ridge the
   video measures), bending x wind, bending x area weight. The marked point
   (``summary[name][point]``: 'median' or 'bayes'), median and intervals, the
   iso-lines included, are ``summary``'s (``summarise``, e.g. recalibrated:
-  what the table prints) where given, else the draws' own."""
-  fig = figure(samples_unit, prior_unit, space, truth, title, summary, point)
+  what the table prints) where given, else the draws' own. ``units``: the
+  table's names and factors (``units.in_units`` of the fabric: bending
+  rigidity in uN m, area weight in g/m^2), the axes drawn in them; None: the
+  search's own scales (bending as a multiple of the reference, kg/m^2)."""
+  fig = figure(samples_unit, prior_unit, space, truth, title, summary, point, units)
   files.savefig(fig, path, dpi=80)
   files.pyplot().close(fig)
 
 
 def figure(samples_unit, prior_unit, space, truth, title: str = '',
-           summary: dict | None = None, point: str = 'median'):  # fmt: skip
+           summary: dict | None = None, point: str = 'median',
+           units: tuple[dict, dict] | None = None):  # fmt: skip
   """``plot``'s figure (matplotlib), not saved: the draws and the prior's in
   physical values with the load ratio, each one's summary and the truth's
   (``posterior_figure.draw``)."""
@@ -545,4 +550,4 @@ def figure(samples_unit, prior_unit, space, truth, title: str = '',
       physsim.load_ratio(truth['wind_speed'], truth['area_weight'])
     )
   return posterior_figure.draw(post, prior, stats, true, space.bounds(), LOG_SCALED,
-                               point, title)  # fmt: skip
+                               point, title, units)  # fmt: skip

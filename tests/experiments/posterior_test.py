@@ -10,7 +10,7 @@ import pytest
 
 import bo
 import physsim
-from experiments.pipeline import measurements, posterior
+from experiments.pipeline import files, measurements, posterior, units
 
 SPACE = physsim.SearchSpace()  # wind 1-6 m/s, area weight 0.1-0.37 kg/m^2
 
@@ -93,6 +93,49 @@ def test_the_picture_draws_the_intervals_the_table_prints(tmp_path, monkeypatch)
     np.ravel(marks), [3.85, 0.253], rtol=1e-9
   )  # the Bayes point
   assert fig._suptitle.get_text().endswith('rec_7')
+
+
+def test_the_picture_reads_in_the_tables_units():
+  """Given the table's units (``units.in_units``), the picture's axes are
+  bending rigidity in uN m and area weight in g/m^2, not the search's scales:
+  the labels the table's, the draws, the point, the truth and the box each
+  times the table's factor; the load ratio's iso-lines still rho v^2 / (w g)."""
+  space = physsim.search_space('gray_interlock')
+  names, factors = units.in_units('gray_interlock')
+  assert factors['bending_scale'] == pytest.approx(1e6 * space.rigidity)
+  assert factors['area_weight'] == 1e3
+  rng = np.random.default_rng(1)
+  samples = rng.uniform(-0.3, 0.3, (400, 3))
+  prior = rng.uniform(-1, 1, (400, 3))
+  summary = posterior.summarise(samples, space, prior)
+  truth = {'bending_scale': 1.2, 'wind_speed': 3.0, 'area_weight': 0.2}
+  fig = posterior.figure(samples, prior, space, truth, summary=summary,
+                         point='bayes', units=(names, factors))  # fmt: skip
+  bending, wind, weight, _, pair = fig.axes[:5]
+  assert bending.get_xlabel() == 'bending rigidity (uN m)'
+  assert weight.get_xlabel() == 'area weight (g/m^2)' == pair.get_ylabel()
+  assert wind.get_xlabel() == 'wind (m/s)' == pair.get_xlabel()
+  for ax, name in ((bending, 'bending_scale'), (weight, 'area_weight')):
+    k = factors[name]
+    drawn = {line.get_color(): line.get_xdata()[0] for line in ax.get_lines()}
+    assert drawn['k'] == pytest.approx(k * summary[name]['bayes'], rel=1e-12)
+    assert drawn['r'] == pytest.approx(k * truth[name], rel=1e-12)
+    lo, hi = space.bounds()[posterior.FIELDS.index(name)]
+    a, b = ax.get_xlim()
+    assert k * lo / 2 < a < b < k * hi * 2, (name, a, b)  # margins: a log axis's wide
+  (true,) = [line.get_data() for line in pair.get_lines() if line.get_marker() == '+']
+  np.testing.assert_allclose(np.ravel(true), [3.0, 200.0], rtol=1e-12)
+  ratios = [
+    float(np.median(v**2 / (9.81 * w / 1e3)))  # w drawn in g/m^2
+    for v, w in (line.get_data() for line in pair.get_lines())
+    if len(v) > 1
+  ]
+  lr = summary['load_ratio']
+  np.testing.assert_allclose(
+    sorted(ratios), [lr['interval_90'][0], lr['median'], lr['interval_90'][1]],
+    rtol=1e-9,
+  )  # fmt: skip
+  files.pyplot().close(fig)
 
 
 # ------------------------------------------------ a cantilever's bending length
