@@ -10,11 +10,17 @@ import pytest
 import physsim
 from benchmarks import overhang_depth as bench
 from experiments.pipeline import calibration_tables
+from experiments.studies import (
+  overhang_joint,
+  overhang_law,
+  overhang_report,
+  overhang_setups,
+)
 
 
 def test_the_law_scales_the_fit_and_floor_and_counts_holds_by_t_quantiles():
   row = {'c': 1.0, 'c_hat': 1.05, 'read': {'fit_sd': 0.03}}
-  r = bench.with_law(row, floor=0.04, dof=4.0)
+  r = overhang_law.with_law(row, floor=0.04, dof=4.0)
   # scale: 0.03 and 0.04 x 1.05 in quadrature; sd: x sqrt(4 / 2)
   scale = float(np.hypot(0.03, 0.042))
   assert r['scale'] == pytest.approx(scale, rel=1e-12)
@@ -22,13 +28,16 @@ def test_the_law_scales_the_fit_and_floor_and_counts_holds_by_t_quantiles():
   assert r['z'] == pytest.approx(0.05 / scale, rel=1e-12)
   # t4's 50% and 90% quantiles by hand: 0.7407 and 2.1318
   rows = [{'z': z, 'c_hat': 1.0} for z in (0.7, 0.75, 2.1, 2.2)]
-  assert bench.held(rows, 0.5, 4.0) == 0.25 and bench.held(rows, 0.9, 4.0) == 0.75
-  assert bench.with_law({'c': 1.0, 'refused': 'x'}, 0.01, 4.0) == {
+  assert (
+    overhang_law.held(rows, 0.5, 4.0) == 0.25
+    and overhang_law.held(rows, 0.9, 4.0) == 0.75
+  )
+  assert overhang_law.with_law({'c': 1.0, 'refused': 'x'}, 0.01, 4.0) == {
     'c': 1.0,
     'refused': 'x',
   }
   with pytest.raises(ValueError, match='abridged'):
-    bench.with_law({'c': 1.0, 'c_hat': 1.0}, 0.01, 4.0)
+    overhang_law.with_law({'c': 1.0, 'c_hat': 1.0}, 0.01, 4.0)
 
 
 def test_the_fitted_law_recovers_the_law_readings_were_drawn_from():
@@ -39,37 +48,37 @@ def test_the_fitted_law_recovers_the_law_readings_were_drawn_from():
   q = (np.arange(400) + 0.5) / 400
   err = stats.t.ppf(q, 5.0) * 0.02
   rows = [{'c': 1.0, 'c_hat': 1.0 + e, 'read': {'fit_sd': 0.0}} for e in err]
-  dof, floor = bench.fitted_law(rows)
-  law = [bench.with_law(r, floor, dof) for r in rows]
-  for level in bench.FIT_LEVELS:
-    assert abs(bench.held(law, level, dof) - level) < 0.02, (dof, floor, level)
+  dof, floor = overhang_law.fitted_law(rows)
+  law = [overhang_law.with_law(r, floor, dof) for r in rows]
+  for level in overhang_law.FIT_LEVELS:
+    assert abs(overhang_law.held(law, level, dof) - level) < 0.02, (dof, floor, level)
   assert 4.0 <= dof <= 6.0 and floor == pytest.approx(0.02, abs=0.0015)
 
 
 def test_short_and_long_bending_lengths_are_reported_apart():
   # two short readings (one outside its 90% interval), three long (all in),
   # a refusal: coverage per group by t4's 90% quantile (2.1318)
-  short, long_ = 0.5 * bench.SHORT_C, 2.0 * bench.SHORT_C
+  short, long_ = 0.5 * overhang_law.SHORT_C, 2.0 * overhang_law.SHORT_C
   rows = [
     {'c': short, 'c_hat': short, 'error': 0.1, 'z': 3.0},
     {'c': short, 'c_hat': short, 'error': -0.02, 'z': -0.5},
     *({'c': long_, 'c_hat': long_, 'error': 0.01, 'z': z} for z in (0.1, 1.0, 2.0)),
     {'c': short, 'refused': 'too few pixels'},
   ]
-  g = bench.by_length(rows, 4.0)
+  g = overhang_law.by_length(rows, 4.0)
   assert g['short']['readings'] == 2 and g['long']['readings'] == 3
   assert g['short']['held_90'] == 0.5 and g['long']['held_90'] == 1.0
   assert g['short']['mean_abs_error'] == pytest.approx(0.06)
   assert g['long']['held_50'] == pytest.approx(1 / 3)
 
 
-@pytest.mark.parametrize('ranges', sorted(bench.SETUPS))
+@pytest.mark.parametrize('ranges', sorted(overhang_setups.SETUPS))
 def test_set_ups_are_drawn_inside_their_ranges(ranges):
-  r = bench.SETUPS[ranges]
+  r = overhang_setups.SETUPS[ranges]
   rng = np.random.default_rng(0)
   for c in (0.006, 0.02, 0.035):
     for _ in range(40):
-      s = bench.draw_setup(rng, c, ranges)
+      s = overhang_setups.draw_setup(rng, c, ranges)
       cam, strip = s['camera'], s['strip']
       assert r['distance'][0] <= cam['distance'] <= r['distance'][1]
       assert r['elevation'][0] <= cam['elevation_deg'] <= r['elevation'][1]
@@ -92,11 +101,13 @@ def test_a_flat_sheet_and_a_strip_give_the_bending_and_the_wind():
     'gp_mean': np.zeros(g), 'gp_var': np.full(g, 1e-4), 'floor': 0.0, 'noise_sd': 1.0,
   }  # fmt: skip
   reading = {'c_hat': c, 'sd': 0.03 * c, 'dof': 4.0}
-  tables = bench.shipped_tables(
+  tables = overhang_joint.shipped_tables(
     calibration_tables.shipped_calibration('shape', 'paper')
   )
-  assert set(tables) == set(bench.MODE_OF_SET)  # the shipped file calibrates both
-  out = bench.joint_estimate(run, reading, bench.Args(), seed=0, tables=tables)
+  assert set(tables) == set(
+    overhang_joint.MODE_OF_SET
+  )  # the shipped file calibrates both
+  out = overhang_joint.joint_estimate(run, reading, bench.Args(), seed=0, tables=tables)
   for how in ('raw', 'printed'):  # nominal levels, and as an estimate prints it
     alone = out['sheet, anemometer'][how]
     both = out['sheet, anemometer, overhang'][how]
@@ -119,7 +130,7 @@ def test_the_protocol_sets_figure_is_written(tmp_path):
       'sheet, anemometer': {'raw': row}, 'sheet, anemometer, overhang': {'raw': row},
     }})  # fmt: skip
   path = tmp_path / 'sets.png'
-  bench.plot_sets(sets, str(path))
+  overhang_report.plot_sets(sets, str(path))
   assert path.stat().st_size > 10_000
 
 
@@ -151,7 +162,7 @@ def test_a_protocol_set_is_written_for_a_sheet_recording(tmp_path):
 def test_the_results_file_keeps_what_reads_the_readings_again():
   """``compact``: a reading keeps its fit's spread, so a results file can be
   read again under another law (``--readings``), to 4 digits."""
-  row = bench.with_law(
+  row = overhang_law.with_law(
     {'c': 0.0123456, 'c_hat': 0.0125, 'read': {'fit_sd': 0.000321, 'ratio': 2.0},
      'setup': {'big': list(range(100))}, 'profile': np.zeros((5, 2)),
      'told_overhang': 0.03, 'error': 0.0125 / 0.0123456 - 1},
@@ -159,13 +170,13 @@ def test_the_results_file_keeps_what_reads_the_readings_again():
   )  # fmt: skip
   out = {'args': {'seed': 1}, 'floor': 0.008, 'dof': 4.0, 'summary': {'setups': 1},
          'rows': [row, {'c': 0.02, 'refused': 'no strip'}], 'sets': []}  # fmt: skip
-  small = bench.compact(out)
+  small = overhang_report.compact(out)
   kept = small['rows'][0]
   assert (
     'setup' not in kept
     and 'profile' not in kept
     and kept['read'] == {'fit_sd': 0.000321}
   )
-  again = bench.with_law(kept, 0.008, 4.0)
+  again = overhang_law.with_law(kept, 0.008, 4.0)
   assert again['z'] == pytest.approx(row['z'], rel=1e-3)
   assert small['rows'][1] == {'c': 0.02, 'refused': 'no strip'}
