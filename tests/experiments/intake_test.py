@@ -19,6 +19,7 @@ import pytest
 import physsim
 from experiments import estimate
 from experiments.pipeline import cloth_view, intake, intake_files, intake_record
+from physsim import video_files
 from tests.experiments import estimate_fixtures as ef
 from tests.experiments import scene_fixtures
 
@@ -196,7 +197,7 @@ def test_a_short_recording_and_a_fifo_frame_are_refused_by_name(scene, tmp_path)
   import threading  # noqa: PLC0415
 
   sim = ef.CONFIG.simulation
-  names = sorted(os.listdir(scene.frames), key=physsim.video.natural_key)
+  names = sorted(os.listdir(scene.frames), key=video_files.natural_key)
   short = tmp_path / 'short'
   short.mkdir()
   for name in names[:3]:
