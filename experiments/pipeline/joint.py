@@ -15,7 +15,7 @@ import jax
 import numpy as np
 
 import physsim
-from experiments.pipeline import embedding, files, layout, measurements
+from experiments.pipeline import embedding, files, layout, measurements, units
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import results as results_lib
 from experiments.pipeline import setup as setup_lib
@@ -189,6 +189,7 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
       combined['samples'][k], npz[k]['prior_samples'], space, job.recording.truth,
       os.path.join(workdir, f'joint_recording_{k}.png'),
       title=f'{config.simulation.material}: joint posterior, recording {k}',
+      units=units.in_units(config.simulation.material),
     )  # fmt: skip
   shared = summary(0, configs[0].measured)
   _write_joint_samples(workdir, combined, space, air_samples=bool(air))

@@ -24,6 +24,7 @@ from experiments.pipeline import (
   measurements,
   search_figures,
   summaries,
+  units,
 )
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import searcher as search_lib
@@ -162,8 +163,9 @@ def _against_truth(result: dict, truth: dict, space: physsim.SearchSpace) -> dic
 
 def _search_pictures(job: search_lib.Job, search: search_lib.LiveSearch, res,
                      best_frames: np.ndarray) -> list:  # fmt: skip
-  """The drawing of ``trace.png`` and ``montage.png`` (the recording beside
-  the best simulation, in the modality its network saw), as callables."""
+  """The drawing of ``trace.png`` (in the fabric's units, as the table's) and
+  ``montage.png`` (the recording beside the best simulation, in the modality
+  its network saw), as callables."""
   st, recording, workdir = job.setup, job.recording, job.workdir
   config = st.config
   iteration = search_figures.iterations_of(
@@ -174,6 +176,7 @@ def _search_pictures(job: search_lib.Job, search: search_lib.LiveSearch, res,
       search_figures.plot_trace, res.X, search_lib.discrepancies(res.Y), iteration,
       st.space, recording.truth, os.path.join(workdir, layout.TRACE_PNG),
       distance=config.scoring.distance,
+      units=units.in_units(config.simulation.material),
     ),
     functools.partial(
       search_figures.plot_montage,
@@ -251,6 +254,7 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
       os.path.join(workdir, layout.POSTERIOR_PNG),
       title=f'{config.simulation.material}: posterior given {_name(source) or os.path.basename(workdir)}',
       summary=summary, point=which,
+      units=units.in_units(config.simulation.material),
     ))  # fmt: skip
   return {
     'point_unit': np.ravel(median).tolist(),

@@ -3,7 +3,9 @@
 ``plot_trace`` is the paper's Figure 3 (the distance and each parameter per
 iteration); ``plot_montage`` puts the recording beside a simulation at the
 estimate, on one depth colour scale with frame times. ``results`` draws both
-beside ``estimate.json`` (the posterior's own figure: ``posterior.plot``).
+beside ``estimate.json`` (the posterior's own figure: ``posterior.plot``). The
+trace reads in the table's units where it is given them (issue 76:
+``units.in_units``), as ``posterior.png`` does, else in the search's scales.
 """
 
 from __future__ import annotations
@@ -12,12 +14,7 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import files
-
-LABELS = {
-  'bending_scale': 'bending (x measured)',
-  'wind_speed': 'wind speed (m/s)',
-  'area_weight': 'area weight (kg/m$^2$)',
-}
+from experiments.pipeline.posterior_figure import LABELS
 
 
 def iterations_of(n_evals: int, n_init: int, q: int) -> np.ndarray:
@@ -38,55 +35,75 @@ DISTANCE_WORDS = {
 
 
 def plot_trace(X_unit, Y, iteration, space, truth, path: str,
-               distance: str = 'energy') -> None:  # fmt: skip
-  """The distance and each parameter per iteration (the paper's Figure 3).
+               distance: str = 'energy',
+               units: tuple[dict, dict] | None = None) -> None:  # fmt: skip
+  """The distance and each parameter per iteration (the paper's Figure 3),
+  saved to ``path`` (PNG): ``trace_figure``'s."""
+  fig = trace_figure(X_unit, Y, iteration, space, truth, distance, units)
+  files.savefig(fig, path, dpi=90)
+  files.pyplot().close(fig)
+
+
+def trace_figure(X_unit, Y, iteration, space, truth, distance: str = 'energy',
+                 units: tuple[dict, dict] | None = None):  # fmt: skip
+  """``plot_trace``'s figure (matplotlib), not saved: the distance per
+  iteration, then each parameter's evaluated values coloured by it.
 
   Args:
     X_unit: (n, 3) evaluated unit-cube points, in order.
     Y: (n,) their distances (NaN: blew up).
     iteration: (n,) the iteration of each (``iterations_of``).
     space: the search space (axis limits).
-    truth: true parameters or None.
-    path: PNG path.
+    truth: true parameters (the search's scales) or None.
     distance: the estimate's distance (``DISTANCE_WORDS``), for the labels.
+    units: ``(names, factors)`` from the search's scales to the units a
+      person reads (``units.in_units`` of the fabric: bending rigidity in
+      uN m, area weight in g/m^2, as the table and ``posterior.png``); None:
+      the search's own (``posterior_figure.LABELS``).
   """
+  names, k = units or (LABELS, dict.fromkeys(physsim.Params._fields, 1.0))
   long_name, short_name = DISTANCE_WORDS.get(distance, DISTANCE_WORDS['energy'])
   X = np.asarray(physsim.from_unit(X_unit, space))  # (3, n)
   Y = np.asarray(Y, np.float64)
+  ok = np.isfinite(Y)
+  jitter = (np.random.default_rng(0).random(len(Y)) - 0.5) * 0.3
+  xs = iteration + jitter
+  plt = files.pyplot()
+  fig, axes = plt.subplots(1, 4, figsize=(17, 3.8), layout='constrained')
+  _distance_panel(axes[0], xs, Y, iteration, long_name)
+  colour = np.log10(np.where(ok, Y, np.nan))
+  for i, (ax, name) in enumerate(zip(axes[1:], physsim.Params._fields, strict=True)):
+    sc = ax.scatter(xs, k[name] * X[i], c=colour, s=14, cmap='viridis')
+    ax.set(xlabel='iteration (0 = initial design)', ylabel=names[name],
+           ylim=k[name] * np.asarray(space.bounds()[i]))  # fmt: skip
+    if name == 'bending_scale':
+      ax.set_yscale('log')
+    if truth is not None:
+      ax.axhline(k[name] * truth[name], color='r', lw=1, label='truth')
+      ax.legend(fontsize=8, loc='upper left', bbox_to_anchor=(0, -0.18), frameon=False)
+  fig.colorbar(
+    sc, ax=axes[1:], label=f'log$_{{10}}$ {short_name} (dark: low)', shrink=0.9
+  )
+  return fig
+
+
+def _distance_panel(ax, xs, Y, iteration, label: str) -> None:
+  """The first panel: each candidate's distance at its (jittered) iteration
+  ``xs``, the best so far at each iteration's end, and those that blew up."""
   ok = np.isfinite(Y)
   best = np.fmin.accumulate(np.where(ok, Y, np.inf))
   last_of = {
     int(i): j for j, i in enumerate(iteration)
   }  # last evaluation per iteration
   its = np.array(sorted(last_of))
-  jitter = (np.random.default_rng(0).random(len(Y)) - 0.5) * 0.3
-  xs = iteration + jitter
-  plt = files.pyplot()
-  fig, axes = plt.subplots(1, 4, figsize=(17, 3.8), layout='constrained')
-  ax = axes[0]
   ax.plot(xs[ok], Y[ok], '.', color='0.55', label='candidate')
   ax.plot(its, best[[last_of[i] for i in its]], '-o', ms=3, color='k',
           label='best so far')  # fmt: skip
   if (~ok).any():
     ax.plot(xs[~ok], np.full((~ok).sum(), np.nanmax(Y) if ok.any() else 1), 'x',
             color='r', label='blew up')  # fmt: skip
-  ax.set(xlabel='iteration (0 = initial design)', ylabel=long_name, yscale='log')
+  ax.set(xlabel='iteration (0 = initial design)', ylabel=label, yscale='log')
   ax.legend(fontsize=8)
-  colour = np.log10(np.where(ok, Y, np.nan))
-  for i, (ax, name) in enumerate(zip(axes[1:], physsim.Params._fields, strict=True)):
-    sc = ax.scatter(xs, X[i], c=colour, s=14, cmap='viridis')
-    ax.set(xlabel='iteration (0 = initial design)', ylabel=LABELS[name],
-           ylim=space.bounds()[i])  # fmt: skip
-    if name == 'bending_scale':
-      ax.set_yscale('log')
-    if truth is not None:
-      ax.axhline(truth[name], color='r', lw=1, label='truth')
-      ax.legend(fontsize=8, loc='upper left', bbox_to_anchor=(0, -0.18), frameon=False)
-  fig.colorbar(
-    sc, ax=axes[1:], label=f'log$_{{10}}$ {short_name} (dark: low)', shrink=0.9
-  )
-  files.savefig(fig, path, dpi=90)
-  plt.close(fig)
 
 
 def plot_montage(
