@@ -1,7 +1,8 @@
 """The house's shape (issue 75): the import graph of physsim, model, bo and
-experiments has no cycle, function-level imports included, and the estimate
-pipeline's stages import only the stages before them. Reads source files
-only (no imports run)."""
+experiments has no cycle, function-level imports included, the estimate
+pipeline's stages import only the stages before them, and no module or
+function of the libraries and benchmarks outgrows the size issue 75 cut them
+to. Reads source files only (no imports run)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,11 @@ import pytest
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _PACKAGES = ('physsim', 'model', 'bo', 'experiments')
 _P = 'experiments.pipeline.'
+# Issue 75's targets: a module a person reads in one sitting, a function on a
+# screen or two (end_lineno - lineno + 1, its docstring included).
+_SIZED = (*_PACKAGES, 'benchmarks')
+_MAX_MODULE_LINES = 600
+_MAX_FUNCTION_LINES = 80
 
 # The estimate's stages in the order they run (experiments/pipeline/__init__.py).
 # A module may import modules of its own stage or earlier ones, never later.
@@ -137,3 +143,46 @@ def test_every_pipeline_module_has_a_stage_or_is_an_application(graph):
   assert not unknown, f'STAGES names modules that do not exist: {unknown}'
   below = [m for m in pipeline - staged if any(m in graph[s] for s in staged)]
   assert below == [], f'staged modules import these unstaged ones: {below}'
+
+
+def _too_big(root: str, packages: tuple[str, ...]) -> list[str]:
+  """'path: N lines' for each module of ``packages`` (under ``root``) over
+  ``_MAX_MODULE_LINES``, and 'path:line name: N lines' for each function (any
+  depth) over ``_MAX_FUNCTION_LINES``."""
+  out = []
+  for package in packages:
+    for folder, _, names in sorted(os.walk(os.path.join(root, package))):
+      for name in sorted(n for n in names if n.endswith('.py')):
+        path = os.path.join(folder, name)
+        with open(path, encoding='utf-8') as f:
+          text = f.read()
+        where = os.path.relpath(path, root)
+        if (n := text.count('\n')) > _MAX_MODULE_LINES:
+          out.append(f'{where}: {n} lines')
+        for node in ast.walk(ast.parse(text, path)):
+          if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            n = node.end_lineno - node.lineno + 1
+            if n > _MAX_FUNCTION_LINES:
+              out.append(f'{where}:{node.lineno} {node.name}: {n} lines')
+  return out
+
+
+def test_no_module_or_function_outgrows_issue_75s_sizes():
+  big = _too_big(_ROOT, _SIZED)
+  assert big == [], (
+    f'over {_MAX_MODULE_LINES} lines a module or {_MAX_FUNCTION_LINES} a '
+    f'function (cut along responsibilities): {big}'
+  )
+
+
+def test_a_planted_long_function_and_module_are_named(tmp_path):
+  pkg = tmp_path / 'pkg'
+  pkg.mkdir()
+  body = '\n'.join(f'  x{i} = {i}' for i in range(_MAX_FUNCTION_LINES))
+  (pkg / 'long.py').write_text(f'def f():\n{body}\n\n\ndef g():\n  return 1\n')
+  (pkg / 'big.py').write_text('x = 1\n' * (_MAX_MODULE_LINES + 1))
+  (pkg / 'fine.py').write_text('x = 1\n' * _MAX_MODULE_LINES)
+  assert _too_big(str(tmp_path), ('pkg',)) == [
+    f'pkg/big.py: {_MAX_MODULE_LINES + 1} lines',
+    f'pkg/long.py:1 f: {_MAX_FUNCTION_LINES + 1} lines',
+  ]
