@@ -30,7 +30,7 @@ The shipped calibration file keeps each seed's check (the device's
 ``check.json``, whose video cells are what the estimates printed) and an
 estimate quotes them pooled (``calibration_tables.quoted_checks``):
 
-  python -c "import json; from experiments.pipeline import report; \
+  python -c "import json; from experiments.pipeline import calibration_tables; \
     from experiments.studies import calibration_check as c; \
     [calibration_tables.record_check(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE, \
       c.check_record(json.load(open(f'/tmp/chk{s}/check.json')))) for s in (2, 3, 4)]"
@@ -39,7 +39,7 @@ and the pool of those checks fabric by fabric, which an estimate of one
 fabric quotes beside them (``calibration_tables.fabric_check``: "This fabric alone ...";
 the shipped one is benchmarks/results/pooled_check_h200/pooled_check.json's):
 
-  python -c "import json; from experiments.pipeline import report; \
+  python -c "import json; from experiments.pipeline import calibration_tables; \
     calibration_tables.record_fabric_checks(calibration_tables.SHAPE_PAPER_CALIBRATION_FILE, \
       json.load(open('out/pooled_check/pooled_check.json'))['checks'])"
 
