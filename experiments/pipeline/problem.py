@@ -22,7 +22,7 @@ from experiments.pipeline.config import (
   EstimateConfig,
 )
 from experiments.pipeline.recording import Recording
-from experiments.pipeline.simulation import cloth
+from experiments.pipeline.simulation import Simulation, cloth
 
 # A recording's shape summary as one program, compiled once per frame shape and
 # camera model (``Intrinsics`` is hashable) for every recording a process reads.
@@ -148,7 +148,8 @@ def make_problem(
       net.network, net.params, inputs, net.clip_frames, net.members
     )[..., 0, :, :]
   with physsim.devices.on_host():  # small arrays: placed by each call
-    space, intr, poses, rec_shape = _recording_view(config, recording, shaped)
+    space = measurements.search_box(sim.material, config.measured, config.search.box)[0]
+    intr, poses, rec_shape = _recording_view(sim, config.seed, recording, shaped)
     lo, hi, log = physsim.params.unit_map(space)
     model = cloth(sim)
     data = ProblemData(
@@ -160,14 +161,13 @@ def make_problem(
   return Problem(config, recording.source, space, n_frames, intr, net, data)
 
 
-def _recording_view(config: EstimateConfig, recording: Recording, shaped: bool):
-  """The recording's search box, camera model, camera poses and (for a shape
-  distance) its sheet's shape summary (``physsim.shape.summary``, one jitted
-  program rather than an eager operation at a time)."""
-  sim = config.simulation
-  space = measurements.search_box(sim.material, config.measured, config.search.box)[0]
+def _recording_view(sim: Simulation, seed: int, recording: Recording, shaped: bool):
+  """The recording's camera model, camera poses (drawn from ``seed`` where it
+  has none, for ``sim``'s cloth) and (for a shape distance) its sheet's shape
+  summary (``physsim.shape.summary``, one jitted program rather than an eager
+  operation at a time)."""
   h, w = recording.depth.shape[1:]
-  key = jax.random.key(config.seed)
+  key = jax.random.key(seed)
   # A known field of view is used even when the pose is unknown.
   intr = recording.intrinsics or physsim.Intrinsics(width=w, height=h)
   if recording.pose is not None:
@@ -184,7 +184,7 @@ def _recording_view(config: EstimateConfig, recording: Recording, shaped: bool):
     )
     if not np.all(np.isfinite(np.asarray(rec_shape))):
       raise ValueError(f'{recording.source}: no frame has a valid depth pixel')
-  return space, intr, poses, rec_shape
+  return intr, poses, rec_shape
 
 
 def stack(datas: list[ProblemData]) -> ProblemData:
