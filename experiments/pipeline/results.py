@@ -135,7 +135,7 @@ def _fit_check(st: setup_lib.Setup, res, replicas) -> dict:
   return {
     'predictive': None if replicas is None else fit_check.predictive(replicas),
     'conflicts': fit_check.conflicts(
-      res.log_lik, search_lib.posterior_config(config).grid, st.space,
+      res.log_lik, search_lib.posterior_config(config.search, config.scoring).grid, st.space,
       config.measured,
     ),
   }  # fmt: skip
@@ -218,7 +218,7 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   ``draws`` (None: no picture). The intervals are read at the levels of
   ``st.calibration`` where it matched these settings, network and mode."""
   config, space, note = st.config, st.space, st.calibration
-  pc = search_lib.posterior_config(config)
+  pc = search_lib.posterior_config(config.search, config.scoring)
   points = bo.posterior.grid_points(pc.grid)
   lp = measurements.log_prior(points, space, config.measured, pc.grid)
   prior, samples = _refined_draws(config, space, pc.grid, lp, res.samples)

@@ -24,6 +24,7 @@ import physsim
 from experiments.pipeline import embedding, layout, measurements
 from experiments.pipeline import objective as obj_lib
 from experiments.pipeline import setup as setup_lib
+from experiments.pipeline.config import Scoring, Search
 from experiments.pipeline.objective import EstimateConfig
 from experiments.pipeline.recording import Recording
 
@@ -107,7 +108,7 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
   s = config.search
   if s.point == 'argmin':
     return bo.Minimizer(BOUNDS, **minimizer_settings(config, workdir), device=device)
-  pc = posterior_config(config)
+  pc = posterior_config(s, config.scoring)
   points = bo.posterior.grid_points(pc.grid)
   return bo.PosteriorSearch(
     pc, n_init=s.n_init, n_iter=s.max_iter,
@@ -118,9 +119,9 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
   )  # fmt: skip
 
 
-def posterior_config(config: EstimateConfig) -> bo.PosteriorConfig:
-  """The ``bo.PosteriorConfig`` of an estimate."""
-  s, sc = config.search, config.scoring
+def posterior_config(s: Search, sc: Scoring) -> bo.PosteriorConfig:
+  """The ``bo.PosteriorConfig`` of an estimate's search and scoring sections
+  (its grid, batch and likelihood)."""
   return bo.PosteriorConfig(
     d=3, grid=tuple(s.posterior_grid), q=s.q, replicates=s.replicates,
     likelihood=sc.likelihood, sharpness=sc.sharpness, model_error=sc.model_error,

@@ -267,7 +267,7 @@ def test_a_bending_length_enters_the_files_only_when_given():
 
 def test_the_model_error_reaches_the_search_and_is_checked():
   config = objective.EstimateConfig().replace(model_error=0.3)
-  assert searcher.posterior_config(config).model_error == 0.3
+  assert searcher.posterior_config(config.search, config.scoring).model_error == 0.3
   for bad in (-0.1, float('nan'), float('inf')):
     with pytest.raises(ValueError, match='model_error'):
       config.replace(model_error=bad).check()
