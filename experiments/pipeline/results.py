@@ -30,6 +30,7 @@ from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import searcher as search_lib
 from experiments.pipeline import setup as setup_lib
 from experiments.pipeline.config import SHAPE_DISTANCES
+from experiments.pipeline.measurements import Measured
 
 
 def write_result(
@@ -135,8 +136,8 @@ def _fit_check(st: setup_lib.Setup, res, replicas) -> dict:
   return {
     'predictive': None if replicas is None else fit_check.predictive(replicas),
     'conflicts': fit_check.conflicts(
-      res.log_lik, search_lib.posterior_config(config.search, config.scoring).grid, st.space,
-      config.measured,
+      res.log_lik, search_lib.posterior_config(config.search, config.scoring).grid,
+      st.space, config.measured,
     ),
   }  # fmt: skip
 
@@ -221,7 +222,9 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   pc = search_lib.posterior_config(config.search, config.scoring)
   points = bo.posterior.grid_points(pc.grid)
   lp = measurements.log_prior(points, space, config.measured, pc.grid)
-  prior, samples = _refined_draws(config, space, pc.grid, lp, res.samples)
+  prior, samples = _refined_draws(
+    config.measured, config.seed, space, pc.grid, lp, res.samples
+  )
   summarise = functools.partial(
     posterior_lib.summarise, samples, space, prior, levels_of(note), weights_of(note),
     config.measured,
@@ -232,7 +235,9 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
   which = 'bayes' if config.search.point == 'bayes' else 'median'
   point = physsim.params.make(*(summary[f][which] for f in posterior_lib.FIELDS))
   median = np.clip(physsim.to_unit(point, space), -1.0, 1.0)
-  air = _air_draws(config, space, samples, prior) if config.measured.air_free else {}
+  air = {}
+  if config.measured.air_free:
+    air = _air_draws(config.measured, config.seed, space, samples, prior)
   if air:  # what a person reads: the true wind, and c
     summary = summarise(air=(air['air_samples'], air['air_prior_samples']))
   estimate = {}
@@ -260,47 +265,48 @@ def _posterior_summary(st: setup_lib.Setup, res, workdir: str, truth,
     'point_unit': np.ravel(median).tolist(),
     'estimate': estimate,
     'load_ratio': {'value': summary['load_ratio'][which], **summary['load_ratio']},
-    **_noise_record(config, res),
+    **_noise_record(config.scoring.likelihood, res),
     'interval_meaning': _interval_meaning(note),
     'calibration': note,
   }
 
 
-def _refined_draws(config, space: physsim.SearchSpace, grid, lp,
-                   samples) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _refined_draws(measured: Measured, seed: int, space: physsim.SearchSpace,
+                   grid, lp, samples) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
   """(prior, posterior) draws in the unit cube, each refined off the grid's
-  points (``posterior.refine_draws``): the prior's as many as the
-  posterior's, drawn from the log prior ``lp`` on ``grid``."""
-  key = jax.random.key(config.seed)
+  points (``posterior.refine_draws``, with the ``measured`` readings and
+  the estimate's ``seed``): the prior's as many as the posterior's, drawn
+  from the log prior ``lp`` on ``grid``."""
+  key = jax.random.key(seed)
   prior = posterior_lib.refine_draws(
     posterior_lib.prior_samples(
       jax.random.fold_in(key, 7), grid, lp, len(samples)
-    ), grid, space, config.measured, config.seed + 1,
+    ), grid, space, measured, seed + 1,
   )  # fmt: skip
-  posterior = posterior_lib.refine_draws(
-    samples, grid, space, config.measured, config.seed
-  )
+  posterior = posterior_lib.refine_draws(samples, grid, space, measured, seed)
   return prior, posterior
 
 
-def _air_draws(config, space: physsim.SearchSpace, samples, prior) -> dict:
+def _air_draws(measured: Measured, seed: int, space: physsim.SearchSpace, samples,
+               prior) -> dict:  # fmt: skip
   """The air coefficient's draws beside the posterior's and the prior's: the
-  wind they hold is the effective one, c read from it and the wind reading
-  (``measurements.air_draws``), as ``posterior.npz`` keeps them."""
+  wind they hold is the effective one, c read from it and the ``measured``
+  wind reading (``measurements.air_draws``, from the estimate's ``seed``), as
+  ``posterior.npz`` keeps them."""
   return {
     'air_samples': measurements.air_draws(
-      measurements.physical(samples, space)[:, 1], config.measured, config.seed
+      measurements.physical(samples, space)[:, 1], measured, seed
     ),
     'air_prior_samples': measurements.air_draws(
-      measurements.physical(prior, space)[:, 1], config.measured, config.seed + 1
+      measurements.physical(prior, space)[:, 1], measured, seed + 1
     ),
   }  # fmt: skip
 
 
-def _noise_record(config, res) -> dict:
-  """The noise the likelihood read: the log PSD's spread, or for the
+def _noise_record(likelihood: str, res) -> dict:
+  """The noise the ``likelihood`` read: the log PSD's spread, or for the
   'synthetic' likelihood (None there) the shape's spread per summary, m."""
-  synthetic = config.scoring.likelihood == 'synthetic'
+  synthetic = likelihood == 'synthetic'
   return {
     'noise_sd_log_psd': None if synthetic else res.noise_sd,
     **({'noise_sd_shape_m': np.asarray(res.noise_sd).tolist()} if synthetic else {}),
