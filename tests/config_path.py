@@ -9,11 +9,13 @@ records, under ``sys.setprofile`` (the calling thread only), every call into
 the project's packages that receives the config as an argument (positional,
 keyword, ``*args`` or ``**kwargs``), each marked by how:
 
-  'direct': handed an ``EstimateConfig`` itself;
+  'direct': handed an ``EstimateConfig`` itself (or a list or tuple of them:
+    several searches' configs);
   'own': so handed, but by the config's own methods (``check``'s
     ``cli.check_numbers``): the config reading itself, no stage;
   'held': handed a value that holds one in a field (a ``Setup``, a ``Job``,
-    a ``Problem``): where the whole config still travels inside another.
+    a ``Problem``): where the whole config still travels inside another
+    (the holder's own methods, handed it as ``self``, aside).
 
 (The config's own methods themselves are left out.) ``path`` collapses
 consecutive repeats of the chosen kinds into stays; ``returns`` counts the
@@ -46,11 +48,11 @@ class Call(NamedTuple):
 
 
 def _arguments(frame) -> list:
-  """The values a called frame was handed (its parameters, ``*args``'s items
-  and ``**kwargs``'s values), read at its 'call' event."""
+  """The values a called frame was handed (its parameters but ``self``,
+  ``*args``'s items and ``**kwargs``'s values), read at its 'call' event."""
   code = frame.f_code
   n = code.co_argcount + code.co_kwonlyargcount
-  names = list(code.co_varnames[:n])
+  names = [name for name in code.co_varnames[:n] if name != 'self']
   star = code.co_varnames[n : n + bool(code.co_flags & inspect.CO_VARARGS)]
   n += len(star)
   stars = code.co_varnames[n : n + bool(code.co_flags & inspect.CO_VARKEYWORDS)]
@@ -74,8 +76,18 @@ def _is_own_method(frame) -> bool:
   )
 
 
+def _is_config(value) -> bool:
+  """An ``EstimateConfig``, or a list or tuple of them."""
+  if isinstance(value, list | tuple) and not hasattr(value, '_fields') and value:
+    return all(isinstance(v, EstimateConfig) for v in value)
+  return isinstance(value, EstimateConfig)
+
+
 def _holds(value) -> bool:
-  """A dataclass or named tuple with an ``EstimateConfig`` field."""
+  """A dataclass or named tuple with an ``EstimateConfig`` field (or a list
+  of them: several searches' jobs)."""
+  if isinstance(value, list) and value:
+    return _holds(value[0])
   if dataclasses.is_dataclass(value) and not isinstance(value, type):
     fields = [getattr(value, f.name, None) for f in dataclasses.fields(value)]
   elif isinstance(value, tuple) and hasattr(value, '_fields'):
@@ -91,7 +103,7 @@ def _how(frame) -> str | None:
   if _is_own_method(frame):
     return None
   values = _arguments(frame)
-  if any(isinstance(v, EstimateConfig) for v in values):
+  if any(_is_config(v) for v in values):
     return 'own' if frame.f_back and _is_own_method(frame.f_back) else 'direct'
   return 'held' if any(_holds(v) for v in values) else None
 
