@@ -160,7 +160,10 @@ class Evaluator:
       part.append(np.concatenate([u, np.repeat(u[:1], q - len(u), 0)]))
     with physsim.devices.on_host():  # small: the call places them
       keys = [
-        obj_lib.candidate_keys(problems[i].config, firsts[i] + lo, q) for i in rows
+        obj_lib.candidate_keys(
+          problems[i].config.seed, problems[i].config.search, firsts[i] + lo, q
+        )
+        for i in rows
       ]
       gust = jax.numpy.stack([k[0] for k in keys])
       noise = jax.numpy.stack([k[1] for k in keys])

@@ -446,14 +446,14 @@ def _bytes_per_pixel(params) -> int:
   return 4 * 2 * (int(widest) + 16)
 
 
-def candidate_keys(config: EstimateConfig, first: int, q: int):
+def candidate_keys(seed: int, search: Search, first: int, q: int):
   """(gust keys, noise keys), each (q,), of a search's evaluations
   ``first .. first + q - 1`` (its running count, so a resumed search draws the
-  same keys). With ``common_random_numbers`` every evaluation gets the
-  search's one pair of keys."""
-  key = jax.random.key(config.seed)
+  same keys), from the estimate's ``seed``. With the search's
+  ``common_random_numbers`` every evaluation gets its one pair of keys."""
+  key = jax.random.key(seed)
   gust, noise = jax.random.fold_in(key, 2), jax.random.fold_in(key, 3)
-  if config.common_random_numbers:
+  if search.common_random_numbers:
     return (
       jnp.broadcast_to(gust, (q,)),
       jnp.broadcast_to(noise, (q,)),

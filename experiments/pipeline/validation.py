@@ -350,7 +350,7 @@ def predict(exported: Exported, rec, wind_speed: float, settings: Settings) -> R
     np.repeat([ours[1], lib[1]], k),
   )  # fmt: skip
   u = physsim.to_unit(params, space)[None]  # (1, 2k, 3)
-  gust, noise = objective_lib.candidate_keys(config, 0, k)
+  gust, noise = objective_lib.candidate_keys(config.seed, config.search, 0, k)
   gust, noise = (jnp.concatenate([a, a])[None] for a in (gust, noise))  # both alike
   run = objective_lib.Objective(problem)
   scores = run(objective_lib.stack([data]), u, gust, noise, positions=True)

@@ -46,7 +46,9 @@ def _data(ratios, boxes=None) -> obj_lib.ProblemData:
 
 def _keys(firsts, q, config=CONFIG):
   """(P, q) gust keys of searches at evaluations ``firsts[i] ..``."""
-  return jax.numpy.stack([obj_lib.candidate_keys(config, f, q)[0] for f in firsts])
+  return jax.numpy.stack(
+    [obj_lib.candidate_keys(config.seed, config.search, f, q)[0] for f in firsts]
+  )
 
 
 def _points(p, q, seed=0):
@@ -169,7 +171,9 @@ def test_shared_worlds_score_as_alone_on_one_device_and_split_over_two(
   objective = obj_lib.Objective(problems[0])
   objective._rollout = _stand_in_rollout(problems[0].n_frames, objective.mesh.vertices)
   u = np.stack([np.zeros(3), np.array([0.5, -0.7, 0.9]), np.array([-0.3, 0.2, 0.1])])
-  gust, noise = obj_lib.candidate_keys(FIXTURE_CONFIG, 0, len(u))
+  gust, noise = obj_lib.candidate_keys(
+    FIXTURE_CONFIG.seed, FIXTURE_CONFIG.search, 0, len(u)
+  )
 
   def call(ps):
     return objective(

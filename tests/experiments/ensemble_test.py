@@ -45,7 +45,7 @@ def env(tmp_path_factory):
 def _scores(model_dir: str, rec, u) -> np.ndarray:
   net = embedding.load_embedding(model_dir)
   problem = obj_lib.make_problem(CONFIG, net, rec)
-  gust, noise = obj_lib.candidate_keys(CONFIG, 0, len(u))
+  gust, noise = obj_lib.candidate_keys(CONFIG.seed, CONFIG.search, 0, len(u))
   out = obj_lib.Objective(problem)(
     obj_lib.stack([problem.data]), np.asarray(u)[None], gust[None], noise[None]
   )

@@ -87,7 +87,7 @@ def test_rgb_truth_scores_zero(env):
   problem = obj_lib.make_problem(CONFIG, net, env['rec'])
   u_truth = physsim.to_unit(physsim.params.make(**TRUTH), problem.space)
   u = np.stack([u_truth, np.zeros(3)])[None]
-  gust, noise = obj_lib.candidate_keys(CONFIG, 0, 2)
+  gust, noise = obj_lib.candidate_keys(CONFIG.seed, CONFIG.search, 0, 2)
   s = obj_lib.Objective(problem)(
     obj_lib.stack([problem.data]), u, gust[None], noise[None], frames=True
   )

@@ -84,7 +84,7 @@ def _score(env, u, config=CONFIG, problem=None, objective=None, **kw):
   """PSD of unit points ``u (q, 3)`` of one problem through the fused program."""
   problem = problem or env['problem']
   objective = objective or env['objective']
-  gust, noise = obj_lib.candidate_keys(config, 0, len(u))
+  gust, noise = obj_lib.candidate_keys(config.seed, config.search, 0, len(u))
   return objective(
     obj_lib.stack([problem.data]), np.asarray(u)[None], gust[None], noise[None], **kw
   )
@@ -204,7 +204,7 @@ def test_worlds_simulating_alike_run_once_and_score_as_alone(env):
   rec2 = env['rec']._replace(depth=env['rec'].depth * np.float32(1.03))
   other = obj_lib.make_problem(CONFIG, env['net'], rec2)
   u = np.stack([_u_truth(), np.zeros(3), np.array([0.5, -0.7, 0.9])])
-  gust, noise = obj_lib.candidate_keys(CONFIG, 0, len(u))
+  gust, noise = obj_lib.candidate_keys(CONFIG.seed, CONFIG.search, 0, len(u))
   objective = env['objective']
   alone = [
     objective(obj_lib.stack([p.data]), u[None], gust[None], noise[None], positions=True)
@@ -227,13 +227,13 @@ def test_fresh_keys_draw_other_gusts(env):
   # candidate scores differently (the simulator's noise a posterior needs).
   config = CONFIG.replace(point='median')
   u = np.stack([_u_truth()] * 3)
-  gust, noise = obj_lib.candidate_keys(config, 0, 3)
+  gust, noise = obj_lib.candidate_keys(config.seed, config.search, 0, 3)
   s = env['objective'](
     obj_lib.stack([env['problem'].data]), u[None], gust[None], noise[None]
   )
   assert np.ptp(s.psd) > 0
   # and they are the search's evaluations 0..2: a resume draws the same
-  g2, _ = obj_lib.candidate_keys(config, 1, 2)
+  g2, _ = obj_lib.candidate_keys(config.seed, config.search, 1, 2)
   assert np.array_equal(jax.random.key_data(g2), jax.random.key_data(gust[1:]))
 
 

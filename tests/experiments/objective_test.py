@@ -37,8 +37,8 @@ def test_keys_depend_on_the_evaluation_index_not_the_batch():
   """A candidate's gusts and noise are the same whether it was scored in a
   batch of 4 or resumed alone as evaluation 2: what makes lockstep searches and
   resumes go as a search alone would."""
-  gust4, noise4 = obj.candidate_keys(SMOKE, first=0, q=4)
-  gust1, noise1 = obj.candidate_keys(SMOKE, first=2, q=1)
+  gust4, noise4 = obj.candidate_keys(SMOKE.seed, SMOKE.search, first=0, q=4)
+  gust1, noise1 = obj.candidate_keys(SMOKE.seed, SMOKE.search, first=2, q=1)
   np.testing.assert_array_equal(_data(gust4)[2:3], _data(gust1))
   np.testing.assert_array_equal(_data(noise4)[2:3], _data(noise1))
   assert len({tuple(k) for k in _data(gust4)}) == 4  # every evaluation its own
@@ -48,7 +48,7 @@ def test_keys_depend_on_the_evaluation_index_not_the_batch():
 def test_the_papers_argmin_gives_every_evaluation_one_pair():
   crn = SMOKE.replace(point='argmin')  # common random numbers
   assert crn.common_random_numbers
-  gust, noise = obj.candidate_keys(crn, first=5, q=3)
+  gust, noise = obj.candidate_keys(crn.seed, crn.search, first=5, q=3)
   assert len({tuple(k) for k in _data(gust)}) == 1
   assert len({tuple(k) for k in _data(noise)}) == 1
 
@@ -56,7 +56,8 @@ def test_the_papers_argmin_gives_every_evaluation_one_pair():
 def test_seeds_change_the_keys():
   other = SMOKE.replace(seed=SMOKE.seed + 1)
   assert not np.array_equal(
-    _data(obj.candidate_keys(SMOKE, 0, 2)[0]), _data(obj.candidate_keys(other, 0, 2)[0])
+    _data(obj.candidate_keys(SMOKE.seed, SMOKE.search, 0, 2)[0]),
+    _data(obj.candidate_keys(other.seed, other.search, 0, 2)[0]),
   )
 
 
@@ -167,7 +168,7 @@ def test_ctrl_c_during_the_simulators_callback_is_an_interrupt_not_scores(
   problem = obj.make_problem(config, embedding.no_network(rec.depth.shape[1:]), rec)
   objective = obj.Objective(problem)
   u = np.zeros((1, 1, 3))
-  gust, noise = obj.candidate_keys(config, 0, 1)
+  gust, noise = obj.candidate_keys(config.seed, config.search, 0, 1)
   keys = (gust[None], noise[None])
   data = obj.stack([problem.data])
   assert np.all(objective(data, u, *keys).valid)  # compiled, whole

@@ -54,7 +54,7 @@ def env(tmp_path_factory):
 def _scores(env, distance: str, u, frames: bool = False):
   config = CONFIG.replace(distance=distance)
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
-  gust, noise = obj_lib.candidate_keys(config, 0, len(u))
+  gust, noise = obj_lib.candidate_keys(config.seed, config.search, 0, len(u))
   out = obj_lib.Objective(problem)(
     obj_lib.stack([problem.data]), np.asarray(u)[None], gust[None], noise[None],
     frames=frames,
@@ -116,7 +116,8 @@ def test_a_misplaced_camera_renders_from_its_error(env):
   problem = obj_lib.make_problem(config, env['net'], env['rec'])
   space = physsim.search_space(CONFIG.simulation.material)
   u = np.repeat(np.asarray(physsim.to_unit(physsim.params.make(**TRUTH), space)), 4, 0)
-  gust, _ = obj_lib.candidate_keys(CONFIG, 0, 4)  # common: the recording's gusts
+  # common: the recording's gusts
+  gust, _ = obj_lib.candidate_keys(CONFIG.seed, CONFIG.search, 0, 4)
   noise = jax.random.split(jax.random.key(11), 4)
   out = obj_lib.Objective(problem)(
     obj_lib.stack([problem.data]), u.reshape(1, 4, 3), gust[None], noise[None],
@@ -144,7 +145,7 @@ def test_the_shape_needs_no_network(env):
   # none: the shape never embeds, so discrepancies and residuals are equal.
   u = np.array([[0.0, 0.0, 0.0], [0.5, -0.6, 0.7]])
   config = CONFIG.replace(distance='shape')
-  gust, noise = obj_lib.candidate_keys(config, 0, len(u))
+  gust, noise = obj_lib.candidate_keys(config.seed, config.search, 0, len(u))
   none = embedding.no_network(env['rec'].depth.shape[1:])
   assert none.network is None and none.image_size == env['net'].image_size
   got = []
