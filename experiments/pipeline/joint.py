@@ -254,6 +254,7 @@ def _summary(combined: dict, npz: list, space: physsim.SearchSpace, note,
     combined['samples'][k], space, npz[k]['prior_samples'],
     results_lib.levels_of(note), results_lib.weights_of(note), measured,
     air=(combined['air'], npz[k]['air_prior_samples']) if air else None,
+    air_simulated=combined.get('air_simulated'),
   )  # fmt: skip
 
 

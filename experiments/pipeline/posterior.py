@@ -203,7 +203,8 @@ def _stats(x: np.ndarray, prior: np.ndarray, name: str, cdf_levels=None,
 
 def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
               recalibration: dict | None = None, weights: dict | None = None,
-              measured: Measured | None = None, air=None) -> dict:  # fmt: skip
+              measured: Measured | None = None, air=None,
+              air_simulated=None) -> dict:  # fmt: skip
   """Physical summaries of posterior draws, each beside the prior's.
 
   With ``air`` (the air coefficient free: ``(c of the draws (S,), c of the
@@ -211,7 +212,10 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
   simulator's effective one: the fabric's true wind v_eff / sqrt(c) is
   summarised as ``wind_speed`` and c as ``air_coefficient``; the load ratio
   stays the effective load rho v_eff^2 / (w g) the video sees. Neither has a
-  recalibrated level (they read at the nominal ones).
+  recalibrated level (they read at the nominal ones). ``air_simulated``
+  (S,): the c each draw's effective wind was drawn with where it differs
+  from the fabric's (a joint's shared discrepancy, ``joint``'s
+  ``'air_simulated'``): the true wind is v_eff / sqrt of it.
 
   Args:
     samples_unit: (S, 3) posterior draws, unit cube.
@@ -242,7 +246,8 @@ def summarise(samples_unit, space: physsim.SearchSpace, prior_unit,
   names = [*FIELDS, 'load_ratio']
   if air is not None:
     c_post, c_prior = (np.ravel(np.asarray(c, np.float64)) for c in air)
-    post[:, 1] /= np.sqrt(c_post)
+    c_wind = c_post if air_simulated is None else np.ravel(air_simulated)
+    post[:, 1] /= np.sqrt(c_wind)
     prior[:, 1] /= np.sqrt(c_prior)
     post = np.concatenate([post, c_post[:, None]], axis=1)
     prior = np.concatenate([prior, c_prior[:, None]], axis=1)
@@ -343,7 +348,10 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     'log_post_bw': (nb, nw)}``: each recording's draws share (b, w) from the
     joint and draw their own wind given them (one for a fan setting's
     recordings, the same in each); with ``air``, ``'air'``: (n,) the shared
-    air coefficient's draws (each recording's v_k is then its effective wind).
+    air coefficient's draws (each recording's v_k is then its effective wind),
+    and ``'air_simulated'``: (n,) the same draws before the shared
+    discrepancy, the c the simulator's push was read with (the true wind is
+    v_k / sqrt of it: the discrepancy errs in the push, not in the wind).
 
   Raises:
     ValueError: priors or fans for another number of recordings, or two
@@ -373,7 +381,7 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     'log_post_bw': np.asarray(logsumexp(log_bwc, axis=0)),
   }
   if air is not None:
-    out['air'] = _air_draws(c, ic, shared_bias_sd, k_jit)
+    out['air_simulated'], out['air'] = _air_draws(c, ic, shared_bias_sd, k_jit)
   return out
 
 
@@ -444,20 +452,22 @@ def _draw_wind(ll: np.ndarray, cells: tuple, lp_v: list, free_air: bool, grid,
   return -1.0 + 2.0 * (cell + jit) / np.asarray(grid, np.float64)
 
 
-def _air_draws(c: np.ndarray, ic: np.ndarray, shared_bias_sd: float, key) -> np.ndarray:
-  """(n,) the shared air coefficient's draws: its nodes ``c`` at the draws'
-  node ``ic``, each spread uniformly within its log step, and by the shared
-  discrepancy's log-normal factor where there is one."""
+def _air_draws(c: np.ndarray, ic: np.ndarray, shared_bias_sd: float, key) -> tuple:
+  """``(simulated, fabric)``, (n,) each: the air coefficient the simulator's
+  push was read with, its nodes ``c`` at the draws' node ``ic`` each spread
+  uniformly within its log step; and the fabric's own, that spread by the
+  shared discrepancy's log-normal factor where there is one."""
   n = len(ic)
   ratio = c[1] / c[0] if len(c) > 1 else 1.0
   u = np.asarray(jax.random.uniform(jax.random.fold_in(key, 99), (n,)))
-  air = c[ic] * ratio ** (u - 0.5)  # within its log step
-  if shared_bias_sd > 0:  # the pressure the simulator puts on every
-    # recording errs by one common factor too (the fan's angle, drag): the
-    # fabric's own c is the simulator's times exp(d), d ~ N(0, sd^2)
-    z = np.asarray(jax.random.normal(jax.random.fold_in(key, 98), (n,)))
-    air = air * np.exp(shared_bias_sd * z)
-  return air
+  simulated = c[ic] * ratio ** (u - 0.5)  # within its log step
+  if shared_bias_sd <= 0:
+    return simulated, simulated
+  # the pressure the simulator puts on every recording errs by one common
+  # factor too (the fan's angle, drag): the fabric's own c is the
+  # simulator's times exp(d), d ~ N(0, sd^2)
+  z = np.asarray(jax.random.normal(jax.random.fold_in(key, 98), (n,)))
+  return simulated, simulated * np.exp(shared_bias_sd * z)
 
 
 def _by_fan(log_liks, log_prior_grid, grid, fans):

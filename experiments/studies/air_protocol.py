@@ -32,6 +32,7 @@ checked on them.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import time
@@ -61,6 +62,8 @@ class Study:
     modes: the air coefficient's modes estimated ('free', 'fixed').
     write_sets: write the first this many sets as protocol folders under
       ``<workdir>/sets`` (0: none).
+    pool: earlier runs' JSON files (``path`` or ``path:mode``) to summarise
+      together instead of running (the sets of several seeds as one table).
     workdir: where the searches keep their files.
     out: JSON path ('' for none).
   """
@@ -75,6 +78,7 @@ class Study:
   seed: int = 0
   modes: tuple[str, ...] = ('free', 'fixed')
   write_sets: int = 0
+  pool: tuple[str, ...] = ()
   workdir: str = 'out/benchmarks/air_protocol'
   out: str = ''
 
@@ -242,15 +246,10 @@ def write_set(folder: str, recs: list, shared: dict, winds: list) -> str:
   return path
 
 
-def run(args: Study) -> dict:
-  """Records and estimates every set (one lockstep over all their searches);
-  prints each set's line and the table; writes and returns the JSON."""
-  t0 = time.perf_counter()
-  base = objective.PRESETS[args.estimate].replace(
-    material=args.material, distance='shape'
-  )
+def _plan(args: Study, base, sets: list[dict]) -> list[tuple]:
+  """Every set recorded (the first ``write_sets`` written as a user's) and
+  its joint's jobs per mode: ``(set, mode, workdir, jobs)``."""
   space = physsim.search_space(args.material)
-  sets = truths(args)
   plan = []
   for k, truth in enumerate(sets):
     shared, winds = readings(args, truth, space)
@@ -262,61 +261,118 @@ def run(args: Study) -> dict:
       wd = os.path.join(args.workdir, mode, f'set_{k:02d}')
       plan.append((k, mode, wd, joint.joint_jobs(config, recs, '', wd, winds)))
     print(f'set {k}: recorded (c {truth["air_coefficient"]:.2f})', flush=True)
-  seconds = {'record': time.perf_counter() - t0}
-  t1 = time.perf_counter()
-  done = estimation.estimate_many([j for *_, jobs in plan for j in jobs], figures=False)
-  seconds['estimate'] = time.perf_counter() - t1
-  t1 = time.perf_counter()
-  rows, i = [], 0
-  for k, mode, wd, jobs in plan:
-    mine, i = done[i : i + len(jobs)], i + len(jobs)
-    out = joint.combine_joint(jobs, mine, wd)
-    t = sets[k]
-    row = {'set': k, 'mode': mode, 'c': t['air_coefficient']}
-    row['bending_factor'] = math.exp(abs(math.log(
-      out['bending_scale']['median'] / t['bending_scale'])))  # fmt: skip
-    row['area_weight_pct'] = 100 * abs(
-      out['area_weight']['median'] / t['area_weight'] - 1
-    )
-    row['wind_pct'] = [100 * abs(r['wind_speed']['median'] / v - 1)
-                       for r, v in zip(out['recordings'], t['winds'], strict=True)]  # fmt: skip
-    if 'air_coefficient' in out:
-      a = out['air_coefficient']
-      row['air'] = a['median']
-      row['air_pct'] = 100 * abs(a['median'] / row['c'] - 1)
-      for level in (90, 50):
-        lo, hi = a[f'interval_{level}']
-        row[f'air_in_{level}'] = bool(lo <= row['c'] <= hi)
-    row['held'] = intervals_held(out, t)
-    row['flagged'] = any(_flagged(r) for r in mine)
-    rows.append(row)
-    print(
-      f'set {k} {mode}: c {row["c"]:.2f} -> {row.get("air", float("nan")):.2f}, '
-      f'bending x{row["bending_factor"]:.2f}, weight {row["area_weight_pct"]:.1f}%, '
-      f'wind {np.mean(row["wind_pct"]):.1f}%, flagged {row["flagged"]}', flush=True,
-    )  # fmt: skip
-  summary = summarise(rows)
-  seconds['combine'] = time.perf_counter() - t1
-  seconds['total'] = time.perf_counter() - t0
-  print('| mode | sets | c error | c 90% / 50% held | wind | bending | weight | '
-        'flagged c<0.7 | flagged 0.9-1.1 |')  # fmt: skip
-  print('|---|---|---|---|---|---|---|---|---|')
+  return plan
+
+
+def score(k: int, mode: str, truth: dict, out: dict, results: list) -> dict:
+  """One set's joint (``combine_joint``'s ``out``; its searches' ``results``)
+  against its truth: the errors, which intervals held, and whether the fit
+  check flagged any of its recordings."""
+  row = {'set': k, 'mode': mode, 'c': truth['air_coefficient']}
+  row['bending_factor'] = math.exp(
+    abs(math.log(out['bending_scale']['median'] / truth['bending_scale']))
+  )
+  row['area_weight_pct'] = 100 * abs(
+    out['area_weight']['median'] / truth['area_weight'] - 1
+  )
+  row['wind_pct'] = [
+    100 * abs(r['wind_speed']['median'] / v - 1)
+    for r, v in zip(out['recordings'], truth['winds'], strict=True)
+  ]
+  if 'air_coefficient' in out:
+    a = out['air_coefficient']
+    row['air'] = a['median']
+    row['air_pct'] = 100 * abs(a['median'] / row['c'] - 1)
+    for level in (90, 50):
+      row[f'air_in_{level}'] = _held(a[f'interval_{level}'], row['c'])
+  row['held'] = intervals_held(out, truth)
+  row['flagged'] = any(_flagged(r) for r in results)
+  return row
+
+
+def _row_line(row: dict) -> str:
+  return (
+    f'set {row["set"]} {row["mode"]}: c {row["c"]:.2f} -> '
+    f'{row.get("air", float("nan")):.2f}, bending x{row["bending_factor"]:.2f}, '
+    f'weight {row["area_weight_pct"]:.1f}%, wind {np.mean(row["wind_pct"]):.1f}%, '
+    f'flagged {row["flagged"]}'
+  )
+
+
+def table(summary: dict) -> str:
+  """The summary as two markdown tables: the errors and the fit check's
+  flags; each printed interval's coverage."""
+  lines = [
+    '| mode | sets | c error | c 90% / 50% held | wind | bending | weight | '
+    'flagged c<0.7 | flagged 0.9-1.1 |',
+    '|---|---|---|---|---|---|---|---|---|',
+  ]
+  pct = lambda h, q: (  # noqa: E731
+    f'{100 * h[f"{q}_90"]:.0f}% / {100 * h[f"{q}_50"]:.0f}%' if f'{q}_90' in h else '-'
+  )
   for mode, s in summary.items():
-    held = (f'{100 * s["air_held_90"]:.0f}% / {100 * s["air_held_50"]:.0f}%'
-            if 'air_held_90' in s else '-')  # fmt: skip
-    print(
-      f'| {mode} | {s["sets"]} | {s.get("air_pct_mean", float("nan")):.1f}% | {held} | '
+    lines.append(
+      f'| {mode} | {s["sets"]} | {s.get("air_pct_mean", float("nan")):.1f}% | '
+      f'{pct(s, "air_held")} | '
       f'{s["wind_pct_mean"]:.1f}% | x{s["bending_factor_median"]:.2f} | '
       f'{s["area_weight_pct_mean"]:.2f}% | {s["flagged_c_below_0.7"]} | '
       f'{s["flagged_c_0.9_1.1"]} |'
     )
-  print('| mode | bending 90% / 50% held | area weight | wind |')
-  print('|---|---|---|---|')
+  lines += [
+    '',
+    '| mode | bending 90% / 50% held | area weight | wind |',
+    '|---|---|---|---|',
+  ]
   for mode, s in summary.items():
     h = s.get('held', {})
-    cells = [f'{100 * h[f"{q}_90"]:.0f}% / {100 * h[f"{q}_50"]:.0f}%'
-             for q in ('bending', 'area_weight', 'wind')]  # fmt: skip
-    print(f'| {mode} | ' + ' | '.join(cells) + ' |')
+    cells = [pct(h, q) for q in ('bending', 'area_weight', 'wind')]
+    lines.append(f'| {mode} | ' + ' | '.join(cells) + ' |')
+  return '\n'.join(lines)
+
+
+def pooled(paths: tuple[str, ...]) -> list[dict]:
+  """The rows of earlier runs' JSON files, ``path`` or ``path:mode`` (that
+  mode's rows only: e.g. a run's rows from before a change of one mode)."""
+  rows = []
+  for entry in paths:
+    path, _, mode = entry.partition(':')
+    try:
+      with open(path) as f:
+        found = json.load(f)['rows']
+    except (OSError, ValueError, KeyError, TypeError) as e:
+      raise ValueError(f'--pool: {path}: not a study JSON ({e})') from None
+    rows += [r for r in found if not mode or r.get('mode') == mode]
+  return rows
+
+
+def run(args: Study) -> dict:
+  """Records and estimates every set (one lockstep over all their searches),
+  or with ``pool`` reads earlier runs' rows; prints each set's line and the
+  tables; writes and returns the JSON."""
+  t0 = time.perf_counter()
+  if args.pool:
+    rows, seconds = pooled(args.pool), {}
+  else:
+    base = objective.PRESETS[args.estimate].replace(
+      material=args.material, distance='shape'
+    )
+    sets = truths(args)
+    plan = _plan(args, base, sets)
+    seconds = {'record': time.perf_counter() - t0}
+    t1 = time.perf_counter()
+    jobs = [j for *_, js in plan for j in js]
+    done = estimation.estimate_many(jobs, figures=False)
+    seconds['estimate'] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    rows, i = [], 0
+    for k, mode, wd, js in plan:
+      mine, i = done[i : i + len(js)], i + len(js)
+      rows.append(score(k, mode, sets[k], joint.combine_joint(js, mine, wd), mine))
+      print(_row_line(rows[-1]), flush=True)
+    seconds['combine'] = time.perf_counter() - t1
+  seconds['total'] = time.perf_counter() - t0
+  summary = summarise(rows)
+  print(table(summary))
   print(', '.join(f'{k} {v:.0f} s' for k, v in seconds.items()))
   out = {
     'args': dataclasses.asdict(args), 'summary': summary, 'rows': rows,
