@@ -289,10 +289,10 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     recorded, args.intake, config, loaded, args.workdir,
     carry_alignment=args.alignment_sd, allow_guessed_up=args.allow_guessed_up,
   )  # fmt: skip
-  warning = advice.shape_camera_warning(
-    prepared.configs[0], any(user_recordings.needs_intake(t) for t in recorded)
-  )
-  for line in (warning, advice.synthetic_warning(prepared.configs[0]), *prepared.lines):
+  scoring = prepared.configs[0].scoring
+  aligned = any(user_recordings.needs_intake(t) for t in recorded)
+  warning = advice.shape_camera_warning(scoring, aligned)
+  for line in (warning, advice.synthetic_warning(scoring), *prepared.lines):
     if line:
       print(line)
   drawings = []  # the pictures, drawn once the answer is printed
@@ -317,7 +317,7 @@ def _main(args: Args, recorded: list[takes.Take]) -> None:
     # experiments.plan reads the posterior: one recording's, or the joint's
     advice.next_recording_note(
       result['estimate'] if n == 1 else {k: result[k] for k in JOINT_SHARED},
-      prepared.configs[0],
+      prepared.configs[0].measured,
       args.workdir,
     ),  # fmt: skip
   ):

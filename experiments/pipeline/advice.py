@@ -12,6 +12,8 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import objective as obj_lib
+from experiments.pipeline.config import Scoring
+from experiments.pipeline.measurements import Measured
 
 # One clip reads the load ratio about twice as poorly above STRONG_LOAD_RATIO as
 # below GENTLE_LOAD_RATIO, and a longer clip helps only below (the sheet blown
@@ -23,11 +25,11 @@ GENTLE_LOAD_RATIO = 8.0
 LITTLE_NARROWING = 1.5
 
 
-def shape_camera_warning(config, aligned: bool) -> str | None:
-  """The line ``estimate`` prints when a shape discrepancy (which reads
-  centimetres in the simulator's world) trusts a camera that the intake's
-  alignment placed there (``aligned``) as exact (no ``camera_sd``); else None."""
-  sc = config.scoring
+def shape_camera_warning(sc: Scoring, aligned: bool) -> str | None:
+  """The line ``estimate`` prints when a shape discrepancy (the scoring's
+  distance, which reads centimetres in the simulator's world) trusts a camera
+  that the intake's alignment placed there (``aligned``) as exact (no
+  ``camera_sd``); else None."""
   if (
     sc.distance not in obj_lib.SHAPE_DISTANCES
     or sc.camera_sd_m
@@ -44,13 +46,13 @@ def shape_camera_warning(config, aligned: bool) -> str | None:
   )
 
 
-def synthetic_warning(config) -> str | None:
-  """The line ``estimate`` prints for the 'synthetic' likelihood (else None):
-  it takes the recording's scatter to be the simulator's. On real-like
-  recordings simulated with another mesh and gust level its intervals were
-  too narrow; with their own (``cloth_resolution``, ``gusts``) they held
-  (BENCHMARKS.md)."""
-  if config.scoring.likelihood != 'synthetic':
+def synthetic_warning(scoring: Scoring) -> str | None:
+  """The line ``estimate`` prints for the scoring's 'synthetic' likelihood
+  (else None): it takes the recording's scatter to be the simulator's. On
+  real-like recordings simulated with another mesh and gust level its
+  intervals were too narrow; with their own (``cloth_resolution``,
+  ``gusts``) they held (BENCHMARKS.md)."""
+  if scoring.likelihood != 'synthetic':
     return None
   return (
     'warning: --likelihood=synthetic trusts the simulator to scatter as your '
@@ -86,21 +88,22 @@ def fan_setting_note(load_ratios, material: str) -> str | None:
   )
 
 
-def next_recording_note(shared: dict, config, workdir: str) -> str | None:
+def next_recording_note(shared: dict, measured: Measured, workdir: str) -> str | None:
   """The one line ``estimate`` prints after every estimate whose bending or
   area weight the recordings left near the prior (``shared``: an estimate's
-  ``estimate`` entries, or a joint estimate's shared ones): what to record or
+  ``estimate`` entries, or a joint estimate's shared ones) and no reading
+  (``measured``) gave: what to record or
   measure next by the protocol study's bound (docs/studies/protocol.md), and the
   command that ranks candidates with the simulator from this posterior."""
   # narrowing is the video's over the prior with the readings: a parameter a
   # reading measured (the strip's bending length, a scale's area weight) is
   # not left at the prior however little the video added
-  measured = {'bending_scale': config.measured.bending_length_sd > 0,
-              'area_weight': config.measured.area_weight_sd > 0}  # fmt: skip
+  read = {'bending_scale': measured.bending_length_sd > 0,
+          'area_weight': measured.area_weight_sd > 0}  # fmt: skip
   little = [
     name for name in ('bending_scale', 'area_weight')
     if shared.get(name, {}).get('narrowing_90', np.inf) < LITTLE_NARROWING
-    and not measured[name]
+    and not read[name]
   ]  # fmt: skip
   if not little:
     return None

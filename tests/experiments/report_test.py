@@ -285,7 +285,7 @@ def test_the_montage_keeps_its_labels_inside_the_canvas(
 def test_the_next_recording_line_names_what_was_left_at_the_prior():
   config = objective.EstimateConfig()
   told = {'bending_scale': {'narrowing_90': 1.0}, 'area_weight': {'narrowing_90': 1.1}}
-  line = advice.next_recording_note(told, config, 'out/e')
+  line = advice.next_recording_note(told, config.measured, 'out/e')
   assert line.startswith('next: the recording(s) told little about bending and area')
   assert '--area_weight=' in line and '--bending_length=' in line
   assert 'python -m experiments.plan --workdir=out/e' in line and '\n' not in line
@@ -294,19 +294,19 @@ def test_the_next_recording_line_names_what_was_left_at_the_prior():
     measured=measurements.Measured(area_weight=0.18, area_weight_sd=0.004,
                                 bending_length=0.02, bending_length_sd=0.002),
   )  # fmt: skip
-  assert advice.next_recording_note(told, weighed, 'out/e') is None
+  assert advice.next_recording_note(told, weighed.measured, 'out/e') is None
   # the strip measured bending (the video adding nothing to it): area weight only
   strip = config.replace(
     measured=measurements.Measured(bending_length=0.02, bending_length_sd=0.002)
   )
-  line = advice.next_recording_note(told, strip, 'out/e')
+  line = advice.next_recording_note(told, strip.measured, 'out/e')
   assert line.startswith('next: the recording(s) told little about area weight;'), line
   assert '--area_weight=' in line and '--bending_length=' not in line
   narrowed = {
     'bending_scale': {'narrowing_90': 3.0},
     'area_weight': {'narrowing_90': 4},
   }
-  assert advice.next_recording_note(narrowed, config, 'out/e') is None
+  assert advice.next_recording_note(narrowed, config.measured, 'out/e') is None
 
 
 def test_a_point_far_from_the_median_gets_the_median_in_a_note():

@@ -218,8 +218,10 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
   saved = json.load(open(os.path.join(workdir, layout.ESTIMATE_FILE)))
   assert len(saved['noise_sd_shape_m']) == 2 and saved['noise_sd_log_psd'] is None
   assert 0 < min(saved['noise_sd_shape_m']) < 0.05  # metres of centroid scatter
-  assert advice.synthetic_warning(config).startswith('warning: --likelihood=synthetic')
-  assert advice.synthetic_warning(CONFIG) is None
+  assert advice.synthetic_warning(config.scoring).startswith(
+    'warning: --likelihood=synthetic'
+  )
+  assert advice.synthetic_warning(CONFIG.scoring) is None
 
 
 def test_camera_error_out_of_range_is_refused():
@@ -232,9 +234,11 @@ def test_estimate_warns_when_a_shape_distance_trusts_an_aligned_camera():
   base = obj_lib.PRESETS['smoke'].replace(distance='energy')
   shape = base.replace(distance='shape')
   warn = advice.shape_camera_warning
-  assert 'camera_sd_m=0.02' in warn(shape, aligned=True)
-  assert 'energy+shape' in warn(shape.replace(distance='energy+shape'), True)
-  assert warn(shape, aligned=False) is None  # a simulated recording's exact camera
-  assert warn(base, aligned=True) is None  # the PSD does not read the world's frame
-  assert warn(shape.replace(camera_sd_m=0.02), aligned=True) is None
-  assert warn(shape.replace(camera_sd_deg=3.0), aligned=True) is None
+  assert 'camera_sd_m=0.02' in warn(shape.scoring, aligned=True)
+  assert 'energy+shape' in warn(shape.replace(distance='energy+shape').scoring, True)
+  # a simulated recording's exact camera
+  assert warn(shape.scoring, aligned=False) is None
+  # the PSD does not read the world's frame
+  assert warn(base.scoring, aligned=True) is None
+  assert warn(shape.replace(camera_sd_m=0.02).scoring, aligned=True) is None
+  assert warn(shape.replace(camera_sd_deg=3.0).scoring, aligned=True) is None
