@@ -168,9 +168,11 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
   note = _joint_note(configs, first.setup.network, fans)
   # A joint the shipped tables cover was calibrated, and checked on another
-  # physics, without a shared discrepancy; elsewhere the discrepancy keeps its
-  # recordings from averaging away the simulator's error.
-  shared_sd = 0.0 if note and note.get('matches') else config.scoring.shared_bias
+  # physics, without a shared discrepancy; elsewhere (and in the protocol
+  # check's sets) the discrepancy keeps its recordings from averaging away
+  # the simulator's error.
+  without = note and note.get('matches') and not note.get('shared_discrepancy')
+  shared_sd = 0.0 if without else config.scoring.shared_bias
   space = first.setup.space
   air = _air_of(configs, space, first.setup.config.search.posterior_grid)
   combined, npz = joint_posterior(jobs, key, shared_sd, fans, air)
@@ -234,6 +236,7 @@ def _joint_note(configs: list, network: setup_lib.Network,
   return setup_lib.calibration(
     configs[0], network, joint=True, recordings=len(configs),
     uncalibrated=tuple(uncalibrated),
+    every_wind_read=all(c.measured.wind_speed_sd > 0 for c in configs),
   )  # fmt: skip
 
 

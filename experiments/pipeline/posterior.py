@@ -309,11 +309,10 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
   Recordings of one fabric in one room share more than the fabric: where the
   simulator differs from the world (the fan's direction, the air's drag, the
   cloth's edges), it differs the same way in each, so their evidence does not
-  average that error away. ``shared_bias_sd`` > 0 says so: every recording
-  sees the area weight times one common factor exp(d), d ~ N(0, sd^2),
-  integrated out (``BIAS_NODES`` Gauss-Hermite nodes): the joint's area
-  weight is then no narrower than about ``sd`` however many recordings it
-  has. Each recording's wind is drawn given (b, w) without it.
+  average that error away. ``shared_bias_sd`` > 0: every recording sees the
+  area weight times one common exp(d), d ~ N(0, sd^2), integrated out
+  (``BIAS_NODES`` Gauss-Hermite nodes), so the joint's area weight is no
+  narrower than about ``sd``. Each wind is drawn given (b, w) without it.
 
   Args:
     log_liks: per recording, (G,) log likelihood on the grid (C order over
@@ -321,8 +320,8 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     grid: (nb, nv, nw) cells per dimension.
     log_prior_grid: (G,) the log prior of one recording's (b, v, w), shared
       by all; or one (G,) per recording where their winds were measured
-      apart (an anemometer at each fan setting). Each must be a product of a
-      (b, w) part, the same for all, and a wind part: its own reading.
+      apart (an anemometer at each fan setting): each a product of a (b, w)
+      part, the same for all, and a wind part (its own reading).
     key: PRNG key for the draws.
     n: draws per recording.
     shared_bias_sd: the shared discrepancy's sd in log area weight (0: none).
@@ -348,10 +347,8 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     'log_post_bw': (nb, nw)}``: each recording's draws share (b, w) from the
     joint and draw their own wind given them (one for a fan setting's
     recordings, the same in each); with ``air``, ``'air'``: (n,) the shared
-    air coefficient's draws (each recording's v_k is then its effective wind),
-    and ``'air_simulated'``: (n,) the same draws before the shared
-    discrepancy, the c the simulator's push was read with (the true wind is
-    v_k / sqrt of it: the discrepancy errs in the push, not in the wind).
+    air coefficient's draws (v_k the effective wind), and ``'air_simulated'``:
+    them before the shared discrepancy (the true wind is v_k / sqrt of it).
 
   Raises:
     ValueError: priors or fans for another number of recordings, or two

@@ -22,7 +22,12 @@ from typing import NamedTuple
 import numpy as np
 
 import physsim
-from experiments.pipeline import calibration_tables, embedding, measurements
+from experiments.pipeline import (
+  calibration_tables,
+  embedding,
+  measurements,
+  protocol_checks,
+)
 from experiments.pipeline import objective as obj_lib
 
 
@@ -126,10 +131,15 @@ def calibration(
   joint: bool = False,
   recordings: int = 1,
   uncalibrated: tuple[str, ...] = (),
+  every_wind_read: bool = False,
 ) -> dict | None:
   """``calibration_tables.calibration_note`` of these settings, this network's recipe and
   accuracy, and the mode (a joint estimate of ``recordings`` recordings;
-  ``uncalibrated``: what else about it no calibration has measured)."""
+  ``uncalibrated``: what else about it no calibration has measured;
+  ``every_wind_read``: each of them with its own anemometer reading)."""
+  if joint and every_wind_read and not uncalibrated:
+    if found := protocol_checks.protocol_note(config, recordings):
+      return found  # a protocol joint the shipped check covers
   return calibration_tables.calibration_note(
     config, joint=joint, recordings=recordings, network=net.recipe,
     accuracy=net.accuracy, uncalibrated=uncalibrated,

@@ -177,6 +177,8 @@ def calibration_line(cal: dict | None) -> str:
       f'{", ".join(cal.get("differs", ["likelihood"]))}; treat the intervals as '
       'indicative.'
     )
+  if cal.get('measured'):
+    return _measured_line(cal)
   parts = _coverage_parts(cal['coverage'])
   if cal.get('recalibrated'):
     return _recalibrated_line(cal, parts)
@@ -184,6 +186,30 @@ def calibration_line(cal: dict | None) -> str:
     f'calibration ({cal["n"]} held-out simulated recordings, {cal["setting"]}): 90%/50% '
     f'intervals held the truth in {parts} of them.'
   )
+
+
+def _measured_line(cal: dict) -> str:
+  """``calibration_line`` of a protocol joint that the shipped protocol
+  check covers: its intervals as printed, how often they held the truth on
+  that check's sets of another physics, and what it did not measure."""
+  readings = ', '.join(
+    f'{name.replace("_", " ")} {sd}' for name, sd in cal.get('readings', {}).items()
+  )
+  physics = PHYSICS_WORDS.get(cal['physics'], cal['physics'])
+  word = lambda q: SHORT.get(q, q.replace('_', ' '))  # noqa: E731
+  parts = ', '.join(
+    f'{word(q)} {100 * c["interval_90"]:.0f}%/{100 * c["interval_50"]:.0f}% of {c["n"]}'
+    for q, c in cal['coverage'].items()
+  )
+  line = (
+    f'calibration ({cal["mode"]}; {cal["setting"]}; readings to {readings}): '
+    f'measured, not recalibrated: on protocol sets of {physics} its 90%/50% '
+    f'intervals held the truth in {parts} sets.'
+  )
+  if cal.get('unmeasured'):
+    names = ', '.join(word(q) for q in cal['unmeasured'])
+    line += f' Not measured: {names}; treat those intervals as indicative.'
+  return line
 
 
 def _recalibrated_line(cal: dict, parts: str) -> str:

@@ -42,8 +42,18 @@ import jax.numpy as jnp
 import numpy as np
 
 import physsim
-from experiments.pipeline import cli, estimation, files, joint, objective
+from experiments.pipeline import (
+  cli,
+  estimation,
+  files,
+  joint,
+  objective,
+  protocol_checks,
+)
 from experiments.pipeline import recording as recording_lib
+
+# The protocol joint's quantities whose intervals the study checks.
+QUANTITIES = ('bending_scale', 'area_weight', 'wind_speed', 'air_coefficient')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,6 +74,12 @@ class Study:
       ``<workdir>/sets`` (0: none).
     pool: earlier runs' JSON files (``path`` or ``path:mode``) to summarise
       together instead of running (the sets of several seeds as one table).
+    install: write the free mode's coverage as the shipped protocol check
+      (``protocol_checks.PROTOCOL_CHECKS_FILE``), which a protocol joint's
+      estimate then quotes.
+    measured: the quantities whose coverage the install ships (the rest are
+      named as not measured: e.g. one whose intervals changed since the sets
+      ran).
     workdir: where the searches keep their files.
     out: JSON path ('' for none).
   """
@@ -79,6 +95,8 @@ class Study:
   modes: tuple[str, ...] = ('free', 'fixed')
   write_sets: int = 0
   pool: tuple[str, ...] = ()
+  install: bool = False
+  measured: tuple[str, ...] = QUANTITIES
   workdir: str = 'out/benchmarks/air_protocol'
   out: str = ''
 
@@ -191,6 +209,7 @@ def summarise(rows: list[dict]) -> dict:
         s[f'air_held_{level}'] = float(np.mean([r[f'air_in_{level}'] for r in mine]))
     held = [r['held'] for r in mine if 'held' in r]
     if held:  # each quantity's intervals, wind over every recording
+      s['held_sets'] = len(held)
       s['held'] = {
         k: float(np.mean([x for h in held for x in np.atleast_1d(h[k])]))
         for k in held[0]
@@ -330,19 +349,72 @@ def table(summary: dict) -> str:
   return '\n'.join(lines)
 
 
-def pooled(paths: tuple[str, ...]) -> list[dict]:
+# What pooled runs must share with the study that pools them.
+POOLED_ALIKE = ('material', 'air_range', 'winds', 'physics', 'estimate', 'image')
+
+
+def pooled(paths: tuple[str, ...], args: Study | None = None) -> list[dict]:
   """The rows of earlier runs' JSON files, ``path`` or ``path:mode`` (that
-  mode's rows only: e.g. a run's rows from before a change of one mode)."""
+  mode's rows only: e.g. a run's rows from before a change of one mode);
+  each run's settings (``POOLED_ALIKE``) must be ``args``'s."""
   rows = []
   for entry in paths:
     path, _, mode = entry.partition(':')
     try:
       with open(path) as f:
-        found = json.load(f)['rows']
+        found = json.load(f)
+      ran, their_rows = found['args'], found['rows']
     except (OSError, ValueError, KeyError, TypeError) as e:
       raise ValueError(f'--pool: {path}: not a study JSON ({e})') from None
-    rows += [r for r in found if not mode or r.get('mode') == mode]
+    for name in POOLED_ALIKE if args is not None else ():
+      mine = getattr(args, name)
+      theirs = (
+        type(mine)(ran.get(name, ())) if isinstance(mine, tuple) else ran.get(name)
+      )
+      if theirs != mine:
+        raise ValueError(f'--pool: {path} ran with {name}={theirs!r}, not {mine!r}')
+    rows += [r for r in their_rows if not mode or r.get('mode') == mode]
   return rows
+
+
+def _base(args: Study):
+  """The estimate's settings every set is estimated with (its readings aside)."""
+  return objective.PRESETS[args.estimate].replace(
+    material=args.material, distance='shape'
+  )
+
+
+def check_record(args: Study, summary: dict) -> dict:
+  """The shipped protocol check (``protocol_checks.protocol_note`` reads
+  it): the free mode's coverage of each of ``args.measured``, the others
+  named as not measured, with the settings and readings the sets had."""
+  free = summary.get('free')
+  if not free or 'held' not in free:
+    raise ValueError('--install: no free-mode sets with their intervals checked')
+  unknown = sorted(set(args.measured) - set(QUANTITIES))
+  if unknown:
+    raise ValueError(f'--measured: {unknown} not among {QUANTITIES}')
+  held = {**free['held'], 'air_coefficient_90': free['air_held_90'],
+          'air_coefficient_50': free['air_held_50']}  # fmt: skip
+  key = lambda q: {'bending_scale': 'bending', 'wind_speed': 'wind'}.get(q, q)  # noqa: E731
+  config = _base(args)
+  return {
+    'mode': 'protocol joint, air free', 'recordings': 3, 'n': free['sets'],
+    'physics': args.physics, 'likelihood': config.scoring.likelihood,
+    'sharpness': config.scoring.sharpness,
+    'setting': f'{args.material.replace("_", " ")}, {args.estimate} estimate, '
+               'shape distance',
+    'config': {'estimate': config.flat()},
+    'readings': dict(READ), 'length_dof': 0.0,
+    'coverage': {
+      q: {
+        **{f'interval_{lv}': held[f'{key(q)}_{lv}'] for lv in (90, 50)},
+        'n': free['sets'] if q == 'air_coefficient' else free['held_sets'],
+      }
+      for q in QUANTITIES if q in args.measured
+    },
+    'unmeasured': [q for q in QUANTITIES if q not in args.measured],
+  }  # fmt: skip
 
 
 def run(args: Study) -> dict:
@@ -351,11 +423,9 @@ def run(args: Study) -> dict:
   tables; writes and returns the JSON."""
   t0 = time.perf_counter()
   if args.pool:
-    rows, seconds = pooled(args.pool), {}
+    rows, seconds = pooled(args.pool, args), {}
   else:
-    base = objective.PRESETS[args.estimate].replace(
-      material=args.material, distance='shape'
-    )
+    base = _base(args)
     sets = truths(args)
     plan = _plan(args, base, sets)
     seconds = {'record': time.perf_counter() - t0}
@@ -380,4 +450,8 @@ def run(args: Study) -> dict:
   }  # fmt: skip
   if args.out:
     files.write_json(args.out, out)
+  if args.install:
+    path = protocol_checks.PROTOCOL_CHECKS_FILE
+    files.write_json(path, check_record(args, summary))
+    print(f'installed: {path}')
   return out
