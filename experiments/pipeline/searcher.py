@@ -107,7 +107,9 @@ def make_searcher(config: EstimateConfig, space: physsim.SearchSpace, workdir: s
   device = gp_device(index) if gp_on_cpu else None
   s = config.search
   if s.point == 'argmin':
-    return bo.Minimizer(BOUNDS, **minimizer_settings(config, workdir), device=device)
+    return bo.Minimizer(
+      BOUNDS, **minimizer_settings(s, config.seed, workdir), device=device
+    )
   pc = posterior_config(s, config.scoring)
   points = bo.posterior.grid_points(pc.grid)
   return bo.PosteriorSearch(
@@ -129,15 +131,15 @@ def posterior_config(s: Search, sc: Scoring) -> bo.PosteriorConfig:
   )  # fmt: skip
 
 
-def minimizer_settings(config: EstimateConfig, workdir: str) -> dict:
-  """``bo.Minimizer`` settings of an estimate."""
-  s = config.search
+def minimizer_settings(s: Search, seed: int, workdir: str) -> dict:
+  """``bo.Minimizer`` settings of an estimate's search section and seed, its
+  state in ``workdir``."""
   return dict(
     n_init=s.n_init,
     n_iter=s.max_iter,
     q=s.q,
     x0=np.zeros(3),  # the paper starts from the range centre
-    seed=config.seed,
+    seed=seed,
     acquisition='logei',
     stop_rel_change=s.stop_rel_change,
     stop_window=s.stop_window,
