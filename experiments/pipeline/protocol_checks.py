@@ -15,12 +15,29 @@ import os
 
 from experiments.pipeline.calibration_tables import _differing_fields, _read_calibration
 
-# Coverage of a protocol joint's intervals (three fan settings, each with an
+# Coverage of a protocol joint's intervals (fan settings each with an
 # anemometer, a scale and a bending length; the air coefficient free),
 # measured on protocol sets of another physics (``experiments.air_protocol
-# --install``). Not recalibrated tables: the intervals as printed, and how
-# often they held the truth.
+# --install``): ``{"checks": [...]}``, one per number of fan settings. Not
+# recalibrated tables: the intervals as printed, and how often they held.
 PROTOCOL_CHECKS_FILE = os.path.join(os.path.dirname(__file__), 'protocol_checks.json')
+
+
+def check_of(recordings: int, path: str = PROTOCOL_CHECKS_FILE) -> dict | None:
+  """The shipped check of protocol joints of ``recordings`` fan settings, or
+  None where none was measured."""
+  if not os.path.isfile(path):
+    return None
+  checks = _read_calibration(path).get('checks', [])
+  return next((c for c in checks if c['recordings'] == recordings), None)
+
+
+def with_check(shipped: dict | None, check: dict) -> dict:
+  """The shipped file's content with ``check`` in place of the one of its
+  number of recordings (the others kept)."""
+  kept = [c for c in (shipped or {}).get('checks', [])
+          if c['recordings'] != check['recordings']]  # fmt: skip
+  return {'checks': sorted([*kept, check], key=lambda c: c['recordings'])}
 
 
 def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
@@ -35,12 +52,10 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   held the truth on those sets (``'measured'``), and names the quantities it
   did not measure. A protocol joint keeps its shared discrepancy, as the
   check's sets had it (``'shared_discrepancy'``)."""
-  if not os.path.isfile(path):
-    return None
-  check = _read_calibration(path)
+  check = check_of(recordings, path)
   m = config.measured
   given = m.area_weight_sd > 0 and m.bending_length_sd > 0 and m.air_free
-  if not given or recordings != check['recordings'] or _differing_fields(config, check):
+  if not given or check is None or _differing_fields(config, check):
     return None
   for name, rel in check['readings'].items():
     value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))

@@ -61,10 +61,12 @@ class Study:
   """The sets and how they are estimated.
 
   Attributes:
-    sets: protocol sets (fabrics), three fan settings each.
+    sets: protocol sets (fabrics).
+    fans: fan settings (recordings) per set, 1 to 4: one in each equal share
+      of ``winds``.
     material: the fabric whose box the truths are drawn in.
     air_range: the air coefficients' log-uniform range.
-    winds: the fan settings' range, m/s (low, middle and high thirds).
+    winds: the fan settings' range, m/s.
     physics: the recordings' world (``physsim.MISMATCHES``).
     estimate: the estimate's preset (``objective.PRESETS``).
     image: the recordings' frame size, pixels a side.
@@ -85,6 +87,7 @@ class Study:
   """
 
   sets: int = 40
+  fans: int = 3
   material: str = 'gray_interlock'
   air_range: tuple[float, ...] = (0.4, 1.25)
   winds: tuple[float, ...] = (1.5, 4.0)
@@ -110,24 +113,27 @@ READ = {'wind_speed': 0.02, 'area_weight': 0.01, 'bending_length': 0.03}
 
 def truths(args: Study) -> list[dict]:
   """Per set: bending (log-uniform), area weight (uniform) in the box, c
-  (log-uniform in ``air_range``) and three fan winds, one per third."""
+  (log-uniform in ``air_range``) and ``fans`` fan winds, one per equal share
+  of the range."""
   rng = np.random.default_rng([args.seed, 41])
   space = physsim.search_space(args.material)
   lo, hi = args.winds
-  third = (hi - lo) / 3
+  share = (hi - lo) / args.fans
   out = []
   for _ in range(args.sets):
     b = math.exp(rng.uniform(*np.log(space.bending_scale)))
     w = rng.uniform(*space.area_weight)
     c = math.exp(rng.uniform(*np.log(args.air_range)))
-    v = [lo + third * (k + rng.uniform(0.1, 0.9)) for k in range(3)]
+    v = [lo + share * (k + rng.uniform(0.1, 0.9)) for k in range(args.fans)]
     out.append({'bending_scale': b, 'area_weight': w, 'air_coefficient': c, 'winds': v})
   return out
 
 
 def record(args: Study, config, truth: dict, k: int) -> list:
-  """The set's three recordings (``recording.Recording``, in memory)."""
+  """The set's recordings, one per fan setting (``recording.Recording``, in
+  memory)."""
   sim = config.simulation
+  n = len(truth['winds'])
   mesh = physsim.square(sim.cloth_resolution, size=sim.cloth_size)
   world = physsim.MISMATCHES[args.physics]
   base = physsim.config_for_mesh(mesh, sim.fps, **world.sim_fields())
@@ -138,8 +144,8 @@ def record(args: Study, config, truth: dict, k: int) -> list:
   space = physsim.search_space(sim.material)
   key = jax.random.key(args.seed * 1000 + k)
   p = physsim.params.make(
-    bending_scale=[truth['bending_scale']] * 3, wind_speed=truth['winds'],
-    area_weight=[truth['area_weight']] * 3,
+    bending_scale=[truth['bending_scale']] * n, wind_speed=truth['winds'],
+    area_weight=[truth['area_weight']] * n,
   )  # fmt: skip
   out = physsim.simulate(
     cloth, p, frames=sim.frames, fps=sim.fps, warmup=sim.warmup,
@@ -147,10 +153,10 @@ def record(args: Study, config, truth: dict, k: int) -> list:
   )  # fmt: skip
   intr = physsim.Intrinsics(width=args.image, height=args.image)
   ranges = physsim.PoseRanges().for_cloth(sim.cloth_size)
-  poses = physsim.sample_poses(jax.random.fold_in(key, 2), 3, ranges)
+  poses = physsim.sample_poses(jax.random.fold_in(key, 2), n, ranges)
   render = physsim.make_depth_renderer(mesh.faces, intr)
   recs = []
-  for j in range(3):
+  for j in range(n):
     pose = jax.tree.map(lambda a, j=j: a[j], poses)
     depth = render(
       jnp.asarray(out.positions[j : j + 1]), jax.tree.map(lambda a: a[None, None], pose)
@@ -350,7 +356,15 @@ def table(summary: dict) -> str:
 
 
 # What pooled runs must share with the study that pools them.
-POOLED_ALIKE = ('material', 'air_range', 'winds', 'physics', 'estimate', 'image')
+POOLED_ALIKE = (
+  'material',
+  'air_range',
+  'winds',
+  'physics',
+  'estimate',
+  'image',
+  'fans',
+)
 
 
 def pooled(paths: tuple[str, ...], args: Study | None = None) -> list[dict]:
@@ -367,10 +381,9 @@ def pooled(paths: tuple[str, ...], args: Study | None = None) -> list[dict]:
     except (OSError, ValueError, KeyError, TypeError) as e:
       raise ValueError(f'--pool: {path}: not a study JSON ({e})') from None
     for name in POOLED_ALIKE if args is not None else ():
-      mine = getattr(args, name)
-      theirs = (
-        type(mine)(ran.get(name, ())) if isinstance(mine, tuple) else ran.get(name)
-      )
+      mine, default = getattr(args, name), getattr(Study(), name)
+      theirs = ran.get(name, default)  # runs from before a setting kept its default
+      theirs = tuple(theirs) if isinstance(mine, tuple) else theirs
       if theirs != mine:
         raise ValueError(f'--pool: {path} ran with {name}={theirs!r}, not {mine!r}')
     rows += [r for r in their_rows if not mode or r.get('mode') == mode]
@@ -399,7 +412,9 @@ def check_record(args: Study, summary: dict) -> dict:
   key = lambda q: {'bending_scale': 'bending', 'wind_speed': 'wind'}.get(q, q)  # noqa: E731
   config = _base(args)
   return {
-    'mode': 'protocol joint, air free', 'recordings': 3, 'n': free['sets'],
+    'mode': f'protocol joint, {args.fans} fan settings, air free',
+    'recordings': args.fans,
+    'n': free['sets'],
     'physics': args.physics, 'likelihood': config.scoring.likelihood,
     'sharpness': config.scoring.sharpness,
     'setting': f'{args.material.replace("_", " ")}, {args.estimate} estimate, '
@@ -422,6 +437,8 @@ def run(args: Study) -> dict:
   or with ``pool`` reads earlier runs' rows; prints each set's line and the
   tables; writes and returns the JSON."""
   t0 = time.perf_counter()
+  if not 1 <= args.fans <= 4:
+    raise ValueError(f'--fans={args.fans}: need 1 to 4 fan settings a set')
   if args.pool:
     rows, seconds = pooled(args.pool, args), {}
   else:
@@ -452,6 +469,9 @@ def run(args: Study) -> dict:
     files.write_json(args.out, out)
   if args.install:
     path = protocol_checks.PROTOCOL_CHECKS_FILE
-    files.write_json(path, check_record(args, summary))
-    print(f'installed: {path}')
+    shipped = json.load(open(path)) if os.path.isfile(path) else None
+    files.write_json(
+      path, protocol_checks.with_check(shipped, check_record(args, summary))
+    )
+    print(f'installed: {path} ({args.fans} fan settings)')
   return out

@@ -89,3 +89,25 @@ def test_intervals_held_reads_each_printed_interval():
   assert h['bending_90'] and h['bending_50'] and h['area_weight_90']
   assert not h['area_weight_50']
   assert h['wind_90'] == [True, True] and h['wind_50'] == [True, False]
+
+
+def test_fan_settings_one_per_equal_share_of_the_range():
+  for fans in (1, 2, 4):
+    share = (4.0 - 1.5) / fans
+    for t in air_protocol.truths(air_protocol.Study(sets=20, seed=4, fans=fans)):
+      assert len(t['winds']) == fans
+      for k, v in enumerate(t['winds']):
+        assert 1.5 + k * share < v < 1.5 + (k + 1) * share
+  with pytest.raises(ValueError, match='--fans=5'):
+    air_protocol.run(air_protocol.Study(fans=5))
+
+
+def test_pooled_runs_must_share_the_studys_settings(tmp_path):
+  path = tmp_path / 'a.json'
+  run = {'args': {'fans': 2}, 'rows': [{'mode': 'free'}]}
+  air_protocol.files.write_json(str(path), run)
+  with pytest.raises(ValueError, match='fans=2'):
+    air_protocol.pooled((str(path),), air_protocol.Study())
+  assert air_protocol.pooled((f'{path}:fixed',)) == []
+  air_protocol.files.write_json(str(path), {'args': {}, 'rows': [{'mode': 'free'}]})
+  assert len(air_protocol.pooled((str(path),), air_protocol.Study())) == 1  # defaults

@@ -31,7 +31,7 @@ def _check(tmp_path):
   )
   record = air_protocol.check_record(study, summary)
   path = tmp_path / 'protocol_checks.json'
-  air_protocol.files.write_json(str(path), record)
+  air_protocol.files.write_json(str(path), protocol_checks.with_check(None, record))
   return record, str(path)
 
 
@@ -83,6 +83,19 @@ def test_the_shipped_check_is_what_a_protocol_estimates_note_quotes():
   config = _config()
   net = setup.resolve(config, joint=True, recordings=3).network
   note = setup.calibration(config, net, joint=True, recordings=3, every_wind_read=True)
-  assert note['measured'] and note['mode'] == 'protocol joint, air free'
+  assert note['measured'] and note['mode'] == 'protocol joint, 3 fan settings, air free'
   plain = setup.calibration(config, net, joint=True, recordings=3)
   assert not plain['matches']
+
+
+def test_a_check_of_other_fan_settings_is_kept_beside_and_read_by_its_count(tmp_path):
+  record, path = _check(tmp_path)
+  two = {**record, 'recordings': 2, 'n': 9}
+  shipped = protocol_checks.with_check({'checks': [record]}, two)
+  assert [c['recordings'] for c in shipped['checks']] == [2, 3]
+  again = protocol_checks.with_check(shipped, {**two, 'n': 11})  # replaced
+  assert [c['n'] for c in again['checks']] == [11, 5]
+  air_protocol.files.write_json(path, again)
+  assert protocol_checks.check_of(2, path)['n'] == 11
+  assert protocol_checks.check_of(4, path) is None
+  assert protocol_checks.protocol_note(_config(), 4, path) is None
