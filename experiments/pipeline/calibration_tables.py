@@ -78,7 +78,7 @@ def calibration_file(config=None) -> str:
     return CALIBRATION_FILE
   if config is None or len(own) == 1:
     return own[0]
-  return min(own, key=lambda p: len(_differing_fields(config, _read_calibration(p))))
+  return min(own, key=lambda p: len(differing_fields(config, read_calibration(p))))
 
 
 @functools.lru_cache(maxsize=16)
@@ -349,7 +349,7 @@ def quoted_checks(cal: dict, mode: str) -> list[dict]:
   return out
 
 
-def _read_calibration(path: str) -> dict:
+def read_calibration(path: str) -> dict:
   """A calibration file, read once per version of it (not to be changed)."""
   st = os.stat(path)
   return _read_cached(path, st.st_mtime_ns, st.st_size)
@@ -366,7 +366,7 @@ _CALIBRATED_FIELDS = (
 )  # fmt: skip
 
 
-def _differing_fields(config, cal: dict) -> list[str]:
+def differing_fields(config, cal: dict) -> list[str]:
   """The likelihood's settings (``_CALIBRATED_FIELDS``) in which an estimate
   with ``config`` differs from calibration ``cal``'s searches; a study of
   several fabrics (``'materials'``) holds for each of them."""
@@ -485,7 +485,7 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   path = calibration_file(config)
   if not os.path.isfile(path):
     return None
-  cal = _read_calibration(path)
+  cal = read_calibration(path)
   head = {k: cal[k] for k in ('n', 'setting', 'likelihood', 'sharpness') if k in cal}
   head['networks'] = len(cal.get('network', {}).get('seeds', [0]))
   if config is None:
@@ -505,7 +505,7 @@ def _differences(config, cal: dict, mode: str | None, joint: bool, recordings: i
   """What keeps calibration ``cal``'s tables from an estimate with ``config``
   in ``mode`` (``calibration_note``'s arguments), each in words; empty where
   they apply."""
-  differs = _differing_fields(config, cal) + list(uncalibrated)
+  differs = differing_fields(config, cal) + list(uncalibrated)
   if getattr(config.measured, 'air_free', False):
     differs.append("air coefficient free (the tables hold it at ArcSim's 1)")
   if joint and recordings != 2:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 
-from experiments.pipeline.calibration_tables import _differing_fields, _read_calibration
+from experiments.pipeline.calibration_tables import differing_fields, read_calibration
 
 # Coverage of a protocol joint's intervals (fan settings each with an
 # anemometer, a scale and a bending length; the air coefficient free),
@@ -28,7 +28,7 @@ def check_of(recordings: int, path: str = PROTOCOL_CHECKS_FILE) -> dict | None:
   None where none was measured."""
   if not os.path.isfile(path):
     return None
-  checks = _read_calibration(path).get('checks', [])
+  checks = read_calibration(path).get('checks', [])
   return next((c for c in checks if c['recordings'] == recordings), None)
 
 
@@ -55,7 +55,7 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   check = check_of(recordings, path)
   m = config.measured
   given = m.area_weight_sd > 0 and m.bending_length_sd > 0 and m.air_free
-  if not given or check is None or _differing_fields(config, check):
+  if not given or check is None or differing_fields(config, check):
     return None
   for name, rel in check['readings'].items():
     value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))

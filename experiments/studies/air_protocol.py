@@ -43,6 +43,7 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import (
+  calibration_tables,
   cli,
   estimation,
   files,
@@ -397,16 +398,24 @@ def _base(args: Study):
   )
 
 
+def check_args(args: Study) -> None:
+  """Refuses settings the study cannot run or install, before any set is
+  recorded."""
+  if not 1 <= args.fans <= 4:
+    raise ValueError(f'--fans={args.fans}: need 1 to 4 fan settings a set')
+  unknown = sorted(set(args.measured) - set(QUANTITIES))
+  if unknown:
+    raise ValueError(f'--measured: {unknown} not among {QUANTITIES}')
+
+
 def check_record(args: Study, summary: dict) -> dict:
   """The shipped protocol check (``protocol_checks.protocol_note`` reads
   it): the free mode's coverage of each of ``args.measured``, the others
   named as not measured, with the settings and readings the sets had."""
+  check_args(args)
   free = summary.get('free')
   if not free or 'held' not in free:
     raise ValueError('--install: no free-mode sets with their intervals checked')
-  unknown = sorted(set(args.measured) - set(QUANTITIES))
-  if unknown:
-    raise ValueError(f'--measured: {unknown} not among {QUANTITIES}')
   held = {**free['held'], 'air_coefficient_90': free['air_held_90'],
           'air_coefficient_50': free['air_held_50']}  # fmt: skip
   key = lambda q: {'bending_scale': 'bending', 'wind_speed': 'wind'}.get(q, q)  # noqa: E731
@@ -437,8 +446,7 @@ def run(args: Study) -> dict:
   or with ``pool`` reads earlier runs' rows; prints each set's line and the
   tables; writes and returns the JSON."""
   t0 = time.perf_counter()
-  if not 1 <= args.fans <= 4:
-    raise ValueError(f'--fans={args.fans}: need 1 to 4 fan settings a set')
+  check_args(args)
   if args.pool:
     rows, seconds = pooled(args.pool, args), {}
   else:
@@ -469,7 +477,9 @@ def run(args: Study) -> dict:
     files.write_json(args.out, out)
   if args.install:
     path = protocol_checks.PROTOCOL_CHECKS_FILE
-    shipped = json.load(open(path)) if os.path.isfile(path) else None
+    shipped = (
+      calibration_tables.read_calibration(path) if os.path.isfile(path) else None
+    )
     files.write_json(
       path, protocol_checks.with_check(shipped, check_record(args, summary))
     )
