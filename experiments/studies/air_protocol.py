@@ -63,8 +63,9 @@ class Study:
 
   Attributes:
     sets: protocol sets (fabrics).
-    fans: fan settings (recordings) per set, 1 to 4: one in each equal share
-      of ``winds``.
+    fans: fan settings (recordings) per set, 2 to 4: one in each equal share
+      of ``winds`` (one recording with its readings is no joint: the
+      calibration tables cover it).
     material: the fabric whose box the truths are drawn in.
     air_range: the air coefficients' log-uniform range.
     winds: the fan settings' range, m/s.
@@ -401,8 +402,11 @@ def _base(args: Study):
 def check_args(args: Study) -> None:
   """Refuses settings the study cannot run or install, before any set is
   recorded."""
-  if not 1 <= args.fans <= 4:
-    raise ValueError(f'--fans={args.fans}: need 1 to 4 fan settings a set')
+  if not 2 <= args.fans <= 4:
+    raise ValueError(
+      f'--fans={args.fans}: need 2 to 4 fan settings a set (a joint of'
+      ' recordings; one recording with its readings is calibrated by the tables)'
+    )
   unknown = sorted(set(args.measured) - set(QUANTITIES))
   if unknown:
     raise ValueError(f'--measured: {unknown} not among {QUANTITIES}')
