@@ -1,7 +1,7 @@
 """The shipped protocol check, and the note of a protocol joint it covers.
 
-A protocol joint (three fan settings, each with an anemometer, a scale and
-a bending length; the air coefficient free) has no recalibrated tables: its
+A protocol joint (two to four fan settings, each with an anemometer, a
+scale and a bending length; the air coefficient free) has no recalibrated tables: its
 intervals are printed as the posterior gives them, and how often they held
 the truth was measured on protocol sets of another physics
 (``experiments.air_protocol --install``). An estimate like those sets quotes

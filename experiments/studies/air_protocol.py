@@ -55,6 +55,8 @@ from experiments.pipeline import recording as recording_lib
 
 # The protocol joint's quantities whose intervals the study checks.
 QUANTITIES = ('bending_scale', 'area_weight', 'wind_speed', 'air_coefficient')
+# The quantities whose printed intervals each set checks (``intervals_held``).
+CHECKED = ('bending', 'area_weight', 'wind')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,11 +218,13 @@ def summarise(rows: list[dict]) -> dict:
       for level in (90, 50):
         s[f'air_held_{level}'] = float(np.mean([r[f'air_in_{level}'] for r in mine]))
     held = [r['held'] for r in mine if 'held' in r]
-    if held:  # each quantity's intervals, wind over every recording
+    if held:  # each quantity's intervals over the sets that checked them
       s['held_sets'] = len(held)
+      keys = sorted({k for h in held for k in h})
+      s['held_n'] = {k: sum(k in h for h in held) for k in keys}
       s['held'] = {
-        k: float(np.mean([x for h in held for x in np.atleast_1d(h[k])]))
-        for k in held[0]
+        k: float(np.mean([x for h in held if k in h for x in np.atleast_1d(h[k])]))
+        for k in keys
       }
     low = [r['flagged'] for r in mine if r['c'] < 0.7]
     near = [r['flagged'] for r in mine if 0.9 <= r['c'] <= 1.1]
@@ -370,12 +374,19 @@ POOLED_ALIKE = (
 
 
 def pooled(paths: tuple[str, ...], args: Study | None = None) -> list[dict]:
-  """The rows of earlier runs' JSON files, ``path`` or ``path:mode`` (that
-  mode's rows only: e.g. a run's rows from before a change of one mode);
-  each run's settings (``POOLED_ALIKE``) must be ``args``'s."""
+  """The rows of earlier runs' JSON files, ``path``, ``path:mode`` (that
+  mode's rows only: e.g. a run's rows from before a change of one mode) or
+  ``path:mode:q+q`` (those rows' interval checks of the quantities ``q`` of
+  ``CHECKED`` only: a run from before a change of another quantity's
+  interval); each run's settings (``POOLED_ALIKE``) must be ``args``'s."""
   rows = []
   for entry in paths:
-    path, _, mode = entry.partition(':')
+    path, mode, keep = (entry.split(':', 2) + ['', ''])[:3]
+    kept = set(keep.split('+')) if keep else set(CHECKED)
+    if kept - set(CHECKED):
+      raise ValueError(
+        f'--pool: {entry}: {sorted(kept - set(CHECKED))} not in {CHECKED}'
+      )
     try:
       with open(path) as f:
         found = json.load(f)
@@ -388,7 +399,13 @@ def pooled(paths: tuple[str, ...], args: Study | None = None) -> list[dict]:
       theirs = tuple(theirs) if isinstance(mine, tuple) else theirs
       if theirs != mine:
         raise ValueError(f'--pool: {path} ran with {name}={theirs!r}, not {mine!r}')
-    rows += [r for r in their_rows if not mode or r.get('mode') == mode]
+    for r in their_rows:
+      if mode and r.get('mode') != mode:
+        continue
+      if 'held' in r:
+        held = {k: v for k, v in r['held'].items() if k.rpartition('_')[0] in kept}
+        r = {**r, 'held': held}
+      rows.append(r)
   return rows
 
 
@@ -437,7 +454,8 @@ def check_record(args: Study, summary: dict) -> dict:
     'coverage': {
       q: {
         **{f'interval_{lv}': held[f'{key(q)}_{lv}'] for lv in (90, 50)},
-        'n': free['sets'] if q == 'air_coefficient' else free['held_sets'],
+        'n': free['sets'] if q == 'air_coefficient'
+             else free.get('held_n', {}).get(f'{key(q)}_90', free['held_sets']),
       }
       for q in QUANTITIES if q in args.measured
     },

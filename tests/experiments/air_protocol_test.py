@@ -112,3 +112,29 @@ def test_pooled_runs_must_share_the_studys_settings(tmp_path):
   assert air_protocol.pooled((f'{path}:fixed',)) == []
   air_protocol.files.write_json(str(path), {'args': {}, 'rows': [{'mode': 'free'}]})
   assert len(air_protocol.pooled((str(path),), air_protocol.Study())) == 1  # defaults
+
+
+def test_pooled_interval_checks_of_named_quantities_only(tmp_path):
+  """A run from before a change of the wind's interval pools its bending and
+  area weight checks only: the wind's coverage and its count come from the
+  other run, the others' from both."""
+  held = lambda b, w: {  # noqa: E731
+    'bending_90': b, 'bending_50': b, 'area_weight_90': b, 'area_weight_50': b,
+    'wind_90': [w, w, w], 'wind_50': [w, w, w],
+  }  # fmt: skip
+  row = lambda h: {  # noqa: E731
+    'mode': 'free', 'c': 1.0, 'air': 1.0, 'air_pct': 0.0, 'air_in_90': True,
+    'air_in_50': True, 'bending_factor': 1.0, 'area_weight_pct': 0.0,
+    'wind_pct': [0.0, 0.0, 0.0], 'flagged': False, 'held': h,
+  }  # fmt: skip
+  old, new = tmp_path / 'old.json', tmp_path / 'new.json'
+  air_protocol.files.write_json(str(old), {'args': {}, 'rows': [row(held(True, True))]})
+  air_protocol.files.write_json(
+    str(new), {'args': {}, 'rows': [row(held(False, False))]}
+  )
+  rows = air_protocol.pooled((f'{old}:free:bending+area_weight', str(new)))
+  s = air_protocol.summarise(rows)['free']
+  assert s['held']['wind_90'] == 0.0 and s['held_n']['wind_90'] == 1
+  assert s['held']['bending_90'] == 0.5 and s['held_n']['bending_90'] == 2
+  with pytest.raises(ValueError, match='air'):
+    air_protocol.pooled((f'{old}:free:air',))
