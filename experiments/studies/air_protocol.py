@@ -318,7 +318,30 @@ def score(k: int, mode: str, truth: dict, out: dict, results: list) -> dict:
       row[f'air_in_{level}'] = _held(a[f'interval_{level}'], row['c'])
   row['held'] = intervals_held(out, truth)
   row['flagged'] = any(_flagged(r) for r in results)
+  row['printed'] = printed(out, truth)
   return row
+
+
+def printed(out: dict, truth: dict) -> dict:
+  """Each printed median and 90% / 50% interval beside its truth (each
+  recording's wind in turn): what a later pooled run needs to fit and check
+  a recalibration of the joint's intervals, which the held flags alone do
+  not carry."""
+  keep = lambda q, t: {  # noqa: E731
+    'truth': t,
+    **{k: q[k] for k in ('median', 'interval_90', 'interval_50')},
+  }
+  found = {
+    'bending_scale': keep(out['bending_scale'], truth['bending_scale']),
+    'area_weight': keep(out['area_weight'], truth['area_weight']),
+    'wind_speed': [
+      keep(r['wind_speed'], v)
+      for r, v in zip(out['recordings'], truth['winds'], strict=True)
+    ],
+  }
+  if 'air_coefficient' in out:
+    found['air_coefficient'] = keep(out['air_coefficient'], truth['air_coefficient'])
+  return found
 
 
 def _row_line(row: dict) -> str:

@@ -138,3 +138,26 @@ def test_pooled_interval_checks_of_named_quantities_only(tmp_path):
   assert s['held']['bending_90'] == 0.5 and s['held_n']['bending_90'] == 2
   with pytest.raises(ValueError, match='air'):
     air_protocol.pooled((f'{old}:free:air',))
+
+
+def test_printed_keeps_each_interval_beside_its_truth():
+  iv = lambda m, a, b, c, d: {  # noqa: E731
+    'median': m,
+    'interval_90': (a, b),
+    'interval_50': (c, d),
+  }
+  out = {
+    'bending_scale': iv(1.1, 0.5, 2.0, 0.9, 1.2),
+    'area_weight': iv(0.2, 0.1, 0.3, 0.15, 0.25),
+    'air_coefficient': iv(0.8, 0.6, 1.0, 0.7, 0.9),
+    'recordings': [{'wind_speed': iv(2.0, 1.5, 2.5, 1.8, 2.2)}] * 2,
+  }
+  truth = {'bending_scale': 1.0, 'area_weight': 0.2, 'air_coefficient': 0.75,
+           'winds': [1.9, 2.4]}  # fmt: skip
+  p = air_protocol.printed(out, truth)
+  assert p['air_coefficient']['truth'] == 0.75
+  assert p['bending_scale']['interval_50'] == (0.9, 1.2)
+  assert [w['truth'] for w in p['wind_speed']] == [1.9, 2.4]
+  assert 'air_coefficient' not in air_protocol.printed(
+    {k: v for k, v in out.items() if k != 'air_coefficient'}, truth
+  )
