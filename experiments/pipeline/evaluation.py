@@ -21,7 +21,7 @@ import physsim
 from experiments.pipeline import objective as obj_lib
 
 
-def _pad(n: int) -> int:
+def padded_rows(n: int) -> int:
   """Rows for ``n`` problems: up to 16 the next power of two, beyond it ``n``
   rounded up to three significant binary digits (at most 1/8 more), so that
   a shrinking set of searches compiles a few program shapes per doubling.
@@ -41,7 +41,7 @@ def _pad(n: int) -> int:
 FLAT_WORLDS = physsim.devices.FLAT_WORLDS
 
 
-def _on_mujoco_c(configs) -> bool:
+def on_mujoco_c(configs) -> bool:
   """Whether every one of ``configs`` simulates on MuJoCo C, where a call's
   time grows with its worlds: a design is scored in calls of ``q``
   (``_call_size``) and the lockstep compiles nothing ahead in a thread."""
@@ -54,7 +54,7 @@ def _call_size(configs, n: int, rows: int = 1) -> int:
   padded up to the searches' initial design where that keeps the call within
   ``FLAT_WORLDS`` worlds, so that a single estimate compiles one program
   shape for its design and its steps."""
-  if _on_mujoco_c(configs):
+  if on_mujoco_c(configs):
     return min(n, max(c.search.q for c in configs))
   padded = max(n, *(c.search.n_init for c in configs))
   return padded if rows * padded <= FLAT_WORLDS else n
@@ -143,7 +143,7 @@ class Evaluator:
       if len(us[i]):
         groups.setdefault(p.structure(), []).append(i)
     for members in groups.values():
-      rows = members + [members[0]] * (_pad(len(members)) - len(members))
+      rows = members + [members[0]] * (padded_rows(len(members)) - len(members))
       n_max = max(len(us[i]) for i in members)
       q = _call_size([problems[i].config for i in members], n_max, len(rows))
       yield members, rows, n_max, q

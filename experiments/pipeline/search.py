@@ -273,7 +273,7 @@ class _Lockstep:
         self.last_step_s, self.last_asked, self.last_run,
         one_off_s=self.last_one_off,
         same_program=self.last_run >= self.last_asked
-        and evaluation._pad(len(active)) == self.last_rows,
+        and evaluation.padded_rows(len(active)) == self.last_rows,
       ),
       f'step {self.steps} of {len(active)} searches',
     )  # fmt: skip
@@ -311,7 +311,7 @@ class _Lockstep:
     self.steps += 1
     self.last_step_s = time.perf_counter() - t0
     self.last_one_off = self.one_off.seconds()
-    self.last_rows = evaluation._pad(len(active))
+    self.last_rows = evaluation.padded_rows(len(active))
 
   def _warm_up(self, active, asked) -> tuple[list, Callable | None]:
     """On the first step off MuJoCo C: while the design's simulations run, the
@@ -321,7 +321,7 @@ class _Lockstep:
     program is compiled: two traces at once share Python's lock, and the
     design's is waited for. Returns the threads and the compile hook."""
     warm, compiled = [], None
-    if self.steps == 0 and not evaluation._on_mujoco_c(
+    if self.steps == 0 and not evaluation.on_mujoco_c(
       [s.problem.config for s in active]
     ):
       warm.append(_in_background(

@@ -149,7 +149,7 @@ def test_a_lockstep_compiles_its_steps_program_while_the_design_runs(
   config, rec = env['recs'][0]
   config = config.replace(max_iter=1)
   jobs = [em.Job(config, rec, env['model'], str(tmp_path / f'w{i}')) for i in (0, 1)]
-  monkeypatch.setattr(evaluation, '_on_mujoco_c', lambda configs: False)
+  monkeypatch.setattr(evaluation, 'on_mujoco_c', lambda configs: False)
   compiled, compiles_in_call, lowered, design_first = [], [], [], []
   real_compile, real_call = evaluation.Evaluator.compile, evaluation.Evaluator.__call__
   real_init = obj_lib.Objective.__init__
@@ -198,15 +198,22 @@ def test_lockstep_rows_pad_by_at_most_an_eighth_beyond_sixteen():
   # Up to 16 searches: the next power of two (few shapes where a compile costs
   # more than the padding); beyond, at most 1/8 more rows and at most eight
   # shapes per doubling (210 -> 224, where a power of two gave 256).
-  assert [evaluation._pad(n) for n in (1, 2, 3, 5, 9, 16)] == [1, 2, 4, 8, 16, 16]
+  assert [evaluation.padded_rows(n) for n in (1, 2, 3, 5, 9, 16)] == [
+    1,
+    2,
+    4,
+    8,
+    16,
+    16,
+  ]
   assert (
-    evaluation._pad(210) == 224
-    and evaluation._pad(17) == 18
-    and evaluation._pad(256) == 256
+    evaluation.padded_rows(210) == 224
+    and evaluation.padded_rows(17) == 18
+    and evaluation.padded_rows(256) == 256
   )
   for lo in (16, 32, 64, 128, 256):
     ns = np.arange(lo + 1, 2 * lo + 1)
-    rows = np.array([evaluation._pad(int(n)) for n in ns])
+    rows = np.array([evaluation.padded_rows(int(n)) for n in ns])
     assert (rows >= ns).all() and (rows / ns).max() <= 1.125
     assert len(set(rows)) <= 8
 
