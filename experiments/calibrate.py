@@ -18,6 +18,9 @@ r"""Simulation-based calibration of the estimate's credible intervals.
   python -m experiments.calibrate --workdir=out/check_mm --check --preset=paper \
       --physics=mismatched --seed=1 --pairs=4 --install  # GPU: the paper tables
       # on recordings of another physics, recorded where estimates quote it
+  python -m experiments.calibrate --workdir=out/cal_cam4 --preset=paper \
+      --camera_sd_m=0.04 --camera_sd_deg=3 --install  # GPU: tables for
+      # estimates that carry the intake's alignment error (4 cm / 3 deg, 1 sd)
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -26,6 +29,13 @@ calibration.json``), where every estimate's report quotes it. With
 with the estimate's defaults and the shipped tables (``--network_seed``:
 with another network too), and the study reports
 how often their intervals held the truth (``calibration_check.check``).
+With ``--camera_sd_m`` / ``--camera_sd_deg`` the estimates carry a camera
+error, as an estimate of a user's recording carries the intake's alignment
+error, and each recording's camera is displaced from the pose its estimate
+is told by an error of that size (``calibration_config.told_pose``);
+``--install`` ships such tables beside the exact cameras' own
+(``carried_errors.camera_path``), where estimates carrying an error within a
+factor of two of theirs quote them.
 """
 
 from __future__ import annotations
@@ -119,8 +129,9 @@ def main(args: Args) -> None:
     simulate_only=args.simulate_only,
   )  # fmt: skip
   if args.install and distributed.is_main():
+    scoring = args.study.estimate.scoring
     dest = calibration_tables.shipped_calibration(
-      args.study.estimate.scoring.distance, args.study.size
+      scoring.distance, args.study.size, (scoring.camera_sd_m, scoring.camera_sd_deg)
     )
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     new = physsim.dataset.read_json(src)

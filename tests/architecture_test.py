@@ -29,7 +29,7 @@ STAGES = (
    'cloth_view', 'takes', 'rig'),
   ('measurements',),
   ('config', 'problem', 'objective'),
-  ('calibration_tables', 'protocol_checks', 'setup'),
+  ('carried_errors', 'calibration_tables', 'protocol_checks', 'setup'),
   ('evaluation', 'searcher', 'resume', 'search'),
   ('posterior', 'posterior_figure', 'fit_check'),
   ('summaries', 'units', 'table_notes', 'report', 'advice', 'search_figures',

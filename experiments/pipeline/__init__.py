@@ -14,9 +14,11 @@ it (``tests/architecture_test.py`` holds the order, ``STAGES``):
                and the prior they make on the search's grid
   3 objective  config (EstimateConfig, a section per stage), problem, objective:
                the fused jitted simulate-render-score
-  4 setup      calibration_tables: the shipped coverage tables; protocol_checks:
-               the protocol joint's measured coverage; setup: what an estimate
-               is built from (network, box, calibration), resolved once
+  4 setup      carried_errors: a reading's and the camera's error against
+               the tables'; calibration_tables: the shipped coverage tables;
+               protocol_checks: the protocol joint's measured coverage; setup:
+               what an estimate is built from (network, box, calibration),
+               resolved once
   5 search     evaluation (one fused objective call per structure), searcher
                (Job, the bo search), resume (run.json), search (the lockstep run)
   6 posterior  posterior: summaries at calibrated levels, joints;

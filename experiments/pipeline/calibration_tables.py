@@ -17,7 +17,7 @@ import os
 import numpy as np
 
 import physsim
-from experiments.pipeline import embedding, files
+from experiments.pipeline import carried_errors, embedding, files
 
 # Coverage of the posterior's intervals measured on held-out simulated
 # recordings, shipped with the package (``experiments/calibrate.py --install``):
@@ -45,31 +45,38 @@ PAPER_CALIBRATION_FILE = os.path.join(
 SIZES = ('demo', 'paper')
 
 
-def shipped_calibration(distance: str, size: str = 'demo') -> str:
+def shipped_calibration(
+  distance: str, size: str = 'demo', camera: tuple[float, float] = (0.0, 0.0)
+) -> str:
   """Where the calibration of estimates with ``distance`` at the study's
   ``size`` is shipped (and ``--install`` puts it): the shape distance's own
   files, every other distance's the default ones (whose networks they
-  record)."""
+  record); tables measured with a camera error (``camera``: metres,
+  degrees) beside them (``carried_errors.camera_path``)."""
   if size not in SIZES:
     raise ValueError(f'no calibration size {size!r}: one of {SIZES}')
   shape = distance == 'shape'
   if size == 'demo':
-    return SHAPE_CALIBRATION_FILE if shape else CALIBRATION_FILE
-  return SHAPE_PAPER_CALIBRATION_FILE if shape else PAPER_CALIBRATION_FILE
+    base = SHAPE_CALIBRATION_FILE if shape else CALIBRATION_FILE
+  else:
+    base = SHAPE_PAPER_CALIBRATION_FILE if shape else PAPER_CALIBRATION_FILE
+  return carried_errors.camera_path(base, camera)
 
 
 def shipped_calibrations(distance: str) -> list[str]:
-  """The files shipped for ``distance`` (every size), those present only."""
+  """The files shipped for ``distance`` (every size and camera error), those
+  present only."""
   own = [shipped_calibration(distance, size) for size in SIZES]
+  own += [p for base in own for p in carried_errors.camera_paths(base)]
   return [p for p in own if os.path.isfile(p)]
 
 
 def calibration_file(config=None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
   (``config.scoring.calibration``), else of those shipped for its distance the
-  one whose settings differ from it least (none: the one its size matches),
-  else (none shipped for it) the default one, whose note then names what
-  differs."""
+  one whose settings differ from it least (then the one nearest its camera
+  error), else (none shipped for it) the default one, whose note then names
+  what differs."""
   scoring = getattr(config, 'scoring', None)
   if given := getattr(scoring, 'calibration', ''):
     return given
@@ -78,7 +85,11 @@ def calibration_file(config=None) -> str:
     return CALIBRATION_FILE
   if config is None or len(own) == 1:
     return own[0]
-  return min(own, key=lambda p: len(differing_fields(config, read_calibration(p))))
+  mine = carried_errors.camera_of(config.flat())
+  return min(own, key=lambda p: (
+    len(differing_fields(config, cal := read_calibration(p))),
+    carried_errors.camera_gap(_camera(cal), mine),
+  ))  # fmt: skip
 
 
 @functools.lru_cache(maxsize=16)
@@ -150,7 +161,7 @@ def with_modes_of(old: dict, new: dict, modes: tuple[str, ...]) -> dict:
     for part in ('held_out', 'held_out_uncalibrated'):
       if m in new.get(part, {}):
         out.setdefault(part, {})[m] = new[part][m]
-    for k in _LENGTH_KEYS if 'bending_length' in _readings_of(m) else ():
+    for k in _LENGTH_KEYS if 'bending_length' in carried_errors.readings_of(m) else ():
       if k in rec_new:
         rec[k] = rec_new[k]
   rec['refitted'] = sorted(set(rec.get('refitted', [])) | set(modes))
@@ -369,7 +380,9 @@ _CALIBRATED_FIELDS = (
 def differing_fields(config, cal: dict) -> list[str]:
   """The likelihood's settings (``_CALIBRATED_FIELDS``) in which an estimate
   with ``config`` differs from calibration ``cal``'s searches; a study of
-  several fabrics (``'materials'``) holds for each of them."""
+  several fabrics (``'materials'``) holds for each of them, and one whose
+  estimates carried a camera error for errors within a factor of two of it
+  (``carried_errors.covers``)."""
   calibrated = dict(cal.get('config', {}).get('estimate', {}))
   calibrated.update(
     likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
@@ -387,8 +400,29 @@ def differing_fields(config, cal: dict) -> list[str]:
     calibrated['material'] = (
       mine['material'] if mine['material'] in cal['materials'] else cal['materials']
     )
-  return [n for n in _CALIBRATED_FIELDS
-          if n in calibrated and not _same(mine[n], calibrated[n])]  # fmt: skip
+  return [n for n in _CALIBRATED_FIELDS if n in calibrated and not (
+    carried_errors.covers(float(calibrated[n]), float(mine[n]))
+    if n in carried_errors.CAMERA_FIELDS else _same(mine[n], calibrated[n])
+  )]  # fmt: skip
+
+
+def _camera(cal: dict) -> tuple[float, float]:
+  """The camera error calibration ``cal``'s estimates carried (metres, degrees)."""
+  return carried_errors.camera_of(cal.get('config', {}).get('estimate', {}))
+
+
+def _camera_worded(config, cal: dict, names: list[str]) -> list[str]:
+  """``differing_fields``' ``names``, the camera error's as one entry in
+  words: the error ``config`` carries and those that ``cal`` and the tables
+  shipped for its distance were measured at."""
+  if not set(names) & set(carried_errors.CAMERA_FIELDS):
+    return names
+  shipped = shipped_calibrations(config.scoring.distance)
+  levels = [_camera(cal)] + [_camera(read_calibration(p)) for p in shipped]
+  mine = carried_errors.camera_of(config.flat())
+  return [n for n in names if n not in carried_errors.CAMERA_FIELDS] + [
+    carried_errors.camera_difference(mine, levels)
+  ]
 
 
 def calibration_mode(measured, joint: bool = False) -> str | None:
@@ -412,44 +446,6 @@ def calibration_mode(measured, joint: bool = False) -> str | None:
     ruler = '' if getattr(measured, 'bending_length_dof', 0.0) else ' (ruler)'
     return ('known wind, bending length' if wind else 'bending length') + ruler
   return 'known wind' if wind else 'known area weight' if weight else 'video'
-
-
-def _readings_of(mode: str | None) -> tuple[str, ...]:
-  """The readings a calibration mode's estimates were given (their
-  uncertainty must be within a factor of two of the calibrated one)."""
-  return {
-    'known wind': ('wind_speed',),
-    'known area weight': ('area_weight',),
-    'joint pair, known winds': ('wind_speed',),
-    'bending length': ('bending_length',),
-    'known wind, bending length': ('wind_speed', 'bending_length'),
-    'bending length (ruler)': ('bending_length',),
-    'known wind, bending length (ruler)': ('wind_speed', 'bending_length'),
-  }.get(mode, ())
-
-
-def _calibrated_range(rec: dict, name: str) -> tuple[float | None, float | None]:
-  """The relative errors of reading ``name`` an estimate may have and quote a
-  calibration's tables: the range its recordings' readings were drawn over
-  (a bending length's ``length_sd_range``), else within a factor of two of
-  the one error they all had."""
-  if name == 'bending_length' and 'length_sd_range' in rec:
-    lo, hi = rec['length_sd_range']
-    return float(lo), float(hi)
-  sd = rec.get('length_sd' if name == 'bending_length' else 'measured_sd')
-  return (None, None) if sd is None else (0.5 * sd, 2.0 * sd)
-
-
-def _pct_range(rec: dict, name: str) -> str:
-  """The simulated readings' relative error as the calibration line prints it."""
-  if name == 'bending_length' and 'length_sd_range' in rec:
-    lo, hi = rec['length_sd_range']
-    return f'{100 * lo:.2g}-{100 * hi:.2g}% (median {100 * rec["length_sd"]:.2g}%)'
-  return f'{100 * rec["length_sd" if name == "bending_length" else "measured_sd"]:.2g}%'
-
-
-def _law(dof: float) -> str:
-  return f"Student's t, {dof:g} degrees of freedom" if dof else 'Gaussian'
 
 
 def _same(mine, theirs) -> bool:
@@ -505,7 +501,8 @@ def _differences(config, cal: dict, mode: str | None, joint: bool, recordings: i
   """What keeps calibration ``cal``'s tables from an estimate with ``config``
   in ``mode`` (``calibration_note``'s arguments), each in words; empty where
   they apply."""
-  differs = differing_fields(config, cal) + list(uncalibrated)
+  differs = _camera_worded(config, cal, differing_fields(config, cal))
+  differs += list(uncalibrated)
   if getattr(config.measured, 'air_free', False):
     differs.append("air coefficient free (the tables hold it at ArcSim's 1)")
   if joint and recordings != 2:
@@ -525,29 +522,7 @@ def _differences(config, cal: dict, mode: str | None, joint: bool, recordings: i
   if rec and mode is not None and mode not in rec['modes']:
     differs.append(f'{mode} (not in this calibration)')
   if rec:
-    differs += _reading_differences(config.measured, rec, mode)
-  return differs
-
-
-def _reading_differences(measured, rec: dict, mode: str | None) -> list[str]:
-  """The readings of ``mode`` whose uncertainty (or a bending length's error
-  law) lies outside what the tables ``rec`` were drawn with, each in words."""
-  differs = []
-  for name in _readings_of(mode):
-    value, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
-    lo, hi = _calibrated_range(rec, name)
-    if lo is None or not lo <= sd / value <= hi:
-      differs.append(
-        f'{name} reading uncertainty ({100 * sd / value:.1f}%; calibrated: '
-        + (f'{_pct_range(rec, name)})' if lo is not None else 'none)')
-      )
-    if name == 'bending_length':  # the reading's error law, as the tables drew it
-      dof = measured.bending_length_dof
-      theirs = 0.0 if mode.endswith('(ruler)') else rec.get('length_dof', 0.0)
-      if dof != theirs:
-        differs.append(
-          f'bending length error law ({_law(dof)}; calibrated: {_law(theirs)})'
-        )
+    differs += carried_errors.reading_differences(config.measured, rec, mode)
   return differs
 
 
@@ -583,7 +558,10 @@ def _recalibrated(cal: dict, head: dict, mode: str, material: str,
     **({'checks': checks} if checks else {}),
     'n_calibration_recordings': rec['n_calibration_recordings'],
     # the readings its recordings were given, simulated to this relative error
-    'readings': {name: _pct_range(rec, name) for name in _readings_of(mode)},
+    'readings': {
+      name: carried_errors.pct_range(rec, name)
+      for name in carried_errors.readings_of(mode)
+    },
     'levels': {f: levels[:, i].tolist() for i, f in enumerate(rec['fields'])},
     'weights': rec.get('weights', {}).get(mode, {}),
     'coverage': {

@@ -15,6 +15,15 @@ two fan settings), so the same simulations also measure the joint estimate.
 What a measured wind or area weight adds is measured too: a reading with 2%
 error (``measured_sd``) enters as a prior.
 
+An estimate of a user's recording carries the intake's alignment error
+(``camera_sd_m`` / ``camera_sd_deg``: the camera placed in the simulator's
+world to a few centimetres and degrees). A study whose estimates carry one
+(``--camera_sd_m``, ``--camera_sd_deg``) tells each recording's estimate a
+camera displaced from the true one by an error of that size
+(``calibration_config.told_pose``: each recording its own, from the study's
+seed), so its tables hold for estimates that carry such an error within a
+factor of two (``carried_errors.covers``).
+
 A network is one draw of its recipe: another seed trains another network,
 whose distances are scaled and bent differently. So the study trains
 ``networks`` networks with the demo's recipe (seeds ``network_seed``,
@@ -87,6 +96,7 @@ from experiments.studies.calibration_config import (
   network_seeds,
   study_configs,
   study_materials,
+  told_pose,
   truths,
   uses_networks,
   with_reading,
@@ -111,7 +121,7 @@ __all__ = [
   'network_dirs', 'network_of', 'network_seeds', 'networks_record', 'pack_runs',
   'packed_runs', 'plot_ranks', 'plot_sweep', 'posteriors', 'recalibration',
   'recorded_networks', 'result', 'run', 'saved_runs', 'simulate_and_estimate',
-  'study_configs', 'study_materials', 'summarise', 'table', 'truths',
+  'study_configs', 'study_materials', 'summarise', 'table', 'told_pose', 'truths',
   'uses_networks', 'with_reading',
 ]  # fmt: skip
 # Parts the study's tests reach by their old names.

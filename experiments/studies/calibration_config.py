@@ -9,6 +9,7 @@ import dataclasses
 import math
 import os
 
+import jax
 import numpy as np
 
 import physsim
@@ -17,6 +18,7 @@ from experiments.pipeline import datasets as gen
 from experiments.pipeline import demo as demo_lib
 from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import posterior as posterior_lib
+from experiments.pipeline import simulation as simulation_lib
 from experiments.pipeline.objective import EstimateConfig
 
 FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
@@ -341,3 +343,34 @@ def estimate_record(config: Config, estimate: EstimateConfig) -> dict:
   """The study's settings as its files hold them: ``estimate``'s flat
   (``EstimateConfig.flat``), the form ``calibration_tables.calibration_note`` matches."""
   return {**dataclasses.asdict(config), 'estimate': estimate.flat()}
+
+
+# The stream of the recordings' camera errors in the study's seed (``told_pose``).
+CAMERA_STREAM = 43
+# One compiled program for every recording's error (hundreds per study).
+_misplaced_pose = jax.jit(physsim.shape.misplaced_pose)
+
+
+def told_pose(config: Config, est: EstimateConfig, pose: physsim.Pose,
+              seq: int) -> physsim.Pose:  # fmt: skip
+  """The camera pose recording ``seq``'s estimate is told, where ``est``
+  carries a camera error (``camera_sd_m`` / ``camera_sd_deg``), as an
+  estimate of a user's recording carries the intake's alignment error: the
+  recording's true camera ``pose`` moved by a rigid error of that size
+  (``physsim.shape.misplaced_pose``, as the estimate draws its own: a tilt
+  of ``camera_sd_deg`` per axis about the estimate's pins, then a shift of
+  ``camera_sd_m`` per axis, 1 sd), drawn from (seed, seq) alone, each
+  recording its own. The true camera then lies off the told one by an error
+  of the same law (the inverse of a tilt R about the pins and a shift t is
+  the tilt R^T and the shift -R^T t, isotropic Gaussian again): the error the
+  estimate models. ``pose`` itself where both are 0 (a camera known exactly)."""
+  sd = (est.scoring.camera_sd_m, est.scoring.camera_sd_deg)
+  if not any(sd):
+    return pose
+  key = jax.random.fold_in(jax.random.key(config.seed), CAMERA_STREAM)
+  moved = _misplaced_pose(
+    jax.random.fold_in(key, seq), pose, *sd, simulation_lib.pin_centre(est.simulation)
+  )
+  return physsim.Pose(
+    *(np.asarray(m, np.asarray(p).dtype) for m, p in zip(moved, pose, strict=True))
+  )

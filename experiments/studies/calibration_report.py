@@ -12,7 +12,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 
 import bo  # noqa: E402
-from experiments.pipeline import files  # noqa: E402
+from experiments.pipeline import carried_errors, files  # noqa: E402
 from experiments.studies.calibration_analysis import coverage_of  # noqa: E402
 from experiments.studies.calibration_config import (  # noqa: E402
   FIELDS,
@@ -47,7 +47,8 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     + (f'{len(mats)} fabrics' if len(mats) > 1 else mats[0])
     + f', {config.size} size, '
     + _networks_text(config)
-    + (f', recordings of {config.physics} physics' if config.physics != 'own' else ''),
+    + (f', recordings of {config.physics} physics' if config.physics != 'own' else '')
+    + _camera_text(config),
     'likelihood': form,
     'sharpness': c,
     'model_error': config.estimate.scoring.model_error,
@@ -74,6 +75,14 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     'config': estimate_record(config, study_configs(config)[3]),
     'seconds': seconds,
   }
+
+
+def _camera_text(config: Config) -> str:
+  """The camera error the study's estimates carried and its recordings'
+  cameras had (``told_pose``), for ``calibration.json``'s setting; '' for
+  cameras known exactly."""
+  sd = carried_errors.camera_of(config.estimate.flat())
+  return f', cameras off by {carried_errors.camera_words(sd)} (1 sd)' if any(sd) else ''
 
 
 def _networks_text(config: Config) -> str:

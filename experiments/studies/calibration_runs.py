@@ -32,6 +32,7 @@ from experiments.studies.calibration_config import (
   network_seeds,
   study_configs,
   study_materials,
+  told_pose,
   truths,
   with_reading,
 )
@@ -176,6 +177,8 @@ def _jobs(config: Config, workdir: str, est, reading: str, rows: list,
     rec = loaded.get(i)
     truth = rec.truth if rec is not None else recording_truth(paths[i])
     if rec is not None:
+      # the camera its estimate is told, off by the error it carries
+      rec = rec._replace(pose=told_pose(config, est, rec.pose, seq))
       # '' : no network (estimation.estimate_many compares depth frames directly)
       model_dir = os.path.join(model_roots[k], material) if model_roots else ''
       job_est = with_reading(config, est.replace(material=material), reading,

@@ -1,0 +1,147 @@
+"""The errors an estimate carries into its posterior, against those a
+calibration's tables were measured with.
+
+An estimate's posterior carries the uncertainty of what it was given: a
+reading's (an anemometer's, a scale's, an overhang's bending length) and the
+camera's placement in the simulator's world (``camera_sd_m`` /
+``camera_sd_deg``: the intake's alignment error). A calibration's tables hold
+for estimates whose carried errors are like those its held-out recordings
+had: a reading's relative error within a factor of two of the one its
+recordings were drawn with (or within the range drawn); a camera's error in
+each of its shift and tilt within a factor of two of the study's, a camera
+known exactly (0) only where the study's was too. Outside, the note says
+which error, and what the tables were measured at.
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+
+# The estimate's camera error, as ``EstimateConfig.flat`` names it: a shift
+# (metres) and a tilt about the pins (degrees), 1 sd per axis.
+CAMERA_FIELDS = ('camera_sd_m', 'camera_sd_deg')
+# How far a carried error may be from the calibrated one, as a factor either way.
+FACTOR = 2.0
+
+
+def readings_of(mode: str | None) -> tuple[str, ...]:
+  """The readings a calibration mode's estimates were given (their
+  uncertainty must be within a factor of two of the calibrated one)."""
+  return {
+    'known wind': ('wind_speed',),
+    'known area weight': ('area_weight',),
+    'joint pair, known winds': ('wind_speed',),
+    'bending length': ('bending_length',),
+    'known wind, bending length': ('wind_speed', 'bending_length'),
+    'bending length (ruler)': ('bending_length',),
+    'known wind, bending length (ruler)': ('wind_speed', 'bending_length'),
+  }.get(mode, ())
+
+
+def calibrated_range(rec: dict, name: str) -> tuple[float | None, float | None]:
+  """The relative errors of reading ``name`` an estimate may have and quote a
+  calibration's tables: the range its recordings' readings were drawn over
+  (a bending length's ``length_sd_range``), else within a factor of two of
+  the one error they all had."""
+  if name == 'bending_length' and 'length_sd_range' in rec:
+    lo, hi = rec['length_sd_range']
+    return float(lo), float(hi)
+  sd = rec.get('length_sd' if name == 'bending_length' else 'measured_sd')
+  return (None, None) if sd is None else (sd / FACTOR, FACTOR * sd)
+
+
+def pct_range(rec: dict, name: str) -> str:
+  """The simulated readings' relative error as the calibration line prints it."""
+  if name == 'bending_length' and 'length_sd_range' in rec:
+    lo, hi = rec['length_sd_range']
+    return f'{100 * lo:.2g}-{100 * hi:.2g}% (median {100 * rec["length_sd"]:.2g}%)'
+  return f'{100 * rec["length_sd" if name == "bending_length" else "measured_sd"]:.2g}%'
+
+
+def _law(dof: float) -> str:
+  return f"Student's t, {dof:g} degrees of freedom" if dof else 'Gaussian'
+
+
+def reading_differences(measured, rec: dict, mode: str | None) -> list[str]:
+  """The readings of ``mode`` whose uncertainty (or a bending length's error
+  law) lies outside what the tables ``rec`` were drawn with, each in words."""
+  differs = []
+  for name in readings_of(mode):
+    value, sd = getattr(measured, name), getattr(measured, f'{name}_sd')
+    lo, hi = calibrated_range(rec, name)
+    if lo is None or not lo <= sd / value <= hi:
+      differs.append(
+        f'{name} reading uncertainty ({100 * sd / value:.1f}%; calibrated: '
+        + (f'{pct_range(rec, name)})' if lo is not None else 'none)')
+      )
+    if name == 'bending_length':  # the reading's error law, as the tables drew it
+      dof = measured.bending_length_dof
+      theirs = 0.0 if mode.endswith('(ruler)') else rec.get('length_dof', 0.0)
+      if dof != theirs:
+        differs.append(
+          f'bending length error law ({_law(dof)}; calibrated: {_law(theirs)})'
+        )
+  return differs
+
+
+def covers(calibrated: float, mine: float) -> bool:
+  """Whether tables measured with one camera error component (a shift's or a
+  tilt's sd) hold for an estimate carrying ``mine``: within a factor of two
+  of it; a camera known exactly (0) is covered only by tables of 0, and
+  tables of 0 cover only it (their recordings' cameras were exact)."""
+  if calibrated <= 0.0 or mine <= 0.0:
+    return math.isclose(calibrated, mine, abs_tol=1e-12)
+  return calibrated / FACTOR * (1 - 1e-9) <= mine <= FACTOR * calibrated * (1 + 1e-9)
+
+
+def camera_of(flat: dict) -> tuple[float, float]:
+  """(metres, degrees): the camera error of an estimate's flat settings
+  (``EstimateConfig.flat``, or a calibration's ``config.estimate``); 0 where
+  not recorded (files from before it was a setting: exact cameras)."""
+  return tuple(float(flat.get(f, 0.0)) for f in CAMERA_FIELDS)
+
+
+def camera_gap(calibrated: tuple[float, float], mine: tuple[float, float]) -> float:
+  """How far a carried camera error is from a calibrated one: the sum of the
+  components' absolute log ratios (0 where equal, infinite where only one of
+  them is 0), to pick the nearest of the tables that cover it."""
+  gap = 0.0
+  for c, m in zip(calibrated, mine, strict=True):
+    if c <= 0.0 or m <= 0.0:
+      gap += 0.0 if c == m == 0.0 else math.inf
+    else:
+      gap += abs(math.log(m / c))
+  return gap
+
+
+def camera_words(sd: tuple[float, float]) -> str:
+  """A camera error as the notes print it: '8.5 cm / 3 deg'."""
+  return f'{100 * sd[0]:.3g} cm / {sd[1]:.3g} deg'
+
+
+def camera_difference(mine: tuple[float, float], levels: list) -> str:
+  """The note's words for a carried camera error no table covers: the error
+  and the camera errors the shipped tables were measured at (``levels``),
+  e.g. "the camera's alignment error 8.5 cm / 3 deg, 1 sd (tables measured
+  at 0 cm / 0 deg; 2 cm / 2 deg; each holds from half to twice its own)"."""
+  have = '; '.join(camera_words(s) for s in sorted(set(levels))) or 'none'
+  return (
+    f"the camera's alignment error {camera_words(mine)}, 1 sd (tables measured "
+    f'at {have}; each holds from half to twice its own)'
+  )
+
+
+def camera_path(base: str, sd: tuple[float, float]) -> str:
+  """Where tables measured with camera error ``sd`` are shipped beside the
+  file ``base`` of exact cameras: ``base`` itself for (0, 0), else
+  ``<base>_camera_<cm>cm_<deg>deg.json``."""
+  if not any(sd):
+    return base
+  return f'{base.removesuffix(".json")}_camera_{100 * sd[0]:g}cm_{sd[1]:g}deg.json'
+
+
+def camera_paths(base: str) -> list[str]:
+  """The files of tables measured with a camera error shipped beside
+  ``base`` (``camera_path``), in order."""
+  return sorted(glob.glob(f'{glob.escape(base.removesuffix(".json"))}_camera_*.json'))

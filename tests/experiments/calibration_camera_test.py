@@ -1,0 +1,208 @@
+"""Calibration for estimates that carry the intake's alignment error.
+
+An estimate of a user's recording carries the camera's placement error in
+its posterior (``camera_sd_m`` / ``camera_sd_deg``). A calibration study
+whose estimates carry one tells each recording's estimate a camera displaced
+from the true one by an error of that size (``told_pose``); its tables
+apply to estimates carrying an error within a factor of two of theirs, and
+an estimate no table covers is told which error is outside and what the
+tables were measured at.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import numpy as np
+import pytest
+
+import physsim
+from experiments.pipeline import calibration_tables, carried_errors, table_notes
+from experiments.pipeline import datasets as gen
+from experiments.pipeline import simulation as simulation_lib
+from experiments.pipeline.objective import EstimateConfig
+from experiments.studies import calibration
+
+STUDY = calibration.PRESETS['paper']
+POSE = physsim.Pose(
+  np.eye(3)[:, [0, 2, 1]] * np.array([1.0, -1.0, 1.0]), np.array([0.1, -2.0, 1.2])
+)
+DRAWS = 2000
+
+
+def _told(
+  sd_m: float, sd_deg: float, seed: int = 0, n: int = DRAWS
+) -> list[physsim.Pose]:
+  est = calibration.study_configs(STUDY)[3].replace(
+    camera_sd_m=sd_m, camera_sd_deg=sd_deg
+  )
+  study = dataclasses.replace(STUDY, seed=seed)
+  return [calibration.told_pose(study, est, POSE, seq) for seq in range(n)]
+
+
+def _tilt_deg(rotation: np.ndarray) -> np.ndarray:
+  """The axis-angle vector (degrees) of a rotation (small angles)."""
+  r = rotation @ POSE.rotation.T
+  w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / 2
+  angle = np.arcsin(np.clip(np.linalg.norm(w), 0.0, 1.0))
+  return np.degrees(w / max(np.linalg.norm(w), 1e-12) * angle)
+
+
+def test_the_told_camera_is_shifted_with_the_named_sd():
+  told = _told(0.03, 0.0)
+  shift = np.stack([t.position for t in told]) - POSE.position  # (DRAWS, 3)
+  # 2,000 draws know an sd to about 1.6% (1 sd): 10% is six of those
+  np.testing.assert_allclose(shift.std(0), 0.03, rtol=0.1)
+  np.testing.assert_allclose(shift.mean(0), 0.0, atol=0.005)
+  for t in told[:5]:  # a shift alone: the camera looks the same way
+    np.testing.assert_allclose(t.rotation, POSE.rotation, atol=1e-6)
+
+
+def test_the_told_camera_is_tilted_about_the_pins_with_the_named_sd():
+  told = _told(0.0, 2.0)
+  tilt = np.stack([_tilt_deg(np.asarray(t.rotation, np.float64)) for t in told])
+  np.testing.assert_allclose(tilt.std(0), 2.0, rtol=0.1)
+  np.testing.assert_allclose(tilt.mean(0), 0.0, atol=0.3)
+  # turned about the estimate's pins: the camera keeps its distance to them
+  pins = simulation_lib.pin_centre(calibration.study_configs(STUDY)[3].simulation)
+  far = np.linalg.norm(POSE.position - pins)
+  for t in told[:20]:
+    assert abs(np.linalg.norm(t.position - pins) - far) < 1e-5
+
+
+def test_each_recordings_camera_error_is_its_own_and_from_the_seed():
+  a, again, other = (
+    _told(0.03, 2.0, n=50),
+    _told(0.03, 2.0, n=50),
+    _told(0.03, 2.0, 1, 50),
+  )
+  for x, y in zip(a, again, strict=True):  # explicit keys: the same each time
+    np.testing.assert_array_equal(x.position, y.position)
+  positions = np.stack([t.position for t in a])
+  assert len({tuple(p) for p in positions.round(9)}) == 50  # each its own
+  assert not np.allclose(positions, np.stack([t.position for t in other]))
+  # an estimate that trusts its camera is told the true one
+  exact = calibration.study_configs(STUDY)[3]
+  assert calibration.told_pose(STUDY, exact, POSE, 3) is POSE
+
+
+@pytest.mark.parametrize(
+  ('mine', 'covered'),
+  [(0.03, True), (0.02, True), (0.05, True), (0.015, True), (0.06, True),
+   (0.07, False), (0.014, False), (0.0, False)],
+)  # fmt: skip
+def test_a_table_covers_a_camera_error_within_a_factor_of_two(mine, covered):
+  assert carried_errors.covers(0.03, mine) is covered
+  cal = {'sharpness': 0.5, 'config': {'estimate': {
+    **EstimateConfig().flat(), 'camera_sd_m': 0.03, 'camera_sd_deg': 2.0}}}  # fmt: skip
+  config = EstimateConfig().replace(camera_sd_m=mine, camera_sd_deg=2.0)
+  differs = calibration_tables.differing_fields(config, cal)
+  assert ('camera_sd_m' not in differs) is covered, differs
+
+
+def test_exact_cameras_match_only_exact_tables():
+  assert carried_errors.covers(0.0, 0.0)
+  assert not carried_errors.covers(0.0, 0.01)
+  assert not carried_errors.covers(2.0, 0.0)  # tilted tables: an exact tilt is not
+
+
+def _write(path, config: EstimateConfig, setting: str) -> None:
+  path.write_text(json.dumps({
+    'n': 4, 'setting': setting, 'sharpness': 0.5,
+    'coverage': {'wind_speed': {'interval_90': 0.9, 'interval_50': 0.5}},
+    'config': {'estimate': config.flat()},
+  }))  # fmt: skip
+
+
+@pytest.fixture
+def shipped(tmp_path, monkeypatch):
+  """Paper-size shape tables at exact cameras, 2 cm / 2 deg and 4 cm / 3 deg."""
+  base = tmp_path / 'calibration_shape_paper.json'
+  monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
+  monkeypatch.setattr(
+    calibration_tables, 'SHAPE_CALIBRATION_FILE', str(tmp_path / 'none.json')
+  )
+  config = EstimateConfig().replace(distance='shape')
+  _write(base, config, 'exact cameras')
+  for sd in ((0.02, 2.0), (0.04, 3.0)):
+    path = calibration_tables.shipped_calibration('shape', 'paper', sd)
+    assert os.path.dirname(path) == str(tmp_path)
+    _write(
+      tmp_path / os.path.basename(path),
+      config.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1]),
+      f'cameras off by {carried_errors.camera_words(sd)}',
+    )
+  return config
+
+
+def test_an_estimate_quotes_the_nearest_table_that_covers_its_camera_error(shipped):
+  for sd, setting in (
+    ((0.0, 0.0), 'exact cameras'),
+    ((0.015, 1.5), 'cameras off by 2 cm / 2 deg'),
+    ((0.025, 2.0), 'cameras off by 2 cm / 2 deg'),
+    ((0.035, 3.0), 'cameras off by 4 cm / 3 deg'),
+    ((0.08, 6.0), 'cameras off by 4 cm / 3 deg'),
+  ):
+    config = shipped.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    note = calibration_tables.calibration_note(config)
+    assert note['matches'] and note['setting'] == setting, (sd, note)
+    assert 'indicative' not in table_notes.calibration_line(note)
+
+
+def test_an_error_no_table_covers_is_named_with_what_the_tables_measured(shipped):
+  # the intake's widest claims: 8.5 cm, and a tilt past every table's
+  for sd in ((0.085, 3.0), (0.03, 7.0), (0.0, 2.0)):
+    config = shipped.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    note = calibration_tables.calibration_note(config)
+    assert not note['matches'], note
+    (why,) = note['differs']
+    assert why == (
+      f"the camera's alignment error {carried_errors.camera_words(sd)}, 1 sd "
+      '(tables measured at 0 cm / 0 deg; 2 cm / 2 deg; 4 cm / 3 deg; each holds '
+      'from half to twice its own)'
+    )
+    line = table_notes.calibration_line(note)
+    assert 'indicative' in line and carried_errors.camera_words(sd) in line, line
+  assert carried_errors.camera_words((0.085, 3.0)) == '8.5 cm / 3 deg'
+
+
+# A paper-size study's structure at the smallest size a CPU runs in a minute
+# or two (as calibration_fabrics_test's), its estimates carrying 3 cm / 2 deg.
+TINY = calibration.Config(
+  size='paper', pairs=1, folds=2, backend='c', sharpness_grid=(0.5,), batch_size=2,
+  estimate=EstimateConfig().replace(
+    distance='shape', cloth_resolution=8, frames=8, warmup=0.25, q=2, n_init=4,
+    max_iter=1, posterior_grid=(4, 8, 4), camera_sd_m=0.03, camera_sd_deg=2.0,
+  ),
+)  # fmt: skip
+TINY_RECORDINGS = dataclasses.replace(
+  gen.PRESETS['eval'], frames=8, cloth_resolution=10, resolution=32, timestep=1 / 240
+)
+
+
+@pytest.mark.slow
+def test_a_study_carrying_a_camera_error_runs_and_records_it(tmp_path, monkeypatch):
+  monkeypatch.setitem(gen.PRESETS, 'eval', TINY_RECORDINGS)
+  out = calibration.run(TINY, str(tmp_path))
+  assert out['n'] == 2
+  assert 'cameras off by 3 cm / 2 deg (1 sd)' in out['setting']
+  assert carried_errors.camera_of(out['config']['estimate']) == (0.03, 2.0)
+  # installed beside the exact cameras' tables, it is what such estimates quote
+  base = tmp_path / 'shipped' / 'calibration_shape_paper.json'
+  monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
+  monkeypatch.setattr(
+    calibration_tables, 'SHAPE_CALIBRATION_FILE', str(tmp_path / 'none.json')
+  )
+  dest = calibration_tables.shipped_calibration('shape', 'paper', (0.03, 2.0))
+  assert dest == str(base).removesuffix('.json') + '_camera_3cm_2deg.json'
+  os.makedirs(os.path.dirname(dest))
+  with open(os.path.join(tmp_path, calibration.RESULT_FILE)) as f, open(dest, 'w') as g:
+    g.write(f.read())
+  est = calibration.study_configs(TINY)[3].replace(point='bayes')
+  for sd in ((0.03, 2.0), (0.05, 1.5)):
+    mine = est.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    assert calibration_tables.calibration_file(mine) == dest
+    assert calibration_tables.calibration_note(mine)['matches'], sd
+  assert not calibration_tables.calibration_note(est)['matches']  # exact camera
