@@ -19,8 +19,14 @@ import numpy as np
 import pytest
 
 import physsim
-from experiments.pipeline import calibration_tables, carried_errors, table_notes
+from experiments.pipeline import (
+  calibration_tables,
+  carried_errors,
+  estimation,
+  table_notes,
+)
 from experiments.pipeline import datasets as gen
+from experiments.pipeline import recording as recording_lib
 from experiments.pipeline import simulation as simulation_lib
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import calibration
@@ -171,7 +177,7 @@ def test_an_error_no_table_covers_is_named_with_what_the_tables_measured(shipped
 # A paper-size study's structure at the smallest size a CPU runs in a minute
 # or two (as calibration_fabrics_test's), its estimates carrying 3 cm / 2 deg.
 TINY = calibration.Config(
-  size='paper', pairs=1, folds=2, backend='c', sharpness_grid=(0.5,), batch_size=2,
+  size='paper', pairs=2, folds=2, backend='c', sharpness_grid=(0.5,), batch_size=4,
   estimate=EstimateConfig().replace(
     distance='shape', cloth_resolution=8, frames=8, warmup=0.25, q=2, n_init=4,
     max_iter=1, posterior_grid=(4, 8, 4), camera_sd_m=0.03, camera_sd_deg=2.0,
@@ -185,8 +191,27 @@ TINY_RECORDINGS = dataclasses.replace(
 @pytest.mark.slow
 def test_a_study_carrying_a_camera_error_runs_and_records_it(tmp_path, monkeypatch):
   monkeypatch.setitem(gen.PRESETS, 'eval', TINY_RECORDINGS)
+  true, jobs = {}, []
+  load, estimate_many = recording_lib.load_recordings, estimation.estimate_many
+
+  def loaded(paths, **kw):  # the recordings as filmed
+    recs = load(paths, **kw)
+    true.update((r.source, r) for r in recs)
+    return recs
+
+  def estimated(batch, **kw):  # ... and as their estimates are told
+    jobs.extend(batch)
+    return estimate_many(batch, **kw)
+
+  monkeypatch.setattr(recording_lib, 'load_recordings', loaded)
+  monkeypatch.setattr(estimation, 'estimate_many', estimated)
   out = calibration.run(TINY, str(tmp_path))
-  assert out['n'] == 2
+  assert out['n'] == 4 and len(jobs) == 4
+  for job in jobs:
+    pose, seq = true[job.recording.source].pose, int(os.path.basename(job.workdir))
+    told = calibration.told_pose(TINY, job.config, pose, seq)
+    np.testing.assert_array_equal(job.recording.pose.position, told.position)
+    assert 0 < np.linalg.norm(told.position - pose.position) < 0.5
   assert 'cameras off by 3 cm / 2 deg (1 sd)' in out['setting']
   assert carried_errors.camera_of(out['config']['estimate']) == (0.03, 2.0)
   # installed beside the exact cameras' tables, it is what such estimates quote
@@ -205,4 +230,5 @@ def test_a_study_carrying_a_camera_error_runs_and_records_it(tmp_path, monkeypat
     mine = est.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
     assert calibration_tables.calibration_file(mine) == dest
     assert calibration_tables.calibration_note(mine)['matches'], sd
-  assert not calibration_tables.calibration_note(est)['matches']  # exact camera
+  exact = est.replace(camera_sd_m=0.0, camera_sd_deg=0.0)
+  assert not calibration_tables.calibration_note(exact)['matches']
