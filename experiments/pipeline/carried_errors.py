@@ -123,12 +123,14 @@ def camera_words(sd: tuple[float, float]) -> str:
 def camera_difference(mine: tuple[float, float], levels: list) -> str:
   """The note's words for a carried camera error no table covers: the error
   and the camera errors the shipped tables were measured at (``levels``),
-  e.g. "the camera's alignment error 8.5 cm / 3 deg, 1 sd (tables measured
-  at 0 cm / 0 deg; 2 cm / 2 deg; each holds from half to twice its own)"."""
-  have = '; '.join(camera_words(s) for s in sorted(set(levels))) or 'none'
+  e.g. "camera alignment error 8.5 cm / 3 deg, 1 sd (tables measured at
+  exact cameras; 2 cm / 2 deg; each holds from half to twice its own)"."""
+  have = '; '.join(
+    camera_words(s) if any(s) else 'exact cameras' for s in sorted(set(levels))
+  )
   return (
-    f"the camera's alignment error {camera_words(mine)}, 1 sd (tables measured "
-    f'at {have}; each holds from half to twice its own)'
+    f'camera alignment error {camera_words(mine)}, 1 sd (tables measured at '
+    f'{have or "none"}; each holds from half to twice its own)'
   )
 
 

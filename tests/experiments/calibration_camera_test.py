@@ -165,9 +165,9 @@ def test_an_error_no_table_covers_is_named_with_what_the_tables_measured(shipped
     assert not note['matches'], note
     (why,) = note['differs']
     assert why == (
-      f"the camera's alignment error {carried_errors.camera_words(sd)}, 1 sd "
-      '(tables measured at 0 cm / 0 deg; 2 cm / 2 deg; 4 cm / 3 deg; each holds '
-      'from half to twice its own)'
+      f'camera alignment error {carried_errors.camera_words(sd)}, 1 sd (tables '
+      'measured at exact cameras; 2 cm / 2 deg; 4 cm / 3 deg; each holds from half '
+      'to twice its own)'
     )
     line = table_notes.calibration_line(note)
     assert 'indicative' in line and carried_errors.camera_words(sd) in line, line
