@@ -128,9 +128,12 @@ def camera_difference(mine: tuple[float, float], levels: list) -> str:
   have = '; '.join(
     camera_words(s) if any(s) else 'exact cameras' for s in sorted(set(levels))
   )
+  error = (
+    f'alignment error {camera_words(mine)}, 1 sd' if any(mine) else 'known exactly'
+  )
   return (
-    f'camera alignment error {camera_words(mine)}, 1 sd (tables measured at '
-    f'{have or "none"}; each holds from half to twice its own)'
+    f'camera {error} (tables measured at {have or "none"}; each holds from half '
+    'to twice its own)'
   )
 
 

@@ -172,6 +172,10 @@ def test_an_error_no_table_covers_is_named_with_what_the_tables_measured(shipped
     line = table_notes.calibration_line(note)
     assert 'indicative' in line and carried_errors.camera_words(sd) in line, line
   assert carried_errors.camera_words((0.085, 3.0)) == '8.5 cm / 3 deg'
+  assert carried_errors.camera_difference((0.0, 0.0), [(0.02, 2.0)]) == (
+    'camera known exactly (tables measured at 2 cm / 2 deg; each holds from half '
+    'to twice its own)'
+  )
 
 
 # A paper-size study's structure at the smallest size a CPU runs in a minute
