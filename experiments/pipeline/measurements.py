@@ -14,6 +14,7 @@ import dataclasses
 import math
 
 import numpy as np
+import scipy.special
 
 import physsim
 from experiments.pipeline import cli
@@ -287,6 +288,50 @@ def effective_wind_log_density(v_eff, reading: float, sd: float, c) -> np.ndarra
   v_eff, c = np.asarray(v_eff, np.float64), np.asarray(c, np.float64)
   z = (v_eff / np.sqrt(c) - reading) / sd
   return -0.5 * z**2 - np.log(sd * np.sqrt(2.0 * np.pi)) - 0.5 * np.log(c)
+
+
+def _cell_scores(lo, hi, reading: float, sd: float, c) -> tuple:
+  """(a, b): the reading's standard scores of the true winds v whose
+  effective wind v sqrt(c) lies in the cell [lo, hi)."""
+  root = np.sqrt(np.asarray(c, np.float64))
+  lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+  return (lo / root - reading) / sd, (hi / root - reading) / sd
+
+
+def _upper(a, b) -> tuple:
+  """(a, b, mirrored): spans above the reading mirrored below it, so that a
+  far cell's normal mass and inverse CDF keep their digits."""
+  mirrored = a > 0
+  return np.where(mirrored, -b, a), np.where(mirrored, -a, b), mirrored
+
+
+def effective_wind_log_mass(lo, hi, reading: float, sd: float, c) -> np.ndarray:
+  """log P(lo <= v_eff < hi | c): the reading's Gaussian mass of the true
+  winds v whose effective wind v sqrt(c) lies in the cell [lo, hi). Exact,
+  where the density at the cell's centre times its width errs once a cell is
+  as wide as the reading's sd (a search's grid: 4-8% cells, 2% readings).
+  Broadcasts the cells against ``c``."""
+  a, b, _ = _upper(*_cell_scores(lo, hi, reading, sd, c))
+  mass = scipy.special.ndtr(b) - scipy.special.ndtr(a)
+  return np.log(np.maximum(mass, 1e-300))
+
+
+def true_wind_in_cell(lo, hi, reading: float, sd: float, c, u) -> np.ndarray:
+  """(S,) true winds v, each drawn from the reading's Gaussian restricted to
+  its cell's span (v sqrt(c) in [lo, hi): each draw's cell and c, (S,) each)
+  by the inverse CDF at the uniforms ``u`` (S,). A uniform position within
+  the cell would widen the wind by the cell's width, which on a search's
+  grid is as large as the reading's sd; a cell the reading leaves no mass
+  (the video insists on it) keeps the uniform position."""
+  a, b, mirrored = _upper(*_cell_scores(lo, hi, reading, sd, c))
+  pa, pb = scipy.special.ndtr(a), scipy.special.ndtr(b)
+  z = scipy.special.ndtri(pa + np.asarray(u) * (pb - pa))
+  v = reading + sd * np.where(mirrored, -z, z)
+  root = np.sqrt(np.asarray(c, np.float64))
+  lo_v, hi_v = np.asarray(lo) / root, np.asarray(hi) / root
+  uniform = lo_v + np.asarray(u) * (hi_v - lo_v)
+  v = np.where(np.isfinite(v) & (pb - pa > 1e-12), v, uniform)
+  return np.clip(v, lo_v, hi_v)
 
 
 def air_wind_log_prior(v_eff, reading: float, sd: float) -> np.ndarray:

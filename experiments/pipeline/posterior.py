@@ -336,11 +336,12 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
     air: with the fabric's air coefficient c free and shared, ``(readings,
       winds)``: each recording's anemometer reading ``(m/s, sd)`` of its true
       wind, and the (nv,) effective winds of the grid's wind cells, m/s. Each
-      recording's prior of its effective wind is then its reading's given c
-      (``measurements.effective_wind_log_density``) and c is drawn with
-      (b, w) from their joint, its prior log-uniform (``measurements.air_nodes``);
-      a shared discrepancy (``shared_bias_sd``) spreads its draws by the same
-      log-normal factor.
+      recording's prior of its effective wind's cell is then its reading's
+      mass there given c (``measurements.effective_wind_log_mass``), c is
+      drawn with (b, w) from their joint, its prior log-uniform
+      (``measurements.air_nodes``), and each wind's place within its cell
+      follows its reading (``_draw_wind``); a shared discrepancy
+      (``shared_bias_sd``) spreads c's draws by the same log-normal factor.
 
   Returns:
     ``{'samples': [(n, 3) unit draws of (b, v_k, w) per recording],
@@ -361,24 +362,22 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
   k_bw, k_v, k_jit = jax.random.split(key, 3)
   idx = np.asarray(jax.random.categorical(k_bw, log_bwc.ravel(), shape=(n,)))
   ic, ib, iw = np.unravel_index(idx, log_bwc.shape)
-  draws = [
-    _draw_wind(
-      x,
-      (ic, ib, iw),
-      [lv[k] for lv in lp_v],
-      air is not None,
-      grid,
-      jax.random.fold_in(k_v, k),
-      jax.random.fold_in(k_jit, k),
-    )
+  simulated = _simulated_air(c, ic, k_jit)
+  given = [
+    None if air is None else (air[1], air[0][ks[0]], simulated) for ks in members
+  ]
+  keys = lambda k: (jax.random.fold_in(k_v, k), jax.random.fold_in(k_jit, k))  # noqa: E731
+  draws = [  # each fan setting's
+    _draw_wind(x, (ic, ib, iw), [lv[k] for lv in lp_v], given[k], grid, *keys(k))
     for k, x in enumerate(ll)
-  ]  # fmt: skip  each fan setting's
+  ]
   out = {
     'samples': [draws[groups.index(f)] for f in fans],
     'log_post_bw': np.asarray(logsumexp(log_bwc, axis=0)),
   }
   if air is not None:
-    out['air_simulated'], out['air'] = _air_draws(c, ic, shared_bias_sd, k_jit)
+    out['air_simulated'] = simulated
+    out['air'] = _fabric_air(simulated, shared_bias_sd, k_jit)
   return out
 
 
@@ -417,54 +416,71 @@ def _wind_priors(lp: list, members: list, air) -> tuple:
     return np.ones(1), np.zeros(1), lp_v
   readings, winds = air
   c, log_c = measurements.air_nodes()
-  step = float(np.abs(np.diff(winds[:2]))[0]) if len(winds) > 1 else 1.0
+  lo, hi = _cell_edges(winds)
   lp_v = [
     [
-      measurements.effective_wind_log_density(winds, *readings[ks[0]], ci)[
-        None, :, None
-      ]
-      + np.log(step)
+      measurements.effective_wind_log_mass(lo, hi, *readings[ks[0]], ci)[None, :, None]
       for ks in members
     ]
     for ci in c
-  ]  # per c, per fan setting: log p(v_k | c) on the grid's cells
+  ]  # per c, per fan setting: log P(v_k's cell | c) on the grid's cells
   return c, log_c, lp_v
 
 
-def _draw_wind(ll: np.ndarray, cells: tuple, lp_v: list, free_air: bool, grid,
+def _cell_edges(winds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+  """(lo, hi): the edges of the grid's wind cells from their (nv,) centres
+  (equal steps, m/s)."""
+  winds = np.asarray(winds, np.float64)
+  step = float(np.abs(np.diff(winds[:2]))[0]) if len(winds) > 1 else 1.0
+  return winds - step / 2, winds + step / 2
+
+
+def _draw_wind(ll: np.ndarray, cells: tuple, lp_v: list, air, grid,
                key_v, key_jit) -> np.ndarray:  # fmt: skip
   """(n, 3) unit draws of one fan setting: the joint's (b, w) cells (``cells``:
   the air node, bending and area weight cell of each draw) with its wind cell
   drawn from its likelihood ``ll`` (nb, nv, nw) times its prior given them
-  (``lp_v``: per air node, ``_wind_priors``'s; ``free_air``: it varies with
-  the air coefficient, not with (b, w)), each uniform within its cell."""
+  (``lp_v``: per air node, ``_wind_priors``'s), each uniform within its
+  cell. ``air`` (the air coefficient free: ``(winds, reading, c)``, the grid's
+  wind cells, this fan setting's reading and the draws' simulated c): the
+  wind's prior varies with c, not with (b, w), and its position within its
+  cell follows the reading (``measurements.true_wind_in_cell``), as a
+  uniform one would widen the true wind v_eff / sqrt(c) by the cell."""
   ic, ib, iw = cells
-  if not free_air:  # (n, nv): wind given (b, w)
+  if air is None:  # (n, nv): wind given (b, w)
     cond = ll[ib, :, iw] + lp_v[0][ib, :, iw]
   else:  # ... and c
     cond = ll[ib, :, iw] + np.stack([lv[0, :, 0] for lv in lp_v])[ic]
   iv = np.asarray(jax.random.categorical(key_v, cond, axis=1))
   cell = np.stack([ib, iv, iw], axis=1).astype(np.float64)
-  jit = np.asarray(jax.random.uniform(key_jit, (len(ib), 3)))
+  jit = np.array(jax.random.uniform(key_jit, (len(ib), 3)), np.float64)
+  if air is not None:
+    winds, (reading, sd), c = air
+    lo, hi = (e[iv] for e in _cell_edges(winds))
+    v = measurements.true_wind_in_cell(lo, hi, reading, sd, c, jit[:, 1])
+    jit[:, 1] = np.clip((v * np.sqrt(c) - lo) / (hi - lo), 0.0, 1.0)
   return -1.0 + 2.0 * (cell + jit) / np.asarray(grid, np.float64)
 
 
-def _air_draws(c: np.ndarray, ic: np.ndarray, shared_bias_sd: float, key) -> tuple:
-  """``(simulated, fabric)``, (n,) each: the air coefficient the simulator's
-  push was read with, its nodes ``c`` at the draws' node ``ic`` each spread
-  uniformly within its log step; and the fabric's own, that spread by the
-  shared discrepancy's log-normal factor where there is one."""
-  n = len(ic)
+def _simulated_air(c: np.ndarray, ic: np.ndarray, key) -> np.ndarray:
+  """(n,) the air coefficient the simulator's push was read with: its nodes
+  ``c`` at the draws' node ``ic``, each spread uniformly within its log
+  step."""
   ratio = c[1] / c[0] if len(c) > 1 else 1.0
-  u = np.asarray(jax.random.uniform(jax.random.fold_in(key, 99), (n,)))
-  simulated = c[ic] * ratio ** (u - 0.5)  # within its log step
+  u = np.asarray(jax.random.uniform(jax.random.fold_in(key, 99), (len(ic),)))
+  return c[ic] * ratio ** (u - 0.5)
+
+
+def _fabric_air(simulated: np.ndarray, shared_bias_sd: float, key) -> np.ndarray:
+  """(n,) the fabric's own air coefficient: the ``simulated`` one spread by
+  the shared discrepancy's log-normal factor where there is one."""
   if shared_bias_sd <= 0:
-    return simulated, simulated
+    return simulated
   # the pressure the simulator puts on every recording errs by one common
   # factor too (the fan's angle, drag): the fabric's own c is the
   # simulator's times exp(d), d ~ N(0, sd^2)
-  z = np.asarray(jax.random.normal(jax.random.fold_in(key, 98), (n,)))
-  return simulated, simulated * np.exp(shared_bias_sd * z)
+  z = np.asarray(jax.random.normal(jax.random.fold_in(key, 98), (len(simulated),)))
+  return simulated * np.exp(shared_bias_sd * z)
 
 
 def _by_fan(log_liks, log_prior_grid, grid, fans):

@@ -149,3 +149,55 @@ def test_a_free_air_coefficient_leaves_the_calibrated_files_as_they_were():
   assert free['air_coefficient'] == 'free'
   with pytest.raises(ValueError, match='--air_coefficient'):
     measurements.Measured(air_coefficient='loose').check(None)
+
+
+def _coarse_flat_video(readings):
+  """A search's coarse wind grid (32 cells over 1-6 m/s, 4-10% wide against
+  2% readings) and videos that say nothing about the wind."""
+  grid = (2, 32, 2)
+  nodes = 1.0 + 5.0 * (np.arange(grid[1]) + 0.5) / grid[1]
+  log_liks = [np.zeros(np.prod(grid)) for _ in readings]
+  return log_liks, grid, np.zeros(np.prod(grid)), (readings, nodes)
+
+
+def test_a_joints_true_wind_is_its_reading_where_the_video_is_silent():
+  """With the video silent on the wind and c free, each true wind's
+  posterior is its anemometer's Gaussian: the draws' quantiles match it to
+  1% of its sd, though the grid's cells are 2-5x as wide as that sd (a
+  uniform position within them widened the 50% interval by half)."""
+  winds = np.array([1.5, 2.5, 3.5])
+  readings = [(float(w), READ_SD * float(w)) for w in winds]
+  log_liks, grid, prior, air = _coarse_flat_video(readings)
+  out = posterior.joint(log_liks, grid, prior, jax.random.key(3), n=40000, air=air)
+  z = np.array([-1.645, -0.674, 0.0, 0.674, 1.645])  # N(0, 1) at 5-95%
+  for k, (r, sd) in enumerate(readings):
+    v_eff = 1.0 + 5.0 * (out['samples'][k][:, 1] + 1.0) / 2.0
+    v = v_eff / np.sqrt(out['air_simulated'])
+    got = np.quantile(v, [0.05, 0.25, 0.5, 0.75, 0.95])
+    np.testing.assert_allclose((got - r) / sd, z, atol=0.04)
+
+
+def test_a_cells_reading_mass_and_draws_against_a_float64_quadrature():
+  """``effective_wind_log_mass`` against the midpoint rule of the
+  reading's density over the cell's span, far cells included; the draws of
+  ``true_wind_in_cell`` stay in their span with its CDF."""
+  reading, sd, c = 2.0, 0.04, 0.6
+  lo = np.array([1.40, 1.52, 1.60, 1.70, 1.90])  # effective winds, m/s
+  hi = lo + 0.08
+  got = measurements.effective_wind_log_mass(lo, hi, reading, sd, c)
+  for a, b, g in zip(lo, hi, got, strict=True):
+    edges = np.linspace(a / np.sqrt(c), b / np.sqrt(c), 20001)
+    v = 0.5 * (edges[1:] + edges[:-1])  # the midpoint rule
+    dens = np.exp(-0.5 * ((v - reading) / sd) ** 2) / (sd * np.sqrt(2 * np.pi))
+    want = np.log(np.sum(dens * np.diff(edges)))
+    assert g == pytest.approx(want, abs=1e-6 + 1e-6 * abs(want))
+  u = np.random.default_rng(0).random(20000)
+  cell = np.full(20000, 1.52), np.full(20000, 1.60)
+  v = measurements.true_wind_in_cell(*cell, reading, sd, c, u)
+  span = cell[0][0] / np.sqrt(c), cell[1][0] / np.sqrt(c)
+  assert span[0] <= v.min() and v.max() <= span[1]
+  grid = np.linspace(*span, 4001)
+  dens = np.exp(-0.5 * ((grid - reading) / sd) ** 2)
+  cdf = np.cumsum(dens) / dens.sum()
+  for q in (0.1, 0.5, 0.9):
+    assert np.quantile(v, q) == pytest.approx(grid[np.searchsorted(cdf, q)], abs=2e-3)
