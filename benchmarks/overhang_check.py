@@ -18,8 +18,8 @@ bias).
 
 Two uses, two renderers, two seeds: ``--tune`` (seed 0, the project's
 ray-caster ``physsim.render``, which the reader's tests use) prints the law
-that fits its readings (``DOF``, ``FLOOR`` and the edge fit's ``EDGE_FLOOR``
-in ``physsim.overhang_depth``); the check (seed 1, MuJoCo's own OpenGL
+that fits its readings (``DOF`` and ``FLOOR`` in ``physsim.overhang_depth``;
+the edge fit's ``EDGE_POINTS`` in ``physsim.overhang_table``); the check (seed 1, MuJoCo's own OpenGL
 renderer, EGL offscreen: the table a box, its rounding a cylinder) measures
 the reading as shipped, and is never used to tune.
 
