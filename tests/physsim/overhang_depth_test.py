@@ -33,6 +33,14 @@ def _render(strip, pose, key=None, frames=3, table=TABLE):
   return d if key is not None else d[0]
 
 
+def _read_on(table, strip, distance, elevation, seed):
+  """``strip`` over ``table`` in three noisy frames from ``distance`` m,
+  ``elevation`` degrees above its top and 10 to the side: (depth, reading)."""
+  pose = tabletop.camera(table, distance, elevation, 10.0)
+  depth = _render(strip, pose, jax.random.key(seed), table=table)
+  return depth, overhang_depth.read(depth, INTR, strip.overhang, 0.001)
+
+
 def test_a_clean_strip_is_read_to_its_bending_length():
   strip = tabletop.Strip(overhang=0.04, bending_length=0.02)
   pose = _pose()
@@ -206,9 +214,7 @@ def test_a_rounded_edge_is_read_within_its_interval():
   the strip, within its 90% interval and the radius to 0.5 mm."""
   table = tabletop.Table(edge_radius=0.003)
   strip = tabletop.Strip(overhang=0.036, bending_length=0.012, thickness=0.0005)
-  pose = tabletop.camera(table, 0.45, 30.0, 10.0)
-  depth = tabletop.depth_frames(strip, pose, table, INTR, 3, jax.random.key(5))
-  r = overhang_depth.read(depth, INTR, 0.036, 0.001)
+  depth, r = _read_on(table, strip, 0.45, 30.0, seed=5)
   assert r.edge_radius == pytest.approx(0.003, abs=0.0005)
   assert _within(r, 0.012), r
   sharp = overhang_depth.read(depth, INTR, 0.036, 0.001, known_radius=0.0)
@@ -225,9 +231,7 @@ def test_a_mid_size_rounding_under_a_soft_thick_strip_is_read_to_its_radius():
   its 90% interval and 3%."""
   table = tabletop.Table(edge_radius=0.0015)
   strip = tabletop.Strip(overhang=0.024, bending_length=0.008, thickness=0.0012)
-  pose = tabletop.camera(table, 0.45, 25.0, 10.0)
-  depth = tabletop.depth_frames(strip, pose, table, INTR, 3, jax.random.key(7))
-  r = overhang_depth.read(depth, INTR, 0.024, 0.001)
+  _, r = _read_on(table, strip, 0.45, 25.0, seed=7)
   assert r.edge_radius == pytest.approx(0.0015, abs=0.0004)
   assert r.bending_length == pytest.approx(0.008, rel=0.03)
   assert _within(r, 0.008), r
@@ -240,9 +244,7 @@ def test_a_thin_board_far_and_high_is_read_within_its_interval():
   its interval."""
   strip = tabletop.Strip(overhang=0.045, bending_length=0.015, thickness=0.0005)
   thin = tabletop.Table(thickness=0.01)
-  pose = tabletop.camera(thin, 0.55, 40.0, 10.0)
-  depth = tabletop.depth_frames(strip, pose, thin, INTR, 3, jax.random.key(6))
-  r = overhang_depth.read(depth, INTR, 0.045, 0.001)
+  _, r = _read_on(thin, strip, 0.55, 40.0, seed=6)
   assert _within(r, 0.015), r
 
 
