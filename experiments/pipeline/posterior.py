@@ -362,7 +362,7 @@ def joint(log_liks, grid, log_prior_grid, key, n: int = 4096,
   k_bw, k_v, k_jit = jax.random.split(key, 3)
   idx = np.asarray(jax.random.categorical(k_bw, log_bwc.ravel(), shape=(n,)))
   ic, ib, iw = np.unravel_index(idx, log_bwc.shape)
-  simulated = _simulated_air(c, ic, k_jit)
+  simulated = None if air is None else _simulated_air(c, ic, k_jit)
   given = [
     None if air is None else (air[1], air[0][ks[0]], simulated) for ks in members
   ]

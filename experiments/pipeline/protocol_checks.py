@@ -1,9 +1,9 @@
 """The shipped protocol check, and the note of a protocol joint it covers.
 
 A protocol joint (two to four fan settings, each with an anemometer, a
-scale and a bending length; the air coefficient free) has no recalibrated tables: its
-intervals are printed as the posterior gives them, and how often they held
-the truth was measured on protocol sets of another physics
+scale and a bending length; the air coefficient free) has no recalibrated
+tables: its intervals are printed as the posterior gives them, and how often
+they held the truth was measured on protocol sets of another physics
 (``experiments.air_protocol --install``). An estimate like those sets quotes
 that measurement (``setup.calibration``); any other stays with the tables'
 note (``calibration_tables``).
@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 
 from experiments.pipeline.calibration_tables import differing_fields, read_calibration
+from experiments.pipeline.carried_errors import FACTOR
 
 # Coverage of a protocol joint's intervals (fan settings each with an
 # anemometer, a scale and a bending length; the air coefficient free),
@@ -59,7 +60,7 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
     return None
   for name, rel in check['readings'].items():
     value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))
-    if not (value > 0 and 0.5 * rel <= sd / value <= 2.0 * rel):
+    if not (value > 0 and rel / FACTOR <= sd / value <= FACTOR * rel):
       return None
   if m.bending_length_dof != check.get('length_dof', 0.0):
     return None
