@@ -189,10 +189,15 @@ def _estimate(args: Args, mode: str, paths: dict, where: str, truth: float) -> d
   result = json.loads(open(os.path.join(workdir, 'estimate.json')).read())
   wind = result['estimate']['wind_speed']
   lo, hi = wind['interval_90']
+  lo50, hi50 = wind['interval_50']
+  note = result.get('calibration') or {}
   row.update(
     wind=wind['value'], median=wind['median'], interval_90=[lo, hi],
     error=abs(wind['value'] - truth) / truth, holds=bool(lo <= truth <= hi),
+    interval_50=[lo50, hi50], holds_50=bool(lo50 <= truth <= hi50),
     narrowing_90=wind['narrowing_90'], alignment=result.get('alignment'),
+    calibrated=bool(note.get('matches') and note.get('recalibrated')),
+    calibration_differs=note.get('differs', []),
   )  # fmt: skip
   return row
 
@@ -236,6 +241,8 @@ def summary(rows: list[dict]) -> dict:
       'max_error': float(errors.max()) if len(ran) else None,
       'within_10pct': int(np.sum(errors <= 0.10)),
       'holds_90': sum(bool(r['holds']) for r in ran),
+      'holds_50': sum(bool(r.get('holds_50')) for r in ran),
+      'calibrated': sum(bool(r.get('calibrated')) for r in ran),
       'median_mean_error': float(med.mean()) if len(med) else None,
       'median_within_10pct': int(np.sum(med <= 0.10)),
     }
@@ -245,8 +252,8 @@ def summary(rows: list[dict]) -> dict:
 def summary_table(stats: dict) -> str:
   lines = [
     '| up from | recordings | refused | mean error | worst | within 10% | 90% holds '
-    '| median: mean error | median within 10% |',
-    '|---|---|---|---|---|---|---|---|---|',
+    '| 50% holds | calibrated | median: mean error | median within 10% |',
+    '|---|---|---|---|---|---|---|---|---|---|---|',
   ]
   for mode, s in stats.items():
     ran = s['recordings'] - s['refused']
@@ -254,6 +261,7 @@ def summary_table(stats: dict) -> str:
     lines.append(
       f'| {mode} | {s["recordings"]} | {s["refused"]} | {pct(s["mean_error"])} | '
       f'{pct(s["max_error"])} | {s["within_10pct"]}/{ran} | {s["holds_90"]}/{ran} | '
+      f'{s["holds_50"]}/{ran} | {s["calibrated"]}/{ran} | '
       f'{pct(s["median_mean_error"])} | {s["median_within_10pct"]}/{ran} |'
     )
   return '\n'.join(lines)

@@ -53,6 +53,8 @@ def test_the_summary_counts_by_hand():
       'exit': 0,
       'error': 0.05,
       'holds': True,
+      'holds_50': True,
+      'calibrated': True,
       'median': 3.1,
       'truth': 3.0,
     },
@@ -61,6 +63,8 @@ def test_the_summary_counts_by_hand():
       'exit': 0,
       'error': 0.15,
       'holds': False,
+      'holds_50': False,
+      'calibrated': True,
       'median': 5.0,
       'truth': 4.0,
     },
@@ -77,11 +81,14 @@ def test_the_summary_counts_by_hand():
   s = windy_rig.summary(rows)
   assert s['world_up'] == {
     'recordings': 3, 'refused': 0, 'mean_error': pytest.approx(0.10),
-    'max_error': 0.15, 'within_10pct': 2, 'holds_90': 2,
+    'max_error': 0.15, 'within_10pct': 2, 'holds_90': 2, 'holds_50': 1,
+    'calibrated': 2,
     'median_mean_error': pytest.approx((0.1 / 3 + 0.25 + 0) / 3),
     'median_within_10pct': 2,
   }  # fmt: skip
   assert s['none']['refused'] == 1 and s['none']['mean_error'] is None
   text = windy_rig.summary_table(s)
-  assert '| world_up | 3 | 0 | 10.0% | 15.0% | 2/3 | 2/3 | 9.4% | 2/3 |' in text
-  assert '| none | 1 | 1 | - | - | 0/0 | 0/0 | - | 0/0 |' in text
+  assert (
+    '| world_up | 3 | 0 | 10.0% | 15.0% | 2/3 | 2/3 | 1/3 | 2/3 | 9.4% | 2/3 |' in text
+  )
+  assert '| none | 1 | 1 | - | - | 0/0 | 0/0 | 0/0 | 0/0 | - | 0/0 |' in text
