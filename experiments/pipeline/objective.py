@@ -124,7 +124,8 @@ class Objective:
     self._net = net
     self._sensor = s.sensor_noise and net.modality == 'depth'
     self._distance = sc.distance
-    self._camera_sd = (sc.camera_sd_m, sc.camera_sd_deg)
+    # whether its recordings' cameras carry an error (its size: ProblemData's)
+    self._camera_error = bool(sc.camera_sd_m or sc.camera_sd_deg)
     self._pins = pin_centre(s)
     cams, (h, w) = (
       problem.data.poses.position.shape[0],
@@ -187,9 +188,10 @@ class Objective:
       i, pos, key = args
       pose = jax.tree.map(lambda a: a[i], data.poses)  # (C,)
       seen_from = pose
-      if any(self._camera_sd):  # the recording's camera, misplaced as it may be
+      if self._camera_error:  # the recording's camera, misplaced as it may be
+        sd = data.camera_sd[i]
         seen_from = physsim.shape.misplaced_poses(
-          camera_key(key), pose, *self._camera_sd, self._pins
+          camera_key(key), pose, sd[0], sd[1], self._pins
         )
       frames = self._frames(
         pos[None], jax.tree.map(lambda a: a[None], seen_from), key[None],

@@ -43,6 +43,10 @@ class ProblemData(NamedTuple):
     rec_points: (N, D) the recording's embedding ((K, N, D) for an ensemble).
     rec_shape: (2,) the recording's ``physsim.shape.summary`` (zeros when the
       distance does not use it).
+    camera_sd: (2,) the camera error its estimate carries (``camera_sd_m``,
+      ``camera_sd_deg``): data, not structure, so recordings carrying
+      different errors (a calibration study's, drawn over a range) are scored
+      in one call of one program.
   """
 
   lo: jax.Array
@@ -54,6 +58,7 @@ class ProblemData(NamedTuple):
   params: object
   rec_points: jax.Array
   rec_shape: jax.Array
+  camera_sd: jax.Array
 
 
 class Problem(NamedTuple):
@@ -89,7 +94,7 @@ class Problem(NamedTuple):
       self.n_frames, s.fps, s.warmup,
       s.gusts, physsim.resolve_backend(h.backend), h.workers, self.intr,
       self.data.poses.position.shape[0], s.sensor_noise, c.scoring.distance,
-      c.scoring.camera_sd_m, c.scoring.camera_sd_deg,
+      bool(c.scoring.camera_sd_m or c.scoring.camera_sd_deg),  # its size is data
       n.modality, n.input_mode, n.clip_frames, n.architecture, n.members,
       jax.tree.structure(n.params),
     )  # fmt: skip
@@ -157,6 +162,7 @@ def make_problem(
       jnp.float32(physsim.reference_rigidity(sim.material) / model.rigidity),
       poses, jnp.asarray(embedding.rgb_color(sim.material), jnp.float32),
       net.params, rec_points, rec_shape,
+      jnp.asarray([config.scoring.camera_sd_m, config.scoring.camera_sd_deg], jnp.float32),
     )  # fmt: skip
   return Problem(config, recording.source, space, n_frames, intr, net, data)
 

@@ -40,7 +40,7 @@ def _data(ratios, boxes=None) -> obj_lib.ProblemData:
     hi[:, 2] = boxes
   return obj_lib.ProblemData(
     lo, hi, np.tile(np.array([1.0, 0.0, 0.0], np.float32), (p, 1)),
-    np.asarray(ratios, np.float32), None, None, None, None, None,
+    np.asarray(ratios, np.float32), None, None, None, None, None, None,
   )  # fmt: skip
 
 

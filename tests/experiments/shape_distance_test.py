@@ -140,6 +140,37 @@ def test_a_misplaced_camera_renders_from_its_error(env):
   np.testing.assert_allclose(out.psd[0], want, rtol=1e-3, atol=_SHAPE_ATOL)
 
 
+def test_recordings_carrying_other_camera_errors_are_scored_in_one_call(env):
+  # A camera error's size is each problem's data, not the program's
+  # structure (a calibration study draws each recording its own): two
+  # problems carrying different errors share one compiled objective, and
+  # scored together each gets what it gets alone, with its own error.
+  u = np.repeat(np.zeros((1, 3), np.float32), 3, 0)
+  gust, _ = obj_lib.candidate_keys(CONFIG.seed, CONFIG.search, 0, 3)
+  noise = jax.random.split(jax.random.key(5), 3)
+  problems = [
+    obj_lib.make_problem(
+      CONFIG.replace(distance='shape', camera_sd_m=m, camera_sd_deg=d),
+      env['net'],
+      env['rec'],
+    )
+    for m, d in ((_CAMERA_SD_M, _CAMERA_SD_DEG), (0.01, 0.5))
+  ]
+  exact = obj_lib.make_problem(CONFIG.replace(distance='shape'), env['net'], env['rec'])
+  assert problems[0].structure() == problems[1].structure() != exact.structure()
+  run = obj_lib.Objective(problems[0])
+  both = run(
+    obj_lib.stack([p.data for p in problems]),
+    np.stack([u, u]),
+    jax.numpy.stack([gust, gust]),
+    jax.numpy.stack([noise, noise]),
+  ).psd
+  for k, p in enumerate(problems):
+    alone = run(obj_lib.stack([p.data]), u[None], gust[None], noise[None]).psd[0]
+    np.testing.assert_allclose(both[k], alone, rtol=1e-5, atol=1e-9)
+  assert not np.allclose(both[0], both[1], rtol=1e-2)  # each its own error
+
+
 def test_the_shape_needs_no_network(env):
   # The same candidates and keys scored with the hand-made network and with
   # none: the shape never embeds, so discrepancies and residuals are equal.
