@@ -131,8 +131,9 @@ def main(args: Args) -> None:
   if args.install and distributed.is_main():
     scoring = args.study.estimate.scoring
     dest = calibration_tables.shipped_calibration(
-      scoring.distance, args.study.size, (scoring.camera_sd_m, scoring.camera_sd_deg)
-    )
+      scoring.distance, args.study.size, (scoring.camera_sd_m, scoring.camera_sd_deg),
+      args.study.camera_sd_spread,
+    )  # fmt: skip
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     new = physsim.dataset.read_json(src)
     old = physsim.dataset.read_json(dest) if os.path.isfile(dest) else {}

@@ -46,13 +46,17 @@ SIZES = ('demo', 'paper')
 
 
 def shipped_calibration(
-  distance: str, size: str = 'demo', camera: tuple[float, float] = (0.0, 0.0)
+  distance: str,
+  size: str = 'demo',
+  camera: tuple[float, float] = (0.0, 0.0),
+  spread: float = 0.0,
 ) -> str:
   """Where the calibration of estimates with ``distance`` at the study's
   ``size`` is shipped (and ``--install`` puts it): the shape distance's own
   files, every other distance's the default ones (whose networks they
   record); tables measured with a camera error (``camera``: metres,
-  degrees) beside them (``carried_errors.camera_path``)."""
+  degrees; ``spread``: drawn per recording over a range about it) beside
+  them (``carried_errors.camera_path``)."""
   if size not in SIZES:
     raise ValueError(f'no calibration size {size!r}: one of {SIZES}')
   shape = distance == 'shape'
@@ -60,7 +64,7 @@ def shipped_calibration(
     base = SHAPE_CALIBRATION_FILE if shape else CALIBRATION_FILE
   else:
     base = SHAPE_PAPER_CALIBRATION_FILE if shape else PAPER_CALIBRATION_FILE
-  return carried_errors.camera_path(base, camera)
+  return carried_errors.camera_path(base, camera, spread)
 
 
 def shipped_calibrations(distance: str) -> list[str]:
@@ -381,8 +385,9 @@ def differing_fields(config, cal: dict) -> list[str]:
   """The likelihood's settings (``_CALIBRATED_FIELDS``) in which an estimate
   with ``config`` differs from calibration ``cal``'s searches; a study of
   several fabrics (``'materials'``) holds for each of them, and one whose
-  estimates carried a camera error for errors within a factor of two of it
-  (``carried_errors.covers``)."""
+  estimates carried a camera error for errors within the range its
+  recordings' were drawn over, or within a factor of two of the one they all
+  had (``carried_errors.covers``)."""
   calibrated = dict(cal.get('config', {}).get('estimate', {}))
   calibrated.update(
     likelihood=cal.get('likelihood', 'gibbs'), sharpness=cal['sharpness']
@@ -400,8 +405,9 @@ def differing_fields(config, cal: dict) -> list[str]:
     calibrated['material'] = (
       mine['material'] if mine['material'] in cal['materials'] else cal['materials']
     )
+  spread = carried_errors.table_of(cal)[2]
   return [n for n in _CALIBRATED_FIELDS if n in calibrated and not (
-    carried_errors.covers(float(calibrated[n]), float(mine[n]))
+    carried_errors.covers(float(calibrated[n]), float(mine[n]), spread)
     if n in carried_errors.CAMERA_FIELDS else _same(mine[n], calibrated[n])
   )]  # fmt: skip
 
@@ -418,7 +424,7 @@ def _camera_worded(config, cal: dict, names: list[str]) -> list[str]:
   if not set(names) & set(carried_errors.CAMERA_FIELDS):
     return names
   shipped = shipped_calibrations(config.scoring.distance)
-  levels = [_camera(cal)] + [_camera(read_calibration(p)) for p in shipped]
+  levels = [carried_errors.table_of(c) for c in (cal, *map(read_calibration, shipped))]
   mine = carried_errors.camera_of(config.flat())
   return [n for n in names if n not in carried_errors.CAMERA_FIELDS] + [
     carried_errors.camera_difference(mine, levels)

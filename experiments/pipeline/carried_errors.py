@@ -8,9 +8,11 @@ camera's placement in the simulator's world (``camera_sd_m`` /
 for estimates whose carried errors are like those its held-out recordings
 had: a reading's relative error within a factor of two of the one its
 recordings were drawn with (or within the range drawn); a camera's error in
-each of its shift and tilt within a factor of two of the study's, a camera
-known exactly (0) only where the study's was too. Outside, the note says
-which error, and what the tables were measured at.
+each of its shift and tilt within the range the study drew its recordings'
+over (``camera_sd_spread``: each recording its own), or within a factor of
+two of the one error they all had; a camera known exactly (0) only where the
+study's was too. Outside, the note says which error, and what the tables
+were measured at.
 """
 
 from __future__ import annotations
@@ -85,14 +87,34 @@ def reading_differences(measured, rec: dict, mode: str | None) -> list[str]:
   return differs
 
 
-def covers(calibrated: float, mine: float) -> bool:
+def covers(calibrated: float, mine: float, spread: float = 0.0) -> bool:
   """Whether tables measured with one camera error component (a shift's or a
-  tilt's sd) hold for an estimate carrying ``mine``: within a factor of two
-  of it; a camera known exactly (0) is covered only by tables of 0, and
-  tables of 0 cover only it (their recordings' cameras were exact)."""
+  tilt's sd) hold for an estimate carrying ``mine``: within the range their
+  recordings' errors were drawn over (``spread`` > 0: ``calibrated`` x
+  exp(+-spread)), else within a factor of two of it; a camera known exactly
+  (0) is covered only by tables of 0, and tables of 0 cover only it (their
+  recordings' cameras were exact)."""
   if calibrated <= 0.0 or mine <= 0.0:
     return math.isclose(calibrated, mine, abs_tol=1e-12)
-  return calibrated / FACTOR * (1 - 1e-9) <= mine <= FACTOR * calibrated * (1 + 1e-9)
+  lo, hi = spread_range(calibrated, spread)
+  return lo * (1 - 1e-9) <= mine <= hi * (1 + 1e-9)
+
+
+def spread_range(sd: float, spread: float) -> tuple[float, float]:
+  """The errors tables measured at ``sd`` hold for: ``sd`` x exp(+-spread)
+  where their recordings' errors were drawn over that range, else from half
+  to twice ``sd``."""
+  f = math.exp(spread) if spread > 0 else FACTOR
+  return sd / f, sd * f
+
+
+def table_of(cal: dict) -> tuple[float, float, float]:
+  """(metres, degrees, spread): the camera error a calibration ``cal``'s
+  estimates carried (the centre of its range) and how far its recordings'
+  were drawn about it (``camera_sd_spread``; 0: all had that one)."""
+  config = cal.get('config', {})
+  m, deg = camera_of(config.get('estimate', {}))
+  return m, deg, float(config.get('camera_sd_spread', 0.0))
 
 
 def camera_of(flat: dict) -> tuple[float, float]:
@@ -120,30 +142,44 @@ def camera_words(sd: tuple[float, float]) -> str:
   return f'{100 * sd[0]:.3g} cm / {sd[1]:.3g} deg'
 
 
+def table_words(table: tuple[float, ...]) -> str:
+  """The camera errors a calibration's tables were measured at, in words:
+  'exact cameras', '4 cm / 2.5 deg', or a range drawn per recording,
+  '1.3-12 cm / 0.8-7.5 deg'."""
+  m, deg, spread = (*table, 0.0)[:3]
+  if not (m or deg):
+    return 'exact cameras'
+  if spread <= 0:
+    return camera_words((m, deg))
+  (m0, m1), (d0, d1) = spread_range(m, spread), spread_range(deg, spread)
+  return f'{100 * m0:.2g}-{100 * m1:.2g} cm / {d0:.2g}-{d1:.2g} deg'
+
+
 def camera_difference(mine: tuple[float, float], levels: list) -> str:
   """The note's words for a carried camera error no table covers: the error
-  and the camera errors the shipped tables were measured at (``levels``),
-  e.g. "camera alignment error 8.5 cm / 3 deg, 1 sd (tables measured at
-  exact cameras; 2 cm / 2 deg; each holds from half to twice its own)"."""
-  have = '; '.join(
-    camera_words(s) if any(s) else 'exact cameras' for s in sorted(set(levels))
-  )
+  and the camera errors the shipped tables were measured at (``levels``:
+  (metres, degrees) or with their spread, ``table_of``), e.g. "camera
+  alignment error 8.5 cm / 3 deg, 1 sd (tables measured at exact cameras;
+  2 cm / 2 deg; each holds from half to twice its own)"."""
+  tables = sorted({(*t, 0.0)[:3] for t in levels})
+  have = '; '.join(table_words(t) for t in tables)
+  if any((t[0] or t[1]) and not t[2] for t in tables) or not tables:
+    have += ('; ' if have else 'none; ') + 'each holds from half to twice its own'
   error = (
     f'alignment error {camera_words(mine)}, 1 sd' if any(mine) else 'known exactly'
   )
-  return (
-    f'camera {error} (tables measured at {have or "none"}; each holds from half '
-    'to twice its own)'
-  )
+  return f'camera {error} (tables measured at {have})'
 
 
-def camera_path(base: str, sd: tuple[float, float]) -> str:
+def camera_path(base: str, sd: tuple[float, float], spread: float = 0.0) -> str:
   """Where tables measured with camera error ``sd`` are shipped beside the
   file ``base`` of exact cameras: ``base`` itself for (0, 0), else
-  ``<base>_camera_<cm>cm_<deg>deg.json``."""
+  ``<base>_camera_<cm>cm_<deg>deg.json``, or for a range drawn per recording
+  (``spread``) ``<base>_camera_<cm>-<cm>cm_<deg>-<deg>deg.json``."""
   if not any(sd):
     return base
-  return f'{base.removesuffix(".json")}_camera_{100 * sd[0]:g}cm_{sd[1]:g}deg.json'
+  words = table_words((*sd, spread)).replace(' ', '').replace('/', '_')
+  return f'{base.removesuffix(".json")}_camera_{words}.json'
 
 
 def camera_paths(base: str) -> list[str]:

@@ -86,6 +86,7 @@ from experiments.studies.calibration_config import (
   PRESETS,
   RESULT_FILE,
   Config,
+  camera_sd_of,
   check_config,
   first_seq,
   fold_of,
@@ -116,7 +117,8 @@ from experiments.studies.calibration_scores import posteriors
 # The study's API, importable from here as before the split.
 __all__ = [
   'FIELDS', 'LENGTH_MODES', 'LEVELS', 'MODE_OF_READING', 'MODES', 'NETWORKS_FILE',
-  'PACKED_DIR', 'PRESETS', 'RESULT_FILE', 'Config', 'analyse', 'check_config',
+  'PACKED_DIR', 'PRESETS', 'RESULT_FILE', 'Config', 'analyse', 'camera_sd_of',
+  'check_config',
   'coverage_of', 'first_seq', 'fold_of', 'length_sd_of', 'length_sd_range',
   'network_dirs', 'network_of', 'network_seeds', 'networks_record', 'pack_runs',
   'packed_runs', 'plot_ranks', 'plot_sweep', 'posteriors', 'recalibration',

@@ -6,6 +6,7 @@ never saw (cross-fitted by pairs)."""
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -17,7 +18,9 @@ from experiments.studies.calibration_config import (
   LEVELS,
   MODES,
   Config,
+  camera_sd_of,
   fold_of,
+  study_configs,
   study_materials,
 )
 from experiments.studies.calibration_scores import LOG_FIELDS, QGRID, posteriors
@@ -281,7 +284,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   folds = max(2, min(config.folds, len({r['seq'] // 2 for r in runs})))
   everyone = {r['seq'] for r in runs}
   sweep, best, fold_choice, cross, never_under, by_fold = {}, {}, {}, {}, {}, {}
-  by_material = {}
+  by_material, by_camera = {}, {}
   levels = [lv / 100 for lv in LEVELS]
   for form in bo.posterior.DISCREPANCY_LIKELIHOODS:
     by_c = {c: posteriors(config, runs, form, c) for c in config.sharpness_grid}
@@ -323,6 +326,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
                              space, bayes=False))
       for k in range(folds)
     ]  # fmt: skip
+    by_camera[form] = by_camera_error(config, held['video'], space)
     by_material[form] = {
       m: summarise([s for s in held['video'] if s.get('material') == m], space)
       for m in study_materials(config)
@@ -332,8 +336,39 @@ def analyse(config: Config, runs: list[dict]) -> dict:
     'fold_sharpness': fold_choice, 'cross_validated': cross,
     'cross_validated_by_fold': by_fold,
     'cross_validated_by_material': by_material,
+    'cross_validated_by_camera_error': by_camera,
     'sharpest_never_under_covering': never_under,
   }  # fmt: skip
+
+
+# Recordings grouped by the camera error they carried: thirds of its range.
+CAMERA_BANDS = ('smallest third', 'middle third', 'largest third')
+
+
+def camera_band(config: Config, seq: int) -> int:
+  """Which third of the study's camera error range recording ``seq``'s
+  error lies in (0, 1, 2): the mean of its shift's and its tilt's place in
+  their log ranges (-1 to 1; ``camera_sd_of``)."""
+  est = study_configs(config)[3]
+  centre = (est.scoring.camera_sd_m, est.scoring.camera_sd_deg)
+  mine = camera_sd_of(config, est, seq)
+  place = np.mean([
+    math.log(m / c) / config.camera_sd_spread
+    for m, c in zip(mine, centre, strict=True) if c
+  ])  # fmt: skip
+  return min(2, max(0, int((place + 1) / 2 * 3)))
+
+
+def by_camera_error(config: Config, held: list[dict], space) -> dict:
+  """Held-out recordings' coverage by the camera error each carried
+  (``camera_band``), where the study drew each its own (``camera_sd_spread``):
+  whether the pooled tables hold at both ends of the range; {} otherwise."""
+  if not config.camera_sd_spread:
+    return {}
+  bands = {}
+  for s in held:
+    bands.setdefault(camera_band(config, s['seq']), []).append(s)
+  return {CAMERA_BANDS[b]: summarise(bands[b], space) for b in sorted(bands)}
 
 
 def coverage_of(summary: dict) -> dict:

@@ -85,6 +85,14 @@ class Config:
       ``p % networks``.
     estimate: the estimate settings (material, cloth and clock follow the
       demo's).
+    camera_sd_spread: where the estimates carry a camera error
+      (``estimate``'s ``camera_sd_m`` / ``camera_sd_deg``), how far each
+      recording's ranges about it: recording ``seq``'s shift and tilt are
+      each that times exp(spread x u), u uniform in [-1, 1], drawn
+      independently from (seed, seq) (``camera_sd_of``), so the tables hold
+      for a carried error anywhere in that box, as an intake's varies from
+      one recording to the next; 0: every recording carries the one error
+      (its tables then hold from half to twice it).
     check_reading: for ``check``: 'wind_speed' (an anemometer) or
       'area_weight' (a scale) estimates every new recording with a simulated
       reading of it (``measured_sd``, drawn around the truth) as the search's
@@ -120,6 +128,7 @@ class Config:
     skip=('simulation.material', 'simulation.cloth_resolution', 'simulation.frames',
           'simulation.warmup', 'hardware.backend', 'seed', 'search.point', 'measured'),
   )  # fmt: skip
+  camera_sd_spread: float = 0.0
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
 
@@ -288,6 +297,7 @@ def check_config(config: Config) -> None:
       f'--length_sd_spread={config.length_sd_spread}: a spread of log errors in [0, 2]'
     )
   measurements.check_dof(config.length_dof, 'length_dof')
+  _check_camera_spread(config)
   if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
@@ -299,6 +309,45 @@ def check_config(config: Config) -> None:
       f'--size=paper with --distance={config.estimate.scoring.distance}: the study '
       'trains demo-size networks only; use --distance=shape'
     )
+
+
+def _check_camera_spread(config: Config) -> None:
+  """Refuses a camera error's spread out of [0, 2], one without a camera
+  error to spread, or one whose range leaves what an estimate may carry."""
+  spread, sc = config.camera_sd_spread, config.estimate.scoring
+  if not 0.0 <= spread <= 2.0:
+    raise ValueError(
+      f'--camera_sd_spread={spread}: a spread of log camera errors in [0, 2]'
+    )
+  if spread and not (sc.camera_sd_m or sc.camera_sd_deg):
+    raise ValueError(
+      f'--camera_sd_spread={spread}: the estimates carry no camera error to '
+      'spread; give --camera_sd_m and --camera_sd_deg'
+    )
+  f = math.exp(spread)
+  if sc.camera_sd_m * f > 0.2 or sc.camera_sd_deg * f > 20.0:
+    raise ValueError(
+      f'--camera_sd_spread={spread}: the range reaches {100 * sc.camera_sd_m * f:.3g} '
+      f'cm / {sc.camera_sd_deg * f:.3g} deg, past what an estimate may carry '
+      '(20 cm / 20 deg)'
+    )
+
+
+# The stream of the recordings' camera error sizes in the study's seed.
+CAMERA_SD_STREAM = 47
+
+
+def camera_sd_of(config: Config, est: EstimateConfig, seq: int) -> tuple[float, float]:
+  """(metres, degrees): the camera error recording ``seq``'s estimate
+  carries, and its told camera is off by (``told_pose``): ``est``'s, each
+  component times exp(``camera_sd_spread`` x u), u uniform in [-1, 1],
+  drawn from (seed, seq) alone."""
+  m, deg = est.scoring.camera_sd_m, est.scoring.camera_sd_deg
+  if not config.camera_sd_spread:
+    return m, deg
+  u = np.random.default_rng([config.seed, CAMERA_SD_STREAM, seq]).uniform(-1, 1, 2)
+  f = np.exp(config.camera_sd_spread * u)
+  return round(float(m * f[0]), 6), round(float(deg * f[1]), 5)
 
 
 def with_reading(config: Config, est: EstimateConfig, reading: str, truth: dict,

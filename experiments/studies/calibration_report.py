@@ -82,7 +82,11 @@ def _camera_text(config: Config) -> str:
   cameras had (``told_pose``), for ``calibration.json``'s setting; '' for
   cameras known exactly."""
   sd = carried_errors.camera_of(config.estimate.flat())
-  return f', cameras off by {carried_errors.camera_words(sd)} (1 sd)' if any(sd) else ''
+  if not any(sd):
+    return ''
+  words = carried_errors.table_words((*sd, config.camera_sd_spread))
+  each = ', each recording its own' if config.camera_sd_spread else ''
+  return f', cameras off by {words} (1 sd{each})'
 
 
 def _networks_text(config: Config) -> str:
@@ -158,6 +162,12 @@ def table(out: dict) -> str:
                         a['sharpest_never_under_covering'].items())]  # fmt: skip
   lines += network_lines(out.get('network'), a)
   lines += _material_lines(a)
+  lines += _group_lines(
+    a.get('cross_validated_by_camera_error', {}).get('gibbs'),
+    'camera error',
+    "recordings by the camera error each carried (the mean of its shift's and "
+    "tilt's place in their ranges), video alone, held out",
+  )
   return '\n'.join(lines)
 
 
@@ -165,12 +175,21 @@ def _material_lines(analysis: dict) -> list[str]:
   """Per fabric of a study of several: its recordings' held-out coverage
   (video alone, read with the pooled tables of the other folds) and its
   point's mean error beside the range centre's."""
-  by = analysis.get('cross_validated_by_material', {}).get('gibbs')
+  return _group_lines(
+    analysis.get('cross_validated_by_material', {}).get('gibbs'),
+    'fabric',
+    "each fabric's recordings, video alone, held out",
+  )
+
+
+def _group_lines(by: dict | None, name: str, title: str) -> list[str]:
+  """A table of groups of recordings (``by``: group -> summary): each group's
+  held-out coverage and its point's mean error beside the range centre's."""
   if not by:
     return []
-  lines = ['', "each fabric's recordings, video alone, held out (50% / 90% hold the "
-           "truth; the point's mean error, range centre's in brackets):", '',
-           '| fabric | n | ' + ' | '.join(FIELDS) + ' |',
+  lines = ['', f"{title} (50% / 90% hold the truth; the point's mean error, range "
+           "centre's in brackets):", '',
+           f'| {name} | n | ' + ' | '.join(FIELDS) + ' |',
            '|---' * (len(FIELDS) + 2) + '|']  # fmt: skip
   for m, sm in by.items():
     if not sm:

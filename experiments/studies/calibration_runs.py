@@ -26,6 +26,7 @@ from experiments.pipeline import training as train_lib
 from experiments.studies.calibration_config import (
   NETWORKS_FILE,
   Config,
+  camera_sd_of,
   first_seq,
   network_dirs,
   network_of,
@@ -177,12 +178,13 @@ def _jobs(config: Config, workdir: str, est, reading: str, rows: list,
     rec = loaded.get(i)
     truth = rec.truth if rec is not None else recording_truth(paths[i])
     if rec is not None:
-      # the camera its estimate is told, off by the error it carries
-      rec = rec._replace(pose=told_pose(config, est, rec.pose, seq))
       # '' : no network (estimation.estimate_many compares depth frames directly)
       model_dir = os.path.join(model_roots[k], material) if model_roots else ''
-      job_est = with_reading(config, est.replace(material=material), reading,
-                             truth, seq)  # fmt: skip
+      m, deg = camera_sd_of(config, est, seq)  # the error it carries
+      job_est = with_reading(config, est.replace(material=material, camera_sd_m=m,
+                             camera_sd_deg=deg), reading, truth, seq)  # fmt: skip
+      # the camera its estimate is told, off by the error it carries
+      rec = rec._replace(pose=told_pose(config, job_est, rec.pose, seq))
       jobs[i] = search.Job(job_est, rec, model_dir, wd)
     meta.append({'seq': seq, 'material': material, 'truth': truth,
                  'workdir': wd, 'network': seeds[k] if seeds else None})  # fmt: skip

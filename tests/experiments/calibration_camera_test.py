@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 
 import numpy as np
@@ -29,7 +30,7 @@ from experiments.pipeline import datasets as gen
 from experiments.pipeline import recording as recording_lib
 from experiments.pipeline import simulation as simulation_lib
 from experiments.pipeline.objective import EstimateConfig
-from experiments.studies import calibration
+from experiments.studies import calibration, calibration_analysis
 
 STUDY = calibration.PRESETS['paper']
 POSE = physsim.Pose(
@@ -114,11 +115,59 @@ def test_exact_cameras_match_only_exact_tables():
   assert not carried_errors.covers(2.0, 0.0)  # tilted tables: an exact tilt is not
 
 
-def _write(path, config: EstimateConfig, setting: str) -> None:
+SPREAD = math.log(3.0)  # each component from a third to three times the centre
+
+
+def test_each_recordings_camera_error_size_is_drawn_over_the_range():
+  study = dataclasses.replace(STUDY, camera_sd_spread=SPREAD)
+  est = calibration.study_configs(STUDY)[3].replace(camera_sd_m=0.03, camera_sd_deg=2.0)
+  sds = np.array([calibration.camera_sd_of(study, est, seq) for seq in range(DRAWS)])
+  u = np.log(sds / [0.03, 2.0]) / SPREAD  # uniform in [-1, 1], per component
+  assert np.all(np.abs(u) <= 1 + 1e-4)
+  # 2,000 uniform draws: the mean within 0.026 (2 sd), the sd 1/sqrt(3)
+  np.testing.assert_allclose(u.mean(0), 0.0, atol=0.03)
+  np.testing.assert_allclose(u.std(0), 1 / math.sqrt(3), rtol=0.05)
+  assert abs(np.corrcoef(u.T)[0, 1]) < 0.1  # shift and tilt drawn apart
+  again = calibration.camera_sd_of(study, est, 7)
+  assert again == tuple(sds[7]) != calibration.camera_sd_of(study, est, 8)
+  assert calibration.camera_sd_of(STUDY, est, 7) == (0.03, 2.0)  # no spread
+
+
+def test_recordings_fall_in_thirds_of_the_camera_error_range_by_their_draw():
+  study = dataclasses.replace(STUDY, camera_sd_spread=SPREAD)
+  est = calibration.study_configs(study)[3]
+  study = dataclasses.replace(
+    study, estimate=est.replace(camera_sd_m=0.03, camera_sd_deg=2.0)
+  )
+  est = calibration.study_configs(study)[3]
+  for seq in range(300):
+    m, deg = calibration.camera_sd_of(study, est, seq)
+    place = (math.log(m / 0.03) + math.log(deg / 2.0)) / 2 / SPREAD  # -1 .. 1
+    want = 0 if place < -1 / 3 else 1 if place < 1 / 3 else 2
+    assert calibration_analysis.camera_band(study, seq) == want, (seq, place)
+
+
+def test_a_camera_spread_the_estimate_cannot_carry_is_refused():
+  est = calibration.study_configs(STUDY)[3]
+  for spread, sd, match in (
+    (2.5, (0.03, 2.0), 'in .0, 2.'),
+    (1.0, (0.0, 0.0), 'no camera error to spread'),
+    (2.0, (0.03, 3.0), 'reaches 22.2 cm / 22.2 deg'),
+  ):
+    study = dataclasses.replace(
+      STUDY,
+      camera_sd_spread=spread,
+      estimate=est.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1]),
+    )
+    with pytest.raises(ValueError, match=f'--camera_sd_spread={spread}: .*{match}'):
+      calibration.check_config(study)
+
+
+def _write(path, config: EstimateConfig, setting: str, spread: float = 0.0) -> None:
   path.write_text(json.dumps({
     'n': 4, 'setting': setting, 'sharpness': 0.5,
     'coverage': {'wind_speed': {'interval_90': 0.9, 'interval_50': 0.5}},
-    'config': {'estimate': config.flat()},
+    'config': {'estimate': config.flat(), 'camera_sd_spread': spread},
   }))  # fmt: skip
 
 
@@ -178,10 +227,46 @@ def test_an_error_no_table_covers_is_named_with_what_the_tables_measured(shipped
   )
 
 
+@pytest.fixture
+def ranged(shipped, tmp_path):
+  """``shipped``'s tables and one drawn per recording over 1-9 cm and 0.67-6
+  deg (3 cm / 2 deg, each a third to three times)."""
+  path = calibration_tables.shipped_calibration('shape', 'paper', (0.03, 2.0), SPREAD)
+  assert path.endswith('calibration_shape_paper_camera_1-9cm_0.67-6deg.json')
+  config = shipped.replace(camera_sd_m=0.03, camera_sd_deg=2.0)
+  _write(tmp_path / os.path.basename(path), config, 'cameras off by a range', SPREAD)
+  return shipped
+
+
+def test_a_table_drawn_over_a_range_covers_every_error_in_it(ranged):
+  # inside the range, outside the levels' factor of two: its tables
+  for sd in ((0.012, 0.7), (0.085, 1.0), (0.09, 6.0), (0.011, 5.9)):
+    note = calibration_tables.calibration_note(
+      ranged.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    )
+    assert note['matches'] and note['setting'] == 'cameras off by a range', sd
+  # where a level covers it too, the nearest centre: the level's
+  note = calibration_tables.calibration_note(
+    ranged.replace(camera_sd_m=0.04, camera_sd_deg=3.0)
+  )
+  assert note['setting'] == 'cameras off by 4 cm / 3 deg'
+  # outside the range and every level: named with both kinds of tables
+  (why,) = calibration_tables.calibration_note(
+    ranged.replace(camera_sd_m=0.12, camera_sd_deg=1.0)
+  )['differs']
+  assert why == (
+    'camera alignment error 12 cm / 1 deg, 1 sd (tables measured at exact cameras; '
+    '2 cm / 2 deg; 1-9 cm / 0.67-6 deg; 4 cm / 3 deg; each holds from half to twice '
+    'its own)'
+  )
+
+
 # A paper-size study's structure at the smallest size a CPU runs in a minute
-# or two (as calibration_fabrics_test's), its estimates carrying 3 cm / 2 deg.
+# or two (as calibration_fabrics_test's), its estimates carrying 3 cm / 2 deg,
+# each recording its own error within exp(+-0.5) of that.
 TINY = calibration.Config(
   size='paper', pairs=2, folds=2, backend='c', sharpness_grid=(0.5,), batch_size=4,
+  camera_sd_spread=0.5,
   estimate=EstimateConfig().replace(
     distance='shape', cloth_resolution=8, frames=8, warmup=0.25, q=2, n_init=4,
     max_iter=1, posterior_grid=(4, 8, 4), camera_sd_m=0.03, camera_sd_deg=2.0,
@@ -211,28 +296,42 @@ def test_a_study_carrying_a_camera_error_runs_and_records_it(tmp_path, monkeypat
   monkeypatch.setattr(estimation, 'estimate_many', estimated)
   out = calibration.run(TINY, str(tmp_path))
   assert out['n'] == 4 and len(jobs) == 4
+  centre = calibration.study_configs(TINY)[3]
+  carried = set()
   for job in jobs:
     pose, seq = true[job.recording.source].pose, int(os.path.basename(job.workdir))
+    sd = carried_errors.camera_of(job.config.flat())  # its own, drawn for it
+    assert sd == calibration.camera_sd_of(TINY, centre, seq)
+    assert all(
+      carried_errors.covers(c, m, 0.5) for c, m in zip((0.03, 2.0), sd, strict=True)
+    )
+    carried.add(sd)
     told = calibration.told_pose(TINY, job.config, pose, seq)
     np.testing.assert_array_equal(job.recording.pose.position, told.position)
     assert 0 < np.linalg.norm(told.position - pose.position) < 0.5
-  assert 'cameras off by 3 cm / 2 deg (1 sd)' in out['setting']
-  assert carried_errors.camera_of(out['config']['estimate']) == (0.03, 2.0)
+  assert len(carried) == 4
+  with open(os.path.join(tmp_path, 'calibration.md')) as f:
+    assert 'recordings by the camera error each carried' in f.read()
+  words = carried_errors.table_words((0.03, 2.0, 0.5))
+  assert words == '1.8-4.9 cm / 1.2-3.3 deg'
+  assert f'cameras off by {words} (1 sd, each recording its own)' in out['setting']
+  assert carried_errors.table_of(out) == (0.03, 2.0, 0.5)
   # installed beside the exact cameras' tables, it is what such estimates quote
   base = tmp_path / 'shipped' / 'calibration_shape_paper.json'
   monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
   monkeypatch.setattr(
     calibration_tables, 'SHAPE_CALIBRATION_FILE', str(tmp_path / 'none.json')
   )
-  dest = calibration_tables.shipped_calibration('shape', 'paper', (0.03, 2.0))
-  assert dest == str(base).removesuffix('.json') + '_camera_3cm_2deg.json'
+  dest = calibration_tables.shipped_calibration('shape', 'paper', (0.03, 2.0), 0.5)
+  assert dest == str(base).removesuffix('.json') + '_camera_1.8-4.9cm_1.2-3.3deg.json'
   os.makedirs(os.path.dirname(dest))
   with open(os.path.join(tmp_path, calibration.RESULT_FILE)) as f, open(dest, 'w') as g:
     g.write(f.read())
   est = calibration.study_configs(TINY)[3].replace(point='bayes')
-  for sd in ((0.03, 2.0), (0.05, 1.5)):
+  for sd in ((0.03, 2.0), (0.045, 1.3), (0.02, 3.2)):
     mine = est.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
     assert calibration_tables.calibration_file(mine) == dest
     assert calibration_tables.calibration_note(mine)['matches'], sd
-  exact = est.replace(camera_sd_m=0.0, camera_sd_deg=0.0)
-  assert not calibration_tables.calibration_note(exact)['matches']
+  for sd in ((0.0, 0.0), (0.055, 2.0)):  # exact, or past the range drawn
+    mine = est.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    assert not calibration_tables.calibration_note(mine)['matches'], sd
