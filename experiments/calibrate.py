@@ -21,6 +21,10 @@ r"""Simulation-based calibration of the estimate's credible intervals.
   python -m experiments.calibrate --workdir=out/cal_cam4 --preset=paper \
       --camera_sd_m=0.04 --camera_sd_deg=3 --install  # GPU: tables for
       # estimates that carry the intake's alignment error (4 cm / 3 deg, 1 sd)
+  python -m experiments.calibrate --workdir=out/cal_camr --preset=paper \
+      --camera_sd_m=0.03 --camera_sd_deg=2.5 --camera_sd_spread=1.25 --install
+      # GPU: each recording its own error, 0.86-10.5 cm / 0.72-8.7 deg: the
+      # intake's range in one set of tables
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -35,7 +39,9 @@ error, and each recording's camera is displaced from the pose its estimate
 is told by an error of that size (``calibration_config.told_pose``);
 ``--install`` ships such tables beside the exact cameras' own
 (``carried_errors.camera_path``), where estimates carrying an error within a
-factor of two of theirs quote them.
+factor of two of theirs quote them; with ``--camera_sd_spread`` each
+recording carries its own error, drawn over a range about that one, and the
+tables hold anywhere in the range.
 """
 
 from __future__ import annotations
