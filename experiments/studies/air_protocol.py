@@ -44,14 +44,17 @@ import numpy as np
 import physsim
 from experiments.pipeline import (
   calibration_tables,
+  carried_errors,
   cli,
   estimation,
   files,
   joint,
   objective,
   protocol_checks,
+  simulation,
 )
 from experiments.pipeline import recording as recording_lib
+from experiments.studies import told_cameras
 
 # The protocol joint's quantities whose intervals the study checks.
 QUANTITIES = ('bending_scale', 'area_weight', 'wind_speed', 'air_coefficient')
@@ -86,6 +89,13 @@ class Study:
     measured: the quantities whose coverage the install ships (the rest are
       named as not measured: e.g. one whose intervals changed since the sets
       ran).
+    camera_sd_m, camera_sd_deg: the camera error each estimate carries (1
+      sd; an estimate of a user's recordings carries its intake's), each
+      recording's told camera off by an error of that size
+      (``told_cameras``); 0: cameras known exactly.
+    camera_sd_spread: each recording's error drawn over exp(+-spread) of
+      that (``told_cameras.spread_sd``), so the check holds for errors
+      anywhere in that range; 0: every recording the one error.
     workdir: where the searches keep their files.
     out: JSON path ('' for none).
   """
@@ -104,6 +114,9 @@ class Study:
   pool: tuple[str, ...] = ()
   install: bool = False
   measured: tuple[str, ...] = QUANTITIES
+  camera_sd_m: float = 0.0
+  camera_sd_deg: float = 0.0
+  camera_sd_spread: float = 0.0
   workdir: str = 'out/benchmarks/air_protocol'
   out: str = ''
 
@@ -287,12 +300,42 @@ def _plan(args: Study, base, sets: list[dict]) -> list[tuple]:
     recs = record(args, base, truth, k)
     if k < args.write_sets:
       write_set(os.path.join(args.workdir, 'sets', f'set_{k:02d}'), recs, shared, winds)
+    recs, own = told(args, base, recs, k)
     for mode in args.modes:
       config = base.replace(air_coefficient=mode, **shared)
       wd = os.path.join(args.workdir, mode, f'set_{k:02d}')
-      plan.append((k, mode, wd, joint.joint_jobs(config, recs, '', wd, winds)))
+      plan.append(
+        (k, mode, wd, joint.joint_jobs(config, recs, '', wd, winds, overrides=own))
+      )
     print(f'set {k}: recorded (c {truth["air_coefficient"]:.2f})', flush=True)
   return plan
+
+
+# The streams of the recordings' camera errors (sizes, then poses) in the seed.
+CAMERA_SD_STREAM, CAMERA_STREAM = 47, 43
+
+
+def told(args: Study, base, recs: list, k: int) -> tuple[list, list[dict] | None]:
+  """Set ``k``'s recordings as their estimates are told them, and each one's
+  carried camera error (a joint's ``overrides``; None for cameras known
+  exactly): recording j's error drawn over the range (``camera_sd_spread``)
+  from (seed, k, j), its camera moved by an error of that size."""
+  sd = (args.camera_sd_m, args.camera_sd_deg)
+  if not any(sd):
+    return recs, None
+  pins = simulation.pin_centre(base.simulation)
+  key = jax.random.fold_in(jax.random.key(args.seed), CAMERA_STREAM)
+  out, own = [], []
+  for j, rec in enumerate(recs):
+    m, deg = told_cameras.spread_sd(
+      sd, args.camera_sd_spread, [args.seed, CAMERA_SD_STREAM, k, j]
+    )
+    moved = told_cameras.moved_pose(
+      jax.random.fold_in(jax.random.fold_in(key, k), j), rec.pose, (m, deg), pins
+    )
+    out.append(rec._replace(pose=moved))
+    own.append({'camera_sd_m': m, 'camera_sd_deg': deg})
+  return out, own
 
 
 def score(k: int, mode: str, truth: dict, out: dict, results: list) -> dict:
@@ -450,6 +493,18 @@ def check_args(args: Study) -> None:
   unknown = sorted(set(args.measured) - set(QUANTITIES))
   if unknown:
     raise ValueError(f'--measured: {unknown} not among {QUANTITIES}')
+  sd, spread = (args.camera_sd_m, args.camera_sd_deg), args.camera_sd_spread
+  reach = math.exp(spread)
+  if not (0 <= sd[0] and 0 <= sd[1] and 0 <= spread <= 2) or (spread and not any(sd)):
+    raise ValueError(
+      f'--camera_sd_m={sd[0]} --camera_sd_deg={sd[1]} --camera_sd_spread={spread}: '
+      'need errors >= 0 and a spread in [0, 2] of an error given'
+    )
+  if sd[0] * reach > 0.2 or sd[1] * reach > 20.0:
+    raise ValueError(
+      f'--camera_sd_spread={spread}: the range reaches {100 * sd[0] * reach:.3g} cm / '
+      f'{sd[1] * reach:.3g} deg, past what an estimate may carry (20 cm / 20 deg)'
+    )
 
 
 def check_record(args: Study, summary: dict) -> dict:
@@ -463,7 +518,9 @@ def check_record(args: Study, summary: dict) -> dict:
   held = {**free['held'], 'air_coefficient_90': free['air_held_90'],
           'air_coefficient_50': free['air_held_50']}  # fmt: skip
   key = lambda q: {'bending_scale': 'bending', 'wind_speed': 'wind'}.get(q, q)  # noqa: E731
-  config = _base(args)
+  sd = (args.camera_sd_m, args.camera_sd_deg)
+  config = _base(args).replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+  camera = carried_errors.table_words((*sd, args.camera_sd_spread))
   return {
     'mode': f'protocol joint, {args.fans} fan settings, air free',
     'recordings': args.fans,
@@ -471,8 +528,8 @@ def check_record(args: Study, summary: dict) -> dict:
     'physics': args.physics, 'likelihood': config.scoring.likelihood,
     'sharpness': config.scoring.sharpness,
     'setting': f'{args.material.replace("_", " ")}, {args.estimate} estimate, '
-               'shape distance',
-    'config': {'estimate': config.flat()},
+               f'shape distance, {camera}',
+    'config': {'estimate': config.flat(), 'camera_sd_spread': args.camera_sd_spread},
     'readings': dict(READ), 'length_dof': 0.0,
     'coverage': {
       q: {

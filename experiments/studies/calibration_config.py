@@ -20,6 +20,7 @@ from experiments.pipeline import objective as objective_lib
 from experiments.pipeline import posterior as posterior_lib
 from experiments.pipeline import simulation as simulation_lib
 from experiments.pipeline.objective import EstimateConfig
+from experiments.studies import told_cameras
 
 FIELDS = (*posterior_lib.FIELDS, 'load_ratio')
 # The mode an estimate is in, by the reading it was given (Config.check_reading).
@@ -341,13 +342,11 @@ def camera_sd_of(config: Config, est: EstimateConfig, seq: int) -> tuple[float, 
   """(metres, degrees): the camera error recording ``seq``'s estimate
   carries, and its told camera is off by (``told_pose``): ``est``'s, each
   component times exp(``camera_sd_spread`` x u), u uniform in [-1, 1],
-  drawn from (seed, seq) alone."""
-  m, deg = est.scoring.camera_sd_m, est.scoring.camera_sd_deg
-  if not config.camera_sd_spread:
-    return m, deg
-  u = np.random.default_rng([config.seed, CAMERA_SD_STREAM, seq]).uniform(-1, 1, 2)
-  f = np.exp(config.camera_sd_spread * u)
-  return round(float(m * f[0]), 6), round(float(deg * f[1]), 5)
+  drawn from (seed, seq) alone (``told_cameras.spread_sd``)."""
+  sd = (est.scoring.camera_sd_m, est.scoring.camera_sd_deg)
+  return told_cameras.spread_sd(
+    sd, config.camera_sd_spread, [config.seed, CAMERA_SD_STREAM, seq]
+  )
 
 
 def with_reading(config: Config, est: EstimateConfig, reading: str, truth: dict,
@@ -396,8 +395,6 @@ def estimate_record(config: Config, estimate: EstimateConfig) -> dict:
 
 # The stream of the recordings' camera errors in the study's seed (``told_pose``).
 CAMERA_STREAM = 43
-# One compiled program for every recording's error (hundreds per study).
-_misplaced_pose = jax.jit(physsim.shape.misplaced_pose)
 
 
 def told_pose(config: Config, est: EstimateConfig, pose: physsim.Pose,
@@ -405,21 +402,13 @@ def told_pose(config: Config, est: EstimateConfig, pose: physsim.Pose,
   """The camera pose recording ``seq``'s estimate is told, where ``est``
   carries a camera error (``camera_sd_m`` / ``camera_sd_deg``), as an
   estimate of a user's recording carries the intake's alignment error: the
-  recording's true camera ``pose`` moved by a rigid error of that size
-  (``physsim.shape.misplaced_pose``, as the estimate draws its own: a tilt
-  of ``camera_sd_deg`` per axis about the estimate's pins, then a shift of
-  ``camera_sd_m`` per axis, 1 sd), drawn from (seed, seq) alone, each
-  recording its own. The true camera then lies off the told one by an error
-  of the same law (the inverse of a tilt R about the pins and a shift t is
-  the tilt R^T and the shift -R^T t, isotropic Gaussian again): the error the
-  estimate models. ``pose`` itself where both are 0 (a camera known exactly)."""
-  sd = (est.scoring.camera_sd_m, est.scoring.camera_sd_deg)
-  if not any(sd):
-    return pose
+  recording's true camera ``pose`` moved by a rigid error of that size about
+  the estimate's pins (``told_cameras.moved_pose``), drawn from (seed, seq)
+  alone, each recording its own; ``pose`` itself where both are 0 (a camera
+  known exactly)."""
   key = jax.random.fold_in(jax.random.key(config.seed), CAMERA_STREAM)
-  moved = _misplaced_pose(
-    jax.random.fold_in(key, seq), pose, *sd, simulation_lib.pin_centre(est.simulation)
-  )
-  return physsim.Pose(
-    *(np.asarray(m, np.asarray(p).dtype) for m, p in zip(moved, pose, strict=True))
-  )
+  return told_cameras.moved_pose(
+    jax.random.fold_in(key, seq), pose,
+    (est.scoring.camera_sd_m, est.scoring.camera_sd_deg),
+    simulation_lib.pin_centre(est.simulation),
+  )  # fmt: skip

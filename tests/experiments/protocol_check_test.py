@@ -5,9 +5,20 @@ were like it; the line a person reads names what was not measured."""
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import pytest
 
-from experiments.pipeline import objective, protocol_checks, setup, table_notes
+import physsim
+from experiments.pipeline import (
+  carried_errors,
+  objective,
+  protocol_checks,
+  setup,
+  table_notes,
+)
+from experiments.pipeline import recording as recording_lib
 from experiments.studies import air_protocol
 
 
@@ -99,3 +110,65 @@ def test_a_check_of_other_fan_settings_is_kept_beside_and_read_by_its_count(tmp_
   assert protocol_checks.check_of(2, path)['n'] == 11
   assert protocol_checks.check_of(4, path) is None
   assert protocol_checks.protocol_note(_config(), 4, path) is None
+
+
+def _summary():
+  return {
+    'free': {'sets': 6, 'held_sets': 6, 'air_held_90': 1.0, 'air_held_50': 0.5,
+             'held': {'bending_90': 1.0, 'bending_50': 0.5, 'area_weight_90': 1.0,
+                      'area_weight_50': 0.5, 'wind_90': 1.0, 'wind_50': 0.5}},
+  }  # fmt: skip
+
+
+CAMERA = dict(camera_sd_m=0.03, camera_sd_deg=2.5, camera_sd_spread=math.log(3.0))
+
+
+def test_a_check_with_camera_errors_sits_beside_the_exact_one_and_covers_its_range(
+  tmp_path,
+):
+  record, path = _check(tmp_path)
+  ranged = air_protocol.check_record(air_protocol.Study(**CAMERA), _summary())
+  assert ranged['setting'].endswith('shape distance, 1-9 cm / 0.83-7.5 deg')
+  assert record['setting'].endswith('shape distance, exact cameras')
+  shipped = protocol_checks.with_check({'checks': [record]}, ranged)
+  assert [c['n'] for c in shipped['checks']] == [5, 6]  # both kept, exact first
+  air_protocol.files.write_json(path, shipped)
+  assert protocol_checks.check_of(3, path)['n'] == 5
+  assert protocol_checks.check_of(3, path, (0.03, 2.5, math.log(3.0)))['n'] == 6
+  # a user's protocol through the intake: its carried error within the range
+  for sd in ((0.012, 1.0), (0.08, 6.0), (0.03, 2.5)):
+    note = protocol_checks.protocol_note(
+      _config(camera_sd_m=sd[0], camera_sd_deg=sd[1]), 3, path
+    )
+    assert note['setting'] == ranged['setting'], sd
+  assert (
+    protocol_checks.protocol_note(_config(), 3, path)['setting'] == (record['setting'])
+  )
+  for sd in ((0.12, 2.5), (0.03, 0.5)):  # past the range: not quoted
+    config = _config(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    assert protocol_checks.protocol_note(config, 3, path) is None, sd
+
+
+def test_the_protocol_study_tells_each_recording_its_own_camera_error():
+  study = air_protocol.Study(estimate='smoke', **CAMERA)
+  base = air_protocol._base(study)
+  pose = physsim.Pose(np.eye(3), np.array([0.0, -2.0, 1.0]))
+  recs = [
+    recording_lib.Recording(np.zeros((2, 4, 4), np.float32), 10.0, None, pose, f'r{j}')
+    for j in range(3)
+  ]
+  told, own = air_protocol.told(study, base, recs, k=4)
+  assert len({(o['camera_sd_m'], o['camera_sd_deg']) for o in own}) == 3
+  for rec, o in zip(told, own, strict=True):
+    assert carried_errors.covers(0.03, o['camera_sd_m'], math.log(3.0))
+    assert carried_errors.covers(2.5, o['camera_sd_deg'], math.log(3.0))
+    moved = np.linalg.norm(rec.pose.position - pose.position)
+    assert 0 < moved < 0.6  # moved, by centimetres to decimetres
+  again, _ = air_protocol.told(study, base, recs, k=4)
+  np.testing.assert_array_equal(again[1].pose.position, told[1].pose.position)
+  exact = air_protocol.Study(estimate='smoke')
+  assert air_protocol.told(exact, base, recs, k=4) == (recs, None)
+  for bad in (dict(camera_sd_spread=1.0), dict(camera_sd_m=0.1, camera_sd_deg=1.0,
+                                               camera_sd_spread=1.0)):  # fmt: skip
+    with pytest.raises(ValueError, match='--camera_sd'):
+      air_protocol.check_args(air_protocol.Study(**bad))
