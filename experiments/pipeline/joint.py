@@ -225,18 +225,21 @@ def _finished_setup(jobs: list[Job], results: list) -> Job:
 def _joint_note(configs: list, network: setup_lib.Network,
                 fans: list[str] | None) -> dict | None:  # fmt: skip
   """The calibration note of a joint of recordings with ``configs``
-  (``setup.calibration``), naming what no calibration measured: recordings
-  sharing a fan setting, a known hem mass the first recording lacks."""
+  (``setup.calibration``: each recording's camera error covered), naming
+  what no calibration measured: recordings sharing a fan setting, a known
+  hem mass the first recording lacks."""
   uncalibrated = []
   if fans is not None and len(set(fans)) < len(fans):
     uncalibrated.append('recordings sharing one fan setting')
   hem_masses = [c.simulation.hem_mass for c in configs]
   if any(hem_masses[1:]) and not hem_masses[0]:
     uncalibrated.append('hem_mass (a recording with a known mass at its hem)')
+  cameras = [(c.scoring.camera_sd_m, c.scoring.camera_sd_deg) for c in configs]
   return setup_lib.calibration(
     configs[0], network, joint=True, recordings=len(configs),
     uncalibrated=tuple(uncalibrated),
     every_wind_read=all(c.measured.wind_speed_sd > 0 for c in configs),
+    cameras=tuple(cameras) if len(set(cameras)) > 1 else (),
   )  # fmt: skip
 
 

@@ -24,6 +24,7 @@ import numpy as np
 import physsim
 from experiments.pipeline import (
   calibration_tables,
+  carried_errors,
   embedding,
   measurements,
   protocol_checks,
@@ -132,18 +133,46 @@ def calibration(
   recordings: int = 1,
   uncalibrated: tuple[str, ...] = (),
   every_wind_read: bool = False,
+  cameras: tuple[tuple[float, float], ...] = (),
 ) -> dict | None:
   """``calibration_tables.calibration_note`` of these settings, this network's recipe and
   accuracy, and the mode (a joint estimate of ``recordings`` recordings;
   ``uncalibrated``: what else about it no calibration has measured;
-  ``every_wind_read``: each of them with its own anemometer reading)."""
+  ``every_wind_read``: each of them with its own anemometer reading;
+  ``cameras``: each recording's own camera error, (metres, degrees), where
+  they differ: one check or one table must cover them all)."""
+  variants = [config.replace(camera_sd_m=m, camera_sd_deg=d) for m, d in cameras] or [
+    config
+  ]
   if joint and every_wind_read and not uncalibrated:
-    if found := protocol_checks.protocol_note(config, recordings):
-      return found  # a protocol joint the shipped check covers
-  return calibration_tables.calibration_note(
-    config, joint=joint, recordings=recordings, network=net.recipe,
-    accuracy=net.accuracy, uncalibrated=uncalibrated,
-  )  # fmt: skip
+    found = [protocol_checks.protocol_note(v, recordings) for v in variants]
+    if all(found) and len({f['setting'] for f in found}) == 1:
+      return found[0]  # a protocol joint the shipped check covers
+  notes = [
+    calibration_tables.calibration_note(
+      v,
+      joint=joint,
+      recordings=recordings,
+      network=net.recipe,
+      accuracy=net.accuracy,
+      uncalibrated=uncalibrated,
+    )  # fmt: skip
+    for v in variants
+  ]
+  if None in notes or len(notes) == 1:
+    return notes[0]
+  if missed := next((n for n in notes if not n['matches']), None):
+    return missed  # a recording's camera error no table covers: named
+  if len({n['setting'] for n in notes}) > 1:
+    words = ', '.join(carried_errors.camera_words(c) for c in cameras)
+    return {
+      **{k: notes[0][k] for k in ('n', 'setting', 'likelihood', 'sharpness')
+         if k in notes[0]},
+      'matches': False,
+      'differs': [f'camera alignment errors of the recordings ({words}) '
+                  'within no one table'],
+    }  # fmt: skip
+  return notes[0]
 
 
 def resolve(

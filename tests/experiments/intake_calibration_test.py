@@ -82,3 +82,18 @@ def test_a_users_recording_through_the_intake_quotes_a_measured_calibration(tmp_
   assert 'indicative' not in line
   assert 'cameras off by 4 cm / 2.5 deg' in line
   assert 'held the truth in their 90%/50% intervals' in line
+
+
+def test_a_joint_pair_quotes_the_tables_only_where_each_recordings_error_is_in_them():
+  config = estimate.Args().search
+  net = setup.resolve(config, joint=True, recordings=2).network
+
+  def note(cameras):
+    first = config.replace(camera_sd_m=cameras[0][0], camera_sd_deg=cameras[0][1])
+    return setup.calibration(first, net, joint=True, recordings=2, cameras=cameras)
+
+  both = note(((0.04, 2.5), (0.06, 3.5)))
+  assert both['matches'] and both['mode'] == 'joint pair', both
+  one = note(((0.04, 2.5), (0.02, 1.0)))  # the second's tilt below the tables'
+  assert not one['matches']
+  assert 'camera alignment error 2 cm / 1 deg' in ' '.join(one['differs'])

@@ -5,6 +5,7 @@ were like it; the line a person reads names what was not measured."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -172,3 +173,26 @@ def test_the_protocol_study_tells_each_recording_its_own_camera_error():
                                                camera_sd_spread=1.0)):  # fmt: skip
     with pytest.raises(ValueError, match='--camera_sd'):
       air_protocol.check_args(air_protocol.Study(**bad))
+
+
+def test_a_joints_every_recordings_camera_error_must_be_covered(tmp_path, monkeypatch):
+  record, path = _check(tmp_path)
+  ranged = air_protocol.check_record(air_protocol.Study(**CAMERA), _summary())
+  air_protocol.files.write_json(
+    path, protocol_checks.with_check({'checks': [record]}, ranged)
+  )
+  read = functools.partial(protocol_checks.protocol_note, path=path)
+  monkeypatch.setattr(protocol_checks, 'protocol_note', read)
+  config = _config(camera_sd_m=0.03, camera_sd_deg=2.5)
+  net = setup.resolve(config, joint=True, recordings=3).network
+
+  def note(cameras):
+    return setup.calibration(
+      config, net, joint=True, recordings=3, every_wind_read=True, cameras=cameras
+    )
+
+  inside = ((0.03, 2.5), (0.012, 1.0), (0.08, 6.0))
+  assert note(inside)['setting'] == ranged['setting']
+  # the first recording's error inside, the third's past the range: not quoted
+  outside = note(((0.03, 2.5), (0.012, 1.0), (0.15, 6.0)))
+  assert not outside['matches'] and 'measured' not in outside
