@@ -89,10 +89,11 @@ class Study:
     measured: the quantities whose coverage the install ships (the rest are
       named as not measured: e.g. one whose intervals changed since the sets
       ran).
-    camera_sd_m, camera_sd_deg: the camera error each estimate carries (1
-      sd; an estimate of a user's recordings carries its intake's), each
+    camera_sd_m: the camera shift each estimate carries (m, 1 sd per axis;
+      an estimate of a user's recordings carries its intake's), each
       recording's told camera off by an error of that size
-      (``told_cameras``); 0: cameras known exactly.
+      (``told_cameras``); 0 with ``camera_sd_deg`` 0: cameras known exactly.
+    camera_sd_deg: the same for the camera's tilt about the pins (degrees).
     camera_sd_spread: each recording's error drawn over exp(+-spread) of
       that (``told_cameras.spread_sd``), so the check holds for errors
       anywhere in that range; 0: every recording the one error.
