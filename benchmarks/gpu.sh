@@ -62,6 +62,19 @@
 #                    PAIRS recordings) on 1 GPU and as N processes of one GPU each
 #                    (SHARDED=1: one process over the N), each run with its own
 #                    empty JAX cache.
+#   camera SUB [RUN]   issue 77's runs for estimates carrying the intake's
+#                  alignment error, each camera error drawn per recording over
+#                  CAM (default 3 cm / 2.5 deg, spread 1.25: 0.86-10.5 cm,
+#                  0.72-8.7 deg); every SUB resumes, one call (TIME_LIMIT, default
+#                  540 s) at a time; RUN default /tmp/camera. SUB one of:
+#                  tables: the paper-size calibration (PAIRS, default 15), and
+#                    once simulated its analysis installed; the table is kept in
+#                    RUN (a fresh copy of the tree lacks it) and in $OUT;
+#                  protocol: air_protocol's free-mode check with those errors
+#                    (SETS, default 8, of seed SEED, default 7) into $OUT;
+#                  intake: the windy rig's recordings of another physics (WINDS,
+#                    default six) taken in as a user's, with the tables of RUN,
+#                    one estimate at a time (three at once overrun an H100).
 # Training: at most EPOCHS (30) epochs, chosen on VAL (0.2) of the training
 # simulations, stopping after PATIENCE (4) without a better one. COLUMNS: the
 # methods (default all four). SMOKE=1 checks paper, table1, identify, engine,
@@ -69,7 +82,7 @@
 # processes share it). Set PYTHONPATH yourself if the dependencies live outside
 # the interpreter.
 set -uo pipefail
-stage=${1:?stage: paper, table1, collect, identify, one, fabrics_make, fabrics, engine, render, motion, posterior or scaling}
+stage=${1:?stage: paper, table1, collect, identify, one, fabrics_make, fabrics, engine, render, motion, posterior, scaling or camera}
 shift
 export PYTHONPATH=${PYTHONPATH:+$PYTHONPATH:}$PWD PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-glfw}
 EPOCHS=${EPOCHS:-30} VAL=${VAL:-0.2} PATIENCE=${PATIENCE:-4}
@@ -435,13 +448,52 @@ scaling() (  # SUB [RUN]: one program on 1 GPU and on every GPU
   esac
 )
 
+camera() (  # SUB [RUN]: see the header
+  local sub=${1:?camera: tables, protocol or intake}
+  R=${2:-/tmp/camera}
+  OUT=${OUT:-out/benchmarks/camera}
+  mkdir -p "$R/logs" "$OUT"
+  local limit=${TIME_LIMIT:-540}
+  local cam=${CAM:---camera_sd_m=0.03 --camera_sd_deg=2.5 --camera_sd_spread=1.25}
+  local cal="--preset=paper --pairs=${PAIRS:-15} $cam --workdir=$R/cal"
+  case "$sub" in
+    tables)
+      if [ ! -f "$R/cal/simulated" ]; then
+        step cal_simulate "$((limit + 60))" python -m experiments.calibrate $cal \
+          --simulate_only --time_limit="$limit" && touch "$R/cal/simulated"
+        tail -3 "$R/logs/cal_simulate.log"
+        return 0  # exit 75: not done; either way, call again
+      fi
+      step cal_install 900 python -m experiments.calibrate $cal --analyse_only --install
+      cp experiments/pipeline/calibration_shape_paper_camera_*-*.json "$R/" &&
+        cp "$R"/calibration_shape_paper_camera_*.json "$R/cal/calibration.md" "$OUT/"
+      tail -30 "$R/logs/cal_install.log"
+      ;;
+    protocol)
+      step protocol "$((limit + 60))" python -m experiments.air_protocol --modes=free \
+        --sets="${SETS:-8}" --seed="${SEED:-7}" $cam --workdir="$R/protocol_${SEED:-7}" \
+        --out="$OUT/protocol_${SEED:-7}.json" --time_limit="$limit"
+      tail -8 "$R/logs/protocol.log"
+      ;;
+    intake)
+      cp "$R"/calibration_shape_paper_camera_*.json experiments/pipeline/
+      step intake "$((limit + 60))" python -m benchmarks.windy_rig --preset=gpu \
+        --recipe=mismatched --parallel=1 --recipe_fields=seed="${SEED:-51}" \
+        --winds="${WINDS:-2.5,2.9,3.3,3.7,4.1,4.5}" --workdir="$R/intake_${SEED:-51}"
+      cp "$R/intake_${SEED:-51}/windy_rig.json" "$OUT/intake_${SEED:-51}.json"
+      tail -14 "$R/logs/intake.log"
+      ;;
+    *) echo "unknown camera stage $sub" >&2; exit 2 ;;
+  esac
+)
+
 case "$stage" in
   paper | table1 | identify | one | fabrics_make | fabrics | collect)
     run_folder "${1:-}"
     shift $(($# > 0 ? 1 : 0))
     "$stage" "$@"
     ;;
-  posterior | scaling)
+  posterior | scaling | camera)
     "$stage" "$@"
     ;;
   engine | render | motion)
