@@ -92,7 +92,7 @@ def calibration_file(config=None) -> str:
   mine = carried_errors.camera_of(config.flat())
   return min(own, key=lambda p: (
     len(differing_fields(config, cal := read_calibration(p))),
-    carried_errors.camera_gap(_camera(cal), mine),
+    carried_errors.camera_gap(carried_errors.table_of(cal)[:2], mine),
   ))  # fmt: skip
 
 
@@ -410,11 +410,6 @@ def differing_fields(config, cal: dict) -> list[str]:
     carried_errors.covers(float(calibrated[n]), float(mine[n]), spread)
     if n in carried_errors.CAMERA_FIELDS else _same(mine[n], calibrated[n])
   )]  # fmt: skip
-
-
-def _camera(cal: dict) -> tuple[float, float]:
-  """The camera error calibration ``cal``'s estimates carried (metres, degrees)."""
-  return carried_errors.camera_of(cal.get('config', {}).get('estimate', {}))
 
 
 def _camera_worded(config, cal: dict, names: list[str]) -> list[str]:

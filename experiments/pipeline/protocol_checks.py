@@ -46,17 +46,9 @@ def check_of(
 def with_check(shipped: dict | None, check: dict) -> dict:
   """The shipped file's content with ``check`` in place of the one of its
   number of recordings and camera error (the others kept)."""
-  same = lambda c: (
-    (c['recordings'], table_of(c))
-    == (  # noqa: E731
-      check['recordings'],
-      table_of(check),
-    )
-  )
-  kept = [c for c in (shipped or {}).get('checks', []) if not same(c)]
-  return {
-    'checks': sorted([*kept, check], key=lambda c: (c['recordings'], table_of(c)))
-  }
+  key = lambda c: (c['recordings'], table_of(c))  # noqa: E731
+  kept = [c for c in (shipped or {}).get('checks', []) if key(c) != key(check)]
+  return {'checks': sorted([*kept, check], key=key)}
 
 
 def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):

@@ -141,9 +141,8 @@ def calibration(
   ``every_wind_read``: each of them with its own anemometer reading;
   ``cameras``: each recording's own camera error, (metres, degrees), where
   they differ: one check or one table must cover them all)."""
-  variants = [config.replace(camera_sd_m=m, camera_sd_deg=d) for m, d in cameras] or [
-    config
-  ]
+  variants = [config.replace(camera_sd_m=m, camera_sd_deg=d) for m, d in cameras]
+  variants = variants or [config]
   if joint and every_wind_read and not uncalibrated:
     found = [protocol_checks.protocol_note(v, recordings) for v in variants]
     if all(found) and len({f['setting'] for f in found}) == 1:
@@ -156,7 +155,7 @@ def calibration(
       network=net.recipe,
       accuracy=net.accuracy,
       uncalibrated=uncalibrated,
-    )  # fmt: skip
+    )
     for v in variants
   ]
   if None in notes or len(notes) == 1:

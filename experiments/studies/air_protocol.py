@@ -312,10 +312,6 @@ def _plan(args: Study, base, sets: list[dict]) -> list[tuple]:
   return plan
 
 
-# The streams of the recordings' camera errors (sizes, then poses) in the seed.
-CAMERA_SD_STREAM, CAMERA_STREAM = 47, 43
-
-
 def told(args: Study, base, recs: list, k: int) -> tuple[list, list[dict] | None]:
   """Set ``k``'s recordings as their estimates are told them, and each one's
   carried camera error (a joint's ``overrides``; None for cameras known
@@ -325,11 +321,11 @@ def told(args: Study, base, recs: list, k: int) -> tuple[list, list[dict] | None
   if not any(sd):
     return recs, None
   pins = simulation.pin_centre(base.simulation)
-  key = jax.random.fold_in(jax.random.key(args.seed), CAMERA_STREAM)
+  key = jax.random.fold_in(jax.random.key(args.seed), told_cameras.POSE_STREAM)
   out, own = [], []
   for j, rec in enumerate(recs):
     m, deg = told_cameras.spread_sd(
-      sd, args.camera_sd_spread, [args.seed, CAMERA_SD_STREAM, k, j]
+      sd, args.camera_sd_spread, [args.seed, told_cameras.SD_STREAM, k, j]
     )
     moved = told_cameras.moved_pose(
       jax.random.fold_in(jax.random.fold_in(key, k), j), rec.pose, (m, deg), pins
@@ -494,18 +490,9 @@ def check_args(args: Study) -> None:
   unknown = sorted(set(args.measured) - set(QUANTITIES))
   if unknown:
     raise ValueError(f'--measured: {unknown} not among {QUANTITIES}')
-  sd, spread = (args.camera_sd_m, args.camera_sd_deg), args.camera_sd_spread
-  reach = math.exp(spread)
-  if not (0 <= sd[0] and 0 <= sd[1] and 0 <= spread <= 2) or (spread and not any(sd)):
-    raise ValueError(
-      f'--camera_sd_m={sd[0]} --camera_sd_deg={sd[1]} --camera_sd_spread={spread}: '
-      'need errors >= 0 and a spread in [0, 2] of an error given'
-    )
-  if sd[0] * reach > 0.2 or sd[1] * reach > 20.0:
-    raise ValueError(
-      f'--camera_sd_spread={spread}: the range reaches {100 * sd[0] * reach:.3g} cm / '
-      f'{sd[1] * reach:.3g} deg, past what an estimate may carry (20 cm / 20 deg)'
-    )
+  told_cameras.check_spread(
+    (args.camera_sd_m, args.camera_sd_deg), args.camera_sd_spread
+  )
 
 
 def check_record(args: Study, summary: dict) -> dict:

@@ -298,7 +298,8 @@ def check_config(config: Config) -> None:
       f'--length_sd_spread={config.length_sd_spread}: a spread of log errors in [0, 2]'
     )
   measurements.check_dof(config.length_dof, 'length_dof')
-  _check_camera_spread(config)
+  sc = config.estimate.scoring
+  told_cameras.check_spread((sc.camera_sd_m, sc.camera_sd_deg), config.camera_sd_spread)
   if len(mats) > 1 and uses_networks(config):
     raise ValueError(
       f'--materials={",".join(config.materials)} with --distance='
@@ -312,32 +313,6 @@ def check_config(config: Config) -> None:
     )
 
 
-def _check_camera_spread(config: Config) -> None:
-  """Refuses a camera error's spread out of [0, 2], one without a camera
-  error to spread, or one whose range leaves what an estimate may carry."""
-  spread, sc = config.camera_sd_spread, config.estimate.scoring
-  if not 0.0 <= spread <= 2.0:
-    raise ValueError(
-      f'--camera_sd_spread={spread}: a spread of log camera errors in [0, 2]'
-    )
-  if spread and not (sc.camera_sd_m or sc.camera_sd_deg):
-    raise ValueError(
-      f'--camera_sd_spread={spread}: the estimates carry no camera error to '
-      'spread; give --camera_sd_m and --camera_sd_deg'
-    )
-  f = math.exp(spread)
-  if sc.camera_sd_m * f > 0.2 or sc.camera_sd_deg * f > 20.0:
-    raise ValueError(
-      f'--camera_sd_spread={spread}: the range reaches {100 * sc.camera_sd_m * f:.3g} '
-      f'cm / {sc.camera_sd_deg * f:.3g} deg, past what an estimate may carry '
-      '(20 cm / 20 deg)'
-    )
-
-
-# The stream of the recordings' camera error sizes in the study's seed.
-CAMERA_SD_STREAM = 47
-
-
 def camera_sd_of(config: Config, est: EstimateConfig, seq: int) -> tuple[float, float]:
   """(metres, degrees): the camera error recording ``seq``'s estimate
   carries, and its told camera is off by (``told_pose``): ``est``'s, each
@@ -345,7 +320,7 @@ def camera_sd_of(config: Config, est: EstimateConfig, seq: int) -> tuple[float, 
   drawn from (seed, seq) alone (``told_cameras.spread_sd``)."""
   sd = (est.scoring.camera_sd_m, est.scoring.camera_sd_deg)
   return told_cameras.spread_sd(
-    sd, config.camera_sd_spread, [config.seed, CAMERA_SD_STREAM, seq]
+    sd, config.camera_sd_spread, [config.seed, told_cameras.SD_STREAM, seq]
   )
 
 
@@ -393,10 +368,6 @@ def estimate_record(config: Config, estimate: EstimateConfig) -> dict:
   return {**dataclasses.asdict(config), 'estimate': estimate.flat()}
 
 
-# The stream of the recordings' camera errors in the study's seed (``told_pose``).
-CAMERA_STREAM = 43
-
-
 def told_pose(config: Config, est: EstimateConfig, pose: physsim.Pose,
               seq: int) -> physsim.Pose:  # fmt: skip
   """The camera pose recording ``seq``'s estimate is told, where ``est``
@@ -406,7 +377,7 @@ def told_pose(config: Config, est: EstimateConfig, pose: physsim.Pose,
   the estimate's pins (``told_cameras.moved_pose``), drawn from (seed, seq)
   alone, each recording its own; ``pose`` itself where both are 0 (a camera
   known exactly)."""
-  key = jax.random.fold_in(jax.random.key(config.seed), CAMERA_STREAM)
+  key = jax.random.fold_in(jax.random.key(config.seed), told_cameras.POSE_STREAM)
   return told_cameras.moved_pose(
     jax.random.fold_in(key, seq), pose,
     (est.scoring.camera_sd_m, est.scoring.camera_sd_deg),

@@ -12,6 +12,8 @@ two draws, each from its own explicit seed; the calibration study
 
 from __future__ import annotations
 
+import math
+
 import jax
 import numpy as np
 
@@ -19,6 +21,36 @@ import physsim
 
 # One compiled program for every recording's error (hundreds per study).
 _misplaced_pose = jax.jit(physsim.shape.misplaced_pose)
+# The streams of a study's seed its recordings' camera errors are drawn from:
+# their sizes (``spread_sd``), then the moves (``moved_pose``).
+SD_STREAM, POSE_STREAM = 47, 43
+# The most camera error an estimate may carry (``EstimateConfig.check``).
+MAX_SD = (0.2, 20.0)
+
+
+def check_spread(sd: tuple[float, float], spread: float) -> None:
+  """Refuses a camera error below 0, a spread of it out of [0, 2], one
+  without an error to spread, or one whose range leaves what an estimate
+  may carry (``MAX_SD``), naming the flags."""
+  if min(sd) < 0:
+    raise ValueError(
+      f'--camera_sd_m={sd[0]} --camera_sd_deg={sd[1]}: camera errors are >= 0'
+    )
+  if not 0.0 <= spread <= 2.0:
+    raise ValueError(
+      f'--camera_sd_spread={spread}: a spread of log camera errors in [0, 2]'
+    )
+  if spread and not any(sd):
+    raise ValueError(
+      f'--camera_sd_spread={spread}: the estimates carry no camera error to '
+      'spread; give --camera_sd_m and --camera_sd_deg'
+    )
+  f = math.exp(spread)
+  if sd[0] * f > MAX_SD[0] or sd[1] * f > MAX_SD[1]:
+    raise ValueError(
+      f'--camera_sd_spread={spread}: the range reaches {100 * sd[0] * f:.3g} cm / '
+      f'{sd[1] * f:.3g} deg, past what an estimate may carry (20 cm / 20 deg)'
+    )
 
 
 def spread_sd(
