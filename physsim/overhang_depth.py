@@ -38,8 +38,8 @@ per-pixel median:
 Using the whole curve rather than the tip alone keeps the reading off the
 places a depth camera sees worst: the strip's outline (where sensors drop
 pixels at depth jumps) and its free end. The fit's spread is the ruler's
-share of c (L's sd over L: 1 mm is 1-5% of a 2-12 cm overhang) and the
-shape's, which shrinks with the number of pixels; what the fit does not see
+share of c (about two thirds of L's sd over L: 1 mm is 1-5% of a 2-12 cm
+overhang) and the shape's, which shrinks with the number of pixels; what the fit does not see
 (the strip's curl and thickness, the angle it leaves the edge at, the
 camera's noise pattern) would be a ``FLOOR`` on c's relative uncertainty,
 and the t law's tails. A reading is a Student's t of ``DOF`` degrees of
@@ -83,10 +83,9 @@ MAX_RESIDUAL = 0.004  # m, RMS: points further from any elastica are not a strip
 # Before, at Peirce's two bending lengths: a t of 4 with a 0.8% floor.
 # Kept with the edge's rounding in the reading (issue 77): on the 60 tuning
 # set-ups of ``benchmarks.overhang_check --tune`` (real tables: rounded edges,
-# curl, askew, flying pixels, depth-scale bias), with the rounding read along
-# the camera's rays and the strip's root lifted, its 90% / 50% intervals held
-# 100% / 68%, the fit's spread there nearly all the ruler's 1 mm (the fitted
-# law, a t of 20 without a floor, is no narrower to speak of); checked on
+# curl, askew, flying pixels, depth-scale bias), with the shape fitted at each
+# of the ruler's L (c moves with about two thirds of L's error), its 90% / 50%
+# intervals held 93% / 47% and the fitted law is this one again; checked on
 # MuJoCo's renders (BENCHMARKS).
 DOF = 10.0
 FLOOR = 0.0

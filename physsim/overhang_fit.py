@@ -138,10 +138,13 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
   """The elastica fitted to (N, 2) (reach, drop) points, m, from the front
   face's plane and the top's.
 
-  The curve gives the strip's shape, L / c, and the ruler its length: the
-  shape is fitted at the given overhang L, and c = L / (L / c) with L
-  Gaussian (``overhang`` +- ``overhang_sd``; exact when the sd is 0) and
-  independent of the shape. The curve is not let refine L: what scales it
+  The curve gives the strip's shape, L / c, and the ruler its length: L is
+  Gaussian (``overhang`` +- ``overhang_sd``; exact when the sd is 0), the
+  shape is fitted at each of its nodes, and c = L / (L / c) over both. The
+  shape at a longer L than the strip's is a stiffer one (the seen curve's
+  root, in metres, holds c), so c moves with about two thirds of L's
+  relative error, not all of it: a shape fitted at the given L alone read
+  c's sd half again too wide. The curve is not let refine L: what scales it
   besides L (the sensor's noise along its rays, the strip's thickness, curl,
   and fibres of unequal overhang when it lies askew) moved a refined L by
   3-8% on short strips, more than the ruler's 1 mm, and c with it
@@ -179,13 +182,15 @@ def fit(profile: np.ndarray, overhang: float, overhang_sd: float,
   nodes, node_weight = _setbacks(setback, setback_sd)
   c, joint = [], []
   for k, (back, w) in enumerate(zip(nodes, node_weight, strict=True)):
-    p, jk, res, off = _posterior(
-      profile, overhang + back, ratios, curves, point_sd, back
-    )
+    # (L, R): L / c's posterior at each of the ruler's L, at this setback
+    # (the ruler's L is one of its nodes: the best fit is reported there)
+    post = [
+      _posterior(profile, length + back, ratios, curves, point_sd, back)
+      for length in ls
+    ]  # fmt: skip
     if k == len(nodes) // 2:
-      j, residual, offset = jk, res, off
-    # (L, R): the ruler's L, apart from L / c, at this setback
-    joint.append(w * weight[:, None] * p[None, :])
+      _, j, residual, offset = post[int(np.argmin(np.abs(ls - overhang)))]
+    joint.append(w * weight[:, None] * np.stack([q[0] for q in post]))
     c.append((ls[:, None] + back) / ratios[None, :])
   c, joint = np.stack(c), np.stack(joint)
   mean = float((joint * c).sum())

@@ -104,15 +104,24 @@ def test_an_askew_strips_fibres_each_bend_at_the_edge_and_hang_their_own_length(
 def test_the_overhang_is_the_rulers_the_curve_reads_the_shape():
   """A strip told 1 mm longer than it is: the reading keeps the ruler's L
   (what scales the curve besides L, noise and thickness, would move it) and
-  reads L / c from the shape, so c comes out longer in the ruler's ratio; its
-  sd carries the ruler's 1 mm. (A fit that refined L would move it, and c,
-  towards the rendered truth.)"""
+  reads L / c from the shape at each of the ruler's L, so c moves with part
+  of L's error, and c's sd is that part of the ruler's 1 mm. The part is
+  checked against an independent finite difference: the same points fitted
+  at two exact lengths either side."""
   strip = tabletop.Strip(overhang=0.03, bending_length=0.015)
   told = 0.031
   r = overhang_depth.read(_render(strip, _pose()), INTR, told, 0.001)
   assert r.overhang == told
-  assert r.bending_length == pytest.approx(0.015 * told / 0.03, rel=_CLEAN_TOL / 3)
-  assert r.fit_sd == pytest.approx(0.015 * 0.001 / 0.03, rel=0.2)
+  # d log c / d log L of the shape fitted at an exact L
+  at = [
+    overhang_fit.fit(r.profile, told + d, 0.0, setback=r.edge_radius)['c']
+    for d in (-0.001, 0.001)
+  ]  # fmt: skip
+  part = (at[1] - at[0]) / 0.002 * told / r.bending_length
+  assert 0.3 < part < 0.95, part  # the curve's root holds c: not all of L
+  moved = r.bending_length / 0.015 - 1.0
+  assert moved == pytest.approx(part * (told / 0.03 - 1.0), abs=_CLEAN_TOL / 3)
+  assert r.fit_sd == pytest.approx(part * r.bending_length * 0.001 / told, rel=0.2)
 
 
 def test_the_fits_spread_is_the_spread_over_noise():
