@@ -66,7 +66,9 @@
 #                  alignment error, each camera error drawn per recording over
 #                  CAM (default 3 cm / 2.5 deg, spread 1.25: 0.86-10.5 cm,
 #                  0.72-8.7 deg); every SUB resumes, one call (TIME_LIMIT, default
-#                  540 s) at a time; RUN default /tmp/camera. SUB one of:
+#                  540 s) at a time; RUN default /tmp/camera; the strip's
+#                  bending-length readings drawn as the depth reader's (STRIP,
+#                  default 1.8%, spread 0.55: 0.46-7.1%). SUB one of:
 #                  tables: the paper-size calibration (PAIRS, default 15), and
 #                    once simulated its analysis installed; the table is kept in
 #                    RUN (a fresh copy of the tree lacks it) and in $OUT;
@@ -455,7 +457,8 @@ camera() (  # SUB [RUN]: see the header
   mkdir -p "$R/logs" "$OUT"
   local limit=${TIME_LIMIT:-540}
   local cam=${CAM:---camera_sd_m=0.03 --camera_sd_deg=2.5 --camera_sd_spread=1.25}
-  local cal="--preset=paper --pairs=${PAIRS:-15} $cam --workdir=$R/cal"
+  local strip=${STRIP:---length_sd=0.018 --length_sd_spread=0.55}
+  local cal="--preset=paper --pairs=${PAIRS:-15} $cam $strip --workdir=$R/cal"
   case "$sub" in
     tables)
       if [ ! -f "$R/cal/simulated" ]; then
@@ -471,7 +474,8 @@ camera() (  # SUB [RUN]: see the header
       ;;
     protocol)
       step protocol "$((limit + 60))" python -m experiments.air_protocol --modes=free \
-        --sets="${SETS:-8}" --seed="${SEED:-7}" $cam --workdir="$R/protocol_${SEED:-7}" \
+        --sets="${SETS:-8}" --seed="${SEED:-7}" $cam $strip --length_dof=10 \
+        --workdir="$R/protocol_${SEED:-7}" \
         --out="$OUT/protocol_${SEED:-7}.json" --time_limit="$limit"
       tail -8 "$R/logs/protocol.log"
       ;;

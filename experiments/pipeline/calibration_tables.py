@@ -78,9 +78,9 @@ def shipped_calibrations(distance: str) -> list[str]:
 def calibration_file(config=None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
   (``config.scoring.calibration``), else of those shipped for its distance the
-  one whose settings differ from it least (then the one nearest its camera
-  error), else (none shipped for it) the default one, whose note then names
-  what differs."""
+  one whose settings differ from it least (then whose readings' range holds
+  its readings, then the one nearest its camera error), else (none shipped
+  for it) the default one, whose note then names what differs."""
   scoring = getattr(config, 'scoring', None)
   if given := getattr(scoring, 'calibration', ''):
     return given
@@ -92,8 +92,20 @@ def calibration_file(config=None) -> str:
   mine = carried_errors.camera_of(config.flat())
   return min(own, key=lambda p: (
     len(differing_fields(config, cal := read_calibration(p))),
+    len(_reading_gaps(config, cal)),
     carried_errors.camera_gap(carried_errors.table_of(cal)[:2], mine),
   ))  # fmt: skip
+
+
+def _reading_gaps(config, cal: dict) -> list[str]:
+  """The readings of ``config``'s single-recording mode that calibration
+  ``cal``'s tables were not drawn over (``carried_errors.reading_differences``;
+  none where it has no tables or the readings no mode)."""
+  rec, measured = cal.get('recalibration'), getattr(config, 'measured', None)
+  mode = calibration_mode(measured) if rec and measured is not None else None
+  if mode is None:
+    return []
+  return carried_errors.reading_differences(measured, rec, mode)
 
 
 @functools.lru_cache(maxsize=16)

@@ -43,12 +43,55 @@ def check_of(
   return next((c for c in checks_of(recordings, path) if table_of(c) == want), None)
 
 
+def length_law(check: dict) -> tuple[float, float, float]:
+  """The bending-length readings a check's sets had: (lowest, highest
+  relative sd, t law's degrees of freedom; 0 Gaussian). A check of one sd
+  holds readings within a factor of two of it (``FACTOR``); one drawn over a
+  range (``length_sd_range``) holds that range."""
+  dof = float(check.get('length_dof', 0.0))
+  if 'length_sd_range' in check:
+    lo, hi = check['length_sd_range']
+    return float(lo), float(hi), dof
+  rel = check['readings']['bending_length']
+  return rel / FACTOR, rel * FACTOR, dof
+
+
 def with_check(shipped: dict | None, check: dict) -> dict:
   """The shipped file's content with ``check`` in place of the one of its
-  number of recordings and camera error (the others kept)."""
-  key = lambda c: (c['recordings'], table_of(c))  # noqa: E731
+  number of recordings, camera error and bending-length readings (the
+  others kept)."""
+  key = lambda c: (c['recordings'], table_of(c), length_law(c))  # noqa: E731
   kept = [c for c in (shipped or {}).get('checks', []) if key(c) != key(check)]
   return {'checks': sorted([*kept, check], key=key)}
+
+
+def _covers_readings(check: dict, m) -> bool:
+  """Whether ``check``'s sets had readings like ``m``'s (``Measured``): each
+  within a factor of two of theirs, a bending length within its range and
+  of its error law."""
+  lo, hi, dof = length_law(check)
+  for name, rel in check['readings'].items():
+    value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))
+    if name == 'bending_length':
+      ok = value > 0 and lo * (1 - 1e-9) <= sd / value <= hi * (1 + 1e-9)
+    else:
+      ok = value > 0 and rel / FACTOR <= sd / value <= FACTOR * rel
+    if not ok:
+      return False
+  return m.bending_length_dof == dof
+
+
+def readings_words(check: dict) -> dict[str, str]:
+  """Each reading of ``check``'s sets as its note prints it: its relative sd
+  (a bending length's range where drawn over one, and a t law's degrees of
+  freedom)."""
+  out = {k: f'{100 * v:.2g}%' for k, v in check['readings'].items()}
+  lo, hi, dof = length_law(check)
+  if 'length_sd_range' in check:
+    out['bending_length'] = f'{100 * lo:.2g}-{100 * hi:.2g}%'
+  if dof:
+    out['bending_length'] += f" (Student's t, {dof:g} degrees of freedom)"
+  return out
 
 
 def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
@@ -56,9 +99,9 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   with ``config`` (its readings: an area weight, a bending length, the air
   free; each recording's wind read), or None where the check does not cover
   it: another number of recordings, a likelihood setting, fabric, size or
-  camera error it was not measured with (a check per camera error; the
-  nearest that covers it), or a reading more than twice as certain or
-  uncertain as its sets' (or a bending length of another error law).
+  camera error it was not measured with, or readings unlike its sets'
+  (``_covers_readings``: a check per camera error and bending-length
+  readings; of those that cover it, the nearest camera error's).
 
   The note quotes how often its intervals, as printed (not recalibrated),
   held the truth on those sets (``'measured'``), and names the quantities it
@@ -67,23 +110,22 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   m = config.measured
   given = m.area_weight_sd > 0 and m.bending_length_sd > 0 and m.air_free
   mine = camera_of(config.flat())
-  covering = sorted(  # those measured with its camera error, the nearest first
-    (c for c in checks_of(recordings, path) if not differing_fields(config, c)),
+  if not given:
+    return None
+  covering = sorted(  # those measured with its camera error and readings like
+    (  # its, the nearest camera error first
+      c for c in checks_of(recordings, path)
+      if not differing_fields(config, c) and _covers_readings(c, m)
+    ),
     key=lambda c: camera_gap(table_of(c)[:2], mine),
-  )
-  if not given or not covering:
+  )  # fmt: skip
+  if not covering:
     return None
   check = covering[0]
-  for name, rel in check['readings'].items():
-    value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))
-    if not (value > 0 and rel / FACTOR <= sd / value <= FACTOR * rel):
-      return None
-  if m.bending_length_dof != check.get('length_dof', 0.0):
-    return None
   return {
     'matches': True, 'mode': check['mode'], 'measured': True,
     'shared_discrepancy': True, 'setting': check['setting'],
     'physics': check['physics'], 'coverage': check['coverage'],
     'unmeasured': check.get('unmeasured', []),
-    'readings': {k: f'{100 * v:.2g}%' for k, v in check['readings'].items()},
+    'readings': readings_words(check),
   }  # fmt: skip

@@ -49,12 +49,13 @@ from experiments.pipeline import (
   estimation,
   files,
   joint,
+  measurements,
   objective,
   protocol_checks,
   simulation,
 )
 from experiments.pipeline import recording as recording_lib
-from experiments.studies import told_cameras
+from experiments.studies import calibration_config, told_cameras
 
 # The protocol joint's quantities whose intervals the study checks.
 QUANTITIES = ('bending_scale', 'area_weight', 'wind_speed', 'air_coefficient')
@@ -97,6 +98,15 @@ class Study:
     camera_sd_spread: each recording's error drawn over exp(+-spread) of
       that (``told_cameras.spread_sd``), so the check holds for errors
       anywhere in that range; 0: every recording the one error.
+    length_sd: the strip's bending-length reading's relative sd (a ruler's
+      cantilever 3%; a depth reading's median about 1.8%).
+    length_sd_spread: each set's strip reading's sd drawn as ``length_sd``
+      x exp(spread x z), z standard normal clipped to +-2.5, as a depth
+      reading's varies with the strip's length and pixels (0.55 spans the
+      depth reader's 0.6-7%); 0: every set's ``length_sd``.
+    length_dof: that reading's error law: Student's t of this many degrees
+      of freedom (the depth reader's ``physsim.overhang_depth.DOF``), or 0,
+      Gaussian (a ruler's).
     workdir: where the searches keep their files.
     out: JSON path ('' for none).
   """
@@ -118,6 +128,9 @@ class Study:
   camera_sd_m: float = 0.0
   camera_sd_deg: float = 0.0
   camera_sd_spread: float = 0.0
+  length_sd: float = 0.03
+  length_sd_spread: float = 0.0
+  length_dof: float = 0.0
   workdir: str = 'out/benchmarks/air_protocol'
   out: str = ''
 
@@ -201,15 +214,33 @@ def readings(args: Study, truth: dict, space) -> tuple[dict, list]:
     truth['bending_scale'], truth['area_weight'], space.rigidity
   ))  # fmt: skip
   w = truth['area_weight']
+  weight = w * (1 + READ['area_weight'] * rng.standard_normal())
+  z = rng.standard_normal()
+  # the strip reading's own draws (its sd, a t law's error) from their own
+  # stream: the other readings are the same whatever its law
+  strip = np.random.default_rng([args.seed, 44, int(1e6 * truth['bending_scale'])])
+  clip = calibration_config.LENGTH_SD_CLIP
+  rel = args.length_sd * math.exp(
+    args.length_sd_spread * float(np.clip(strip.standard_normal(), -clip, clip))
+  )
+  if args.length_dof:
+    z = strip.standard_t(args.length_dof) * math.sqrt(
+      (args.length_dof - 2) / args.length_dof
+    )
   shared = {
-    'area_weight': w * (1 + READ['area_weight'] * rng.standard_normal()),
-    'area_weight_sd': READ['area_weight'] * w,
-    'bending_length': c * (1 + READ['bending_length'] * rng.standard_normal()),
-    'bending_length_sd': READ['bending_length'] * c,
-  }
+    'area_weight': weight, 'area_weight_sd': READ['area_weight'] * w,
+    'bending_length': c * (1 + rel * z), 'bending_length_sd': rel * c,
+    **({'bending_length_dof': args.length_dof} if args.length_dof else {}),
+  }  # fmt: skip
   winds = [(v * (1 + READ['wind_speed'] * rng.standard_normal()),
             READ['wind_speed'] * v) for v in truth['winds']]  # fmt: skip
   return shared, winds
+
+
+def length_sd_range(args: Study) -> tuple[float, float]:
+  """The strip readings' relative sds the sets span (``length_sd_spread``)."""
+  k = args.length_sd_spread * calibration_config.LENGTH_SD_CLIP
+  return args.length_sd * math.exp(-k), args.length_sd * math.exp(k)
 
 
 def _flagged(result: dict) -> bool:
@@ -493,6 +524,15 @@ def check_args(args: Study) -> None:
   told_cameras.check_spread(
     (args.camera_sd_m, args.camera_sd_deg), args.camera_sd_spread
   )
+  if not (math.isfinite(args.length_sd) and 0.0 < args.length_sd <= 0.3):
+    raise ValueError(f'--length_sd={args.length_sd}: need a relative sd in (0, 0.3]')
+  if not (math.isfinite(args.length_sd_spread) and 0 <= args.length_sd_spread <= 1):
+    raise ValueError(f'--length_sd_spread={args.length_sd_spread}: need 0 to 1')
+  if args.length_dof and not 2.0 < args.length_dof <= measurements.MAX_DOF:
+    raise ValueError(
+      f'--length_dof={args.length_dof}: need 0 (Gaussian) or more than 2, at most '
+      f'{measurements.MAX_DOF:g}'
+    )
 
 
 def check_record(args: Study, summary: dict) -> dict:
@@ -518,7 +558,10 @@ def check_record(args: Study, summary: dict) -> dict:
     'setting': f'{args.material.replace("_", " ")}, {args.estimate} estimate, '
                f'shape distance, {camera}',
     'config': {'estimate': config.flat(), 'camera_sd_spread': args.camera_sd_spread},
-    'readings': dict(READ), 'length_dof': 0.0,
+    'readings': {**READ, 'bending_length': args.length_sd},
+    'length_dof': args.length_dof,
+    **({'length_sd_range': list(length_sd_range(args))}
+       if args.length_sd_spread else {}),  # fmt: skip
     'coverage': {
       q: {
         **{f'interval_{lv}': held[f'{key(q)}_{lv}'] for lv in (90, 50)},

@@ -14,6 +14,7 @@ search itself is not run: the note is fixed before it starts
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 
 import pytest
@@ -97,3 +98,32 @@ def test_a_joint_pair_quotes_the_tables_only_where_each_recordings_error_is_in_t
   one = note(((0.04, 2.5), (0.02, 1.0)))  # the second's tilt below the tables'
   assert not one['matches']
   assert 'camera alignment error 2 cm / 1 deg' in ' '.join(one['differs'])
+
+
+def test_of_two_tables_that_cover_the_camera_the_one_that_holds_the_readings(
+  tmp_path, monkeypatch
+):
+  """A bending length read more precisely than the nearer camera table's
+  readings were drawn: the estimate quotes the table whose readings' range
+  holds it, not the nearer one that would have to call it indicative."""
+  shipped = calibration_tables.read_calibration(
+    calibration_tables.shipped_calibration('shape', 'paper', SHIPPED)
+  )
+  near, far = tmp_path / 'near.json', tmp_path / 'far.json'
+  wide = json.loads(json.dumps(shipped))
+  wide['config']['estimate']['camera_sd_m'] = 0.06  # further from 4 cm
+  wide['recalibration']['length_sd_range'] = [0.004, 0.08]
+  for path, cal in ((near, shipped), (far, wide)):
+    path.write_text(json.dumps(cal))
+  monkeypatch.setattr(
+    calibration_tables, 'shipped_calibrations', lambda _: [str(near), str(far)]
+  )
+  config = estimate.Args().search.replace(
+    camera_sd_m=0.04, camera_sd_deg=2.5, bending_length=0.02,
+    bending_length_dof=10.0,
+  )  # fmt: skip
+  for rel, chosen in ((0.02, near), (0.006, far)):  # 0.6%: below the near 0.85%
+    mine = config.replace(bending_length_sd=rel * 0.02)
+    assert calibration_tables.calibration_file(mine) == str(chosen), rel
+  mine = config.replace(bending_length_sd=0.006 * 0.02)
+  assert calibration_tables.calibration_note(mine)['matches']

@@ -196,3 +196,67 @@ def test_a_joints_every_recordings_camera_error_must_be_covered(tmp_path, monkey
   # the first recording's error inside, the third's past the range: not quoted
   outside = note(((0.03, 2.5), (0.012, 1.0), (0.15, 6.0)))
   assert not outside['matches'] and 'measured' not in outside
+
+
+DEPTH = dict(length_sd=0.018, length_sd_spread=0.55, length_dof=10.0)
+
+
+def test_a_check_with_depth_readings_of_the_strip_covers_them_beside_the_rulers(
+  tmp_path,
+):
+  """A protocol whose strip a depth camera read (a t of 10, its sd varying
+  with the strip) quotes a check whose sets had such readings, and the
+  ruler's check keeps its ruler readings: each reading law its own check."""
+  record, path = _check(tmp_path)
+  depth = air_protocol.check_record(air_protocol.Study(**DEPTH), _summary())
+  lo, hi = depth['length_sd_range']
+  assert lo == pytest.approx(0.018 * math.exp(-0.55 * 2.5))  # by hand: 0.46%
+  assert hi == pytest.approx(0.018 * math.exp(0.55 * 2.5))  # 7.1%
+  shipped = protocol_checks.with_check({'checks': [record]}, depth)
+  assert len(shipped['checks']) == 2  # beside the ruler's, not in its place
+  air_protocol.files.write_json(path, shipped)
+  for rel in (0.006, 0.018, 0.06):  # a long strip's to a short soft one's
+    m = dict(bending_length_sd=rel * 0.03, bending_length_dof=10.0)
+    note = protocol_checks.protocol_note(_config(**m), 3, path)
+    assert note['coverage']['area_weight']['n'] == 6, rel  # the depth check's
+    assert "0.46-7.1% (Student's t, 10 degrees of freedom)" in (
+      table_notes.calibration_line(note)
+    )
+  ruler = protocol_checks.protocol_note(_config(), 3, path)
+  assert ruler['coverage']['area_weight']['n'] == 4  # the ruler's check
+  for m in (
+    dict(bending_length_sd=0.003 * 0.03, bending_length_dof=10.0),  # below its range
+    dict(bending_length_sd=0.018 * 0.03, bending_length_dof=4.0),  # another t
+    dict(bending_length_sd=0.006 * 0.03),  # a ruler's, below the ruler check's 1.5%
+  ):
+    assert protocol_checks.protocol_note(_config(**m), 3, path) is None, m
+
+
+def test_the_studys_strip_reading_follows_its_law_and_leaves_the_others():
+  space = physsim.search_space('gray_interlock')
+  truth = {'bending_scale': 1.3, 'area_weight': 0.2, 'winds': [2.0, 3.0, 4.0]}
+  ruler, winds = air_protocol.readings(air_protocol.Study(), truth, space)
+  assert 'bending_length_dof' not in ruler  # a Gaussian reading, as files hold it
+  c = physsim.params.bending_length(1.3, 0.2, space.rigidity)
+  assert ruler['bending_length_sd'] == pytest.approx(0.03 * c)
+  sds, errors = [], []
+  for k in range(400):
+    t = {**truth, 'bending_scale': 0.5 + k / 400}
+    depth, depth_winds = air_protocol.readings(air_protocol.Study(**DEPTH), t, space)
+    if k == 0:
+      plain, plain_winds = air_protocol.readings(air_protocol.Study(), t, space)
+      assert depth_winds == plain_winds  # the strip's law moves no other reading
+      assert depth['area_weight'] == plain['area_weight']
+    assert depth['bending_length_dof'] == 10.0
+    ck = physsim.params.bending_length(t['bending_scale'], 0.2, space.rigidity)
+    sds.append(depth['bending_length_sd'] / ck)
+    errors.append((depth['bending_length'] / ck - 1) / sds[-1])
+  lo, hi = air_protocol.length_sd_range(air_protocol.Study(**DEPTH))
+  assert lo <= min(sds) and max(sds) <= hi
+  # log sd's spread 0.55 (clipped at 2.5 sd), errors of unit sd: 400 draws
+  # know an sd to about +-4% (a t of 10's kurtosis widens it a little)
+  assert np.std(np.log(sds)) == pytest.approx(0.55, rel=0.12)
+  assert np.std(errors) == pytest.approx(1.0, rel=0.15)
+  for bad in (dict(length_sd=0.0), dict(length_sd_spread=1.5), dict(length_dof=2.0)):
+    with pytest.raises(ValueError, match='--length'):
+      air_protocol.check_args(air_protocol.Study(**bad))
