@@ -49,13 +49,12 @@ from experiments.pipeline import (
   estimation,
   files,
   joint,
-  measurements,
   objective,
   protocol_checks,
   simulation,
 )
 from experiments.pipeline import recording as recording_lib
-from experiments.studies import calibration_config, told_cameras
+from experiments.studies import protocol_readings, told_cameras
 
 # The protocol joint's quantities whose intervals the study checks.
 QUANTITIES = ('bending_scale', 'area_weight', 'wind_speed', 'air_coefficient')
@@ -139,7 +138,6 @@ PRESETS = {
   'default': Study(),
   'smoke': Study(sets=2, estimate='smoke', image=32, modes=('free',)),
 }
-READ = {'wind_speed': 0.02, 'area_weight': 0.01, 'bending_length': 0.03}
 
 
 def truths(args: Study) -> list[dict]:
@@ -207,40 +205,10 @@ def record(args: Study, config, truth: dict, k: int) -> list:
   return recs
 
 
-def readings(args: Study, truth: dict, space) -> tuple[dict, list]:
-  """The scale's and the strip's readings (shared) and each fan's anemometer's."""
-  rng = np.random.default_rng([args.seed, 43, int(1e6 * truth['bending_scale'])])
-  c = float(physsim.params.bending_length(
-    truth['bending_scale'], truth['area_weight'], space.rigidity
-  ))  # fmt: skip
-  w = truth['area_weight']
-  weight = w * (1 + READ['area_weight'] * rng.standard_normal())
-  z = rng.standard_normal()
-  # the strip reading's own draws (its sd, a t law's error) from their own
-  # stream: the other readings are the same whatever its law
-  strip = np.random.default_rng([args.seed, 44, int(1e6 * truth['bending_scale'])])
-  clip = calibration_config.LENGTH_SD_CLIP
-  rel = args.length_sd * math.exp(
-    args.length_sd_spread * float(np.clip(strip.standard_normal(), -clip, clip))
-  )
-  if args.length_dof:
-    z = strip.standard_t(args.length_dof) * math.sqrt(
-      (args.length_dof - 2) / args.length_dof
-    )
-  shared = {
-    'area_weight': weight, 'area_weight_sd': READ['area_weight'] * w,
-    'bending_length': c * (1 + rel * z), 'bending_length_sd': rel * c,
-    **({'bending_length_dof': args.length_dof} if args.length_dof else {}),
-  }  # fmt: skip
-  winds = [(v * (1 + READ['wind_speed'] * rng.standard_normal()),
-            READ['wind_speed'] * v) for v in truth['winds']]  # fmt: skip
-  return shared, winds
-
-
-def length_sd_range(args: Study) -> tuple[float, float]:
-  """The strip readings' relative sds the sets span (``length_sd_spread``)."""
-  k = args.length_sd_spread * calibration_config.LENGTH_SD_CLIP
-  return args.length_sd * math.exp(-k), args.length_sd * math.exp(k)
+def strip_law(args: Study) -> protocol_readings.StripLaw:
+  """The study's strip readings' law (``protocol_readings.StripLaw``)."""
+  return protocol_readings.StripLaw(args.length_sd, args.length_sd_spread,
+                                    args.length_dof)  # fmt: skip
 
 
 def _flagged(result: dict) -> bool:
@@ -328,7 +296,7 @@ def _plan(args: Study, base, sets: list[dict]) -> list[tuple]:
   space = physsim.search_space(args.material)
   plan = []
   for k, truth in enumerate(sets):
-    shared, winds = readings(args, truth, space)
+    shared, winds = protocol_readings.readings(args.seed, truth, space, strip_law(args))
     recs = record(args, base, truth, k)
     if k < args.write_sets:
       write_set(os.path.join(args.workdir, 'sets', f'set_{k:02d}'), recs, shared, winds)
@@ -524,15 +492,7 @@ def check_args(args: Study) -> None:
   told_cameras.check_spread(
     (args.camera_sd_m, args.camera_sd_deg), args.camera_sd_spread
   )
-  if not (math.isfinite(args.length_sd) and 0.0 < args.length_sd <= 0.3):
-    raise ValueError(f'--length_sd={args.length_sd}: need a relative sd in (0, 0.3]')
-  if not (math.isfinite(args.length_sd_spread) and 0 <= args.length_sd_spread <= 1):
-    raise ValueError(f'--length_sd_spread={args.length_sd_spread}: need 0 to 1')
-  if args.length_dof and not 2.0 < args.length_dof <= measurements.MAX_DOF:
-    raise ValueError(
-      f'--length_dof={args.length_dof}: need 0 (Gaussian) or more than 2, at most '
-      f'{measurements.MAX_DOF:g}'
-    )
+  strip_law(args).check()
 
 
 def check_record(args: Study, summary: dict) -> dict:
@@ -558,9 +518,9 @@ def check_record(args: Study, summary: dict) -> dict:
     'setting': f'{args.material.replace("_", " ")}, {args.estimate} estimate, '
                f'shape distance, {camera}',
     'config': {'estimate': config.flat(), 'camera_sd_spread': args.camera_sd_spread},
-    'readings': {**READ, 'bending_length': args.length_sd},
+    'readings': {**protocol_readings.READ, 'bending_length': args.length_sd},
     'length_dof': args.length_dof,
-    **({'length_sd_range': list(length_sd_range(args))}
+    **({'length_sd_range': list(strip_law(args).range())}
        if args.length_sd_spread else {}),  # fmt: skip
     'coverage': {
       q: {

@@ -20,7 +20,7 @@ from experiments.pipeline import (
   table_notes,
 )
 from experiments.pipeline import recording as recording_lib
-from experiments.studies import air_protocol
+from experiments.studies import air_protocol, protocol_readings
 
 
 def _config(**kw):
@@ -199,6 +199,7 @@ def test_a_joints_every_recordings_camera_error_must_be_covered(tmp_path, monkey
 
 
 DEPTH = dict(length_sd=0.018, length_sd_spread=0.55, length_dof=10.0)
+LAW = protocol_readings.StripLaw(0.018, 0.55, 10.0)  # DEPTH's
 
 
 def test_a_check_with_depth_readings_of_the_strip_covers_them_beside_the_rulers(
@@ -235,23 +236,23 @@ def test_a_check_with_depth_readings_of_the_strip_covers_them_beside_the_rulers(
 def test_the_studys_strip_reading_follows_its_law_and_leaves_the_others():
   space = physsim.search_space('gray_interlock')
   truth = {'bending_scale': 1.3, 'area_weight': 0.2, 'winds': [2.0, 3.0, 4.0]}
-  ruler, winds = air_protocol.readings(air_protocol.Study(), truth, space)
+  ruler, winds = protocol_readings.readings(0, truth, space)
   assert 'bending_length_dof' not in ruler  # a Gaussian reading, as files hold it
   c = physsim.params.bending_length(1.3, 0.2, space.rigidity)
   assert ruler['bending_length_sd'] == pytest.approx(0.03 * c)
   sds, errors = [], []
   for k in range(400):
     t = {**truth, 'bending_scale': 0.5 + k / 400}
-    depth, depth_winds = air_protocol.readings(air_protocol.Study(**DEPTH), t, space)
+    depth, depth_winds = protocol_readings.readings(0, t, space, LAW)
     if k == 0:
-      plain, plain_winds = air_protocol.readings(air_protocol.Study(), t, space)
+      plain, plain_winds = protocol_readings.readings(0, t, space)
       assert depth_winds == plain_winds  # the strip's law moves no other reading
       assert depth['area_weight'] == plain['area_weight']
     assert depth['bending_length_dof'] == 10.0
     ck = physsim.params.bending_length(t['bending_scale'], 0.2, space.rigidity)
     sds.append(depth['bending_length_sd'] / ck)
     errors.append((depth['bending_length'] / ck - 1) / sds[-1])
-  lo, hi = air_protocol.length_sd_range(air_protocol.Study(**DEPTH))
+  lo, hi = LAW.range()
   assert lo <= min(sds) and max(sds) <= hi
   # log sd's spread 0.55 (clipped at 2.5 sd), errors of unit sd: 400 draws
   # know an sd to about +-4% (a t of 10's kurtosis widens it a little)
