@@ -18,6 +18,8 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from experiments.pipeline import (
+  calibration_tables,
+  carried_errors,
   estimation,
   files,
   intake,
@@ -58,21 +60,63 @@ def own_settings(config) -> dict:
   return {k: flat[k] for k in joint.PER_RECORDING if k in flat}
 
 
+# At most this factor an intake's claimed camera error is raised to the
+# lowest a shipped calibration's tables cover (``calibrated_camera``).
+RAISE = 2.0
+
+
+def calibrated_camera(config) -> tuple[float, float]:
+  """The camera error (metres, degrees) an estimate with ``config`` carries
+  so that a shipped calibration's tables cover it: its own where one does
+  or none would; else each component raised, by at most ``RAISE``, to the
+  lowest that the nearest such tables hold. Carrying more error than the
+  intake claims widens the posterior a little (wider is acceptable); a
+  claim below every table's range would print the intervals as indicative."""
+  own = carried_errors.camera_of(config.flat())
+  raised = []
+  for path in calibration_tables.shipped_calibrations(config.scoring.distance):
+    cal = calibration_tables.read_calibration(path)
+    m, deg, spread = carried_errors.table_of(cal)
+    if m <= 0.0 or deg <= 0.0:
+      continue  # exact cameras' tables: no error raised reaches them
+    low = (carried_errors.spread_range(m, spread)[0],
+           carried_errors.spread_range(deg, spread)[0])  # fmt: skip
+    up = tuple(max(o, lo) for o, lo in zip(own, low, strict=True))
+    if any(u > RAISE * o for u, o in zip(up, own, strict=True)):
+      continue
+    moved = config.replace(camera_sd_m=up[0], camera_sd_deg=up[1])
+    if not calibration_tables.differing_fields(moved, cal):
+      raised.append(up)
+  if not raised or own in raised:
+    return own
+  return min(raised, key=lambda up: carried_errors.camera_gap(own, up))
+
+
 def with_alignment_error(config, intakes: list, carry: bool = True):
   """``config`` with the intakes' own alignment error as its camera error
-  (the largest of them) where ``carry`` and the user gave none; and the
-  line that says so, or None."""
+  (the largest of them) where ``carry`` and the user gave none, raised to a
+  calibration's range where it lies just below it (``calibrated_camera``);
+  and the line that says so, or None."""
   sds = [ik.alignment_sd for ik in intakes if ik is not None and any(ik.alignment_sd)]
   if not (carry and sds) or config.scoring.camera_sd_m or config.scoring.camera_sd_deg:
     return config, None
-  m, deg = max(s[0] for s in sds), max(s[1] for s in sds)
+  claimed = max(s[0] for s in sds), max(s[1] for s in sds)
+  config = config.replace(camera_sd_m=claimed[0], camera_sd_deg=claimed[1])
+  m, deg = calibrated_camera(config)
   config = config.replace(camera_sd_m=m, camera_sd_deg=deg)
   config.check()
-  return config, (
+  line = (
     f"the posterior carries the alignment's own error: the camera placed to "
     f'{100 * m:.1f} cm and {deg:g} degrees (1 sd; --camera_sd_m and '
     '--camera_sd_deg set it, --noalignment_sd trusts the placement exactly)'
   )
+  if (m, deg) != claimed:
+    line += (
+      f'; the alignment claimed {100 * claimed[0]:.1f} cm and {claimed[1]:g} '
+      "degrees, raised to the calibration's lowest so that its measured "
+      'coverage applies'
+    )
+  return config, line
 
 
 def alignment_record(intakes: list, config) -> dict | None:

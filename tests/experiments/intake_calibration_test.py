@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import types
 
 import pytest
 
@@ -57,7 +58,8 @@ def test_the_defaults_carrying_an_error_near_the_shipped_one_quote_its_tables():
   config = estimate.Args().search.replace(camera_sd_m=0.05, camera_sd_deg=3.0)
   note = calibration_tables.calibration_note(config)
   assert note['matches'] and note['recalibrated'] and note['mode'] == 'video', note
-  # a given up's usual 1 degree lies outside them: named, not quoted
+  # a given up's usual 1 degree lies outside them: named, not quoted (the
+  # intake carries such a claim as their lowest instead: see below)
   config = config.replace(camera_sd_deg=1.0)
   note = calibration_tables.calibration_note(config)
   assert not note['matches']
@@ -127,3 +129,29 @@ def test_of_two_tables_that_cover_the_camera_the_one_that_holds_the_readings(
     assert calibration_tables.calibration_file(mine) == str(chosen), rel
   mine = config.replace(bending_length_sd=0.006 * 0.02)
   assert calibration_tables.calibration_note(mine)['matches']
+
+
+def test_a_claim_just_below_the_tables_is_raised_to_them_and_says_so():
+  """A given up's 1 degree (the intake's usual claim) is carried as the
+  tables' lowest, 1.25 degrees, so their measured coverage applies, and the
+  printed line says what was claimed; a claim far below (more than twice
+  under), or within them, is carried as it is."""
+  config = estimate.Args().search
+
+  def carried(m, deg):
+    ik = types.SimpleNamespace(alignment_sd=(m, deg))
+    return user_recordings.with_alignment_error(config, [ik])
+
+  raised, line = carried(0.033, 1.0)
+  assert carried_errors.camera_of(raised.flat()) == pytest.approx((0.033, 1.25))
+  assert 'claimed 3.3 cm and 1 degrees, raised' in line
+  note = calibration_tables.calibration_note(raised)
+  assert note['matches'] and note['recalibrated']
+  for sd in ((0.05, 3.0), (0.033, 0.5), (0.009, 2.0)):  # inside; 2.5x; 2.2x under
+    kept, line = carried(*sd)
+    assert carried_errors.camera_of(kept.flat()) == pytest.approx(sd), sd
+    assert 'raised' not in line
+  # an error the user set is theirs: no intake claim replaces it
+  mine = config.replace(camera_sd_m=0.01, camera_sd_deg=0.3)
+  ik = types.SimpleNamespace(alignment_sd=(0.033, 1.0))
+  assert user_recordings.with_alignment_error(mine, [ik]) == (mine, None)
