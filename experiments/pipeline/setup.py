@@ -162,6 +162,14 @@ def calibration(
     return notes[0]
   if missed := next((n for n in notes if not n['matches']), None):
     return missed  # a recording's camera error no table covers: named
+  if len({n['setting'] for n in notes}) > 1 and (common := _common_table(variants)):
+    notes = [  # each nearest another's, but one table covers them all
+      calibration_tables.calibration_note(
+        v.replace(calibration=common), joint=joint, recordings=recordings,
+        network=net.recipe, accuracy=net.accuracy, uncalibrated=uncalibrated,
+      )
+      for v in variants
+    ]  # fmt: skip
   if len({n['setting'] for n in notes}) > 1:
     words = ', '.join(carried_errors.camera_words(c) for c in cameras)
     return {
@@ -172,6 +180,24 @@ def calibration(
                   'within no one table'],
     }  # fmt: skip
   return notes[0]
+
+
+def _common_table(variants) -> str | None:
+  """The shipped calibration whose tables cover every one of ``variants``
+  (each recording's settings, its own camera error), the nearest to their
+  camera errors; None where none does."""
+  shipped = calibration_tables.shipped_calibrations(variants[0].scoring.distance)
+  fits = []
+  for path in shipped:
+    cal = calibration_tables.read_calibration(path)
+    if not any(calibration_tables.differing_fields(v, cal) for v in variants):
+      table = carried_errors.table_of(cal)[:2]
+      gap = sum(
+        carried_errors.camera_gap(table, carried_errors.camera_of(v.flat()))
+        for v in variants
+      )  # fmt: skip
+      fits.append((gap, path))
+  return min(fits)[1] if fits else None
 
 
 def resolve(

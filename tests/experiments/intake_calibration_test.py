@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import types
 
@@ -32,8 +33,11 @@ from experiments.pipeline import (
   user_recordings,
 )
 
-# The tables shipped for a carried camera error (metres, degrees).
+# The tables shipped for a carried camera error (metres, degrees), and those
+# over the intake's range (3 cm / 2.5 deg x exp(+-1.25): 0.86-10.5 cm,
+# 0.72-8.7 deg).
 SHIPPED = (0.04, 2.5)
+RANGED = calibration_tables.shipped_calibration('shape', 'paper', (0.03, 2.5), 1.25)
 
 
 def _prepared(tmp_path, seed: int, wind: float):
@@ -58,12 +62,16 @@ def test_the_defaults_carrying_an_error_near_the_shipped_one_quote_its_tables():
   config = estimate.Args().search.replace(camera_sd_m=0.05, camera_sd_deg=3.0)
   note = calibration_tables.calibration_note(config)
   assert note['matches'] and note['recalibrated'] and note['mode'] == 'video', note
-  # a given up's usual 1 degree lies outside them: named, not quoted (the
-  # intake carries such a claim as their lowest instead: see below)
+  # a given up's usual 1 degree: below them, inside the ranged tables
   config = config.replace(camera_sd_deg=1.0)
+  assert calibration_tables.calibration_file(config) == RANGED
+  assert calibration_tables.calibration_note(config)['matches']
+  # below every range: named, not quoted (the intake raises a claim up to
+  # twice below a range to it: see below)
+  config = config.replace(camera_sd_deg=0.3)
   note = calibration_tables.calibration_note(config)
   assert not note['matches']
-  assert 'camera alignment error 5 cm / 1 deg' in ' '.join(note['differs'])
+  assert 'camera alignment error 5 cm / 0.3 deg' in ' '.join(note['differs'])
 
 
 @pytest.mark.slow
@@ -72,18 +80,20 @@ def test_a_users_recording_through_the_intake_quotes_a_measured_calibration(tmp_
   carried = carried_errors.camera_of(config.flat())
   # the intake's own error, carried into the posterior, inside the tables' range
   assert all(
-    carried_errors.covers(c, m) for c, m in zip(SHIPPED, carried, strict=True)
+    carried_errors.covers(c, m, 1.25) for c, m in zip((0.03, 2.5), carried, strict=True)
   ), carried
   note = setup.calibration(config, net)
   assert note['matches'] and note['recalibrated'], note
-  assert carried_errors.camera_of(
-    calibration_tables.read_calibration(calibration_tables.calibration_file(config))[
-      'config'
-    ]['estimate']
-  ) == pytest.approx(SHIPPED)
+  quoted = calibration_tables.read_calibration(
+    calibration_tables.calibration_file(config)
+  )
+  m, deg, spread = carried_errors.table_of(quoted)
+  assert m > 0 and deg > 0  # tables whose recordings' cameras were off
+  assert carried_errors.covers(m, carried[0], spread)
+  assert carried_errors.covers(deg, carried[1], spread)
   line = table_notes.calibration_line(note)
   assert 'indicative' not in line
-  assert 'cameras off by 4 cm / 2.5 deg' in line
+  assert f'cameras off by {carried_errors.table_words((m, deg, spread))}' in line
   assert 'held the truth in their 90%/50% intervals' in line
 
 
@@ -97,9 +107,13 @@ def test_a_joint_pair_quotes_the_tables_only_where_each_recordings_error_is_in_t
 
   both = note(((0.04, 2.5), (0.06, 3.5)))
   assert both['matches'] and both['mode'] == 'joint pair', both
-  one = note(((0.04, 2.5), (0.02, 1.0)))  # the second's tilt below the tables'
+  # the second's tilt below the 4 cm tables: the ranged ones cover both
+  ranged = calibration_tables.read_calibration(RANGED)
+  two = note(((0.04, 2.5), (0.02, 1.0)))
+  assert two['matches'] and two['setting'] == ranged['setting'], two
+  one = note(((0.04, 2.5), (0.02, 0.3)))  # below every table's tilts
   assert not one['matches']
-  assert 'camera alignment error 2 cm / 1 deg' in ' '.join(one['differs'])
+  assert 'camera alignment error 2 cm / 0.3 deg' in ' '.join(one['differs'])
 
 
 def test_of_two_tables_that_cover_the_camera_the_one_that_holds_the_readings(
@@ -132,22 +146,23 @@ def test_of_two_tables_that_cover_the_camera_the_one_that_holds_the_readings(
 
 
 def test_a_claim_just_below_the_tables_is_raised_to_them_and_says_so():
-  """A given up's 1 degree (the intake's usual claim) is carried as the
-  tables' lowest, 1.25 degrees, so their measured coverage applies, and the
-  printed line says what was claimed; a claim far below (more than twice
-  under), or within them, is carried as it is."""
+  """A claim just below every table's range (0.5 degree against the ranged
+  tables' 0.72) is carried as that lowest, so their measured coverage
+  applies, and the printed line says what was claimed; a claim far below
+  (more than twice under), or within a range, is carried as it is."""
   config = estimate.Args().search
 
   def carried(m, deg):
     ik = types.SimpleNamespace(alignment_sd=(m, deg))
     return user_recordings.with_alignment_error(config, [ik])
 
-  raised, line = carried(0.033, 1.0)
-  assert carried_errors.camera_of(raised.flat()) == pytest.approx((0.033, 1.25))
-  assert 'claimed 3.3 cm and 1 degrees, raised' in line
+  low = 2.5 * math.exp(-1.25)  # the ranged tables' lowest tilt, 0.72 degrees
+  raised, line = carried(0.033, 0.5)
+  assert carried_errors.camera_of(raised.flat()) == pytest.approx((0.033, low))
+  assert 'claimed 3.3 cm and 0.5 degrees, raised' in line
   note = calibration_tables.calibration_note(raised)
   assert note['matches'] and note['recalibrated']
-  for sd in ((0.05, 3.0), (0.033, 0.5), (0.009, 2.0)):  # inside; 2.5x; 2.2x under
+  for sd in ((0.033, 1.0), (0.05, 3.0), (0.033, 0.3), (0.004, 2.0)):  # in; 2.4x; 2.1x
     kept, line = carried(*sd)
     assert carried_errors.camera_of(kept.flat()) == pytest.approx(sd), sd
     assert 'raised' not in line
