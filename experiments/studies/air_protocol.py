@@ -432,6 +432,12 @@ POOLED_ALIKE = (
   'estimate',
   'image',
   'fans',
+  'camera_sd_m',
+  'camera_sd_deg',
+  'camera_sd_spread',
+  'length_sd',
+  'length_sd_spread',
+  'length_dof',
 )
 
 

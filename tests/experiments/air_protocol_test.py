@@ -112,6 +112,12 @@ def test_pooled_runs_must_share_the_studys_settings(tmp_path):
   assert air_protocol.pooled((f'{path}:fixed',)) == []
   air_protocol.files.write_json(str(path), {'args': {}, 'rows': [{'mode': 'free'}]})
   assert len(air_protocol.pooled((str(path),), air_protocol.Study())) == 1  # defaults
+  # sets whose cameras or strips were read otherwise are another check's
+  for ran, name in (({'camera_sd_m': 0.03}, 'camera_sd_m'), ({'length_dof': 10.0},
+                    'length_dof')):  # fmt: skip
+    air_protocol.files.write_json(str(path), {'args': ran, 'rows': [{'mode': 'free'}]})
+    with pytest.raises(ValueError, match=name):
+      air_protocol.pooled((str(path),), air_protocol.Study())
 
 
 def test_pooled_interval_checks_of_named_quantities_only(tmp_path):
