@@ -19,8 +19,9 @@ from experiments.pipeline.carried_errors import FACTOR, camera_gap, camera_of, t
 # Coverage of a protocol joint's intervals (fan settings each with an
 # anemometer, a scale and a bending length; the air coefficient free),
 # measured on protocol sets of another physics (``experiments.air_protocol
-# --install``): ``{"checks": [...]}``, one per number of fan settings. Not
-# recalibrated tables: the intervals as printed, and how often they held.
+# --install``): ``{"checks": [...]}``, one per number of fan settings, camera
+# error and strip reading law (``with_check``). Not recalibrated tables: the
+# intervals as printed, and how often they held.
 PROTOCOL_CHECKS_FILE = os.path.join(os.path.dirname(__file__), 'protocol_checks.json')
 
 
