@@ -141,6 +141,14 @@ def reading_range(space: physsim.SearchSpace, name: str) -> tuple[float, float]:
   return float(lo), float(hi)
 
 
+def unit_error(rng: np.random.Generator, dof: float = 0.0) -> float:
+  """A reading's error in units of its sd: standard normal, or (``dof`` > 2)
+  Student's t of ``dof`` degrees of freedom scaled to unit variance."""
+  if not dof:
+    return float(rng.standard_normal())
+  return float(rng.standard_t(dof) * math.sqrt((dof - 2) / dof))
+
+
 def simulated_reading(
   name: str, truth: dict, rel_sd: float, seed: int, seq: int,
   space: physsim.SearchSpace | None = None, dof: float = 0.0,
@@ -172,7 +180,7 @@ def simulated_reading(
     value = truth[name]
   stream = FIELDS.index(name) if name in FIELDS else len(FIELDS)
   rng = np.random.default_rng([seed, 13, seq, stream])
-  z = rng.standard_t(dof) * math.sqrt((dof - 2) / dof) if dof else rng.standard_normal()
+  z = unit_error(rng, dof)
   v = value * (1.0 + rel_sd * z)
   out = Measured(**{name: v, f'{name}_sd': rel_sd * value})
   return dataclasses.replace(out, bending_length_dof=dof) if dof else out

@@ -346,20 +346,31 @@ def run_material(config: Config, run: dict) -> str:
 LENGTH_SD_CLIP = 2.5  # standard deviations of log error a simulated reading spans
 
 
+def spread_length_sd(sd: float, spread: float, z: float) -> float:
+  """A simulated reading's relative sd: ``sd`` x exp(``spread`` x z), z (a
+  standard normal draw) clipped to +-``LENGTH_SD_CLIP``."""
+  return sd * math.exp(spread * float(np.clip(z, -LENGTH_SD_CLIP, LENGTH_SD_CLIP)))
+
+
+def spread_length_range(sd: float, spread: float) -> tuple[float, float]:
+  """The relative sds ``spread_length_sd`` draws over (its extremes)."""
+  return spread_length_sd(sd, spread, -LENGTH_SD_CLIP), spread_length_sd(
+    sd, spread, LENGTH_SD_CLIP
+  )
+
+
 def length_sd_of(config: Config, seq: int) -> float:
   """Recording ``seq``'s simulated bending-length error (relative):
-  ``length_sd`` x exp(``length_sd_spread`` x z), z drawn from (seed, seq)
-  alone and clipped to +-``LENGTH_SD_CLIP``."""
+  ``spread_length_sd`` of ``length_sd`` and ``length_sd_spread``, z drawn
+  from (seed, seq) alone."""
   z = np.random.default_rng([config.seed, 31, seq]).standard_normal()
-  z = float(np.clip(z, -LENGTH_SD_CLIP, LENGTH_SD_CLIP))
-  return config.length_sd * math.exp(config.length_sd_spread * z)
+  return spread_length_sd(config.length_sd, config.length_sd_spread, z)
 
 
 def length_sd_range(config: Config) -> tuple[float, float]:
   """The relative bending-length errors the length modes' tables were
   fitted over (``length_sd_of``'s extremes)."""
-  k = config.length_sd_spread * LENGTH_SD_CLIP
-  return config.length_sd * math.exp(-k), config.length_sd * math.exp(k)
+  return spread_length_range(config.length_sd, config.length_sd_spread)
 
 
 def estimate_record(config: Config, estimate: EstimateConfig) -> dict:

@@ -18,7 +18,7 @@ import numpy as np
 
 import physsim
 from experiments.pipeline import measurements
-from experiments.studies.calibration_config import LENGTH_SD_CLIP
+from experiments.studies import calibration_config
 
 # relative sd of the anemometer's wind, the scale's area weight and a ruler's
 # bending length
@@ -28,8 +28,9 @@ READ = {'wind_speed': 0.02, 'area_weight': 0.01, 'bending_length': 0.03}
 @dataclasses.dataclass(frozen=True)
 class StripLaw:
   """How a set's strip reading errs: its sd ``sd`` x exp(``spread`` x z), z
-  standard normal clipped to +-``LENGTH_SD_CLIP``; its error Gaussian, or a
-  Student's t of ``dof`` degrees of freedom (> 2) scaled to that sd."""
+  standard normal clipped (``calibration_config.spread_length_sd``); its
+  error Gaussian, or a Student's t of ``dof`` degrees of freedom (> 2)
+  scaled to that sd (``measurements.unit_error``)."""
 
   sd: float = READ['bending_length']
   spread: float = 0.0
@@ -37,8 +38,7 @@ class StripLaw:
 
   def range(self) -> tuple[float, float]:
     """The relative sds the readings span."""
-    k = self.spread * LENGTH_SD_CLIP
-    return self.sd * math.exp(-k), self.sd * math.exp(k)
+    return calibration_config.spread_length_range(self.sd, self.spread)
 
   def check(self) -> None:
     """Refuses a law no reading has, naming its flag."""
@@ -65,10 +65,11 @@ def readings(seed: int, truth: dict, space, strip: StripLaw = StripLaw()):
   weight = w * (1 + READ['area_weight'] * rng.standard_normal())
   z = rng.standard_normal()
   own = np.random.default_rng([seed, 44, key])  # the strip's own stream
-  u = float(np.clip(own.standard_normal(), -LENGTH_SD_CLIP, LENGTH_SD_CLIP))
-  rel = strip.sd * math.exp(strip.spread * u)
+  rel = calibration_config.spread_length_sd(
+    strip.sd, strip.spread, own.standard_normal()
+  )
   if strip.dof:
-    z = own.standard_t(strip.dof) * math.sqrt((strip.dof - 2) / strip.dof)
+    z = measurements.unit_error(own, strip.dof)
   shared = {
     'area_weight': weight, 'area_weight_sd': READ['area_weight'] * w,
     'bending_length': c * (1 + rel * z), 'bending_length_sd': rel * c,
