@@ -61,7 +61,8 @@ def pct_range(rec: dict, name: str) -> str:
   return f'{100 * rec["length_sd" if name == "bending_length" else "measured_sd"]:.2g}%'
 
 
-def _law(dof: float) -> str:
+def law_words(dof: float) -> str:
+  """A reading's error law in words: a t's degrees of freedom, or Gaussian."""
   return f"Student's t, {dof:g} degrees of freedom" if dof else 'Gaussian'
 
 
@@ -82,7 +83,7 @@ def reading_differences(measured, rec: dict, mode: str | None) -> list[str]:
       theirs = 0.0 if mode.endswith('(ruler)') else rec.get('length_dof', 0.0)
       if dof != theirs:
         differs.append(
-          f'bending length error law ({_law(dof)}; calibrated: {_law(theirs)})'
+          f'bending length error law ({law_words(dof)}; calibrated: {law_words(theirs)})'
         )
   return differs
 
@@ -155,12 +156,15 @@ def table_words(table: tuple[float, ...]) -> str:
   return f'{100 * m0:.2g}-{100 * m1:.2g} cm / {d0:.2g}-{d1:.2g} deg'
 
 
-def camera_difference(mine: tuple[float, float], levels: list) -> str:
+def camera_difference(
+  mine: tuple[float, float], levels: list, what: str = 'tables'
+) -> str:
   """The note's words for a carried camera error no table covers: the error
-  and the camera errors the shipped tables were measured at (``levels``:
-  (metres, degrees) or with their spread, ``table_of``), e.g. "camera
-  alignment error 8.5 cm / 3 deg, 1 sd (tables measured at exact cameras;
-  2 cm / 2 deg; each holds from half to twice its own)"."""
+  and the camera errors the shipped tables (or ``what`` else was measured)
+  were measured at (``levels``: (metres, degrees) or with their spread,
+  ``table_of``), e.g. "camera alignment error 8.5 cm / 3 deg, 1 sd (tables
+  measured at exact cameras; 2 cm / 2 deg; each holds from half to twice its
+  own)"."""
   tables = sorted({(*t, 0.0)[:3] for t in levels})
   have = '; '.join(table_words(t) for t in tables)
   if any((t[0] or t[1]) and not t[2] for t in tables) or not tables:
@@ -168,7 +172,7 @@ def camera_difference(mine: tuple[float, float], levels: list) -> str:
   error = (
     f'alignment error {camera_words(mine)}, 1 sd' if any(mine) else 'known exactly'
   )
-  return f'camera {error} (tables measured at {have})'
+  return f'camera {error} ({what} measured at {have})'
 
 
 def camera_path(base: str, sd: tuple[float, float], spread: float = 0.0) -> str:

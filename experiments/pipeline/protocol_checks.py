@@ -5,8 +5,9 @@ scale and a bending length; the air coefficient free) has no recalibrated
 tables: its intervals are printed as the posterior gives them, and how often
 they held the truth was measured on protocol sets of another physics
 (``experiments.air_protocol --install``). An estimate like those sets quotes
-that measurement (``setup.calibration``); any other stays with the tables'
-note (``calibration_tables``).
+that measurement (``setup.calibration``); any other protocol joint is told
+what keeps the nearest check from it (``protocol_miss``), and its intervals
+are printed as indicative.
 """
 
 from __future__ import annotations
@@ -14,7 +15,15 @@ from __future__ import annotations
 import os
 
 from experiments.pipeline.calibration_tables import differing_fields, read_calibration
-from experiments.pipeline.carried_errors import FACTOR, camera_gap, camera_of, table_of
+from experiments.pipeline.carried_errors import (
+  CAMERA_FIELDS,
+  FACTOR,
+  camera_difference,
+  camera_gap,
+  camera_of,
+  law_words,
+  table_of,
+)
 
 # Coverage of a protocol joint's intervals (fan settings each with an
 # anemometer, a scale and a bending length; the air coefficient free),
@@ -70,16 +79,30 @@ def _covers_readings(check: dict, m) -> bool:
   """Whether ``check``'s sets had readings like ``m``'s (``Measured``): each
   within a factor of two of theirs, a bending length within its range and
   of its error law."""
+  return not _reading_misses(check, m)
+
+
+def _reading_misses(check: dict, m) -> list[str]:
+  """The readings of ``m`` unlike ``check``'s sets', each in words: its
+  relative sd outside what the sets had (a factor of two of theirs, a
+  bending length's range), or a bending length of another error law."""
   lo, hi, dof = length_law(check)
+  out = []
   for name, rel in check['readings'].items():
     value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))
-    if name == 'bending_length':
-      ok = value > 0 and lo * (1 - 1e-9) <= sd / value <= hi * (1 + 1e-9)
-    else:
-      ok = value > 0 and rel / FACTOR <= sd / value <= FACTOR * rel
-    if not ok:
-      return False
-  return m.bending_length_dof == dof
+    a, b = (lo, hi) if name == 'bending_length' else (rel / FACTOR, FACTOR * rel)
+    if not (value > 0 and a * (1 - 1e-9) <= sd / value <= b * (1 + 1e-9)):
+      mine = f'{100 * sd / value:.2g}%' if value > 0 else 'none'
+      out.append(
+        f'{name.replace("_", " ")} reading {mine} (checked: '
+        f'{100 * a:.2g}-{100 * b:.2g}%)'
+      )
+  if m.bending_length_dof != dof:
+    out.append(
+      f'bending length error law ({law_words(m.bending_length_dof)}; checked: '
+      f'{law_words(dof)})'
+    )
+  return out
 
 
 def readings_words(check: dict) -> dict[str, str]:
@@ -109,9 +132,8 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   did not measure. A protocol joint keeps its shared discrepancy, as the
   check's sets had it (``'shared_discrepancy'``)."""
   m = config.measured
-  given = m.area_weight_sd > 0 and m.bending_length_sd > 0 and m.air_free
   mine = camera_of(config.flat())
-  if not given:
+  if not is_protocol(m):
     return None
   covering = sorted(  # those measured with its camera error and readings like
     (  # its, the nearest camera error first
@@ -130,3 +152,58 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
     'unmeasured': check.get('unmeasured', []),
     'readings': readings_words(check),
   }  # fmt: skip
+
+
+def is_protocol(measured) -> bool:
+  """Whether an estimate's readings are a protocol's (an area weight and a
+  bending length read, the air coefficient free): what a protocol check is
+  measured for."""
+  return (
+    measured.area_weight_sd > 0 and measured.bending_length_sd > 0 and measured.air_free
+  )
+
+
+def protocol_miss(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
+  """The note of a protocol joint of ``recordings`` with ``config`` that no
+  shipped check covers (``protocol_note`` is None): the nearest check (the
+  fewest differences, then the nearest number of fan settings, then the nearest
+  camera error) and what keeps it from this joint, each in words
+  (``'matches': False``); None where it is no protocol joint or nothing is
+  shipped."""
+  checks = checks_of_any(path)
+  if not is_protocol(config.measured) or not checks:
+    return None
+  counts = sorted({c['recordings'] for c in checks})
+  mine = camera_of(config.flat())
+  levels = [table_of(c) for c in checks]
+
+  def misses(check):
+    names = differing_fields(config, check)
+    out = [] if check['recordings'] == recordings else [
+      f'{recordings} fan settings (protocol checks of '
+      f'{", ".join(map(str, counts))})'
+    ]  # fmt: skip
+    out += [n.replace('_', ' ') for n in names if n not in CAMERA_FIELDS]
+    if set(names) & set(CAMERA_FIELDS):
+      out.append(camera_difference(mine, levels, 'protocol checks'))
+    return out + _reading_misses(check, config.measured)
+
+  nearest = min(
+    checks,
+    key=lambda c: (
+      len(misses(c)),
+      abs(c['recordings'] - recordings),
+      camera_gap(table_of(c)[:2], mine),
+    ),
+  )  # fmt: skip
+  return {
+    'matches': False, 'n': nearest['n'],
+    'setting': f'{nearest["mode"]} ({nearest["setting"]})',
+    'likelihood': nearest['likelihood'], 'sharpness': nearest['sharpness'],
+    'differs': misses(nearest),
+  }  # fmt: skip
+
+
+def checks_of_any(path: str = PROTOCOL_CHECKS_FILE) -> list[dict]:
+  """Every shipped protocol check, of any number of fan settings."""
+  return read_calibration(path).get('checks', []) if os.path.isfile(path) else []

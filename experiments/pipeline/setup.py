@@ -144,9 +144,9 @@ def calibration(
   variants = [config.replace(camera_sd_m=m, camera_sd_deg=d) for m, d in cameras]
   variants = variants or [config]
   if joint and every_wind_read and not uncalibrated:
-    found = [protocol_checks.protocol_note(v, recordings) for v in variants]
-    if all(found) and len({f['setting'] for f in found}) == 1:
-      return found[0]  # a protocol joint the shipped check covers
+    found = _protocol_note(variants, recordings, cameras)
+    if found is not None:
+      return found
   notes = [
     calibration_tables.calibration_note(
       v,
@@ -180,6 +180,25 @@ def calibration(
                   'within no one table'],
     }  # fmt: skip
   return notes[0]
+
+
+def _protocol_note(variants, recordings: int, cameras) -> dict | None:
+  """A protocol joint's note (``protocol_checks``): the shipped check that
+  covers every recording (``variants``: each with its own camera error), or
+  what keeps the nearest check from the first it does not cover; None where
+  it is no protocol joint (the tables' note then)."""
+  found = [protocol_checks.protocol_note(v, recordings) for v in variants]
+  if all(found) and len({f['setting'] for f in found}) == 1:
+    return found[0]
+  if all(found):
+    words = ', '.join(carried_errors.camera_words(c) for c in cameras)
+    return {
+      'matches': False, 'setting': found[0]['setting'],
+      'differs': [f'camera alignment errors of the recordings ({words}) '
+                  'within no one protocol check'],
+    }  # fmt: skip
+  first = next(v for v, f in zip(variants, found, strict=True) if not f)
+  return protocol_checks.protocol_miss(first, recordings)
 
 
 def _common_table(variants) -> str | None:

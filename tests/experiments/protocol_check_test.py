@@ -74,19 +74,60 @@ def test_a_protocol_joint_like_the_checks_sets_quotes_it(tmp_path):
 
 
 @pytest.mark.parametrize(
-  'recordings, change',
+  'recordings, change, named',
   [
-    (2, {}),  # the sets had three fan settings
-    (3, {'material': 'black_denim'}),  # another fabric's box
-    (3, {'area_weight_sd': 0.01}),  # a scale five times as uncertain
-    (3, {'bending_length_dof': 4.0}),  # a depth camera's t law
-    (3, {'air_coefficient': 'fixed'}),
-    (3, {'q': 8}),  # another search budget
+    (2, {}, '2 fan settings (protocol checks of 3)'),  # the sets had three
+    (3, {'material': 'black_denim'}, 'material'),  # another fabric's box
+    # a scale five times as uncertain: 5% against the sets' 1% (x/2 to x2)
+    (3, {'area_weight_sd': 0.01}, 'area weight reading 5% (checked: 0.5-2%)'),
+    (
+      3,
+      {'bending_length_dof': 4.0},
+      "bending length error law (Student's t, 4 degrees of freedom; checked: Gaussian)",
+    ),  # a depth camera's t law
+    (3, {'air_coefficient': 'fixed'}, None),  # no protocol: the tables' note
+    (3, {'q': 8}, 'q'),  # another search budget
   ],
 )
-def test_a_joint_unlike_the_checks_sets_does_not_quote_it(tmp_path, recordings, change):
-  _, path = _check(tmp_path)
-  assert protocol_checks.protocol_note(_config(**change), recordings, path) is None
+def test_a_joint_unlike_the_checks_sets_does_not_quote_it_and_is_told_why(
+  tmp_path, recordings, change, named
+):
+  record, path = _check(tmp_path)
+  config = _config(**change)
+  assert protocol_checks.protocol_note(config, recordings, path) is None
+  miss = protocol_checks.protocol_miss(config, recordings, path)
+  if named is None:
+    assert miss is None
+    return
+  assert not miss['matches'] and miss['differs'] == [named]
+  line = table_notes.calibration_line(miss)
+  assert f'measured for {record["mode"]} ({record["setting"]})' in line
+  assert named in line and line.endswith('treat the intervals as indicative.')
+
+
+def test_a_joint_is_told_of_the_nearest_check_and_every_difference(tmp_path):
+  """Of the checks of two and three fan settings, a joint of four is told
+  of the three's; one past a check's camera errors is told the errors the
+  checks were measured at, beside its other differences."""
+  record, path = _check(tmp_path)
+  two = {**record, 'recordings': 2, 'n': 9}
+  air_protocol.files.write_json(
+    path, protocol_checks.with_check({'checks': [record]}, two)
+  )
+  four = protocol_checks.protocol_miss(_config(), 4, path)
+  assert four['n'] == record['n'] and four['differs'] == [
+    '4 fan settings (protocol checks of 2, 3)'
+  ]
+  far = _config(camera_sd_m=0.03, camera_sd_deg=2.5, area_weight_sd=0.01)
+  miss = protocol_checks.protocol_miss(far, 3, path)
+  assert miss['n'] == record['n'] and miss['differs'] == [
+    'camera alignment error 3 cm / 2.5 deg, 1 sd (protocol checks measured at exact'
+    ' cameras)',
+    'area weight reading 5% (checked: 0.5-2%)',
+  ]
+  assert (
+    protocol_checks.protocol_miss(_config(), 3, str(tmp_path / 'none.json')) is None
+  )
 
 
 def test_the_shipped_check_is_what_a_protocol_estimates_note_quotes():
@@ -98,6 +139,10 @@ def test_the_shipped_check_is_what_a_protocol_estimates_note_quotes():
   assert note['measured'] and note['mode'] == 'protocol joint, 3 fan settings, air free'
   plain = setup.calibration(config, net, joint=True, recordings=3)
   assert not plain['matches']
+  depth = config.replace(bending_length_dof=10.0)  # the protocol's, not a check's
+  missed = setup.calibration(depth, net, joint=True, recordings=3, every_wind_read=True)
+  assert not missed['matches'] and missed['setting'].startswith('protocol joint, 3 fan')
+  assert any('error law' in d for d in missed['differs'])
 
 
 def test_a_check_of_other_fan_settings_is_kept_beside_and_read_by_its_count(tmp_path):
@@ -181,8 +226,9 @@ def test_a_joints_every_recordings_camera_error_must_be_covered(tmp_path, monkey
   air_protocol.files.write_json(
     path, protocol_checks.with_check({'checks': [record]}, ranged)
   )
-  read = functools.partial(protocol_checks.protocol_note, path=path)
-  monkeypatch.setattr(protocol_checks, 'protocol_note', read)
+  for name in ('protocol_note', 'protocol_miss'):
+    read = functools.partial(getattr(protocol_checks, name), path=path)
+    monkeypatch.setattr(protocol_checks, name, read)
   config = _config(camera_sd_m=0.03, camera_sd_deg=2.5)
   net = setup.resolve(config, joint=True, recordings=3).network
 
@@ -193,9 +239,12 @@ def test_a_joints_every_recordings_camera_error_must_be_covered(tmp_path, monkey
 
   inside = ((0.03, 2.5), (0.012, 1.0), (0.08, 6.0))
   assert note(inside)['setting'] == ranged['setting']
-  # the first recording's error inside, the third's past the range: not quoted
+  # the first recording's error inside, the third's past the range: not
+  # quoted, and told the errors the checks were measured at
   outside = note(((0.03, 2.5), (0.012, 1.0), (0.15, 6.0)))
   assert not outside['matches'] and 'measured' not in outside
+  assert outside['differs'][0].startswith('camera alignment error 15 cm / 6 deg')
+  assert 'exact cameras; 1-9 cm / 0.83-7.5 deg' in outside['differs'][0]
 
 
 DEPTH = dict(length_sd=0.018, length_sd_spread=0.55, length_dof=10.0)
