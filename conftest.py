@@ -20,8 +20,9 @@ import tempfile
 # Quiet and small: no TF-style logging, no preallocation if a GPU is present.
 os.environ.setdefault('TF_CPP_MIN_LOG_LEVEL', '2')
 os.environ.setdefault('XLA_PYTHON_CLIENT_PREALLOCATE', 'false')
-# Two CPU devices, as the scripts have one per core (cli.host_devices): lockstep
-# searches put their GPs on different devices, and the tests cover that path.
+# Two CPU devices (the scripts have one per core but one: cli.host_devices):
+# lockstep searches put their GPs on different devices, and the tests cover
+# that path (at the tests' small sizes it has not hung: cli_test says why it can).
 if 'xla_force_host_platform_device_count' not in os.environ.get('XLA_FLAGS', ''):
   os.environ['XLA_FLAGS'] = (
     os.environ.get('XLA_FLAGS', '') + ' --xla_force_host_platform_device_count=2'

@@ -377,14 +377,22 @@ def parse(cls, presets: Mapping[str, object], argv: list[str]):
 
 
 def host_devices(n: int | None = None) -> None:
-  """Asks XLA for ``n`` CPU devices (default: one per core) unless the
-  environment already says how many, so that independent host work (one GP
-  per recording in a lockstep estimate) runs in parallel: one CPU device runs
-  its programs one at a time. Takes effect only before JAX starts its backends."""
+  """Asks XLA for ``n`` CPU devices (default: one fewer than the cores, at
+  least one) unless the environment already says how many, so that
+  independent host work (one GP per recording in a lockstep estimate) runs in
+  parallel: one CPU device runs its programs one at a time.
+
+  Not one per core: jaxlib's batched LAPACK kernels (a GP's Cholesky over a
+  batch of candidates) wait inside XLA's intra-op thread pool, one thread per
+  core, for work they put on that same pool; with a device per core every
+  pool thread can be such a waiter and none is left to do the work, a
+  deadlock (a lockstep estimate at the default size hung at its first GP step
+  on two cores). One thread more than devices keeps one free. Takes effect
+  only before JAX starts its backends."""
   flags_ = os.environ.get('XLA_FLAGS', '')
   if 'xla_force_host_platform_device_count' in flags_:
     return
-  n = n or os.cpu_count() or 1
+  n = n or max(1, (os.cpu_count() or 1) - 1)
   os.environ['XLA_FLAGS'] = (
     f'{flags_} --xla_force_host_platform_device_count={n}'.strip()
   )

@@ -149,7 +149,7 @@ class _Lockstep:
 
   The searches' GP steps run as one program per setting (bo.batched), their
   rows stacked over the recordings and spread over the host's CPU devices
-  (one per core: cli.host_devices) or the local GPUs. The batch keeps its
+  (one per core but one: cli.host_devices) or the local GPUs. The batch keeps its
   first size (on CPUs the rows of searches that finished are skipped), so
   the program compiles once.
   """

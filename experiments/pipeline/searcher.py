@@ -95,7 +95,7 @@ def gp_device(i: int = 0):
   holds tens to hundreds of points, so on a GPU its L-BFGS loops only wait on
   kernel launches, while the GPU has the simulations to run. ``estimate_many``
   asks all its searches at once (``bo.batched``), spread over every CPU device
-  (``cli.host_devices`` makes one per core)."""
+  (``cli.host_devices`` makes one per core but one)."""
   cpus = jax.local_devices(backend='cpu')  # this process's, under jax.distributed
   return cpus[i % len(cpus)]
 

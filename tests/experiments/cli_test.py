@@ -175,3 +175,45 @@ def test_a_user_error_is_one_line_and_exit_status_2(tmp_path):
     cmd + ['--verbose'], cwd=_ROOT, env=env, capture_output=True, text=True
   )
   assert verbose.returncode != 0 and 'Traceback' in verbose.stderr
+
+
+@pytest.mark.parametrize('cores, devices', [(1, 1), (2, 1), (8, 7)])
+def test_scripts_ask_for_one_host_device_fewer_than_cores(monkeypatch, cores, devices):
+  monkeypatch.delenv('XLA_FLAGS', raising=False)
+  monkeypatch.setattr(os, 'cpu_count', lambda: cores)
+  cli.host_devices()
+  assert os.environ['XLA_FLAGS'] == f'--xla_force_host_platform_device_count={devices}'
+  monkeypatch.setenv('XLA_FLAGS', '--xla_force_host_platform_device_count=3')
+  cli.host_devices()  # the environment's count is kept
+  assert os.environ['XLA_FLAGS'] == '--xla_force_host_platform_device_count=3'
+
+
+# A GP step's shape on CPU devices (bo.batched 'map'): rows sharded over every
+# device, each a batch of Cholesky factorisations. With a device per core,
+# jaxlib's batched LAPACK kernels can wait in every thread of XLA's intra-op
+# pool for work queued on it: on two cores, two devices hung 3 runs of 3 (one
+# device: 2.7 s).
+_CHOLESKY_OVER_DEVICES = """
+from experiments.pipeline import cli
+cli.host_devices()
+import jax, jax.numpy as jnp, numpy as np
+jax.config.update('jax_enable_x64', True)
+mesh = jax.sharding.Mesh(np.array(jax.devices()), ('x',))
+spec = jax.sharding.PartitionSpec('x')
+rows = lambda a: jax.lax.map(lambda m: jnp.linalg.cholesky(m).sum(), a)
+f = jax.jit(jax.shard_map(rows, mesh=mesh, in_specs=spec, out_specs=spec))
+b = 2 * np.eye(40) + np.zeros((2 * len(jax.devices()), 64, 40, 40))
+for _ in range(100):
+  assert np.isclose(float(jax.device_get(f(b)).sum()), len(b) * 64 * 40 * 2**0.5)
+print('ok', len(jax.devices()))
+"""
+
+
+def test_the_host_devices_run_batched_cholesky_without_deadlock():
+  env = {k: v for k, v in os.environ.items() if k != 'XLA_FLAGS'}
+  out = subprocess.run(
+    [sys.executable, '-c', _CHOLESKY_OVER_DEVICES], env=env, capture_output=True,
+    text=True, timeout=120,
+  )  # fmt: skip
+  assert out.returncode == 0, out.stderr[-2000:]
+  assert out.stdout.split() == ['ok', str(max(1, (os.cpu_count() or 1) - 1))]
