@@ -37,10 +37,7 @@ PROTOCOL_CHECKS_FILE = os.path.join(os.path.dirname(__file__), 'protocol_checks.
 def checks_of(recordings: int, path: str = PROTOCOL_CHECKS_FILE) -> list[dict]:
   """The shipped checks of protocol joints of ``recordings`` fan settings
   (one per camera error they were measured with; ``carried_errors.table_of``)."""
-  if not os.path.isfile(path):
-    return []
-  checks = read_calibration(path).get('checks', [])
-  return [c for c in checks if c['recordings'] == recordings]
+  return [c for c in checks_of_any(path) if c['recordings'] == recordings]
 
 
 def check_of(
@@ -188,19 +185,19 @@ def protocol_miss(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
       out.append(camera_difference(mine, levels, 'protocol checks'))
     return out + _reading_misses(check, config.measured)
 
-  nearest = min(
-    checks,
-    key=lambda c: (
-      len(misses(c)),
-      abs(c['recordings'] - recordings),
-      camera_gap(table_of(c)[:2], mine),
+  differs, nearest = min(
+    ((misses(c), c) for c in checks),
+    key=lambda mc: (
+      len(mc[0]),
+      abs(mc[1]['recordings'] - recordings),
+      camera_gap(table_of(mc[1])[:2], mine),
     ),
   )  # fmt: skip
   return {
     'matches': False, 'n': nearest['n'],
     'setting': f'{nearest["mode"]} ({nearest["setting"]})',
     'likelihood': nearest['likelihood'], 'sharpness': nearest['sharpness'],
-    'differs': misses(nearest),
+    'differs': differs,
   }  # fmt: skip
 
 

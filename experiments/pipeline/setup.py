@@ -171,15 +171,21 @@ def calibration(
       for v in variants
     ]  # fmt: skip
   if len({n['setting'] for n in notes}) > 1:
-    words = ', '.join(carried_errors.camera_words(c) for c in cameras)
-    return {
-      **{k: notes[0][k] for k in ('n', 'setting', 'likelihood', 'sharpness')
-         if k in notes[0]},
-      'matches': False,
-      'differs': [f'camera alignment errors of the recordings ({words}) '
-                  'within no one table'],
-    }  # fmt: skip
+    return _cameras_apart(notes[0], cameras, 'table')
   return notes[0]
+
+
+def _cameras_apart(note: dict, cameras, what: str) -> dict:
+  """The note of a joint whose recordings' camera errors (``cameras``) no one
+  ``what`` (a table, a protocol check) covers, headed as ``note`` (the
+  first recording's)."""
+  words = ', '.join(carried_errors.camera_words(c) for c in cameras)
+  return {
+    **{k: note[k] for k in ('n', 'setting', 'likelihood', 'sharpness') if k in note},
+    'matches': False,
+    'differs': [f'camera alignment errors of the recordings ({words}) '
+                f'within no one {what}'],
+  }  # fmt: skip
 
 
 def _protocol_note(variants, recordings: int, cameras) -> dict | None:
@@ -191,12 +197,7 @@ def _protocol_note(variants, recordings: int, cameras) -> dict | None:
   if all(found) and len({f['setting'] for f in found}) == 1:
     return found[0]
   if all(found):
-    words = ', '.join(carried_errors.camera_words(c) for c in cameras)
-    return {
-      'matches': False, 'setting': found[0]['setting'],
-      'differs': [f'camera alignment errors of the recordings ({words}) '
-                  'within no one protocol check'],
-    }  # fmt: skip
+    return _cameras_apart(found[0], cameras, 'protocol check')
   first = next(v for v, f in zip(variants, found, strict=True) if not f)
   return protocol_checks.protocol_miss(first, recordings)
 
