@@ -245,6 +245,12 @@ def test_a_joints_every_recordings_camera_error_must_be_covered(tmp_path, monkey
   assert not outside['matches'] and 'measured' not in outside
   assert outside['differs'][0].startswith('camera alignment error 15 cm / 6 deg')
   assert 'exact cameras; 1-9 cm / 0.83-7.5 deg' in outside['differs'][0]
+  # each recording covered, but by different checks (exact, ranged): named
+  apart = note(((0.0, 0.0), (0.03, 2.5), (0.03, 2.5)))
+  assert not apart['matches'] and apart['differs'] == [
+    'camera alignment errors of the recordings (0 cm / 0 deg, 3 cm / 2.5 deg,'
+    ' 3 cm / 2.5 deg) within no one protocol check'
+  ]
 
 
 DEPTH = dict(length_sd=0.018, length_sd_spread=0.55, length_dof=10.0)
