@@ -166,7 +166,7 @@ def combine_joint(jobs: list[Job], results: list, workdir: str,
   # The settings the recordings share.
   config = configs[0].replace(wind_speed=0.0, wind_speed_sd=0.0)
   key = jax.random.fold_in(jax.random.key(config.seed), 11)
-  note = _joint_note(configs, first.setup.network, fans)
+  note = joint_note(configs, first.setup.network, fans)
   # A joint the shipped tables cover was calibrated, and checked on another
   # physics, without a shared discrepancy; elsewhere (and in the protocol
   # check's sets) the discrepancy keeps its recordings from averaging away
@@ -222,7 +222,7 @@ def _finished_setup(jobs: list[Job], results: list) -> Job:
   return first
 
 
-def _joint_note(configs: list, network: setup_lib.Network,
+def joint_note(configs: list, network: setup_lib.Network,
                 fans: list[str] | None) -> dict | None:  # fmt: skip
   """The calibration note of a joint of recordings with ``configs``
   (``setup.calibration``: each recording's camera error covered), naming

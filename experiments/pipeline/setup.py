@@ -256,6 +256,21 @@ def resolve(
     net = network_record
     check_material(net, config.simulation.material, allow_other_material)
   mesh = obj_lib.mesh(config.simulation)
+  space, widened = search_box(config)
+  return Setup(
+    config=config,
+    network=net,
+    mesh=mesh,
+    pin_centre=mesh.vertices[mesh.pinned].mean(0),
+    space=space,
+    calibration=estimate_note(config, net, joint=joint, recordings=recordings),
+    widened=tuple(widened),
+  )
+
+
+def search_box(config: obj_lib.EstimateConfig):
+  """The estimate's search space (``measurements.search_box``: widened to
+  hold its readings, or the one ``--box`` set) and what widened it."""
   space, widened = measurements.search_box(
     config.simulation.material, config.measured, config.search.box
   )
@@ -263,18 +278,18 @@ def resolve(
     physsim.search_space(config.simulation.material).bounds().ravel()
   ):
     widened = [f'search box set to {tuple(config.search.box)} (--box)']
-  return Setup(
-    config=config,
-    network=net,
-    mesh=mesh,
-    pin_centre=mesh.vertices[mesh.pinned].mean(0),
-    space=space,
-    calibration=calibration(
-      config,
-      net,
-      joint=joint,
-      recordings=recordings,
-      uncalibrated=("a search box other than the fabric's",) if widened else (),
-    ),  # fmt: skip
-    widened=tuple(widened),
-  )
+  return space, widened
+
+
+def estimate_note(
+  config: obj_lib.EstimateConfig, net: Network, *, joint: bool = False,
+  recordings: int = 1,
+) -> dict | None:  # fmt: skip
+  """The calibration note an estimate with ``config`` and ``net`` prints
+  (``calibration``), a search box other than the fabric's named among
+  what no calibration measured."""
+  widened = search_box(config)[1]
+  return calibration(
+    config, net, joint=joint, recordings=recordings,
+    uncalibrated=("a search box other than the fabric's",) if widened else (),
+  )  # fmt: skip

@@ -28,6 +28,7 @@ from experiments.pipeline import (
   intake_record,
   joint,
   layout,
+  reading_floor,
   setup,
   takes,
 )
@@ -194,7 +195,9 @@ class Prepared(NamedTuple):
     configs: each one's estimate settings (its own set-up, its alignment error).
     intakes: each one's intake, or None (a project sequence read as it is).
     lines: what the user should read before the answer (each alignment
-      error carried into a posterior).
+      error carried into a posterior, readings carried less precise).
+    readings: the readings' uncertainties carried in place of the given
+      ones (``carried_readings``), by flat name; empty: as given.
   """
 
   @property
@@ -206,6 +209,7 @@ class Prepared(NamedTuple):
   configs: list
   intakes: list
   lines: list[str]
+  readings: dict
 
 
 def prepare(
@@ -262,7 +266,35 @@ def prepare(
     configs.append(own)
     if line:
       lines.append(f'{take.path}: {line}' if n > 1 else line)
-  return Prepared(recs, configs, intakes, lines)
+  raised, line = carried_readings(recorded, configs, network)
+  configs = [c.replace(**raised) for c in configs]
+  return Prepared(recs, configs, intakes, [*lines, *filter(None, [line])], raised)
+
+
+def carried_readings(
+  recorded: list[takes.Take], configs: list, network: setup.Network
+) -> tuple[dict, str | None]:
+  """The readings' uncertainties the estimate carries in place of those
+  given, and the line that says so (``reading_floor.carried``): raised to
+  the lowest a shipped calibration was measured with where only that keeps
+  its coverage from this estimate (one recording's tables, or a joint's
+  protocol check: its fabric readings only, each recording keeping its own
+  wind reading)."""
+  if len(configs) == 1:
+    names = reading_floor.READINGS
+    covered = lambda r: _measured(setup.estimate_note(configs[0].replace(**r), network))  # noqa: E731
+  else:
+    names, fans = reading_floor.SHARED, takes.fans(recorded)
+    covered = lambda r: _measured(  # noqa: E731
+      joint.joint_note([c.replace(**r) for c in configs], network, fans)
+    )
+  lows = reading_floor.floors(configs[0].scoring.distance)
+  return reading_floor.carried(configs[0].measured, lows, covered, names)
+
+
+def _measured(note: dict | None) -> bool:
+  """Whether a calibration note quotes measured coverage (not indicative)."""
+  return bool(note) and note.get('matches', True)
 
 
 def estimate(
@@ -282,7 +314,7 @@ def estimate(
   if len(recorded) > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
     result = estimation.estimate_joint(
-      config, prepared.recordings, model, workdir,
+      config.replace(**prepared.readings), prepared.recordings, model, workdir,
       winds if any(t.wind for t in recorded) else None,
       overrides=[own_settings(c) for c in prepared.configs],
       fans=takes.fans(recorded), pictures=pictures, **kw,
