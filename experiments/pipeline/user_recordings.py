@@ -198,6 +198,7 @@ class Prepared(NamedTuple):
       error carried into a posterior, readings carried less precise).
     readings: the readings' uncertainties carried in place of the given
       ones (``carried_readings``), by flat name; empty: as given.
+    given: those readings' uncertainties as given, by the same names.
   """
 
   @property
@@ -210,6 +211,7 @@ class Prepared(NamedTuple):
   intakes: list
   lines: list[str]
   readings: dict
+  given: dict
 
 
 def prepare(
@@ -267,8 +269,11 @@ def prepare(
     if line:
       lines.append(f'{take.path}: {line}' if n > 1 else line)
   raised, line = carried_readings(recorded, configs, network)
+  given = {k: getattr(configs[0].measured, k) for k in raised}
   configs = [c.replace(**raised) for c in configs]
-  return Prepared(recs, configs, intakes, [*lines, *filter(None, [line])], raised)
+  return Prepared(
+    recs, configs, intakes, [*lines, *filter(None, [line])], raised, given
+  )
 
 
 def carried_readings(
@@ -308,8 +313,9 @@ def estimate(
 ) -> dict:
   """The estimate of the prepared recordings: one recording's
   (``estimate.json``), or several's jointly (``joint.json``), each file with
-  the recordings' alignment record (``alignment_record``). ``kw``: the
-  search's (``allow_other_material``, ``nets``)."""
+  the recordings' alignment record (``alignment_record``) and the readings
+  carried less precise than given (``carried_readings``: each one's given
+  and carried sd). ``kw``: the search's (``allow_other_material``, ``nets``)."""
   record = prepared.record
   if len(recorded) > 1:
     winds = [t.wind or (0.0, 0.0) for t in recorded]
@@ -319,20 +325,26 @@ def estimate(
       overrides=[own_settings(c) for c in prepared.configs],
       fans=takes.fans(recorded), pictures=pictures, **kw,
     )  # fmt: skip
-    _record_alignment(os.path.join(workdir, layout.JOINT_FILE), record)
+    path = os.path.join(workdir, layout.JOINT_FILE)
   else:
     result = estimation.estimate(
       prepared.configs[0], prepared.recordings[0], model, workdir,
       pictures=pictures, **kw,
     )  # fmt: skip
-    _record_alignment(os.path.join(workdir, layout.ESTIMATE_FILE), record)
+    path = os.path.join(workdir, layout.ESTIMATE_FILE)
+  carried = {
+    k: {'given': prepared.given[k], 'carried': v} for k, v in prepared.readings.items()
+  }
+  _add_records(path, alignment=record, readings_carried=carried or None)
   return result
 
 
-def _record_alignment(path: str, record: dict | None) -> None:
-  """Adds ``record`` to the result JSON the search wrote at ``path``."""
-  if record is None or not os.path.isfile(path):
+def _add_records(path: str, **records) -> None:
+  """Adds ``records`` (those not None) to the result JSON the search wrote
+  at ``path``."""
+  records = {k: v for k, v in records.items() if v is not None}
+  if not records or not os.path.isfile(path):
     return
   data = recording_lib.read_json(path)
-  data['alignment'] = record
+  data.update(records)
   files.write_json(path, data)

@@ -10,15 +10,18 @@ The shipped files fix the ranges: the paper tables drew the area weight at
 
 from __future__ import annotations
 
+import dataclasses
 import types
 
 import pytest
 
 from experiments import estimate
 from experiments.pipeline import (
+  intake,
   joint,
   objective,
   reading_floor,
+  rig,
   setup,
   table_notes,
   takes,
@@ -124,3 +127,26 @@ def test_a_protocol_joints_precise_ruler_quotes_the_protocol_check():
   # recordings sharing a fan setting: no check covers them, raised or not
   shared = [t._replace(fan='one') for t in recorded]
   assert user_recordings.carried_readings(shared, configs, net) == ({}, None)
+
+
+@pytest.mark.slow
+def test_a_users_recording_through_the_intake_carries_a_precise_scale_raised(tmp_path):
+  """The windy rig's recording (another physics, an OpenCV camera file)
+  taken in with a scale at 0.8%: the prepared estimate carries 1%, keeps
+  what was given, and says so before the answer."""
+  recipe = dataclasses.replace(rig.MISMATCHED, seed=3, wind_speed=3.0)
+  paths = rig.write(recipe, str(tmp_path / 'recording'), 'c')
+  config = estimate.Args().search.replace(area_weight=0.2, area_weight_sd=0.0016)
+  prepared = user_recordings.prepare(
+    takes.from_flags([paths['depth']], paths['camera']),
+    intake.IntakeConfig(world_up='z'),
+    config,
+    _net(config),
+    str(tmp_path / 'estimate'),
+  )
+  assert prepared.readings == {'area_weight_sd': pytest.approx(0.002)}
+  assert prepared.given == {'area_weight_sd': pytest.approx(0.0016)}
+  assert prepared.configs[0].measured.area_weight_sd == pytest.approx(0.002)
+  assert any('area weight 0.8% as 1%' in line for line in prepared.lines)
+  note = setup.estimate_note(prepared.configs[0], _net(config))
+  assert note['matches'] and note['recalibrated']
