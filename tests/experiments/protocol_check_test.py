@@ -145,6 +145,27 @@ def test_the_shipped_check_is_what_a_protocol_estimates_note_quotes():
   assert any('error law' in d for d in missed['differs'])
 
 
+def test_a_protocol_through_the_intake_with_a_depth_read_strip_quotes_the_shipped_check():
+  """Three fan settings taken in through the intake (each camera placed to
+  a few cm and degrees) with the strip read by the depth camera: the
+  shipped check of such sets (camera errors over the intake's range, t-law
+  readings) is quoted, with its number of sets; past its camera range the
+  joint is told why not."""
+  m = dict(bending_length_sd=0.018 * 0.03, bending_length_dof=10.0)
+  config = _config(camera_sd_m=0.03, camera_sd_deg=2.0, **m)
+  net = setup.resolve(config, joint=True, recordings=3).network
+  note = setup.calibration(config, net, joint=True, recordings=3, every_wind_read=True)
+  assert note['measured'] and note['matches']
+  n = note['coverage']['bending_scale']['n']
+  assert n >= 7 and note['coverage']['air_coefficient']['n'] == n
+  line = table_notes.calibration_line(note)
+  assert "Student's t, 10 degrees of freedom" in line and f'of {n}' in line
+  far = config.replace(camera_sd_m=0.15)  # past 10.5 cm
+  missed = setup.calibration(far, net, joint=True, recordings=3, every_wind_read=True)
+  assert not missed['matches']
+  assert any('camera alignment error' in d for d in missed['differs'])
+
+
 def test_a_check_of_other_fan_settings_is_kept_beside_and_read_by_its_count(tmp_path):
   record, path = _check(tmp_path)
   two = {**record, 'recordings': 2, 'n': 9}
