@@ -72,6 +72,16 @@ def with_check(shipped: dict | None, check: dict) -> dict:
   return {'checks': sorted([*kept, check], key=key)}
 
 
+def reading_range(check: dict, name: str) -> tuple[float, float]:
+  """The relative errors of reading ``name`` that ``check`` holds: a bending
+  length's law's range (``length_law``), else a factor of two either way of
+  the one its sets had."""
+  if name == 'bending_length':
+    return length_law(check)[:2]
+  rel = check['readings'][name]
+  return rel / FACTOR, FACTOR * rel
+
+
 def _covers_readings(check: dict, m) -> bool:
   """Whether ``check``'s sets had readings like ``m``'s (``Measured``): each
   within a factor of two of theirs, a bending length within its range and
@@ -83,11 +93,11 @@ def _reading_misses(check: dict, m) -> list[str]:
   """The readings of ``m`` unlike ``check``'s sets', each in words: its
   relative sd outside what the sets had (a factor of two of theirs, a
   bending length's range), or a bending length of another error law."""
-  lo, hi, dof = length_law(check)
+  dof = length_law(check)[2]
   out = []
-  for name, rel in check['readings'].items():
+  for name in check['readings']:
     value, sd = (getattr(m, name), getattr(m, f'{name}_sd'))
-    a, b = (lo, hi) if name == 'bending_length' else (rel / FACTOR, FACTOR * rel)
+    a, b = reading_range(check, name)
     if not (value > 0 and a * (1 - 1e-9) <= sd / value <= b * (1 + 1e-9)):
       mine = f'{100 * sd / value:.2g}%' if value > 0 else 'none'
       out.append(

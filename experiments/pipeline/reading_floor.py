@@ -36,8 +36,8 @@ SHARED = ('area_weight', 'bending_length')
 def floors(distance: str) -> dict[str, list[float]]:
   """The lowest relative error of each reading that a shipped calibration's
   tables (for ``distance``) or a shipped protocol check was measured with:
-  a range's lower end, else a factor of two (``carried_errors.FACTOR``)
-  under the one error all its recordings had."""
+  the lower end of the range it holds (``carried_errors.calibrated_range``,
+  ``protocol_checks.reading_range``)."""
   out: dict[str, set[float]] = {name: set() for name in READINGS}
   for path in calibration_tables.shipped_calibrations(distance):
     rec = calibration_tables.read_calibration(path).get('recalibration')
@@ -46,11 +46,8 @@ def floors(distance: str) -> dict[str, list[float]]:
       if lo is not None:
         out[name].add(float(lo))
   for check in protocol_checks.checks_of_any():
-    lo, _, _ = protocol_checks.length_law(check)
-    out['bending_length'].add(lo)
-    for name, rel in check['readings'].items():
-      if name != 'bending_length' and name in out:
-        out[name].add(float(rel) / carried_errors.FACTOR)
+    for name in set(check['readings']) & set(out):
+      out[name].add(float(protocol_checks.reading_range(check, name)[0]))
   return {k: sorted(v) for k, v in out.items()}
 
 
@@ -87,10 +84,9 @@ def carried(
   them; else the least raise (``raises``) that ``covered`` accepts.
   ``covered(raised)`` says whether a calibration covers the estimate with
   those uncertainties in place of its own."""
-  ways = raises(measured, lows, names)
   if covered({}):
     return {}, None
-  found = next((w for w in ways[1:] if covered(w)), None)
+  found = next((w for w in raises(measured, lows, names)[1:] if covered(w)), None)
   if not found:
     return {}, None
   words = ', '.join(

@@ -263,7 +263,9 @@ def resolve(
     mesh=mesh,
     pin_centre=mesh.vertices[mesh.pinned].mean(0),
     space=space,
-    calibration=estimate_note(config, net, joint=joint, recordings=recordings),
+    calibration=calibration(
+      config, net, joint=joint, recordings=recordings, uncalibrated=_box_words(widened)
+    ),
     widened=tuple(widened),
   )
 
@@ -288,8 +290,13 @@ def estimate_note(
   """The calibration note an estimate with ``config`` and ``net`` prints
   (``calibration``), a search box other than the fabric's named among
   what no calibration measured."""
-  widened = search_box(config)[1]
   return calibration(
     config, net, joint=joint, recordings=recordings,
-    uncalibrated=("a search box other than the fabric's",) if widened else (),
+    uncalibrated=_box_words(search_box(config)[1]),
   )  # fmt: skip
+
+
+def _box_words(widened) -> tuple[str, ...]:
+  """What no calibration measured about a search box that ``widened`` says
+  is not the fabric's own (``search_box``)."""
+  return ("a search box other than the fabric's",) if widened else ()
