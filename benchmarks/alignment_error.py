@@ -69,16 +69,24 @@ def _rotation_vector(r: np.ndarray) -> np.ndarray:
   return angle * axis / (2.0 * np.sin(angle))
 
 
-def placement_error(placed, true, centre) -> tuple[float, float]:
-  """(shift m, rotation deg): ``placed`` against ``true`` as
-  ``misplaced_pose`` draws an error, a rotation about ``centre`` then a shift."""
-  r = np.asarray(placed.rotation, np.float64) @ np.asarray(true.rotation, np.float64).T
+def placement_vectors(placed, true, centre) -> tuple[np.ndarray, np.ndarray]:
+  """(shift (3,) m, rotation (3,) axis-angle radians): ``placed`` against
+  ``true`` as ``misplaced_pose`` draws an error, a rotation about ``centre``
+  then a shift, both in ``true``'s camera frame (its x right, y down, z
+  forward), so that the error can be put on another camera
+  (``told_cameras.intake_pose``)."""
+  t = np.asarray(true.rotation, np.float64)
+  r = np.asarray(placed.rotation, np.float64) @ t.T
   c = np.asarray(centre, np.float64)
   rotated = r @ (np.asarray(true.position, np.float64) - c) + c
   shift = np.asarray(placed.position, np.float64) - rotated
-  return float(np.linalg.norm(shift)), float(
-    np.degrees(np.linalg.norm(_rotation_vector(r)))
-  )
+  return t.T @ shift, t.T @ _rotation_vector(r)
+
+
+def placement_error(placed, true, centre) -> tuple[float, float]:
+  """(shift m, rotation deg): the sizes of ``placement_vectors``."""
+  shift, rot = placement_vectors(placed, true, centre)
+  return float(np.linalg.norm(shift)), float(np.degrees(np.linalg.norm(rot)))
 
 
 def main(args: Args) -> None:
@@ -105,12 +113,14 @@ def main(args: Args) -> None:
           rows.append({'wind': wind, 'seed': seed, 'mode': mode, 'refused': str(e)})
           print(f'{wind:g} m/s seed {seed} {mode}: refused: {e}', flush=True)
           continue
+        shift_cam, rot_cam = placement_vectors(ik.pose, true, centre)
         shift, deg = placement_error(ik.pose, true, centre)
         sd_m, sd_deg = ik.alignment_sd
         rows.append({
           'wind': wind, 'seed': seed, 'mode': mode, 'up_from': ik.up_from,
           'shift_m': shift, 'rotation_deg': deg, 'sd_m': sd_m, 'sd_deg': sd_deg,
           'shift_in_sd': shift / sd_m, 'rotation_in_sd': deg / sd_deg,
+          'shift_camera_m': shift_cam.tolist(), 'rotation_camera_rad': rot_cam.tolist(),
         })  # fmt: skip
         print(
           f'{wind:g} m/s seed {seed} {mode}: shift {100 * shift:.1f} cm (claimed '

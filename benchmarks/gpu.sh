@@ -71,7 +71,10 @@
 #                  default 1.8%, spread 0.55: 0.46-7.1%). SUB one of:
 #                  tables: the paper-size calibration (PAIRS, default 15), and
 #                    once simulated its analysis installed; the table is kept in
-#                    RUN (a fresh copy of the tree lacks it) and in $OUT;
+#                    RUN (a fresh copy of the tree lacks it) and in $OUT, with
+#                    the packed estimates (analyse them elsewhere);
+#                    CAM=--camera_errors=FILES: cameras off as the measured
+#                    intakes of benchmarks.alignment_error's FILES erred;
 #                  protocol: air_protocol's free-mode check with those errors
 #                    (SETS, default 8, of seed SEED, default 7) into $OUT;
 #                  intake: the windy rig's recordings of another physics (WINDS,
@@ -469,7 +472,8 @@ camera() (  # SUB [RUN]: see the header
       fi
       step cal_install 900 python -m experiments.calibrate $cal --analyse_only --install
       cp experiments/pipeline/calibration_shape_paper_camera_*-*.json "$R/" &&
-        cp "$R"/calibration_shape_paper_camera_*.json "$R/cal/calibration.md" "$OUT/"
+        cp "$R"/calibration_shape_paper_camera_*.json "$R/cal/calibration.md" "$OUT/" &&
+        cp -r "$R/cal/packed" "$OUT/"
       tail -30 "$R/logs/cal_install.log"
       ;;
     protocol)
@@ -481,7 +485,8 @@ camera() (  # SUB [RUN]: see the header
       ;;
     intake)
       cp "$R"/calibration_shape_paper_camera_*.json experiments/pipeline/
-      step intake "$((limit + 60))" python -m benchmarks.windy_rig --preset=gpu \
+      # the rig's own process must not take the GPU its estimates' processes need
+      XLA_PYTHON_CLIENT_PREALLOCATE=false step intake "$((limit + 60))" python -m benchmarks.windy_rig --preset=gpu \
         --recipe=mismatched --parallel=1 --recipe_fields=seed="${SEED:-51}" \
         --winds="${WINDS:-2.5,2.9,3.3,3.7,4.1,4.5}" --workdir="$R/intake_${SEED:-51}"
       cp "$R/intake_${SEED:-51}/windy_rig.json" "$OUT/intake_${SEED:-51}.json"

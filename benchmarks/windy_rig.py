@@ -198,6 +198,7 @@ def _estimate(args: Args, mode: str, paths: dict, where: str, truth: float) -> d
     narrowing_90=wind['narrowing_90'], alignment=result.get('alignment'),
     calibrated=bool(note.get('matches') and note.get('recalibrated')),
     calibration_differs=note.get('differs', []),
+    calibration_setting=note.get('setting', ''),
   )  # fmt: skip
   return row
 

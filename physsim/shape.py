@@ -88,12 +88,24 @@ def misplaced_pose(key, pose: Pose, sd_m: float, sd_deg: float, centre) -> Pose:
   alignment's error instead of trusting the camera to the millimetre.
   """
   k_rot, k_shift = jax.random.split(key)
-  rot = _rotation(jnp.deg2rad(sd_deg) * jax.random.normal(k_rot, (3,)))
+  return displaced_pose(
+    pose,
+    jnp.deg2rad(sd_deg) * jax.random.normal(k_rot, (3,)),
+    sd_m * jax.random.normal(k_shift, (3,)),
+    centre,
+  )
+
+
+def displaced_pose(pose: Pose, axis_angle, shift, centre) -> Pose:
+  """A camera ``pose`` rotated by ``axis_angle`` (radians, an axis-angle
+  vector of the world frame) about ``centre``, then shifted by ``shift``
+  (metres): one rigid error, the move ``misplaced_pose`` draws."""
+  rot = _rotation(jnp.asarray(axis_angle, jnp.float32))
   centre = jnp.asarray(centre, jnp.float32)
   position = (
     rot @ (jnp.asarray(pose.position, jnp.float32) - centre)
     + centre
-    + sd_m * jax.random.normal(k_shift, (3,))
+    + jnp.asarray(shift, jnp.float32)
   )
   return Pose(rot @ jnp.asarray(pose.rotation, jnp.float32), position)
 

@@ -50,13 +50,15 @@ def shipped_calibration(
   size: str = 'demo',
   camera: tuple[float, float] = (0.0, 0.0),
   spread: float = 0.0,
+  source: str = 'given',
 ) -> str:
   """Where the calibration of estimates with ``distance`` at the study's
   ``size`` is shipped (and ``--install`` puts it): the shape distance's own
   files, every other distance's the default ones (whose networks they
   record); tables measured with a camera error (``camera``: metres,
-  degrees; ``spread``: drawn per recording over a range about it) beside
-  them (``carried_errors.camera_path``)."""
+  degrees; ``spread``: drawn per recording over a range about it;
+  ``source``: 'intake' where the cameras were displaced as the intake errs)
+  beside them (``carried_errors.camera_path``)."""
   if size not in SIZES:
     raise ValueError(f'no calibration size {size!r}: one of {SIZES}')
   shape = distance == 'shape'
@@ -64,7 +66,7 @@ def shipped_calibration(
     base = SHAPE_CALIBRATION_FILE if shape else CALIBRATION_FILE
   else:
     base = SHAPE_PAPER_CALIBRATION_FILE if shape else PAPER_CALIBRATION_FILE
-  return carried_errors.camera_path(base, camera, spread)
+  return carried_errors.camera_path(base, camera, spread, source)
 
 
 def shipped_calibrations(distance: str) -> list[str]:
@@ -89,10 +91,12 @@ def calibration_file(config=None) -> str:
     return CALIBRATION_FILE
   if config is None or len(own) == 1:
     return own[0]
-  mine = carried_errors.camera_of(config.flat())
+  flat = config.flat()
+  mine, source = carried_errors.camera_of(flat), carried_errors.source_of(flat)
   return min(own, key=lambda p: (
     len(differing_fields(config, cal := read_calibration(p))),
     len(_reading_gaps(config, cal)),
+    carried_errors.table_source(cal) != source,  # displaced as this error errs
     carried_errors.camera_gap(carried_errors.table_of(cal)[:2], mine),
   ))  # fmt: skip
 
@@ -418,16 +422,27 @@ def differing_fields(config, cal: dict) -> list[str]:
       mine['material'] if mine['material'] in cal['materials'] else cal['materials']
     )
   spread = carried_errors.table_of(cal)[2]
-  return [n for n in _CALIBRATED_FIELDS if n in calibrated and not (
+  differs = [n for n in _CALIBRATED_FIELDS if n in calibrated and not (
     carried_errors.covers(float(calibrated[n]), float(mine[n]), spread)
     if n in carried_errors.CAMERA_FIELDS else _same(mine[n], calibrated[n])
   )]  # fmt: skip
+  source = carried_errors.table_source(cal)
+  if not carried_errors.source_holds(source, carried_errors.source_of(mine)):
+    differs.append('camera_sd_from')
+  return differs
 
 
 def _camera_worded(config, cal: dict, names: list[str]) -> list[str]:
   """``differing_fields``' ``names``, the camera error's as one entry in
   words: the error ``config`` carries and those that ``cal`` and the tables
-  shipped for its distance were measured at."""
+  shipped for its distance were measured at; a camera error that did not
+  come from the intake, against tables of the intake's own errors, in words
+  too."""
+  if 'camera_sd_from' in names:
+    names = [n for n in names if n != 'camera_sd_from'] + [
+      'camera error given (these tables displaced cameras as the intake errs '
+      'against its own claim, and hold for its claims alone)'
+    ]
   if not set(names) & set(carried_errors.CAMERA_FIELDS):
     return names
   shipped = shipped_calibrations(config.scoring.distance)

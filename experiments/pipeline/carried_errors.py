@@ -118,6 +118,30 @@ def table_of(cal: dict) -> tuple[float, float, float]:
   return m, deg, float(config.get('camera_sd_spread', 0.0))
 
 
+def source_of(flat: dict) -> str:
+  """Where the camera error of an estimate's flat settings came from
+  (``Scoring.camera_sd_from``): 'given' (a user's, or none; files from
+  before it was a setting) or 'intake'."""
+  return str(flat.get('camera_sd_from', 'given'))
+
+
+def table_source(cal: dict) -> str:
+  """How a calibration ``cal``'s recordings' cameras were displaced: 'given'
+  (by the full error each estimate carried) or 'intake' (as the intake
+  actually errs against what it claims, ``experiments.calibrate
+  --camera_errors``)."""
+  return source_of(cal.get('config', {}).get('estimate', {}))
+
+
+def source_holds(table: str, mine: str) -> bool:
+  """Whether tables of cameras displaced as ``table`` says hold for an
+  estimate whose error came from ``mine``: the full claimed error's for any
+  (they displace at least as far as any honest claim); the intake's actual
+  errors' only for the intake's own claims (a user's claim is not known to
+  err as the intake does)."""
+  return table == 'given' or table == mine
+
+
 def camera_of(flat: dict) -> tuple[float, float]:
   """(metres, degrees): the camera error of an estimate's flat settings
   (``EstimateConfig.flat``, or a calibration's ``config.estimate``); 0 where
@@ -175,15 +199,20 @@ def camera_difference(
   return f'camera {error} ({what} measured at {have})'
 
 
-def camera_path(base: str, sd: tuple[float, float], spread: float = 0.0) -> str:
+def camera_path(
+  base: str, sd: tuple[float, float], spread: float = 0.0, source: str = 'given'
+) -> str:
   """Where tables measured with camera error ``sd`` are shipped beside the
   file ``base`` of exact cameras: ``base`` itself for (0, 0), else
   ``<base>_camera_<cm>cm_<deg>deg.json``, or for a range drawn per recording
-  (``spread``) ``<base>_camera_<cm>-<cm>cm_<deg>-<deg>deg.json``."""
+  (``spread``) ``<base>_camera_<cm>-<cm>cm_<deg>-<deg>deg.json``; with
+  ``_camera_intake_`` where the cameras were displaced as the intake errs
+  (``source`` 'intake')."""
   if not any(sd):
     return base
   words = table_words((*sd, spread)).replace(' ', '').replace('/', '_')
-  return f'{base.removesuffix(".json")}_camera_{words}.json'
+  kind = 'camera_intake' if source == 'intake' else 'camera'
+  return f'{base.removesuffix(".json")}_{kind}_{words}.json'
 
 
 def camera_paths(base: str) -> list[str]:

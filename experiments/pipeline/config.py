@@ -45,6 +45,8 @@ POINTS = ('median', 'bayes', 'argmin')
 
 
 LIKELIHOODS = bo.posterior.LIKELIHOODS
+# Where an estimate's camera error came from (``Scoring.camera_sd_from``).
+CAMERA_SOURCES = ('given', 'intake')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +74,14 @@ class Scoring:
     camera_sd_deg: the same for the camera's rotation about the pins, degrees
       (1 sd per axis); the intake's camera was within 3 degrees on its test
       recording.
+    camera_sd_from: where that error came from: 'given' (a user's, or none)
+      or 'intake' (the intake's own claim for its alignment, which
+      ``user_recordings.with_alignment_error`` carries; no flag sets it). It
+      changes no search,
+      only which calibration tables hold: those whose recordings' cameras were
+      displaced as the intake actually errs against its claim
+      (``experiments.calibrate --camera_errors``) hold for the intake's claims
+      alone; those displaced by the full claimed error hold for either.
     likelihood: the posterior's approximate likelihood from the
       discrepancy, 'gibbs' or 'threshold' (BOLFI's; see bo.posterior); or,
       with ``distance='shape'``, 'synthetic': GP emulators of the shape
@@ -105,6 +115,7 @@ class Scoring:
   distance: str = cli.choice('shape', DISTANCES)
   camera_sd_m: float = 0.0
   camera_sd_deg: float = 0.0
+  camera_sd_from: str = cli.choice('given', CAMERA_SOURCES)
   likelihood: str = cli.choice('gibbs', LIKELIHOODS)
   sharpness: float = 0.5
   model_error: float = 0.0
@@ -207,7 +218,8 @@ class EstimateConfig:
   """
 
   simulation: Simulation = Simulation()
-  scoring: Scoring = Scoring()
+  # where the camera error came from is set by the intake, never a flag
+  scoring: Scoring = cli.nested(Scoring(), skip=('camera_sd_from',))
   search: Search = Search()
   hardware: Hardware = Hardware()
   seed: int = 0
@@ -273,6 +285,8 @@ class EstimateConfig:
         out.update(dataclasses.asdict(getattr(self, section)))
     if out['shared_bias'] == Scoring.shared_bias:  # files as before it was a setting
       del out['shared_bias']
+    if out['camera_sd_from'] == 'given':  # ... and before the intake's was marked
+      del out['camera_sd_from']
     if not out['hem_mass']:  # ... and before a hem could be simulated
       del out['hem_mass']
     if not out['box']:  # ... and before the box could be set
@@ -325,9 +339,10 @@ class EstimateConfig:
         f"hem_mass={sim.hem_mass} kg hangs along the square cloth's free edge; "
         f'garment {sim.garment!r} has none'
       )
+    flat['camera_sd_from'] = sc.camera_sd_from  # flat() leaves out 'given'
     for name, allowed in (
       ('backend', BACKENDS), ('distance', DISTANCES), ('point', POINTS),
-      ('likelihood', LIKELIHOODS),
+      ('likelihood', LIKELIHOODS), ('camera_sd_from', CAMERA_SOURCES),
     ):  # fmt: skip
       if flat[name] not in allowed:
         raise ValueError(f'{name} must be one of {allowed}, got {flat[name]!r}')

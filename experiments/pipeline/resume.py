@@ -21,8 +21,9 @@ from experiments.pipeline.recording import read_json
 from experiments.pipeline.searcher import Job
 
 # Config fields that do not change what an estimate searches (the shared
-# discrepancy: only how the joint reads the searches).
-_RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias')  # fmt: skip
+# discrepancy: only how the joint reads the searches; where the camera error
+# came from: only which tables hold).
+_RESUMABLE_FIELDS = ('workers', 'calibration', 'shared_bias', 'camera_sd_from')  # fmt: skip
 
 
 def _digest(a) -> str:

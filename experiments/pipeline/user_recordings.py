@@ -95,14 +95,17 @@ def calibrated_camera(config) -> tuple[float, float]:
 
 def with_alignment_error(config, intakes: list, carry: bool = True):
   """``config`` with the intakes' own alignment error as its camera error
-  (the largest of them) where ``carry`` and the user gave none, raised to a
+  (the largest of them; ``camera_sd_from='intake'``, so tables of cameras
+  displaced as the intake errs hold) where ``carry`` and the user gave none, raised to a
   calibration's range where it lies just below it (``calibrated_camera``);
   and the line that says so, or None."""
   sds = [ik.alignment_sd for ik in intakes if ik is not None and any(ik.alignment_sd)]
   if not (carry and sds) or config.scoring.camera_sd_m or config.scoring.camera_sd_deg:
     return config, None
   claimed = max(s[0] for s in sds), max(s[1] for s in sds)
-  config = config.replace(camera_sd_m=claimed[0], camera_sd_deg=claimed[1])
+  config = config.replace(
+    camera_sd_m=claimed[0], camera_sd_deg=claimed[1], camera_sd_from='intake'
+  )
   m, deg = calibrated_camera(config)
   config = config.replace(camera_sd_m=m, camera_sd_deg=deg)
   config.check()

@@ -100,6 +100,7 @@ from experiments.studies.calibration_config import (
   told_pose,
   truths,
   uses_networks,
+  with_intake_errors,
   with_reading,
 )
 from experiments.studies.calibration_report import plot_ranks, plot_sweep, result, table
@@ -123,6 +124,7 @@ __all__ = [
   'network_dirs', 'network_of', 'network_seeds', 'networks_record', 'pack_runs',
   'packed_runs', 'plot_ranks', 'plot_sweep', 'posteriors', 'recalibration',
   'recorded_networks', 'result', 'run', 'saved_runs', 'simulate_and_estimate',
+  'with_intake_errors',
   'study_configs', 'study_materials', 'summarise', 'table', 'told_pose', 'truths',
   'uses_networks', 'with_reading',
 ]  # fmt: skip

@@ -6,6 +6,7 @@ it runs (``experiments.studies.calibration`` runs it)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 
@@ -94,6 +95,17 @@ class Config:
       for a carried error anywhere in that box, as an intake's varies from
       one recording to the next; 0: every recording carries the one error
       (its tables then hold from half to twice it).
+    camera_errors: ``benchmarks.alignment_error``'s JSON files: each
+      recording's estimate is told a camera off as one of their intakes
+      actually erred (drawn per recording, put on its own camera in that
+      camera's frame) and carries that intake's claim (``camera_errors_jitter``
+      spreads the claims between the measured ones); the estimate's camera
+      error and ``camera_sd_spread`` are then the claims' range
+      (``with_intake_errors``) and its ``camera_sd_from`` 'intake', so the
+      tables hold for the intake's own claims. (): cameras displaced by the
+      full error each estimate carries.
+    camera_errors_jitter: how far each claim is spread about the measured
+      one: times exp(jitter x u), u uniform in [-1, 1].
     check_reading: for ``check``: 'wind_speed' (an anemometer) or
       'area_weight' (a scale) estimates every new recording with a simulated
       reading of it (``measured_sd``, drawn around the truth) as the search's
@@ -130,6 +142,8 @@ class Config:
           'simulation.warmup', 'hardware.backend', 'seed', 'search.point', 'measured'),
   )  # fmt: skip
   camera_sd_spread: float = 0.0
+  camera_errors: tuple[str, ...] = ()
+  camera_errors_jitter: float = 0.25
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
 
@@ -313,11 +327,54 @@ def check_config(config: Config) -> None:
     )
 
 
+@functools.lru_cache(maxsize=4)
+def intake_errors(paths: tuple[str, ...]) -> tuple[told_cameras.IntakeError, ...]:
+  """The measured intake errors of ``Config.camera_errors`` (read once)."""
+  return told_cameras.read_intake_errors(paths)
+
+
+def with_intake_errors(config: Config) -> Config:
+  """``config`` with its estimates' camera error set from ``camera_errors``:
+  the range of the intakes' claims (``told_cameras.intake_range``) as
+  ``camera_sd_m`` / ``camera_sd_deg`` and ``camera_sd_spread``, and
+  ``camera_sd_from`` 'intake'; ``config`` itself without them.
+
+  Raises:
+    ValueError: the files' errors (``told_cameras.read_intake_errors``), a
+      jitter outside [0, 1], or a camera error given beside them.
+  """
+  if not config.camera_errors:
+    return config
+  if not 0.0 <= config.camera_errors_jitter <= 1.0:
+    raise ValueError(
+      f'--camera_errors_jitter={config.camera_errors_jitter}: a spread of log '
+      'claims in [0, 1]'
+    )
+  sc = config.estimate.scoring
+  m, deg, spread = told_cameras.intake_range(
+    intake_errors(tuple(config.camera_errors)), config.camera_errors_jitter
+  )
+  given = (sc.camera_sd_m, sc.camera_sd_deg, config.camera_sd_spread)
+  if any(given) and given != (m, deg, spread):
+    raise ValueError(
+      "--camera_errors sets the camera error from the intakes' claims; drop "
+      '--camera_sd_m, --camera_sd_deg and --camera_sd_spread'
+    )
+  estimate = config.estimate.replace(
+    camera_sd_m=m, camera_sd_deg=deg, camera_sd_from='intake'
+  )
+  return dataclasses.replace(config, estimate=estimate, camera_sd_spread=spread)
+
+
 def camera_sd_of(config: Config, est: EstimateConfig, seq: int) -> tuple[float, float]:
   """(metres, degrees): the camera error recording ``seq``'s estimate
   carries, and its told camera is off by (``told_pose``): ``est``'s, each
   component times exp(``camera_sd_spread`` x u), u uniform in [-1, 1],
-  drawn from (seed, seq) alone (``told_cameras.spread_sd``)."""
+  drawn from (seed, seq) alone (``told_cameras.spread_sd``); with
+  ``camera_errors``, the claim of the intake drawn for it
+  (``told_cameras.intake_draw``)."""
+  if config.camera_errors:
+    return _intake_of(config, seq)[1]
   sd = (est.scoring.camera_sd_m, est.scoring.camera_sd_deg)
   return told_cameras.spread_sd(
     sd, config.camera_sd_spread, [config.seed, told_cameras.SD_STREAM, seq]
@@ -387,10 +444,22 @@ def told_pose(config: Config, est: EstimateConfig, pose: physsim.Pose,
   recording's true camera ``pose`` moved by a rigid error of that size about
   the estimate's pins (``told_cameras.moved_pose``), drawn from (seed, seq)
   alone, each recording its own; ``pose`` itself where both are 0 (a camera
-  known exactly)."""
+  known exactly). With ``camera_errors``: moved as the intake drawn for it
+  actually erred (``told_cameras.intake_pose``)."""
+  pins = simulation_lib.pin_centre(est.simulation)
+  if config.camera_errors:
+    return told_cameras.intake_pose(pose, _intake_of(config, seq)[0], pins)
   key = jax.random.fold_in(jax.random.key(config.seed), told_cameras.POSE_STREAM)
   return told_cameras.moved_pose(
     jax.random.fold_in(key, seq), pose,
-    (est.scoring.camera_sd_m, est.scoring.camera_sd_deg),
-    simulation_lib.pin_centre(est.simulation),
+    (est.scoring.camera_sd_m, est.scoring.camera_sd_deg), pins,
+  )  # fmt: skip
+
+
+def _intake_of(config: Config, seq: int) -> tuple[told_cameras.IntakeError, tuple]:
+  """Recording ``seq``'s drawn intake error and its claim (``intake_draw``),
+  from (seed, seq) alone."""
+  return told_cameras.intake_draw(
+    intake_errors(tuple(config.camera_errors)), config.camera_errors_jitter,
+    [config.seed, told_cameras.SD_STREAM, seq],
   )  # fmt: skip

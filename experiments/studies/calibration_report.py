@@ -19,6 +19,7 @@ from experiments.studies.calibration_config import (  # noqa: E402
   MODES,
   Config,
   estimate_record,
+  intake_errors,
   length_sd_range,
   study_configs,
   study_materials,
@@ -85,6 +86,11 @@ def _camera_text(config: Config) -> str:
   if not any(sd):
     return ''
   words = carried_errors.table_words((*sd, config.camera_sd_spread))
+  if config.camera_errors:
+    return (
+      f', cameras off as {len(intake_errors(tuple(config.camera_errors)))} measured '
+      f"intakes erred, each estimate carrying its intake's claim (claims {words})"
+    )
   each = ', each recording its own' if config.camera_sd_spread else ''
   return f', cameras off by {words} (1 sd{each})'
 
