@@ -77,11 +77,11 @@ class Scoring:
     camera_sd_from: where that error came from: 'given' (a user's, or none)
       or 'intake' (the intake's own claim for its alignment, which
       ``user_recordings.with_alignment_error`` carries; no flag sets it). It
-      changes no search,
-      only which calibration tables hold: those whose recordings' cameras were
-      displaced as the intake actually errs against its claim
-      (``experiments.calibrate --camera_errors``) hold for the intake's claims
-      alone; those displaced by the full claimed error hold for either.
+      changes no search, only which calibration tables hold: those whose
+      recordings' cameras were displaced as the intake actually errs against
+      its claim (``experiments.calibrate --camera_errors``) hold for the
+      intake's claims alone; those displaced by the full claimed error hold
+      for either.
     likelihood: the posterior's approximate likelihood from the
       discrepancy, 'gibbs' or 'threshold' (BOLFI's; see bo.posterior); or,
       with ``distance='shape'``, 'synthetic': GP emulators of the shape
