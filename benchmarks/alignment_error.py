@@ -83,10 +83,9 @@ def placement_vectors(placed, true, centre) -> tuple[np.ndarray, np.ndarray]:
   return t.T @ shift, t.T @ _rotation_vector(r)
 
 
-def placement_error(placed, true, centre) -> tuple[float, float]:
-  """(shift m, rotation deg): the sizes of ``placement_vectors``."""
-  shift, rot = placement_vectors(placed, true, centre)
-  return float(np.linalg.norm(shift)), float(np.degrees(np.linalg.norm(rot)))
+def sizes(shift: np.ndarray, rotation: np.ndarray) -> tuple[float, float]:
+  """(m, deg): the lengths of a shift and of an axis-angle rotation (radians)."""
+  return float(np.linalg.norm(shift)), float(np.degrees(np.linalg.norm(rotation)))
 
 
 def main(args: Args) -> None:
@@ -114,7 +113,7 @@ def main(args: Args) -> None:
           print(f'{wind:g} m/s seed {seed} {mode}: refused: {e}', flush=True)
           continue
         shift_cam, rot_cam = placement_vectors(ik.pose, true, centre)
-        shift, deg = placement_error(ik.pose, true, centre)
+        shift, deg = sizes(shift_cam, rot_cam)  # a rotation keeps lengths
         sd_m, sd_deg = ik.alignment_sd
         rows.append({
           'wind': wind, 'seed': seed, 'mode': mode, 'up_from': ik.up_from,

@@ -92,7 +92,11 @@ def moved_pose(
   models."""
   if not any(sd):
     return pose
-  moved = _misplaced_pose(key, pose, *sd, pins)
+  return _like(_misplaced_pose(key, pose, *sd, pins), pose)
+
+
+def _like(moved: physsim.Pose, pose: physsim.Pose) -> physsim.Pose:
+  """``moved`` as NumPy arrays in ``pose``'s dtypes."""
   return physsim.Pose(
     *(np.asarray(m, np.asarray(p).dtype) for m, p in zip(moved, pose, strict=True))
   )
@@ -195,6 +199,4 @@ def intake_pose(pose: physsim.Pose, error: IntakeError, pins) -> physsim.Pose:
   r = np.asarray(pose.rotation, np.float64)
   moved = _displaced_pose(pose, r @ np.asarray(error.rotation),
                           r @ np.asarray(error.shift), np.asarray(pins))  # fmt: skip
-  return physsim.Pose(
-    *(np.asarray(m, np.asarray(p).dtype) for m, p in zip(moved, pose, strict=True))
-  )
+  return _like(moved, pose)
