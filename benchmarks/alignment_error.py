@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import time
 
 import numpy as np
@@ -40,6 +41,9 @@ class Args:
     winds: the rig's fan, m/s.
     seeds: each wind's recordings (gusts, noise, IMU error).
     recipe: 'default' or 'mismatched' (``rig.RECIPES``).
+    recipe_fields: comma-separated ``field=value`` changes to the recipe
+      (``rig.with_fields``), e.g. another rig's camera:
+      ``eye=-0.9:-2.0:1.7,target=0:0.2:1.1``.
     modes: 'world_up' (``--world_up=z``) and/or 'imu' (the camera file's gravity).
     workdir: where the recordings are kept.
     out: JSON path ('' for none).
@@ -48,6 +52,7 @@ class Args:
   winds: tuple[float, ...] = (3.0, 3.52, 4.0, 4.5)
   seeds: tuple[int, ...] = (11, 12, 13)
   recipe: str = cli.choice('default', tuple(rig.RECIPES))
+  recipe_fields: str = ''
   modes: tuple[str, ...] = ('world_up', 'imu')
   workdir: str = 'out/alignment_error'
   out: str = ''
@@ -92,16 +97,15 @@ def main(args: Args) -> None:
   unknown = [m for m in args.modes if m not in ('world_up', 'imu')]
   if unknown:
     raise ValueError(f'--modes: no {unknown}; world_up and/or imu')
-  base = rig.RECIPES[args.recipe]
+  base = rig.with_fields(rig.RECIPES[args.recipe], args.recipe_fields)
+  tag = '_'.join([args.recipe] + re.findall(r'[A-Za-z0-9.-]+', args.recipe_fields))
   sim = objective.EstimateConfig().simulation
   centre = simulation.pin_centre(sim)  # what the estimate rotates its cameras about
   rows, t0 = [], time.perf_counter()
   for wind in args.winds:
     for seed in args.seeds:
       recipe = dataclasses.replace(base, wind_speed=wind, seed=seed)
-      paths = rig.write(
-        recipe, os.path.join(args.workdir, f'{args.recipe}_{wind:g}_{seed}')
-      )
+      paths = rig.write(recipe, os.path.join(args.workdir, f'{tag}_{wind:g}_{seed}'))
       true = camera.look_at(recipe.eye, recipe.target)
       for mode in args.modes:
         ik_config = intake.IntakeConfig(world_up='z' if mode == 'world_up' else '')

@@ -65,7 +65,8 @@ class Args:
     winds: comma-separated winds, m/s: one recording each, the k-th with the
       recipe's seed + k ('': one recording at the recipe's wind).
     recipe_fields: comma-separated ``field=value`` changes to the recipe
-      (numbers; e.g. ``gust_intensity=0.2,cloth_resolution=25``).
+      (``rig.with_fields``: numbers, and points as ``x:y:z``; e.g.
+      ``gust_intensity=0.2,cloth_resolution=25`` or ``eye=-0.6:-1.4:1.6``).
     parallel: estimates run at once (processes).
   """
 
@@ -104,31 +105,6 @@ def _modes(text: str) -> list[str]:
   return modes
 
 
-def _changed(recipe: rig.Recipe, text: str) -> rig.Recipe:
-  """``recipe`` with ``--recipe_fields``' ``field=value`` pairs, each value
-  parsed as its field's number type."""
-  numeric = sorted(
-    f.name
-    for f in dataclasses.fields(recipe)
-    if type(getattr(recipe, f.name)) in (int, float)
-  )
-  out = {}
-  for item in (x for x in text.split(',') if x):
-    name, _, value = item.partition('=')
-    kind = type(getattr(recipe, name, None))
-    if name not in numeric or not value:
-      raise ValueError(
-        f'--recipe_fields={text}: {item!r} is not field=number of {numeric}'
-      )
-    try:
-      out[name] = kind(value)
-    except ValueError:
-      raise ValueError(
-        f'--recipe_fields={text}: {value!r} is not a {kind.__name__}'
-      ) from None
-  return dataclasses.replace(recipe, **out)
-
-
 def recordings(args: Args) -> list[tuple[str, rig.Recipe]]:
   """Each recording's folder name (under the workdir) and recipe."""
   recipe = rig.RECIPES[args.recipe]
@@ -138,7 +114,7 @@ def recordings(args: Args) -> list[tuple[str, rig.Recipe]]:
       if getattr(recipe, f.name) != getattr(rig.Recipe(), f.name)
     }  # fmt: skip
     recipe = dataclasses.replace(rig.SMOKE, **changed)
-  recipe = _changed(recipe, args.recipe_fields)
+  recipe = rig.with_fields(recipe, args.recipe_fields)
   if not args.winds:
     return [('', recipe)]
   try:

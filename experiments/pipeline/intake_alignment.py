@@ -96,24 +96,33 @@ def cross_check(given: list, fit: alignment.ClothFit) -> tuple[str, ...]:
 
 
 def alignment_error(
-  fit, pins, want_spacing: float, intr, warnings, scatter: float = 0.0
+  fit, pins, want_spacing: float, intr, warnings, scatter_se: float = 0.0
 ) -> tuple:
-  """(metres, degrees): the alignment's own error, 1 sd, for the estimate's
-  ``camera_sd_m``/``camera_sd_deg``: a tilt by where up came from
-  (``UP_SD_DEG``), at least as large as any disagreement between its sources;
-  a shift of two pixels at the pins' depth, at least ``MIN_SD_M``, or half the
-  pins' spacing error if larger. ``scatter`` (``alignment.track_pins``: how
-  far the fitted pins move over the recording) is a shift of its own and turns
-  the pins' line by its angle across their spacing."""
+  """(metres, degrees): the alignment's own error, 1 sd per axis, for the
+  estimate's ``camera_sd_m``/``camera_sd_deg``.
+
+  The pins are fitted at the cloth's top corners, which sit inside the pinned
+  corners and behind them (the cloth by a pin curls and sweeps downwind, and
+  the sensor loses it edge-on), by about half the pins' spacing shortfall
+  against the simulated cloth's. With ``scatter_se`` (``alignment.track_pins``'
+  scatter over the square root of its kept stretches: the noise left in the
+  chosen fit) in quadrature, that is the length ``L`` of a shift in no known
+  direction: ``L / sqrt(3)`` per axis, at least ``MIN_SD_M`` or two pixels at
+  the pins' depth. Its turn of the pins' line across their spacing adds in
+  quadrature to the tilt by where up came from (``UP_SD_DEG``), which is at
+  least any disagreement between up's sources. The pins' scatter itself is not
+  the error: it grows with the cloth's flutter, the placement's error does not
+  (benchmarks.alignment_error)."""
+  depth = float(np.mean(pins[:, 2]))
+  spacing = float(np.linalg.norm(pins[1] - pins[0]))
+  per_axis = float(np.hypot(0.5 * abs(spacing - want_spacing), scatter_se)) / np.sqrt(3)
+  m = max(MIN_SD_M, 2 * depth / intr.fx, per_axis)
   deg = UP_SD_DEG[fit.up_from]
-  deg = max(deg, float(np.degrees(np.arctan2(scatter, want_spacing))))
   if fit.floor_up is not None and fit.up_from not in ('floor', 'cloth plane'):
     deg = max(deg, alignment.angle_deg(fit.up, fit.floor_up))
   if warnings:  # sources of up more than UP_CROSS_CHECK_DEG apart
     deg = max(deg, 2 * UP_CROSS_CHECK_DEG)
-  depth = float(np.mean(pins[:, 2]))
-  spacing = float(np.linalg.norm(pins[1] - pins[0]))
-  m = max(MIN_SD_M, 2 * depth / intr.fx, 0.5 * abs(spacing - want_spacing), scatter)
+  deg = float(np.hypot(deg, np.degrees(np.arctan2(per_axis, want_spacing))))
   return (round(min(m, 0.2), 4), round(min(deg, 20.0), 2))
 
 
@@ -182,18 +191,19 @@ def fit_placement(
     spacing=want,
   )  # fmt: skip
   warnings = cross_check(given, fit)
-  found, scatter = fit.pins, 0.0
-  if not config.pins:  # the whole recording's most upwind fit, and its spread
+  found, scatter_se = fit.pins, 0.0
+  if not config.pins:  # the whole recording's most upwind fit, and its noise
     track = alignment.track_pins(
       taken.depth, intr, fit.pins, fit.up, wind_toward_camera=config.wind_toward_camera,
       spacing=want,
     )  # fmt: skip
-    found, scatter = track.pins, track.scatter
+    found = track.pins
+    scatter_se = track.scatter / np.sqrt(max(int(track.kept.sum()), 1))
   pose, pins = alignment.camera_pose(
     found, fit.up, pins_world, wind_toward_camera=config.wind_toward_camera
   )
   check_spacing(taken.source, pins, want, sim)
-  sd = alignment_error(fit, pins, want, intr, warnings, scatter)
+  sd = alignment_error(fit, pins, want, intr, warnings, scatter_se)
   return Placement(pose, pins, fit.up_from, warnings, sd)
 
 

@@ -132,6 +132,39 @@ SMOKE = Recipe(
 )  # fmt: skip
 
 
+def with_fields(recipe: Recipe, text: str, flag: str = '--recipe_fields') -> Recipe:
+  """``recipe`` with ``text``'s comma-separated ``field=value`` pairs: a number
+  parsed as its field's type, a point (``eye``, ``target``, ``world_shift``)
+  written ``x:y:z`` in metres, so that a study moves the camera or changes the
+  physics without a recipe of its own.
+
+  Raises:
+    ValueError: naming ``flag``, the item and the fields it may change.
+  """
+  fields = {f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)}
+  numeric = sorted(n for n, v in fields.items() if type(v) in (int, float))
+  points = sorted(n for n, v in fields.items() if isinstance(v, tuple) and len(v) == 3)
+  out = {}
+  for item in (x for x in text.split(',') if x):
+    name, _, value = item.partition('=')
+    if name not in numeric + points or not value:
+      raise ValueError(
+        f'{flag}={text}: {item!r} is not field=number of {numeric} or '
+        f'field=x:y:z of {points}'
+      )
+    kind = float if name in points else type(fields[name])
+    parts = value.split(':') if name in points else [value]
+    try:
+      got = tuple(kind(v) for v in parts)
+    except ValueError:
+      raise ValueError(f'{flag}={text}: {value!r} is not a {kind.__name__}') from None
+    if not np.all(np.isfinite(got)) or len(got) != (3 if name in points else 1):
+      shape = 'three finite numbers x:y:z' if name in points else 'a finite number'
+      raise ValueError(f'{flag}={text}: {value!r} is not {shape}')
+    out[name] = got if name in points else got[0]
+  return dataclasses.replace(recipe, **out)
+
+
 def rig_from_sim(recipe: Recipe) -> np.ndarray:
   """(4, 4) the rig's world from the simulator's: a turn about z, a shift."""
   a = np.deg2rad(recipe.world_turn_deg)

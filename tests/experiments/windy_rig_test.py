@@ -29,10 +29,21 @@ def test_recipe_fields_change_the_recipe_as_numbers_of_its_types():
   assert isinstance(r.cloth_resolution, int)
 
 
+def test_recipe_fields_move_the_camera_as_points():
+  args = windy_rig.Args(recipe_fields='eye=-0.6:-1.4:1.6,target=0:0.2:1')
+  ((_, r),) = windy_rig.recordings(args)
+  assert r.eye == (-0.6, -1.4, 1.6) and r.target == (0.0, 0.2, 1.0)
+  assert dataclasses.replace(r, eye=rig.Recipe.eye, target=rig.Recipe.target) == (
+    rig.Recipe()
+  )
+
+
 @pytest.mark.parametrize(
   'fields, named',
   [('gusts=0.2', "'gusts=0.2'"), ('cloth_resolution=2.5', "'2.5' is not a int"),
-   ('material=black_denim', "'material=black_denim'"), ('warmup=', "'warmup='")],
+   ('material=black_denim', "'material=black_denim'"), ('warmup=', "'warmup='"),
+   ('eye=1:2', "'1:2' is not three finite"), ('target=0:a:1', "'0:a:1' is not a float"),
+   ('wind_speed=nan', "'nan' is not a finite number")],
 )  # fmt: skip
 def test_bad_recipe_fields_are_refused_naming_the_item(fields, named):
   with pytest.raises(ValueError, match='--recipe_fields') as e:
