@@ -1,9 +1,10 @@
 """Is the intake's own alignment error honest? Its claim against its actual error.
 
 The intake places a user's camera in the simulator's world and says how far
-off that placement may be (``intake_alignment.alignment_error``: a tilt by
-where up came from and the pins' spread, a shift of pixels at the pins' depth,
-the pins' scatter); the estimate then renders its candidates from cameras moved by
+off that placement may be (``intake_alignment.alignment_error``: the pins'
+spacing shortfall and their scatter's standard error as a shift, at least two
+pixels at their depth, and its turn with the tilt by where up came from); the
+estimate then renders its candidates from cameras moved by
 that much (``physsim.shape.misplaced_pose``: a rotation of ``sd_deg`` per axis
 about the pins' centre, then a shift of ``sd_m`` per axis). On windy-rig recordings
 (``experiments.pipeline.rig``: floor out of view, up from ``--world_up`` or

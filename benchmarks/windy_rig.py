@@ -68,6 +68,11 @@ class Args:
       (``rig.with_fields``: numbers, and points as ``x:y:z``; e.g.
       ``gust_intensity=0.2,cloth_resolution=25`` or ``eye=-0.6:-1.4:1.6``).
     parallel: estimates run at once (processes).
+    fabric_draws: -1: the recipe's fabric (its bending and area weight at the
+      centre of the estimate's prior, where the wind's posterior is narrowest
+      for it); else the seed of each recording's own fabric drawn as the
+      calibration tables draw theirs (``rig.drawn_fabric``), so that a check of
+      coverage is one of what the tables promise.
   """
 
   workdir: str = 'out/benchmarks/windy_rig'
@@ -81,6 +86,7 @@ class Args:
   winds: str = ''
   recipe_fields: str = ''
   parallel: int = 1
+  fabric_draws: int = -1
 
 
 PRESETS = {
@@ -123,10 +129,13 @@ def recordings(args: Args) -> list[tuple[str, rig.Recipe]]:
     winds = []
   if not winds or not all(0 < w < 20 for w in winds):
     raise ValueError(f'--winds={args.winds}: need comma-separated winds in (0, 20) m/s')
-  return [
-    (f'rec{k:02d}', dataclasses.replace(recipe, wind_speed=w, seed=recipe.seed + k))
-    for k, w in enumerate(winds)
-  ]
+  out = []
+  for k, w in enumerate(winds):
+    r = dataclasses.replace(recipe, wind_speed=w, seed=recipe.seed + k)
+    if args.fabric_draws >= 0:
+      r = rig.drawn_fabric(r, np.random.default_rng([args.fabric_draws, k]))
+    out.append((f'rec{k:02d}', r))
+  return out
 
 
 def _flags(mode: str, paths: dict) -> list[str]:

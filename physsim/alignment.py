@@ -262,8 +262,10 @@ def track_pins(
   stretch of frames. ``fit_pins`` runs on ``windows`` stretches of ``frames``
   frames spread over ``depth`` (T, H, W) with ``up`` given; each pin is taken
   from the stretch that puts it most upwind (the cloth's least swept-back
-  moment), and how far the fits move (``scatter``) is the error left. A
-  stretch that fitted something else (``MISFIT_SHARE``) is left out of both.
+  moment), and how far the fits move (``scatter``) is the noise in that
+  choice (the intake claims its standard error, not the scatter itself, which
+  grows with the cloth's flutter). A stretch that fitted something else
+  (``MISFIT_SHARE``) is left out of both.
 
   Args:
     depth: (T, H, W) metres, 0 where not cloth.

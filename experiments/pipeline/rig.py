@@ -165,6 +165,20 @@ def with_fields(recipe: Recipe, text: str, flag: str = '--recipe_fields') -> Rec
   return dataclasses.replace(recipe, **out)
 
 
+def drawn_fabric(recipe: Recipe, rng: np.random.Generator) -> Recipe:
+  """``recipe`` with its bending scale and area weight drawn uniform in the
+  unit cube of its material's search box (the estimate's prior), as the
+  calibration tables draw their recordings' (``calibration_config.truths``):
+  their coverage is an average over that prior, and a fabric at its centre
+  (the recipe's own) holds the wind's intervals more often than they say."""
+  p = physsim.from_unit(
+    rng.uniform(-1.0, 1.0, 3), physsim.search_space(recipe.material)
+  )
+  return dataclasses.replace(
+    recipe, bending_scale=float(p.bending_scale), area_weight=float(p.area_weight)
+  )
+
+
 def rig_from_sim(recipe: Recipe) -> np.ndarray:
   """(4, 4) the rig's world from the simulator's: a turn about z, a shift."""
   a = np.deg2rad(recipe.world_turn_deg)

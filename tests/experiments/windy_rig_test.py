@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from benchmarks import windy_rig
@@ -103,3 +104,18 @@ def test_the_summary_counts_by_hand():
     '| world_up | 3 | 0 | 10.0% | 15.0% | 2/3 | 2/3 | 1/3 | 2/3 | 9.4% | 2/3 |' in text
   )
   assert '| none | 1 | 1 | - | - | 0/0 | 0/0 | 0/0 | 0/0 | - | 0/0 |' in text
+
+
+def test_fabric_draws_give_each_recording_a_fabric_of_the_prior():
+  """By hand: the unit cube's bending is log-uniform over 0.1-10 and its area
+  weight uniform over gray interlock's 0.15-0.22 kg/m^2 (the tables' prior)."""
+  args = windy_rig.Args(winds='3.0,4.0,2.5', fabric_draws=7, recipe_fields='seed=70')
+  recs = [r for _, r in windy_rig.recordings(args)]
+  for k, r in enumerate(recs):
+    u = np.random.default_rng([7, k]).uniform(-1.0, 1.0, 3)
+    assert r.bending_scale == pytest.approx(10.0 ** u[0], rel=1e-9)
+    assert r.area_weight == pytest.approx(0.15 + (u[2] + 1) / 2 * 0.07, rel=1e-9)
+    assert (r.wind_speed, r.seed) == ((3.0, 4.0, 2.5)[k], 70 + k)
+  assert len({r.area_weight for r in recs}) == 3  # each its own fabric
+  plain = windy_rig.recordings(dataclasses.replace(args, fabric_draws=-1))
+  assert {(r.bending_scale, r.area_weight) for _, r in plain} == {(1.0, 0.185)}
