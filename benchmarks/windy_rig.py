@@ -69,8 +69,7 @@ class Args:
       ``gust_intensity=0.2,cloth_resolution=25`` or ``eye=-0.6:-1.4:1.6``).
     parallel: estimates run at once (processes).
     fabric_draws: -1: the recipe's fabric (its bending and area weight at the
-      centre of the estimate's prior, where the wind's posterior is narrowest
-      for it); else the seed of each recording's own fabric drawn as the
+      centre of the estimate's prior); else the seed of each recording's own fabric drawn as the
       calibration tables draw theirs (``rig.drawn_fabric``), so that a check of
       coverage is one of what the tables promise.
   """

@@ -132,14 +132,15 @@ SMOKE = Recipe(
 )  # fmt: skip
 
 
-def with_fields(recipe: Recipe, text: str, flag: str = '--recipe_fields') -> Recipe:
+def with_fields(recipe: Recipe, text: str) -> Recipe:
   """``recipe`` with ``text``'s comma-separated ``field=value`` pairs: a number
   parsed as its field's type, a point (``eye``, ``target``, ``world_shift``)
   written ``x:y:z`` in metres, so that a study moves the camera or changes the
   physics without a recipe of its own.
 
   Raises:
-    ValueError: naming ``flag``, the item and the fields it may change.
+    ValueError: naming ``--recipe_fields``, the item and the fields it may
+      change.
   """
   fields = {f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)}
   numeric = sorted(n for n, v in fields.items() if type(v) in (int, float))
@@ -149,7 +150,7 @@ def with_fields(recipe: Recipe, text: str, flag: str = '--recipe_fields') -> Rec
     name, _, value = item.partition('=')
     if name not in numeric + points or not value:
       raise ValueError(
-        f'{flag}={text}: {item!r} is not field=number of {numeric} or '
+        f'--recipe_fields={text}: {item!r} is not field=number of {numeric} or '
         f'field=x:y:z of {points}'
       )
     kind = float if name in points else type(fields[name])
@@ -157,10 +158,12 @@ def with_fields(recipe: Recipe, text: str, flag: str = '--recipe_fields') -> Rec
     try:
       got = tuple(kind(v) for v in parts)
     except ValueError:
-      raise ValueError(f'{flag}={text}: {value!r} is not a {kind.__name__}') from None
+      raise ValueError(
+        f'--recipe_fields={text}: {value!r} is not a {kind.__name__}'
+      ) from None
     if not np.all(np.isfinite(got)) or len(got) != (3 if name in points else 1):
       shape = 'three finite numbers x:y:z' if name in points else 'a finite number'
-      raise ValueError(f'{flag}={text}: {value!r} is not {shape}')
+      raise ValueError(f'--recipe_fields={text}: {value!r} is not {shape}')
     out[name] = got if name in points else got[0]
   return dataclasses.replace(recipe, **out)
 
@@ -169,8 +172,8 @@ def drawn_fabric(recipe: Recipe, rng: np.random.Generator) -> Recipe:
   """``recipe`` with its bending scale and area weight drawn uniform in the
   unit cube of its material's search box (the estimate's prior), as the
   calibration tables draw their recordings' (``calibration_config.truths``):
-  their coverage is an average over that prior, and a fabric at its centre
-  (the recipe's own) holds the wind's intervals more often than they say."""
+  their coverage is an average over that prior, not a promise at its centre
+  (the recipe's own fabric)."""
   p = physsim.from_unit(
     rng.uniform(-1.0, 1.0, 3), physsim.search_space(recipe.material)
   )
