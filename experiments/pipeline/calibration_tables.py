@@ -81,7 +81,8 @@ def calibration_file(config=None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
   (``config.scoring.calibration``), else of those shipped for its distance the
   one whose settings differ from it least (then whose readings' range holds
-  its readings, then the one nearest its camera error), else (none shipped
+  its readings, then the one whose recordings' camera errors were most like
+  its own: ``carried_errors.recordings_gap``), else (none shipped
   for it) the default one, whose note then names what differs."""
   scoring = getattr(config, 'scoring', None)
   if given := getattr(scoring, 'calibration', ''):
@@ -97,7 +98,7 @@ def calibration_file(config=None) -> str:
     len(differing_fields(config, cal := read_calibration(p))),
     len(_reading_gaps(config, cal)),
     carried_errors.table_source(cal) != source,  # displaced as this error errs
-    carried_errors.camera_gap(carried_errors.table_of(cal)[:2], mine),
+    carried_errors.recordings_gap(carried_errors.table_of(cal), mine),
   ))  # fmt: skip
 
 

@@ -162,6 +162,28 @@ def camera_gap(calibrated: tuple[float, float], mine: tuple[float, float]) -> fl
   return gap
 
 
+def recordings_gap(table: tuple[float, ...], mine: tuple[float, float]) -> float:
+  """How far a carried camera error lies, on average, from the errors a
+  table's held-out recordings carried: per component the mean absolute log
+  ratio to errors drawn log-uniformly over the table's range (``table``:
+  metres, degrees, spread; its recordings' errors were the centre times
+  exp(spread x u), u uniform in [-1, 1]), or ``camera_gap``'s where they all
+  carried one. Of the tables covering an estimate, the one whose recordings
+  were most like it is the least: a narrow range wins over a wide one
+  centred nearer, whose coverage is averaged over errors far from this one."""
+  m, deg, spread = (*table, 0.0)[:3]
+  if spread <= 0.0:
+    return camera_gap((m, deg), mine)
+  gap = 0.0
+  for c, x in zip((m, deg), mine, strict=True):
+    if c <= 0.0 or x <= 0.0:
+      gap += 0.0 if c == x == 0.0 else math.inf
+      continue
+    d = abs(math.log(x / c))  # E|d - spread u|: (s^2 + d^2) / 2s inside, d past it
+    gap += (spread**2 + d**2) / (2 * spread) if d < spread else d
+  return gap
+
+
 def camera_words(sd: tuple[float, float]) -> str:
   """A camera error as the notes print it: '8.5 cm / 3 deg'."""
   return f'{100 * sd[0]:.3g} cm / {sd[1]:.3g} deg'

@@ -22,6 +22,7 @@ from experiments.pipeline.carried_errors import (
   camera_gap,
   camera_of,
   law_words,
+  recordings_gap,
   table_of,
 )
 
@@ -132,7 +133,8 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   it: another number of recordings, a likelihood setting, fabric, size or
   camera error it was not measured with, or readings unlike its sets'
   (``_covers_readings``: a check per camera error and bending-length
-  readings; of those that cover it, the nearest camera error's).
+  readings; of those that cover it, the one whose sets' camera errors were
+  most like its own: ``carried_errors.recordings_gap``).
 
   The note quotes how often its intervals, as printed (not recalibrated),
   held the truth on those sets (``'measured'``), and names the quantities it
@@ -143,11 +145,11 @@ def protocol_note(config, recordings: int, path: str = PROTOCOL_CHECKS_FILE):
   if not is_protocol(m):
     return None
   covering = sorted(  # those measured with its camera error and readings like
-    (  # its, the nearest camera error first
+    (  # its, those whose sets' camera errors were most like its own first
       c for c in checks_of(recordings, path)
       if not differing_fields(config, c) and _covers_readings(c, m)
     ),
-    key=lambda c: camera_gap(table_of(c)[:2], mine),
+    key=lambda c: recordings_gap(table_of(c), mine),
   )  # fmt: skip
   if not covering:
     return None

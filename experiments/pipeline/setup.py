@@ -204,16 +204,17 @@ def _protocol_note(variants, recordings: int, cameras) -> dict | None:
 
 def _common_table(variants) -> str | None:
   """The shipped calibration whose tables cover every one of ``variants``
-  (each recording's settings, its own camera error), the nearest to their
-  camera errors; None where none does."""
+  (each recording's settings, its own camera error), the one whose
+  recordings' errors were most like theirs (``carried_errors.recordings_gap``);
+  None where none does."""
   shipped = calibration_tables.shipped_calibrations(variants[0].scoring.distance)
   fits = []
   for path in shipped:
     cal = calibration_tables.read_calibration(path)
     if not any(calibration_tables.differing_fields(v, cal) for v in variants):
-      table = carried_errors.table_of(cal)[:2]
+      table = carried_errors.table_of(cal)
       gap = sum(
-        carried_errors.camera_gap(table, carried_errors.camera_of(v.flat()))
+        carried_errors.recordings_gap(table, carried_errors.camera_of(v.flat()))
         for v in variants
       )  # fmt: skip
       fits.append((gap, path))

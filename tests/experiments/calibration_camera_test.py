@@ -261,6 +261,47 @@ def test_a_table_drawn_over_a_range_covers_every_error_in_it(ranged):
   )
 
 
+@pytest.mark.parametrize('mine', [(0.03, 2.0), (0.012, 4.0), (0.05, 0.5), (0.2, 2.0)])
+def test_recordings_gap_is_the_mean_log_distance_to_the_tables_draws(mine):
+  # the mean |log ratio| to errors drawn as the study draws them (centre x
+  # exp(spread u), u uniform in [-1, 1]), by the midpoint rule on a fine grid
+  table = (0.03, 2.0, 1.1)
+  u = (np.arange(200_000) + 0.5) / 100_000 - 1.0
+  want = sum(
+    np.mean(np.abs(np.log(x / (c * np.exp(table[2] * u)))))
+    for c, x in zip(table[:2], mine, strict=True)
+  )
+  assert carried_errors.recordings_gap(table, mine) == pytest.approx(want, rel=1e-6)
+  # one error for every recording: camera_gap's
+  assert carried_errors.recordings_gap(table[:2], mine) == pytest.approx(
+    carried_errors.camera_gap(table[:2], mine)
+  )
+
+
+def test_an_estimate_quotes_the_table_whose_recordings_were_most_like_it(
+  tmp_path, monkeypatch
+):
+  """Two ranged tables cover 3 cm / 2 deg: one of 1-9 cm centred on it, one of
+  1-4 cm off its centre; the narrow one's recordings were more like it."""
+  base = tmp_path / 'calibration_shape_paper.json'
+  monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
+  monkeypatch.setattr(
+    calibration_tables, 'SHAPE_CALIBRATION_FILE', str(tmp_path / 'none.json')
+  )
+  config = EstimateConfig().replace(distance='shape')
+  _write(base, config, 'exact cameras')
+  for sd, spread, name in (((0.03, 2.0), SPREAD, 'wide'), ((0.02, 1.6), 0.7, 'narrow')):
+    path = calibration_tables.shipped_calibration('shape', 'paper', sd, spread)
+    mine = config.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    _write(tmp_path / os.path.basename(path), mine, name, spread)
+  for sd, setting in (((0.03, 2.0), 'narrow'), ((0.015, 1.0), 'narrow'),
+                      ((0.05, 2.0), 'wide'), ((0.03, 4.0), 'wide')):  # fmt: skip
+    note = calibration_tables.calibration_note(
+      config.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
+    )
+    assert note['matches'] and note['setting'] == setting, (sd, note['setting'])
+
+
 # A paper-size study's structure at the smallest size a CPU runs in a minute
 # or two (as calibration_fabrics_test's), its estimates carrying 3 cm / 2 deg,
 # each recording its own error within exp(+-0.5) of that.

@@ -33,11 +33,14 @@ from experiments.pipeline import (
   user_recordings,
 )
 
-# The tables shipped for a carried camera error (metres, degrees), and those
+# The tables shipped for a carried camera error (metres, degrees), those
 # over the intake's range (3 cm / 2.5 deg x exp(+-1.25): 0.86-10.5 cm,
 # 0.72-8.7 deg).
 SHIPPED = (0.04, 2.5)
 RANGED = calibration_tables.shipped_calibration('shape', 'paper', (0.03, 2.5), 1.25)
+# ... and over the range of the intake's honest claims (2 cm / 1.6 deg x
+# exp(+-0.7): 0.99-4 cm, 0.79-3.2 deg)
+NEAR = calibration_tables.shipped_calibration('shape', 'paper', (0.02, 1.6), 0.7)
 
 
 def _prepared(tmp_path, seed: int, wind: float):
@@ -109,8 +112,13 @@ def test_a_joint_pair_quotes_the_tables_only_where_each_recordings_error_is_in_t
   assert both['matches'] and both['mode'] == 'joint pair', both
   # the second's tilt below the 4 cm tables: the ranged ones cover both
   ranged = calibration_tables.read_calibration(RANGED)
-  two = note(((0.04, 2.5), (0.02, 1.0)))
+  two = note(((0.05, 2.5), (0.02, 1.0)))
   assert two['matches'] and two['setting'] == ranged['setting'], two
+  # both inside the intake's claims' range too: those tables, whose
+  # recordings' errors were the more like theirs
+  near = calibration_tables.read_calibration(NEAR)
+  two = note(((0.04, 2.5), (0.02, 1.0)))
+  assert two['matches'] and two['setting'] == near['setting'], two
   one = note(((0.04, 2.5), (0.02, 0.3)))  # below every table's tilts
   assert not one['matches']
   assert 'camera alignment error 2 cm / 0.3 deg' in ' '.join(one['differs'])

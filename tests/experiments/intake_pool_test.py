@@ -1,0 +1,68 @@
+"""benchmarks/intake_pool.py: the windy rig's runs pooled, checked by hand."""
+
+import json
+import math
+
+import pytest
+
+from benchmarks import intake_pool
+
+SETTING = (
+  'gibbs likelihood, sharpness 0.5, cameras off by 0.99-4 cm / 0.79-3.2 deg (1 sd)'
+)
+
+
+def _row(truth, median, lo50, hi50, lo90, hi90, setting=SETTING):
+  return {
+    'exit': 0, 'recording': 'rec00', 'truth': truth, 'median': median,
+    'error': abs(median - truth) / truth,
+    'interval_50': [lo50, hi50], 'interval_90': [lo90, hi90],
+    'holds_50': lo50 <= truth <= hi50, 'holds': lo90 <= truth <= hi90,
+    'calibration_setting': setting,
+  }  # fmt: skip
+
+
+def _run(path, rows, draws=-1):
+  path.write_text(json.dumps({'settings': {'fabric_draws': draws}, 'rows': rows}))
+  return str(path)
+
+
+def test_wilson_interval_by_hand():
+  # k = 5 of n = 10 at z = 1.645: centre 0.5, half z sqrt(0.025 + z^2/400) / (1 + z^2/10)
+  z = intake_pool._Z90
+  half = z * math.sqrt(0.025 + z * z / 400) / (1 + z * z / 10)
+  lo, hi = intake_pool.wilson(5, 10)
+  assert lo == pytest.approx(0.5 - half) and hi == pytest.approx(0.5 + half)
+  assert intake_pool.wilson(0, 4)[0] == 0.0 and intake_pool.wilson(4, 4)[1] == 1.0
+
+
+def test_half_widths_on_the_truths_side():
+  # median 3, 50% interval [2.5, 4]: a truth of 3.5 is half the upper half-width
+  assert intake_pool.half_widths(_row(3.5, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(0.5)
+  assert intake_pool.half_widths(_row(2.0, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(2.0)
+
+
+def test_runs_are_pooled_by_fabric_and_table(tmp_path):
+  a = _run(tmp_path / 'a.json', [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6),
+                                 _row(4.0, 3.0, 2.8, 3.2, 2.5, 3.8)], draws=7)  # fmt: skip
+  b = _run(tmp_path / 'b.json', [_row(2.5, 2.4, 2.3, 2.6, 2.0, 2.9, 'no cameras')])
+  rows = intake_pool.read_rows([a, b])
+  groups = {(g['fabric'], g['table']): g for g in intake_pool.pooled(rows)}
+  drawn = groups[('drawn over the prior', '0.99-4 cm / 0.79-3.2 deg')]
+  assert (drawn['n'], drawn['held_90'], drawn['held_50']) == (2, 1, 1)
+  assert drawn['mean_error'] == pytest.approx((0.1 / 3 + 0.25) / 2)
+  assert groups[('all', 'all')]['n'] == 3
+  assert groups[("the recipe's own", 'no cameras')]['held_50'] == 1
+
+
+def test_a_file_that_is_no_windy_rig_run_is_named(tmp_path):
+  bad = tmp_path / 'bad.json'
+  bad.write_text('{"rows": [')
+  with pytest.raises(ValueError, match='bad.json: not a windy_rig.json'):
+    intake_pool.read_rows([str(bad)])
+  other = tmp_path / 'other.json'
+  other.write_text('{"n": 3}')
+  with pytest.raises(ValueError, match='other.json: not a windy_rig.json'):
+    intake_pool.read_rows([str(other)])
+  with pytest.raises(ValueError, match='no such files'):
+    intake_pool.main(intake_pool.Args(runs=str(tmp_path / 'none*.json')))
