@@ -14,6 +14,9 @@ gives):
   python -m benchmarks.intake_pool \
       --runs='benchmarks/results/camera_intake_claim_tables/*.json' \
       --out=out/intake_pool
+
+and draws each recording's place (pooled.png), so that a count's few misses
+can be told from a spread that is too wide or too narrow throughout.
 """
 
 from __future__ import annotations
@@ -126,6 +129,32 @@ def table(groups: list[dict]) -> str:
   return '\n'.join(lines)
 
 
+def figure(rows: list[dict], path: str) -> None:
+  """Each recording's truth in its 50% interval's half-widths, a row per
+  group, with the 50% interval's edge (1) and where a Gaussian's 90% one
+  would be (2.44)."""
+  plt = files.pyplot()
+  keys = sorted({(r['drawn'], r['table']) for r in rows})
+  fig, ax = plt.subplots(figsize=(7, 0.6 * len(keys) + 1.4))
+  for i, key in enumerate(keys):
+    x = [min(half_widths(r), 4.0) for r in rows if (r['drawn'], r['table']) == key]
+    ax.plot(x, np.full(len(x), i), 'o', alpha=0.6)
+  for edge, words in ((1.0, '50% edge'), (2.44, "a Gaussian's 90% edge")):
+    ax.axvline(edge, color='gray', ls='--', lw=1)
+    ax.text(edge, len(keys) - 0.4, f' {words}', fontsize=8, color='gray')
+  ax.set_yticks(range(len(keys)))
+  ax.set_yticklabels(
+    [f'{"drawn" if d else "centre"}: {t}' for d, t in keys], fontsize=8
+  )
+  ax.set_ylim(-0.6, len(keys) - 0.1)
+  ax.set_xlim(0, 4.1)
+  ax.set_xlabel("|truth - median| / the 50% interval's half-width (capped at 4)")
+  ax.set_title("wind through the intake: each recording's truth", fontsize=10)
+  fig.tight_layout()
+  files.savefig(fig, path)
+  plt.close(fig)
+
+
 def main(args: Args) -> None:
   paths = sorted({p for pat in args.runs.split(',') if pat for p in glob.glob(pat)})
   if not paths:
@@ -142,8 +171,9 @@ def main(args: Args) -> None:
     'runs': paths, 'groups': groups,
     'rows': [{k: r[k] for k in keep} | {'half_widths': half_widths(r)} for r in rows],
   })  # fmt: skip
+  figure(rows, os.path.join(args.out, 'pooled.png'))
   print(table(groups))
-  print(f'wrote {out}')
+  print(f'wrote {out} and pooled.png')
 
 
 if __name__ == '__main__':

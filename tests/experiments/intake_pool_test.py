@@ -66,3 +66,14 @@ def test_a_file_that_is_no_windy_rig_run_is_named(tmp_path):
     intake_pool.read_rows([str(other)])
   with pytest.raises(ValueError, match='no such files'):
     intake_pool.main(intake_pool.Args(runs=str(tmp_path / 'none*.json')))
+
+
+def test_main_writes_the_pool_and_its_picture(tmp_path):
+  _run(tmp_path / 'a.json', [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6)], draws=3)
+  _run(tmp_path / 'b.json', [_row(2.5, 2.9, 2.7, 3.0, 2.4, 3.2)])
+  out = tmp_path / 'out'
+  intake_pool.main(intake_pool.Args(runs=str(tmp_path / '*.json'), out=str(out)))
+  pooled = json.loads((out / 'pooled.json').read_text())
+  assert [g['n'] for g in pooled['groups']] == [1, 1, 2]
+  assert pooled['rows'][1]['half_widths'] == pytest.approx(2.0)
+  assert (out / 'pooled.png').read_bytes()[:4] == b'\x89PNG'
