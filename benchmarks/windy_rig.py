@@ -23,15 +23,29 @@ what, e.g. ``--recipe_fields=gust_intensity=0.2``).
 
 Prints a table and writes ``<workdir>/windy_rig.json``; reruns resume.
 
+One run is a handful of recordings, too few to read a coverage: ``--pool``
+adds up the rows of several, grouped by the tables each estimate quoted and by
+whether each recording's fabric was drawn over the prior (``--fabric_draws``,
+what the tables' coverage is averaged over) or was the recipe's own (the
+prior's centre); beside each count its 90% Wilson interval, and the truth's
+place in the 50% interval's half-widths (|truth - median| / the half-width on
+the truth's side: 1 at its edge; a median near 1 is a calibrated 50%
+interval's), drawn per recording so that a count's few misses can be told
+from intervals too wide throughout.
+
   python -m benchmarks.windy_rig
   python -m benchmarks.windy_rig --modes=world_up,none --max_iter=2
   python -m benchmarks.windy_rig --preset=gpu --recipe=mismatched
+  python -m benchmarks.windy_rig --workdir=out/intake_pool \
+      --pool='benchmarks/results/camera_intake_claim_tables/*.json'
 """
 
 from __future__ import annotations
 
 import dataclasses
+import glob
 import json
+import math
 import os
 import subprocess
 import sys
@@ -40,10 +54,12 @@ from concurrent import futures
 
 import numpy as np
 
+from bo.calibration import binomial_interval
 from experiments.pipeline import cli, files, objective, rig
 
 MODES = ('world_up', 'imu', 'none', 'guessed', 'trusted')
 BACKENDS = ('c', 'auto', 'mjx', 'warp')
+Z90 = 1.6448536269514722  # the standard normal's 95th percentile: 90% intervals
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +88,9 @@ class Args:
       centre of the estimate's prior); else the seed of each recording's own fabric drawn as the
       calibration tables draw theirs (``rig.drawn_fabric``), so that a check of
       coverage is one of what the tables promise.
+    pool: comma-separated earlier ``windy_rig.json`` files or globs: instead
+      of recording, their rows pooled by fabric and table (``pooled``) into
+      the workdir's pooled.json and pooled.png.
   """
 
   workdir: str = 'out/benchmarks/windy_rig'
@@ -86,6 +105,7 @@ class Args:
   recipe_fields: str = ''
   parallel: int = 1
   fabric_draws: int = -1
+  pool: str = ''
 
 
 PRESETS = {
@@ -252,7 +272,128 @@ def summary_table(stats: dict) -> str:
   return '\n'.join(lines)
 
 
+def half_widths(row: dict) -> float:
+  """|truth - median| in the 50% interval's half-widths on the truth's side."""
+  lo, hi = row['interval_50']
+  m, t = row['median'], row['truth']
+  side = (hi - m) if t >= m else (m - lo)
+  return abs(t - m) / side if side > 0 else math.inf
+
+
+def table_of_row(row: dict) -> str:
+  """The tables a row's estimate quoted, by their cameras' words."""
+  setting = row.get('calibration_setting') or 'no table'
+  return setting.split('cameras off by ')[-1].split(' (')[0]
+
+
+def read_rows(paths: list[str]) -> list[dict]:
+  """Every estimated row of the runs, with its run, fabric and table."""
+  rows = []
+  for path in paths:
+    try:
+      run = json.load(open(path))
+    except (OSError, ValueError) as e:
+      raise ValueError(f'{path}: not a windy_rig.json ({e})') from e
+    if 'rows' not in run or 'settings' not in run:
+      raise ValueError(f'{path}: not a windy_rig.json (no rows or settings)')
+    drawn = int(run['settings'].get('fabric_draws', -1)) >= 0
+    for r in run['rows']:
+      if r.get('exit') == 0 and 'interval_50' in r:
+        rows.append({**r, 'run': os.path.basename(path), 'drawn': drawn,
+                     'table': table_of_row(r)})  # fmt: skip
+  return rows
+
+
+def pooled(rows: list[dict]) -> list[dict]:
+  """Per (fabric, table) group and over all: counts, intervals, errors."""
+  groups = {}
+  for r in rows:
+    key = ('drawn over the prior' if r['drawn'] else "the recipe's own", r['table'])
+    groups.setdefault(key, []).append(r)
+  out = []
+  for (fabric, table), rs in [*sorted(groups.items()), (('all', 'all'), rows)]:
+    n = len(rs)
+    k90, k50 = sum(bool(r['holds']) for r in rs), sum(bool(r['holds_50']) for r in rs)
+    out.append({
+      'fabric': fabric, 'table': table, 'n': n,
+      'held_90': k90, 'held_90_ci': binomial_interval(k90, n, Z90),
+      'held_50': k50, 'held_50_ci': binomial_interval(k50, n, Z90),
+      'mean_error': float(np.mean([r['error'] for r in rs])) if n else None,
+      'median_half_widths': float(np.median([half_widths(r) for r in rs])) if n else None,
+    })  # fmt: skip
+  return out
+
+
+def pool_table(groups: list[dict]) -> str:
+  lines = [
+    '| fabric | tables quoted | n | wind error | 90% held [90% CI] | '
+    '50% held [90% CI] | median half-widths |',
+    '|---|---|---|---|---|---|---|',
+  ]
+  for g in groups:
+    ci = lambda c: f'[{100 * c[0]:.0f}, {100 * c[1]:.0f}%]'  # noqa: E731
+    lines.append(
+      f'| {g["fabric"]} | {g["table"]} | {g["n"]} | {100 * g["mean_error"]:.1f}% | '
+      f'{g["held_90"]}/{g["n"]} {ci(g["held_90_ci"])} | '
+      f'{g["held_50"]}/{g["n"]} {ci(g["held_50_ci"])} | '
+      f'{g["median_half_widths"]:.2f} |'
+    )
+  return '\n'.join(lines)
+
+
+def figure(rows: list[dict], path: str) -> None:
+  """Each recording's truth in its 50% interval's half-widths, a row per
+  group, with the 50% interval's edge (1) and where a Gaussian's 90% one
+  would be (2.44)."""
+  plt = files.pyplot()
+  keys = sorted({(r['drawn'], r['table']) for r in rows})
+  fig, ax = plt.subplots(figsize=(7, 0.6 * len(keys) + 1.4))
+  for i, key in enumerate(keys):
+    x = [min(half_widths(r), 4.0) for r in rows if (r['drawn'], r['table']) == key]
+    ax.plot(x, np.full(len(x), i), 'o', alpha=0.6)
+  for edge, words in ((1.0, '50% edge'), (2.44, "a Gaussian's 90% edge")):
+    ax.axvline(edge, color='gray', ls='--', lw=1)
+    ax.text(edge, len(keys) - 0.4, f' {words}', fontsize=8, color='gray')
+  ax.set_yticks(range(len(keys)))
+  ax.set_yticklabels(
+    [f'{"drawn" if d else "centre"}: {t}' for d, t in keys], fontsize=8
+  )
+  ax.set_ylim(-0.6, len(keys) - 0.1)
+  ax.set_xlim(0, 4.1)
+  ax.set_xlabel("|truth - median| / the 50% interval's half-width (capped at 4)")
+  ax.set_title("wind through the intake: each recording's truth", fontsize=10)
+  fig.tight_layout()
+  files.savefig(fig, path)
+  plt.close(fig)
+
+
+def pool_runs(args: Args) -> None:
+  """``--pool``: earlier runs' rows pooled by fabric and table (``pooled``),
+  printed, and written with each recording's place (pooled.png) to the
+  workdir."""
+  paths = sorted({p for pat in args.pool.split(',') if pat for p in glob.glob(pat)})
+  if not paths:
+    raise ValueError(f'--pool={args.pool!r}: no such files')
+  rows = read_rows(paths)
+  if not rows:
+    raise ValueError(f'--pool={args.pool!r}: no estimated recordings in {paths}')
+  groups = pooled(rows)
+  os.makedirs(args.workdir, exist_ok=True)
+  out = os.path.join(args.workdir, 'pooled.json')
+  keep = ('run', 'recording', 'truth', 'median', 'error', 'holds', 'holds_50',
+          'drawn', 'table')  # fmt: skip
+  files.write_json(out, {
+    'runs': paths, 'groups': groups,
+    'rows': [{k: r[k] for k in keep} | {'half_widths': half_widths(r)} for r in rows],
+  })  # fmt: skip
+  figure(rows, os.path.join(args.workdir, 'pooled.png'))
+  print(pool_table(groups))
+  print(f'wrote {out} and pooled.png')
+
+
 def main(args: Args) -> None:
+  if args.pool:
+    return pool_runs(args)
   modes = _modes(args.modes)
   recs = recordings(args)
   if args.parallel < 1:

@@ -1,11 +1,12 @@
-"""benchmarks/intake_pool.py: the windy rig's runs pooled, checked by hand."""
+"""benchmarks/windy_rig.py --pool: the windy rig's runs pooled, checked by hand."""
 
 import json
 import math
 
 import pytest
 
-from benchmarks import intake_pool
+from benchmarks import windy_rig
+from bo.calibration import binomial_interval
 
 SETTING = (
   'gibbs likelihood, sharpness 0.5, cameras off by 0.99-4 cm / 0.79-3.2 deg (1 sd)'
@@ -27,27 +28,32 @@ def _run(path, rows, draws=-1):
   return str(path)
 
 
-def test_wilson_interval_by_hand():
+def test_the_pools_90_percent_binomial_interval_by_hand():
   # k = 5 of n = 10 at z = 1.645: centre 0.5, half z sqrt(0.025 + z^2/400) / (1 + z^2/10)
-  z = intake_pool._Z90
+  z = windy_rig.Z90
   half = z * math.sqrt(0.025 + z * z / 400) / (1 + z * z / 10)
-  lo, hi = intake_pool.wilson(5, 10)
+  lo, hi = binomial_interval(5, 10, z)
   assert lo == pytest.approx(0.5 - half) and hi == pytest.approx(0.5 + half)
-  assert intake_pool.wilson(0, 4)[0] == 0.0 and intake_pool.wilson(4, 4)[1] == 1.0
+  rows = [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6)] * 5 + [
+    _row(4.0, 3.0, 2.8, 3.2, 2.5, 3.8)
+  ] * 5
+  (group, _) = windy_rig.pooled([{**r, 'drawn': False, 'table': 't'} for r in rows])
+  assert group['held_50'] == 5
+  assert group['held_50_ci'] == pytest.approx((0.5 - half, 0.5 + half))
 
 
 def test_half_widths_on_the_truths_side():
   # median 3, 50% interval [2.5, 4]: a truth of 3.5 is half the upper half-width
-  assert intake_pool.half_widths(_row(3.5, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(0.5)
-  assert intake_pool.half_widths(_row(2.0, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(2.0)
+  assert windy_rig.half_widths(_row(3.5, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(0.5)
+  assert windy_rig.half_widths(_row(2.0, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(2.0)
 
 
 def test_runs_are_pooled_by_fabric_and_table(tmp_path):
   a = _run(tmp_path / 'a.json', [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6),
                                  _row(4.0, 3.0, 2.8, 3.2, 2.5, 3.8)], draws=7)  # fmt: skip
   b = _run(tmp_path / 'b.json', [_row(2.5, 2.4, 2.3, 2.6, 2.0, 2.9, 'no cameras')])
-  rows = intake_pool.read_rows([a, b])
-  groups = {(g['fabric'], g['table']): g for g in intake_pool.pooled(rows)}
+  rows = windy_rig.read_rows([a, b])
+  groups = {(g['fabric'], g['table']): g for g in windy_rig.pooled(rows)}
   drawn = groups[('drawn over the prior', '0.99-4 cm / 0.79-3.2 deg')]
   assert (drawn['n'], drawn['held_90'], drawn['held_50']) == (2, 1, 1)
   assert drawn['mean_error'] == pytest.approx((0.1 / 3 + 0.25) / 2)
@@ -59,20 +65,20 @@ def test_a_file_that_is_no_windy_rig_run_is_named(tmp_path):
   bad = tmp_path / 'bad.json'
   bad.write_text('{"rows": [')
   with pytest.raises(ValueError, match='bad.json: not a windy_rig.json'):
-    intake_pool.read_rows([str(bad)])
+    windy_rig.read_rows([str(bad)])
   other = tmp_path / 'other.json'
   other.write_text('{"n": 3}')
   with pytest.raises(ValueError, match='other.json: not a windy_rig.json'):
-    intake_pool.read_rows([str(other)])
+    windy_rig.read_rows([str(other)])
   with pytest.raises(ValueError, match='no such files'):
-    intake_pool.main(intake_pool.Args(runs=str(tmp_path / 'none*.json')))
+    windy_rig.main(windy_rig.Args(pool=str(tmp_path / 'none*.json')))
 
 
 def test_main_writes_the_pool_and_its_picture(tmp_path):
   _run(tmp_path / 'a.json', [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6)], draws=3)
   _run(tmp_path / 'b.json', [_row(2.5, 2.9, 2.7, 3.0, 2.4, 3.2)])
   out = tmp_path / 'out'
-  intake_pool.main(intake_pool.Args(runs=str(tmp_path / '*.json'), out=str(out)))
+  windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(out)))
   pooled = json.loads((out / 'pooled.json').read_text())
   assert [g['n'] for g in pooled['groups']] == [1, 1, 2]
   assert pooled['rows'][1]['half_widths'] == pytest.approx(2.0)
