@@ -371,7 +371,11 @@ def pool_runs(args: Args) -> None:
   """``--pool``: earlier runs' rows pooled by fabric and table (``pooled``),
   printed, and written with each recording's place (pooled.png) to the
   workdir."""
-  paths = sorted({p for pat in args.pool.split(',') if pat for p in glob.glob(pat)})
+  out = os.path.join(args.workdir, 'pooled.json')
+  paths = sorted({
+    p for pat in args.pool.split(',') if pat for p in glob.glob(pat)
+    if not os.path.exists(out) or not os.path.samefile(p, out)  # an earlier pool's own
+  })  # fmt: skip
   if not paths:
     raise ValueError(f'--pool={args.pool!r}: no such files')
   rows = read_rows(paths)
@@ -379,7 +383,6 @@ def pool_runs(args: Args) -> None:
     raise ValueError(f'--pool={args.pool!r}: no estimated recordings in {paths}')
   groups = pooled(rows)
   os.makedirs(args.workdir, exist_ok=True)
-  out = os.path.join(args.workdir, 'pooled.json')
   keep = ('run', 'recording', 'truth', 'median', 'error', 'holds', 'holds_50',
           'drawn', 'table')  # fmt: skip
   files.write_json(out, {

@@ -83,3 +83,7 @@ def test_main_writes_the_pool_and_its_picture(tmp_path):
   assert [g['n'] for g in pooled['groups']] == [1, 1, 2]
   assert pooled['rows'][1]['half_widths'] == pytest.approx(2.0)
   assert (out / 'pooled.png').read_bytes()[:4] == b'\x89PNG'
+  # pooled again into the runs' own folder: its earlier pool is not a run
+  windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(tmp_path)))
+  windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(tmp_path)))
+  assert len(json.loads((tmp_path / 'pooled.json').read_text())['rows']) == 2
