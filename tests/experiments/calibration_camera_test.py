@@ -171,9 +171,9 @@ def _write(path, config: EstimateConfig, setting: str, spread: float = 0.0) -> N
   }))  # fmt: skip
 
 
-@pytest.fixture
-def shipped(tmp_path, monkeypatch):
-  """Paper-size shape tables at exact cameras, 2 cm / 2 deg and 4 cm / 3 deg."""
+def _exact_tables(tmp_path, monkeypatch) -> EstimateConfig:
+  """The shape distance's paper-size tables at exact cameras, in ``tmp_path``
+  (where the tables beside them go), and its estimate's settings."""
   base = tmp_path / 'calibration_shape_paper.json'
   monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
   monkeypatch.setattr(
@@ -181,6 +181,13 @@ def shipped(tmp_path, monkeypatch):
   )
   config = EstimateConfig().replace(distance='shape')
   _write(base, config, 'exact cameras')
+  return config
+
+
+@pytest.fixture
+def shipped(tmp_path, monkeypatch):
+  """Paper-size shape tables at exact cameras, 2 cm / 2 deg and 4 cm / 3 deg."""
+  config = _exact_tables(tmp_path, monkeypatch)
   for sd in ((0.02, 2.0), (0.04, 3.0)):
     path = calibration_tables.shipped_calibration('shape', 'paper', sd)
     assert os.path.dirname(path) == str(tmp_path)
@@ -283,13 +290,7 @@ def test_an_estimate_quotes_the_table_whose_recordings_were_most_like_it(
 ):
   """Two ranged tables cover 3 cm / 2 deg: one of 1-9 cm centred on it, one of
   1-4 cm off its centre; the narrow one's recordings were more like it."""
-  base = tmp_path / 'calibration_shape_paper.json'
-  monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
-  monkeypatch.setattr(
-    calibration_tables, 'SHAPE_CALIBRATION_FILE', str(tmp_path / 'none.json')
-  )
-  config = EstimateConfig().replace(distance='shape')
-  _write(base, config, 'exact cameras')
+  config = _exact_tables(tmp_path, monkeypatch)
   for sd, spread, name in (((0.03, 2.0), SPREAD, 'wide'), ((0.02, 1.6), 0.7, 'narrow')):
     path = calibration_tables.shipped_calibration('shape', 'paper', sd, spread)
     mine = config.replace(camera_sd_m=sd[0], camera_sd_deg=sd[1])
