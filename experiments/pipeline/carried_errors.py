@@ -152,7 +152,8 @@ def camera_of(flat: dict) -> tuple[float, float]:
 def camera_gap(calibrated: tuple[float, float], mine: tuple[float, float]) -> float:
   """How far a carried camera error is from a calibrated one: the sum of the
   components' absolute log ratios (0 where equal, infinite where only one of
-  them is 0), to pick the nearest of the tables that cover it."""
+  them is 0): of tables whose recordings all carried one error, how unlike
+  this one they were (``recordings_gap``), and of raised claims the nearest."""
   gap = 0.0
   for c, m in zip(calibrated, mine, strict=True):
     if c <= 0.0 or m <= 0.0:
