@@ -55,11 +55,12 @@ from concurrent import futures
 import numpy as np
 
 from bo.calibration import binomial_interval
+from bo.design import Z90
 from experiments.pipeline import cli, files, objective, rig
+from experiments.pipeline.recording import read_json
 
 MODES = ('world_up', 'imu', 'none', 'guessed', 'trusted')
 BACKENDS = ('c', 'auto', 'mjx', 'warp')
-Z90 = 1.6448536269514722  # the standard normal's 95th percentile: 90% intervals
 
 
 @dataclasses.dataclass(frozen=True)
@@ -291,10 +292,10 @@ def read_rows(paths: list[str]) -> list[dict]:
   rows = []
   for path in paths:
     try:
-      run = json.load(open(path))
-    except (OSError, ValueError) as e:
+      run = read_json(path)
+    except ValueError as e:
       raise ValueError(f'{path}: not a windy_rig.json ({e})') from e
-    if 'rows' not in run or 'settings' not in run:
+    if not isinstance(run, dict) or 'rows' not in run or 'settings' not in run:
       raise ValueError(f'{path}: not a windy_rig.json (no rows or settings)')
     drawn = int(run['settings'].get('fabric_draws', -1)) >= 0
     for r in run['rows']:

@@ -7,6 +7,7 @@ import pytest
 
 from benchmarks import windy_rig
 from bo.calibration import binomial_interval
+from bo.design import Z90
 
 SETTING = (
   'gibbs likelihood, sharpness 0.5, cameras off by 0.99-4 cm / 0.79-3.2 deg (1 sd)'
@@ -30,7 +31,7 @@ def _run(path, rows, draws=-1):
 
 def test_the_pools_90_percent_binomial_interval_by_hand():
   # k = 5 of n = 10 at z = 1.645: centre 0.5, half z sqrt(0.025 + z^2/400) / (1 + z^2/10)
-  z = windy_rig.Z90
+  z = Z90
   half = z * math.sqrt(0.025 + z * z / 400) / (1 + z * z / 10)
   lo, hi = binomial_interval(5, 10, z)
   assert lo == pytest.approx(0.5 - half) and hi == pytest.approx(0.5 + half)
