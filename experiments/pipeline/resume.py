@@ -4,8 +4,8 @@ A search's state file (``bo_state.npz``, ``posterior_state.npz``) knows only
 the optimiser's settings, so ``check_run`` writes beside it what defines the
 run (the settings that change what is searched, digests of the recording and
 the camera, the network's folders) and refuses a workdir that holds another
-run. A search that had finished before keeps the result it wrote
-(``earlier_result``).
+run. A search that had finished before keeps the result it wrote, unless the
+calibration it quoted has changed since (``earlier_result``).
 """
 
 from __future__ import annotations
@@ -73,9 +73,19 @@ def check_run(job: Job, problem) -> None:
   files.write_json(path, run)
 
 
-def earlier_result(workdir: str) -> dict | None:
-  """The ``estimate.json`` of a search in ``workdir`` that had finished before
-  (its ``run.json`` matched: ``check_run``), which stands; None where it has
-  none (it stopped before writing it: its files are written again)."""
-  path = os.path.join(workdir, layout.ESTIMATE_FILE)
-  return read_json(path) if os.path.isfile(path) else None
+def earlier_result(job: Job) -> dict | None:
+  """The ``estimate.json`` of a search in ``job.workdir`` that had finished
+  before (its ``run.json`` matched: ``check_run``), which stands; None where
+  it has none (it stopped before writing it: its files are written again) or
+  where it quoted another calibration than its settings do now (tables
+  installed or changed since: its intervals are read again at the new
+  tables' levels from the search it kept)."""
+  path = os.path.join(job.workdir, layout.ESTIMATE_FILE)
+  if not os.path.isfile(path):
+    return None
+  result = read_json(path)
+  if 'calibration' in result and job.setup is not None:
+    now = json.loads(json.dumps(job.setup.calibration))
+    if result['calibration'] != now:
+      return None
+  return result

@@ -133,10 +133,11 @@ def run(
     jobs, write, progress, gp_on_cpu, evaluator or evaluation.Evaluator()
   )
   lock.start(nets)
-  # Searches that finished before: their result stands (run.json matched).
+  # Searches that finished before: their result stands (run.json matched),
+  # read again where the calibration it quoted has changed since.
   ended = [s for s in lock.live if s.done()]
   for s in ended:
-    lock.out[s.index] = resume.earlier_result(lock.jobs[s.index].workdir)
+    lock.out[s.index] = resume.earlier_result(lock.jobs[s.index])
   lock.finish([s for s in ended if lock.out[s.index] is None])
   while active := [s for s in lock.live if not s.done()]:
     lock.step(active)

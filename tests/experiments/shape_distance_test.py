@@ -20,7 +20,14 @@ import pytest
 
 import physsim
 from experiments import estimate as estimate_cli
-from experiments.pipeline import advice, embedding, estimation, evaluation, layout
+from experiments.pipeline import (
+  advice,
+  calibration_tables,
+  embedding,
+  estimation,
+  evaluation,
+  layout,
+)
 from experiments.pipeline import objective as obj_lib
 from tests.experiments.estimate_fixtures import (
   CONFIG,
@@ -253,6 +260,34 @@ def test_an_estimate_with_the_synthetic_likelihood(env, tmp_path):
     'warning: --likelihood=synthetic'
   )
   assert advice.synthetic_warning(CONFIG.scoring) is None
+  _requotes_after_new_tables(config, env, workdir, out, z)
+
+
+def _requotes_after_new_tables(config, env, workdir, out, z):
+  # Rerun on the finished workdir after its tables changed (here: another file
+  # given, as after an install): the result is read again with the new note
+  # from the search it kept (nothing searched again); unchanged, it stands.
+  theirs = calibration_tables.calibration_file(config)
+  cal = json.load(open(theirs))
+  cal['setting'] += ' (refit)'
+  refit = os.path.join(os.path.dirname(workdir), 'refit.json')
+  with open(refit, 'w') as f:
+    json.dump(cal, f)
+  requoted = estimation.estimate(
+    config.replace(calibration=refit), env['rec'], '', workdir, progress=False
+  )
+  assert requoted['calibration']['setting'].endswith(' (refit)')
+  saved = json.load(open(os.path.join(workdir, layout.ESTIMATE_FILE)))
+  assert saved['calibration'] == requoted['calibration']
+  after = np.load(os.path.join(workdir, layout.POSTERIOR_STATE))
+  np.testing.assert_array_equal(after['X'], z['X'])
+  assert requoted['evaluations'] == out['evaluations']
+  stood = os.path.getmtime(os.path.join(workdir, layout.ESTIMATE_FILE))
+  again = estimation.estimate(
+    config.replace(calibration=refit), env['rec'], '', workdir, progress=False
+  )
+  assert again == saved
+  assert os.path.getmtime(os.path.join(workdir, layout.ESTIMATE_FILE)) == stood
 
 
 def test_camera_error_out_of_range_is_refused():
