@@ -288,13 +288,16 @@ def table_of_row(row: dict) -> str:
 
 
 def read_rows(paths: list[str]) -> list[dict]:
-  """Every estimated row of the runs, with its run, fabric and table."""
+  """Every estimated row of the runs, with its run, fabric and table (an
+  earlier pool among them skipped: its rows are the runs')."""
   rows = []
   for path in paths:
     try:
       run = read_json(path)
     except ValueError as e:
       raise ValueError(f'{path}: not a windy_rig.json ({e})') from e
+    if isinstance(run, dict) and {'runs', 'groups', 'rows'} <= run.keys():
+      continue  # an earlier pool (pooled.json), not a run
     if not isinstance(run, dict) or 'rows' not in run or 'settings' not in run:
       raise ValueError(f'{path}: not a windy_rig.json (no rows or settings)')
     drawn = int(run['settings'].get('fabric_draws', -1)) >= 0
@@ -373,10 +376,7 @@ def pool_runs(args: Args) -> None:
   printed, and written with each recording's place (pooled.png) to the
   workdir."""
   out = os.path.join(args.workdir, 'pooled.json')
-  paths = sorted({
-    p for pat in args.pool.split(',') if pat for p in glob.glob(pat)
-    if not os.path.exists(out) or not os.path.samefile(p, out)  # an earlier pool's own
-  })  # fmt: skip
+  paths = sorted({p for pat in args.pool.split(',') if pat for p in glob.glob(pat)})
   if not paths:
     raise ValueError(f'--pool={args.pool!r}: no such files')
   rows = read_rows(paths)

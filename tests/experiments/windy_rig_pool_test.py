@@ -88,3 +88,6 @@ def test_main_writes_the_pool_and_its_picture(tmp_path):
   windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(tmp_path)))
   windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(tmp_path)))
   assert len(json.loads((tmp_path / 'pooled.json').read_text())['rows']) == 2
+  # and from there into another folder: the runs' folder's pool is skipped too
+  windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(out)))
+  assert len(json.loads((out / 'pooled.json').read_text())['rows']) == 2
