@@ -49,6 +49,7 @@ import math
 import os
 import subprocess
 import sys
+import textwrap
 import time
 from concurrent import futures
 
@@ -282,8 +283,11 @@ def half_widths(row: dict) -> float:
 
 
 def table_of_row(row: dict) -> str:
-  """The tables a row's estimate quoted, by their cameras' words."""
+  """The tables a row's estimate quoted, by their cameras' words (tables of
+  cameras off as the intake errs: 'intake errors, claims <range>')."""
   setting = row.get('calibration_setting') or 'no table'
+  if 'intakes erred' in setting and '(claims ' in setting:
+    return 'intake errors, claims ' + setting.split('(claims ')[-1].split(')')[0]
   return setting.split('cameras off by ')[-1].split(' (')[0]
 
 
@@ -351,7 +355,7 @@ def figure(rows: list[dict], path: str) -> None:
   would be (2.44)."""
   plt = files.pyplot()
   keys = sorted({(r['drawn'], r['table']) for r in rows})
-  fig, ax = plt.subplots(figsize=(7, 0.6 * len(keys) + 1.4))
+  fig, ax = plt.subplots(figsize=(8, 0.8 * len(keys) + 1.4))
   for i, key in enumerate(keys):
     x = [min(half_widths(r), 4.0) for r in rows if (r['drawn'], r['table']) == key]
     ax.plot(x, np.full(len(x), i), 'o', alpha=0.6)
@@ -360,11 +364,14 @@ def figure(rows: list[dict], path: str) -> None:
     ax.text(edge, len(keys) - 0.4, f' {words}', fontsize=8, color='gray')
   ax.set_yticks(range(len(keys)))
   ax.set_yticklabels(
-    [f'{"drawn" if d else "centre"}: {t}' for d, t in keys], fontsize=8
+    [textwrap.fill(f'{"drawn" if d else "centre"}: {t}', 32) for d, t in keys],
+    fontsize=8,
   )
   ax.set_ylim(-0.6, len(keys) - 0.1)
   ax.set_xlim(0, 4.1)
-  ax.set_xlabel("|truth - median| / the 50% interval's half-width (capped at 4)")
+  ax.set_xlabel(
+    "|truth - median| / the 50% interval's half-width (capped at 4)", fontsize=9
+  )
   ax.set_title("wind through the intake: each recording's truth", fontsize=10)
   fig.tight_layout()
   files.savefig(fig, path)

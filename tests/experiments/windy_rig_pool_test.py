@@ -62,6 +62,19 @@ def test_runs_are_pooled_by_fabric_and_table(tmp_path):
   assert groups[("the recipe's own", 'no cameras')]['held_50'] == 1
 
 
+def test_tables_of_the_intakes_errors_are_named_by_their_claims():
+  setting = (
+    'gibbs likelihood, shape distance, no network, cameras off as 32 measured '
+    "intakes erred, each estimate carrying its intake's claim (claims 1.3-3.5 cm / "
+    '0.99-2.7 deg)'
+  )
+  row = _row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6, setting)
+  assert (
+    windy_rig.table_of_row(row) == 'intake errors, claims 1.3-3.5 cm / 0.99-2.7 deg'
+  )
+  assert windy_rig.table_of_row(_row(3, 3, 2, 4, 1, 5)) == '0.99-4 cm / 0.79-3.2 deg'
+
+
 def test_a_file_that_is_no_windy_rig_run_is_named(tmp_path):
   bad = tmp_path / 'bad.json'
   bad.write_text('{"rows": [')
