@@ -77,7 +77,8 @@ class Args:
     recipe: the recording's recipe: 'default' (the estimator's physics, a
       finer mesh, gustier, another noise model) or 'mismatched' (also a
       fan off the normal, another gust spectrum, drag, damping, stretchier
-      edges: rig.MISMATCHED).
+      edges: rig.MISMATCHED) or 'mismatched_b' (a second such world, each
+      knob other: checks of what was fitted on the first).
     backend: the estimate's simulator.
     record_backend: the recording's simulator ('': the estimate's).
     winds: comma-separated winds, m/s: one recording each, the k-th with the

@@ -80,4 +80,11 @@ WORLD = Mismatch(
   fan_yaw_deg=10.0, gust_modes=16, air_drag=0.1, bending_damping=0.002,
   edge_solref_scale=2.0,
 )  # fmt: skip
-MISMATCHES = {'own': OWN, 'mismatched': WORLD}
+# A second such world, each setting other than WORLD's: recordings of it check
+# what was fitted on WORLD (tables, a discrepancy term) held out in the
+# physics too, not only in the recordings.
+WORLD_B = Mismatch(
+  fan_yaw_deg=5.0, gust_modes=32, air_drag=0.05, bending_damping=0.005,
+  edge_solref_scale=1.5,
+)  # fmt: skip
+MISMATCHES = {'own': OWN, 'mismatched': WORLD, 'mismatched_b': WORLD_B}

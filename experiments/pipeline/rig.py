@@ -114,15 +114,28 @@ class Recipe:
     )  # fmt: skip
 
 
+def in_world(world: physsim.Mismatch, recipe: Recipe | None = None) -> Recipe:
+  """``recipe`` (default the rig's own) with its simulator unlike the
+  estimator's as ``world`` is (a ``physsim.Mismatch``: the fan's turn and
+  gusts, drag, damped bending, the edges' time constant)."""
+  recipe = recipe or Recipe()
+  return dataclasses.replace(
+    recipe, fan_yaw_deg=world.fan_yaw_deg, gust_modes=world.gust_modes,
+    air_drag=world.air_drag, bending_damping=world.bending_damping,
+    edge_solref=Recipe.edge_solref * world.edge_solref_scale,
+  )  # fmt: skip
+
+
 # Issue 39, item 6: the simulator itself unlike the estimator's, as the world
-# is (``physsim.mismatch.WORLD``, the dataset sweeps' ``physics='mismatched'``).
-_WORLD = physsim.mismatch.WORLD
-MISMATCHED = Recipe(
-  fan_yaw_deg=_WORLD.fan_yaw_deg, gust_modes=_WORLD.gust_modes,
-  air_drag=_WORLD.air_drag, bending_damping=_WORLD.bending_damping,
-  edge_solref=Recipe.edge_solref * _WORLD.edge_solref_scale,
-)  # fmt: skip
-RECIPES = {'default': Recipe(), 'mismatched': MISMATCHED}
+# is (``physsim.mismatch.WORLD``, the dataset sweeps' ``physics='mismatched'``);
+# 'mismatched_b' a second such world (``physsim.mismatch.WORLD_B``), for
+# checks held out in the physics too.
+MISMATCHED = in_world(physsim.mismatch.WORLD)
+RECIPES = {
+  'default': Recipe(),
+  'mismatched': MISMATCHED,
+  'mismatched_b': in_world(physsim.mismatch.WORLD_B),
+}
 
 # The smallest that the intake still fits (a 12-vertex cloth's far corner is
 # lost to the sensor's edge band and its pins come out 0.78 m apart).

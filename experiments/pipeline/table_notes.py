@@ -41,6 +41,8 @@ PHYSICS_WORDS = {
   'own': "the estimator's own simulator",
   'mismatched': 'another physics (fan 10 degrees off, other gusts, drag, damped '
   'bending, softer edges)',
+  'mismatched_b': 'a second other physics (fan 5 degrees off, finer gusts, less drag, '
+  'more damped bending, softer edges)',
 }
 
 

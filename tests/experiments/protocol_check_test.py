@@ -337,3 +337,8 @@ def test_the_studys_strip_reading_follows_its_law_and_leaves_the_others():
   for bad in (dict(length_sd=0.0), dict(length_sd_spread=1.5), dict(length_dof=2.0)):
     with pytest.raises(ValueError, match='--length'):
       air_protocol.check_args(air_protocol.Study(**bad))
+
+
+def test_every_world_a_check_can_be_of_is_worded():
+  # a check's line names its recordings' physics in words, for every world
+  assert set(table_notes.PHYSICS_WORDS) == set(physsim.MISMATCHES)

@@ -38,6 +38,15 @@ def test_the_world_recipe_by_hand():
   )
 
 
+def test_the_second_world_by_hand():
+  w = physsim.mismatch.WORLD_B
+  a = np.deg2rad(5.0)
+  np.testing.assert_allclose(w.wind(0.3).direction, (np.sin(a), np.cos(a), 0.0))
+  assert w.wind(0.3).gust_modes == 32
+  assert w.sim_fields() == dict(edge_solref=0.006, air_drag=0.05, bending_damping=0.005)
+  assert physsim.MISMATCHES['mismatched_b'] is w
+
+
 @pytest.mark.parametrize(
   'field, value',
   [('fan_yaw_deg', float('nan')), ('air_drag', -0.1), ('gust_modes', 0),
