@@ -114,13 +114,12 @@ class Recipe:
     )  # fmt: skip
 
 
-def in_world(world: physsim.Mismatch, recipe: Recipe | None = None) -> Recipe:
-  """``recipe`` (default the rig's own) with its simulator unlike the
-  estimator's as ``world`` is (a ``physsim.Mismatch``: the fan's turn and
-  gusts, drag, damped bending, the edges' time constant)."""
-  recipe = recipe or Recipe()
-  return dataclasses.replace(
-    recipe, fan_yaw_deg=world.fan_yaw_deg, gust_modes=world.gust_modes,
+def in_world(world: physsim.Mismatch) -> Recipe:
+  """The rig's recipe with its simulator unlike the estimator's as ``world``
+  is (a ``physsim.Mismatch``: the fan's turn and gusts, drag, damped bending,
+  the edges' time constant)."""
+  return Recipe(
+    fan_yaw_deg=world.fan_yaw_deg, gust_modes=world.gust_modes,
     air_drag=world.air_drag, bending_damping=world.bending_damping,
     edge_solref=Recipe.edge_solref * world.edge_solref_scale,
   )  # fmt: skip
