@@ -77,10 +77,11 @@
 #                    intakes of benchmarks.alignment_error's FILES erred;
 #                  protocol: air_protocol's free-mode check with those errors
 #                    (SETS, default 8, of seed SEED, default 7) into $OUT;
-#                  intake: the windy rig's recordings of another physics (WINDS,
-#                    default six; RIG=field=value,...: the rig changed, e.g.
-#                    its camera, rig.with_fields; DRAWS=SEED: each its own
-#                    fabric drawn over the prior, as the tables' are) taken in
+#                  intake: the windy rig's recordings of another physics (RECIPE,
+#                    default mismatched; WINDS, default six; RIG=field=value,...:
+#                    the rig changed, e.g. its camera, rig.with_fields;
+#                    DRAWS=SEED: each its own fabric drawn over the prior, as
+#                    the tables' are) taken in
 #                    as a user's, with the tables of RUN, one estimate at a
 #                    time (three at once overrun an H100).
 # Training: at most EPOCHS (30) epochs, chosen on VAL (0.2) of the training
@@ -490,7 +491,7 @@ camera() (  # SUB [RUN]: see the header
       cp "$R"/calibration_shape_paper_camera_*.json experiments/pipeline/
       # the rig's own process must not take the GPU its estimates' processes need
       XLA_PYTHON_CLIENT_PREALLOCATE=false step intake "$((limit + 60))" python -m benchmarks.windy_rig --preset=gpu \
-        --recipe=mismatched --parallel=1 --recipe_fields=seed="${SEED:-51}"${RIG:+,$RIG} \
+        --recipe="${RECIPE:-mismatched}" --parallel=1 --recipe_fields=seed="${SEED:-51}"${RIG:+,$RIG} \
         --winds="${WINDS:-2.5,2.9,3.3,3.7,4.1,4.5}" --workdir="$R/intake_${SEED:-51}" \
         ${DRAWS:+--fabric_draws=$DRAWS}
       cp "$R/intake_${SEED:-51}/windy_rig.json" "$OUT/intake_${SEED:-51}.json"

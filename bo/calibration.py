@@ -112,10 +112,16 @@ def ranks(draws, truth) -> np.ndarray:
 
 
 def levels(
-  calibration_ranks, probs=PROBS, width_ratios=None, uninformed: float = UNINFORMED
+  calibration_ranks,
+  probs=PROBS,
+  width_ratios=None,
+  uninformed: float = UNINFORMED,
+  centred: bool = False,
 ) -> np.ndarray:
   """The posterior CDF levels that hold ``probs`` of the calibration truths
-  below them, per column (the order statistics of the module doc).
+  below them, per column (the order statistics of the module doc); with
+  ``centred``, levels symmetric about the posterior's median that hold the
+  central share ``|2 p - 1|`` of the truths (``centred_levels``).
 
   Args:
     calibration_ranks: (n, k) ranks of ``n`` calibration problems' truths,
@@ -127,6 +133,8 @@ def levels(
       posterior interval over the prior's (``width_ratio``): a column whose
       median reaches ``uninformed`` keeps the nominal levels ``probs``.
     uninformed: that threshold.
+    centred: width only: the posterior's median stays the point, whatever
+      shift the calibration's ranks show.
 
   Returns:
     (len(probs), k) CDF levels in ``[0, 1]``.
@@ -136,18 +144,9 @@ def levels(
     raise ValueError(f'need finite (n, k) ranks with n >= 1, got {r.shape}')
   if np.any((r < 0) | (r > 1)):
     raise ValueError('ranks must lie in [0, 1]')
-  n = r.shape[0]
-  padded = np.concatenate([np.zeros((1, r.shape[1])), r, np.ones((1, r.shape[1]))])
-  out = []
-  for p in probs:
-    if not 0.0 < p < 1.0:
-      raise ValueError(f'probs must lie in (0, 1), got {p}')
-    if p == 0.5:
-      out.append(np.median(r, axis=0))
-      continue
-    k = math.floor((n + 1) * p) if p < 0.5 else math.ceil((n + 1) * p)
-    out.append(padded[min(max(k, 0), n + 1)])
-  out = np.stack(out)
+  if any(not 0.0 < p < 1.0 for p in probs):
+    raise ValueError(f'probs must lie in (0, 1), got {tuple(probs)}')
+  out = centred_levels(r, probs) if centred else _one_sided_levels(r, probs)
   if width_ratios is not None:
     w = np.asarray(width_ratios, np.float64)
     if w.shape != r.shape:
@@ -155,6 +154,49 @@ def levels(
     keep = np.median(w, axis=0) >= uninformed
     out[:, keep] = np.asarray(probs, np.float64)[:, None]
   return out
+
+
+def _one_sided_levels(r: np.ndarray, probs) -> np.ndarray:
+  """``levels``' order statistics of the sorted ranks ``r`` (n, k)."""
+  n = r.shape[0]
+  padded = np.concatenate([np.zeros((1, r.shape[1])), r, np.ones((1, r.shape[1]))])
+  out = []
+  for p in probs:
+    if p == 0.5:
+      out.append(np.median(r, axis=0))
+      continue
+    k = math.floor((n + 1) * p) if p < 0.5 else math.ceil((n + 1) * p)
+    out.append(padded[min(max(k, 0), n + 1)])
+  return np.stack(out)
+
+
+def centred_levels(calibration_ranks, probs=PROBS) -> np.ndarray:
+  """CDF levels ``0.5 -+ d`` about the posterior's median, ``d`` the order
+  statistic of the truths' distances from it ``|r - 0.5|`` that holds the
+  central share ``a = |2 p - 1|`` (``k = ceil((n + 1) a)``, rounded up so
+  intervals err wide): split-conformal on the distance, so the central
+  interval of level ``a`` holds the truth at least ``a`` of the time when the
+  calibration and the problem are exchangeable, as ``levels``' do, but the
+  median is never moved. Tables fitted on one kind of mismatch (another
+  physics, ``experiments.calibrate --physics``) learn its bias as a shift of
+  the levels; the width is what carries to a mismatch of unknown direction.
+
+  Args:
+    calibration_ranks: (n, k) ranks in ``[0, 1]``.
+    probs: shares as ``levels``'.
+
+  Returns:
+    (len(probs), k) CDF levels, symmetric about 0.5.
+  """
+  d = np.sort(np.abs(np.asarray(calibration_ranks, np.float64) - 0.5), axis=0)
+  n = d.shape[0]
+  padded = np.concatenate([d, np.full((1, d.shape[1]), 0.5)])
+  out = []
+  for p in probs:
+    k = math.ceil((n + 1) * abs(2.0 * p - 1.0))
+    half = padded[min(k, n + 1) - 1] if k > 0 else np.zeros(d.shape[1])
+    out.append(0.5 + np.sign(p - 0.5) * half)
+  return np.stack(out)
 
 
 def width_ratio(draws, prior_draws, log=None) -> np.ndarray:

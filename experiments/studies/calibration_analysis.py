@@ -89,14 +89,16 @@ def _fabric_box(material: str) -> tuple[np.ndarray, np.ndarray]:
   return _box(physsim.search_space(material))
 
 
-def recalibration(scores: list[dict]) -> np.ndarray:
+def recalibration(scores: list[dict], centred: bool = False) -> np.ndarray:
   """(len(PROBS), fields) CDF levels from these recordings' ranks
-  (``bo.calibration.levels``); a field the video does not inform (its
-  intervals as wide as the prior's) keeps the nominal levels."""
+  (``bo.calibration.levels``; ``centred``: about the median, widths only); a
+  field the video does not inform (its intervals as wide as the prior's)
+  keeps the nominal levels."""
   widths = [s.get('width_ratio') for s in scores]
   return bo.calibration.levels(
     np.stack([s['rank'] for s in scores]),
     width_ratios=None if any(w is None for w in widths) else np.stack(widths),
+    centred=centred,
   )
 
 
@@ -246,7 +248,7 @@ def _mean_interval_score(summary: dict) -> float:
                         for f in posterior_lib.FIELDS for lv in LEVELS]))  # fmt: skip
 
 
-def _choose(by_c: dict, space, rows) -> tuple[float, dict]:
+def _choose(by_c: dict, space, rows, centred: bool = False) -> tuple[float, dict]:
   """The sharpness whose recalibrated intervals (recalibrated on ``rows``
   itself) score best on ``rows``' video posteriors; and each mode's tables
   at that value. ``by_c``: ``{sharpness: {mode: scores}}``."""
@@ -255,7 +257,7 @@ def _choose(by_c: dict, space, rows) -> tuple[float, dict]:
     mine = {m: [s for s in v if s['seq'] in rows] for m, v in scores.items()}
     if not mine['video']:
       continue
-    recal = {m: recalibration(v) for m, v in mine.items() if v}
+    recal = {m: recalibration(v, centred) for m, v in mine.items() if v}
     score = _mean_interval_score(
       summarise(mine['video'], space, recal['video'], bayes=False)
     )
@@ -281,6 +283,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   sharpest value whose uncalibrated intervals never under-cover,
   ``bo.posterior.choose_sharpness``) is reported beside it."""
   space = physsim.search_space(config.material)
+  centred = config.centred_levels
   folds = max(2, min(config.folds, len({r['seq'] // 2 for r in runs})))
   everyone = {r['seq'] for r in runs}
   sweep, best, fold_choice, cross, never_under, by_fold = {}, {}, {}, {}, {}, {}
@@ -290,7 +293,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
     by_c = {c: posteriors(config, runs, form, c) for c in config.sharpness_grid}
     sweep[form] = {}
     for c, scores in by_c.items():
-      recal = {m: recalibration(v) for m, v in scores.items() if v}
+      recal = {m: recalibration(v, centred) for m, v in scores.items() if v}
       sweep[form][c] = {
         'uncalibrated': {m: summarise(v, space, bayes=False) for m, v in scores.items()},
         'recalibrated_in_sample': {
@@ -299,7 +302,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
         },
         'recalibration': {m: v.tolist() for m, v in recal.items()},
       }  # fmt: skip
-    best[form], recal_all = _choose(by_c, space, everyone)
+    best[form], recal_all = _choose(by_c, space, everyone, centred)
     sweep[form][best[form]]['weights'] = {
       m: weights(by_c[best[form]][m], recal_all[m]) for m in recal_all
     }
@@ -310,7 +313,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
     fold_choice[form] = []
     for k in range(folds):
       train = {s for s in everyone if fold_of(s, folds) != k}
-      c_k, recal_k = _choose(by_c, space, train)
+      c_k, recal_k = _choose(by_c, space, train, centred)
       fold_choice[form].append(c_k)
       for m in MODES:
         if m not in recal_k:

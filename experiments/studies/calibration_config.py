@@ -117,6 +117,10 @@ class Config:
       another gust spectrum, drag, damped bending, stretchier edges; the
       estimates still simulate their own), to measure or fit the intervals
       on recordings unlike the estimator's simulator, as a real one is.
+    centred_levels: the tables correct the intervals' width only, about the
+      posterior's median (``bo.calibration.centred_levels``): for tables of
+      another physics, whose bias in one direction a real recording need
+      not share.
   """
 
   material: str = 'gray_interlock'
@@ -146,6 +150,7 @@ class Config:
   camera_errors_jitter: float = 0.25
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
+  centred_levels: bool = False
 
 
 PRESETS = {

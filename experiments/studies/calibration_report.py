@@ -49,7 +49,8 @@ def result(config: Config, analysis: dict, seconds: float = 0.0,
     + f', {config.size} size, '
     + _networks_text(config)
     + (f', recordings of {config.physics} physics' if config.physics != 'own' else '')
-    + _camera_text(config),
+    + _camera_text(config)
+    + (', levels centred on the median' if config.centred_levels else ''),
     'likelihood': form,
     'sharpness': c,
     'model_error': config.estimate.scoring.model_error,

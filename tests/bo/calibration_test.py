@@ -44,6 +44,30 @@ def test_levels_are_the_conformal_order_statistics():
     calibration.levels(r, (0.0, 0.5))
 
 
+def test_centred_levels_keep_the_median_and_cover_a_shifted_posterior():
+  # by hand: n = 9 distances |r - 0.5| = 0.05 .. 0.45; a = 0.5 takes the
+  # ceil(10 x 0.5) = 5th (0.25), a = 0.9 the 9th (0.45)
+  r = 0.5 + np.array([0.05, -0.1, 0.15, -0.2, 0.25, -0.3, 0.35, -0.4, 0.45])[:, None]
+  lv = calibration.levels(r, centred=True)[:, 0]
+  np.testing.assert_allclose(lv, [0.05, 0.25, 0.5, 0.75, 0.95], atol=1e-12)
+  # too few for a level: the whole posterior, as the one-sided levels
+  np.testing.assert_allclose(calibration.levels(r[:5], (0.05, 0.95), centred=True)[:, 0],
+                             [0.0, 1.0])  # fmt: skip
+  # A posterior shifted and too wide: the truth's rank ~ Beta(6, 3). The
+  # one-sided levels move the median; the centred ones leave it, and their
+  # central intervals still hold the truth at least as often as they say on
+  # fresh ranks (split-conformal), to the binomial's 3 sd.
+  rng = np.random.default_rng(0)
+  fit, fresh = rng.beta(6, 3, (399, 1)), rng.beta(6, 3, 20000)
+  assert calibration.levels(fit)[2, 0] > 0.6
+  lv = calibration.levels(fit, centred=True)[:, 0]
+  np.testing.assert_allclose(lv[::-1], 1.0 - lv, atol=1e-12)
+  for (lo, hi), a in ((lv[[1, 3]], 0.5), (lv[[0, 4]], 0.9)):
+    held = np.mean((fresh >= lo) & (fresh <= hi))
+    assert held >= a - 3 * np.sqrt(a * (1 - a) / 399), (a, held)
+    assert held <= a + 2 / 400 + 3 * np.sqrt(a * (1 - a) / 399), (a, held)
+
+
 def test_quantiles_per_column():
   draws = np.stack([np.linspace(0, 1, 101), np.linspace(0, 10, 101)], axis=1)
   q = calibration.quantiles(draws, np.array([[0.1, 0.5], [0.9, 1.0]]))

@@ -358,6 +358,18 @@ def test_a_study_carrying_a_camera_error_runs_and_records_it(tmp_path, monkeypat
   assert words == '1.8-4.9 cm / 1.2-3.3 deg'
   assert f'cameras off by {words} (1 sd, each recording its own)' in out['setting']
   assert carried_errors.table_of(out) == (0.03, 2.0, 0.5)
+  # the same estimates read again with tables of the width alone: every
+  # mode's levels symmetric about the median, and the setting says so
+  cen = calibration.run(
+    dataclasses.replace(TINY, centred_levels=True), str(tmp_path), analyse_only=True
+  )
+  assert cen['setting'] == out['setting'] + ', levels centred on the median'
+  for table in cen['recalibration']['modes'].values():
+    lv = np.asarray(table)
+    np.testing.assert_allclose(lv + lv[::-1], 1.0, atol=1e-12)
+  with open(os.path.join(tmp_path, calibration.RESULT_FILE)) as f:
+    assert json.load(f)['setting'] == cen['setting']
+  out = calibration.run(TINY, str(tmp_path), analyse_only=True)  # back to shifts
   # installed beside the exact cameras' tables, it is what such estimates quote
   base = tmp_path / 'shipped' / 'calibration_shape_paper.json'
   monkeypatch.setattr(calibration_tables, 'SHAPE_PAPER_CALIBRATION_FILE', str(base))
