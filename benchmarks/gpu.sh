@@ -74,7 +74,8 @@
 #                    RUN (a fresh copy of the tree lacks it) and in $OUT, with
 #                    the packed estimates (analyse them elsewhere);
 #                    CAM=--camera_errors=FILES: cameras off as the measured
-#                    intakes of benchmarks.alignment_error's FILES erred;
+#                    intakes of benchmarks.alignment_error's FILES erred (with
+#                    --physics=mismatched --centred_levels: the shipped ones);
 #                  protocol: air_protocol's free-mode check with those errors
 #                    (SETS, default 8, of seed SEED, default 7) into $OUT;
 #                  intake: the windy rig's recordings of another physics (RECIPE,
