@@ -96,7 +96,11 @@ def test_a_users_recording_through_the_intake_quotes_a_measured_calibration(tmp_
   assert carried_errors.covers(deg, carried[1], spread)
   line = table_notes.calibration_line(note)
   assert 'indicative' not in line
-  assert f'cameras off by {carried_errors.table_words((m, deg, spread))}' in line
+  # the intake's own claim: the tables of cameras off as the intake errs
+  assert carried_errors.source_of(config.flat()) == 'intake'
+  assert carried_errors.table_source(quoted) == 'intake'
+  words = carried_errors.table_words((m, deg, spread))
+  assert f"each estimate carrying its intake's claim (claims {words})" in line
   assert 'held the truth in their 90%/50% intervals' in line
 
 
