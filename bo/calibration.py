@@ -139,13 +139,7 @@ def levels(
   Returns:
     (len(probs), k) CDF levels in ``[0, 1]``.
   """
-  r = np.sort(np.asarray(calibration_ranks, np.float64), axis=0)
-  if r.ndim != 2 or r.shape[0] < 1 or not np.all(np.isfinite(r)):
-    raise ValueError(f'need finite (n, k) ranks with n >= 1, got {r.shape}')
-  if np.any((r < 0) | (r > 1)):
-    raise ValueError('ranks must lie in [0, 1]')
-  if any(not 0.0 < p < 1.0 for p in probs):
-    raise ValueError(f'probs must lie in (0, 1), got {tuple(probs)}')
+  r = _checked_ranks(calibration_ranks, probs)
   out = centred_levels(r, probs) if centred else _one_sided_levels(r, probs)
   if width_ratios is not None:
     w = np.asarray(width_ratios, np.float64)
@@ -154,6 +148,18 @@ def levels(
     keep = np.median(w, axis=0) >= uninformed
     out[:, keep] = np.asarray(probs, np.float64)[:, None]
   return out
+
+
+def _checked_ranks(calibration_ranks, probs) -> np.ndarray:
+  """The ranks (n, k), sorted per column, after checking them and ``probs``."""
+  r = np.sort(np.asarray(calibration_ranks, np.float64), axis=0)
+  if r.ndim != 2 or r.shape[0] < 1 or not np.all(np.isfinite(r)):
+    raise ValueError(f'need finite (n, k) ranks with n >= 1, got {r.shape}')
+  if np.any((r < 0) | (r > 1)):
+    raise ValueError('ranks must lie in [0, 1]')
+  if any(not 0.0 < p < 1.0 for p in probs):
+    raise ValueError(f'probs must lie in (0, 1), got {tuple(probs)}')
+  return r
 
 
 def _one_sided_levels(r: np.ndarray, probs) -> np.ndarray:
@@ -188,7 +194,7 @@ def centred_levels(calibration_ranks, probs=PROBS) -> np.ndarray:
   Returns:
     (len(probs), k) CDF levels, symmetric about 0.5.
   """
-  d = np.sort(np.abs(np.asarray(calibration_ranks, np.float64) - 0.5), axis=0)
+  d = np.sort(np.abs(_checked_ranks(calibration_ranks, probs) - 0.5), axis=0)
   n = d.shape[0]
   padded = np.concatenate([d, np.full((1, d.shape[1]), 0.5)])
   out = []
