@@ -106,11 +106,6 @@ class Config:
       full error each estimate carries.
     camera_errors_jitter: how far each claim is spread about the measured
       one: times exp(jitter x u), u uniform in [-1, 1].
-    camera_claim_max_m: with ``camera_errors``, only the intakes whose
-      claimed shift is at most this (metres; 0: every one), for tables of the
-      small claims alone, which an estimate carrying a small claim quotes
-      (``carried_errors.recordings_gap``): tables pooled over every claim
-      average its intervals' width over claims unlike its own.
     check_reading: for ``check``: 'wind_speed' (an anemometer) or
       'area_weight' (a scale) estimates every new recording with a simulated
       reading of it (``measured_sd``, drawn around the truth) as the search's
@@ -153,7 +148,6 @@ class Config:
   camera_sd_spread: float = 0.0
   camera_errors: tuple[str, ...] = ()
   camera_errors_jitter: float = 0.25
-  camera_claim_max_m: float = 0.0
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
   centred_levels: bool = False
@@ -338,17 +332,9 @@ def check_config(config: Config) -> None:
     )
 
 
-def intake_errors(config: Config) -> tuple[told_cameras.IntakeError, ...]:
-  """The measured intake errors of ``config.camera_errors`` whose claims are
-  within ``camera_claim_max_m`` (``told_cameras.claims_at_most``)."""
-  return told_cameras.claims_at_most(
-    _read_intake_errors(tuple(config.camera_errors)), config.camera_claim_max_m
-  )
-
-
 @functools.lru_cache(maxsize=4)
-def _read_intake_errors(paths: tuple[str, ...]) -> tuple[told_cameras.IntakeError, ...]:
-  """``told_cameras.read_intake_errors`` of ``paths``, read once."""
+def intake_errors(paths: tuple[str, ...]) -> tuple[told_cameras.IntakeError, ...]:
+  """The measured intake errors of ``Config.camera_errors`` (read once)."""
   return told_cameras.read_intake_errors(paths)
 
 
@@ -363,11 +349,6 @@ def with_intake_errors(config: Config) -> Config:
       jitter outside [0, 1], or a camera error given beside them.
   """
   if not config.camera_errors:
-    if config.camera_claim_max_m:
-      raise ValueError(
-        f'--camera_claim_max_m={config.camera_claim_max_m}: picks among the '
-        'intakes of --camera_errors; give them'
-      )
     return config
   if not 0.0 <= config.camera_errors_jitter <= 1.0:
     raise ValueError(
@@ -376,7 +357,7 @@ def with_intake_errors(config: Config) -> Config:
     )
   sc = config.estimate.scoring
   m, deg, spread = told_cameras.intake_range(
-    intake_errors(config), config.camera_errors_jitter
+    intake_errors(tuple(config.camera_errors)), config.camera_errors_jitter
   )
   given = (sc.camera_sd_m, sc.camera_sd_deg, config.camera_sd_spread)
   if any(given) and given != (m, deg, spread):
@@ -484,6 +465,6 @@ def _intake_of(config: Config, seq: int) -> tuple[told_cameras.IntakeError, tupl
   """Recording ``seq``'s drawn intake error and its claim (``intake_draw``),
   from (seed, seq) alone."""
   return told_cameras.intake_draw(
-    intake_errors(config), config.camera_errors_jitter,
+    intake_errors(tuple(config.camera_errors)), config.camera_errors_jitter,
     [config.seed, told_cameras.SD_STREAM, seq],
   )  # fmt: skip

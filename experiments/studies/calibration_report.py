@@ -89,7 +89,7 @@ def _camera_text(config: Config) -> str:
   words = carried_errors.table_words((*sd, config.camera_sd_spread))
   if config.camera_errors:
     return (
-      f', cameras off as {len(intake_errors(config))} measured '
+      f', cameras off as {len(intake_errors(tuple(config.camera_errors)))} measured '
       f"intakes erred, each estimate carrying its intake's claim (claims {words})"
     )
   each = ', each recording its own' if config.camera_sd_spread else ''

@@ -165,31 +165,6 @@ def read_intake_errors(paths: tuple[str, ...]) -> tuple[IntakeError, ...]:
   return tuple(errors)
 
 
-def claims_at_most(
-  errors: tuple[IntakeError, ...], max_m: float
-) -> tuple[IntakeError, ...]:
-  """Those of ``errors`` whose claimed shift is at most ``max_m`` metres
-  (0: all of them), in order.
-
-  Raises:
-    ValueError: ``max_m`` negative or not finite, or fewer than
-      ``MIN_INTAKE_ERRORS`` left, naming the claims there were.
-  """
-  if not (math.isfinite(max_m) and max_m >= 0.0):
-    raise ValueError(f'--camera_claim_max_m={max_m}: a claimed shift in metres, >= 0')
-  if not max_m:
-    return errors
-  kept = tuple(e for e in errors if e.claim[0] <= max_m)
-  if len(kept) < MIN_INTAKE_ERRORS:
-    claims = sorted(100 * e.claim[0] for e in errors)
-    raise ValueError(
-      f'--camera_claim_max_m={max_m}: {len(kept)} intakes claim at most '
-      f'{100 * max_m:.3g} cm (claims {claims[0]:.3g}-{claims[-1]:.3g} cm); tables '
-      f'need at least {MIN_INTAKE_ERRORS}'
-    )
-  return kept
-
-
 def intake_draw(
   errors: tuple[IntakeError, ...], jitter: float, seed: list[int]
 ) -> tuple[IntakeError, tuple[float, float]]:

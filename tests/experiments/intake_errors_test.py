@@ -150,41 +150,6 @@ def test_each_recording_carries_a_measured_intakes_claim_and_is_off_as_it_erred(
   assert len(used) >= 6  # drawn over the measured intakes
 
 
-def test_tables_of_the_small_claims_draw_only_those_intakes(errors_file):
-  """``--camera_claim_max_m``: the fixture's claims are 3-11 cm (1 cm
-  apart); at most 10.5 cm keeps 8 intakes, and every recording's intake and
-  the tables' range come from those alone."""
-  errors = told_cameras.read_intake_errors((errors_file,))
-  small = _study(errors_file, camera_claim_max_m=0.105)
-  assert calibration_config.intake_errors(small) == errors[:8]
-  est, every = (
-    calibration.study_configs(small)[3],
-    calibration.study_configs(_study(errors_file))[3],
-  )
-  m, _, spread = carried_errors.table_of(
-    {'config': calibration_config.estimate_record(small, est)}
-  )
-  assert carried_errors.spread_range(m, spread)[1] <= 0.10 * math.exp(0.25) * (
-    1 + 1e-4
-  )  # rounded centre
-  assert est.scoring.camera_sd_m < every.scoring.camera_sd_m
-  for seq in range(30):
-    assert calibration.camera_sd_of(small, est, seq)[0] <= 0.10 * math.exp(0.25) + 1e-9
-  assert calibration_report._camera_text(small).startswith(
-    ', cameras off as 8 measured'
-  )
-  with pytest.raises(
-    ValueError, match=r'7 intakes claim at most 9.5 cm \(claims 3-11 cm\)'
-  ):
-    _study(errors_file, camera_claim_max_m=0.095)
-  with pytest.raises(ValueError, match='camera_claim_max_m=-0.01'):
-    _study(errors_file, camera_claim_max_m=-0.01)
-  with pytest.raises(ValueError, match='give them'):
-    calibration.with_intake_errors(
-      dataclasses.replace(calibration.PRESETS['paper'], camera_claim_max_m=0.05)
-    )
-
-
 def test_camera_errors_beside_a_given_error_or_jitter_out_of_range_are_refused(
   errors_file,
 ):
