@@ -283,6 +283,14 @@ def half_widths(row: dict) -> float:
   return abs(t - m) / side if side > 0 else math.inf
 
 
+def width_50(row: dict) -> float:
+  """The 50% interval's half-width over the median: how wide the estimate
+  says it is, beside how far it is (``half_widths``); the calibration
+  study reports its recordings' the same way (``half_width_50``)."""
+  lo, hi = row['interval_50']
+  return (hi - lo) / (2 * abs(row['median'])) if row['median'] else math.inf
+
+
 def table_of_row(row: dict) -> str:
   """The tables a row's estimate quoted, by their cameras' words (tables of
   cameras off as the intake errs: 'intake errors, claims <range>')."""
@@ -329,6 +337,7 @@ def pooled(rows: list[dict]) -> list[dict]:
       'held_50': k50, 'held_50_ci': binomial_interval(k50, n, Z90),
       'mean_error': float(np.mean([r['error'] for r in rs])) if n else None,
       'median_half_widths': float(np.median([half_widths(r) for r in rs])) if n else None,
+      'median_width_50': float(np.median([width_50(r) for r in rs])) if n else None,
     })  # fmt: skip
   return out
 
@@ -336,8 +345,8 @@ def pooled(rows: list[dict]) -> list[dict]:
 def pool_table(groups: list[dict]) -> str:
   lines = [
     '| fabric | tables quoted | n | wind error | 90% held [90% CI] | '
-    '50% held [90% CI] | median half-widths |',
-    '|---|---|---|---|---|---|---|',
+    '50% held [90% CI] | median half-widths | 50% half-width / median |',
+    '|---|---|---|---|---|---|---|---|',
   ]
   for g in groups:
     ci = lambda c: f'[{100 * c[0]:.0f}, {100 * c[1]:.0f}%]'  # noqa: E731
@@ -345,7 +354,7 @@ def pool_table(groups: list[dict]) -> str:
       f'| {g["fabric"]} | {g["table"]} | {g["n"]} | {100 * g["mean_error"]:.1f}% | '
       f'{g["held_90"]}/{g["n"]} {ci(g["held_90_ci"])} | '
       f'{g["held_50"]}/{g["n"]} {ci(g["held_50_ci"])} | '
-      f'{g["median_half_widths"]:.2f} |'
+      f'{g["median_half_widths"]:.2f} | {100 * g["median_width_50"]:.1f}% |'
     )
   return '\n'.join(lines)
 
@@ -396,7 +405,10 @@ def pool_runs(args: Args) -> None:
           'drawn', 'table')  # fmt: skip
   files.write_json(out, {
     'runs': paths, 'groups': groups,
-    'rows': [{k: r[k] for k in keep} | {'half_widths': half_widths(r)} for r in rows],
+    'rows': [
+      {k: r[k] for k in keep} | {'half_widths': half_widths(r), 'width_50': width_50(r)}
+      for r in rows
+    ],
   })  # fmt: skip
   figure(rows, os.path.join(args.workdir, 'pooled.png'))
   print(pool_table(groups))

@@ -140,8 +140,9 @@ def summarise(
 def _intervals(scores: list[dict], vals, t, scale, i: int, f: str) -> dict:
   """Field ``i`` (``f``)'s interval coverage and scores (``vals``: (n,
   len(PROBS)) its quantiles per recording, ``scale``: (n,) its prior
-  extent), the prior's own intervals' coverage, the width over the prior's
-  and the ranks' histogram and chi^2."""
+  extent), the prior's own intervals' coverage, the 50% interval's median
+  half-width over its median, the width over the prior's and the ranks'
+  histogram and chi^2."""
   probs = bo.calibration.PROBS
   cell = {}
   tr = np.log if f in LOG_FIELDS else (lambda a: a)
@@ -160,6 +161,16 @@ def _intervals(scores: list[dict], vals, t, scale, i: int, f: str) -> dict:
       cell[f'prior_interval_{lvl}'] = float(
         np.mean((pr >= (1 - a) / 2) & (pr <= (1 + a) / 2))
       )
+  # How wide the 50% interval is beside its point, to set a user path's
+  # estimates beside the tables' recordings at the same error
+  # (``benchmarks.windy_rig --pool``): half its width over the median, or for
+  # a log-scaled field half its log width (the factor's log).
+  lo50, hi50 = vals[:, probs.index(0.25)], vals[:, probs.index(0.75)]
+  if f in LOG_FIELDS:
+    half = (np.log(hi50) - np.log(lo50)) / 2
+  else:
+    half = (hi50 - lo50) / (2 * np.maximum(np.abs(vals[:, probs.index(0.5)]), 1e-300))
+  cell['half_width_50'] = float(np.median(half))
   if all('width_ratio' in s for s in scores):  # ~1: the prior's own width
     cell['width_ratio'] = float(np.median([s['width_ratio'][i] for s in scores]))
   rank = np.array([s['rank'][i] for s in scores])

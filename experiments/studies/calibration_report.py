@@ -4,6 +4,7 @@ table and the figures (rank histograms, the sharpness sweep)."""
 from __future__ import annotations
 
 import functools
+import math
 
 import matplotlib
 import numpy as np
@@ -25,6 +26,7 @@ from experiments.studies.calibration_config import (  # noqa: E402
   study_materials,
   uses_networks,
 )
+from experiments.studies.calibration_scores import LOG_FIELDS  # noqa: E402
 
 
 def result(config: Config, analysis: dict, seconds: float = 0.0,
@@ -159,6 +161,7 @@ def table(out: dict) -> str:
       lines.append(
         f'| {mode} | {f} | {_cell(s, out["held_out_uncalibrated"][mode], f)} |'
       )
+  lines += _half_width_line(out['held_out'].get('video', {}))
   a = out['analysis']
   lines += ['', 'sharpness chosen on all recordings (best recalibrated interval '
             'score): ' + ', '.join(f'{k} {v:g}' for k, v in a['best_sharpness'].items())
@@ -176,6 +179,22 @@ def table(out: dict) -> str:
     "tilt's place in their ranges), video alone, held out",
   )
   return '\n'.join(lines)
+
+
+def _half_width_line(video: dict) -> list[str]:
+  """The video's held-out 50% intervals' median half-width over their median,
+  per field (none in files from before it was measured)."""
+  widths = {
+    f: video[f]['half_width_50'] for f in FIELDS if 'half_width_50' in video.get(f, {})
+  }
+  if not widths:
+    return []
+  words = [
+    f'{f} x{math.exp(w):.2f}' if f in LOG_FIELDS else f'{f} {100 * w:.1f}%'
+    for f, w in widths.items()
+  ]
+  return ['', "the video's 50% intervals, held out: median half-width "
+          + ', '.join(words) + ' of the median (a factor for a log-scaled one)']  # fmt: skip
 
 
 def _material_lines(analysis: dict) -> list[str]:

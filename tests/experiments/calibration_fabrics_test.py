@@ -22,7 +22,12 @@ import physsim
 from experiments.pipeline import calibration_tables, table_notes
 from experiments.pipeline import datasets as gen
 from experiments.pipeline.objective import EstimateConfig
-from experiments.studies import calibration, calibration_check
+from experiments.studies import (
+  calibration,
+  calibration_check,
+  calibration_report,
+  calibration_scores,
+)
 from physsim.overhang_depth import DOF
 
 FABRICS = ('gray_interlock', 'black_denim')
@@ -693,3 +698,25 @@ def test_the_shipped_file_quotes_each_fabric_its_own_coverage_on_another_physics
     want = [q for q, v in by[material].items() if q != 'n'
             and _wilson_upper(round(v['interval_90'] * n), n) < 0.9]  # fmt: skip
     assert mine['short'] == want, material
+
+
+def test_the_50pct_half_width_is_read_beside_the_median():
+  """Posteriors uniform on median x (1 -+ h): the 50% interval's half-width
+  is h / 2 of the median (worked by hand), the median over recordings."""
+  space = physsim.search_space('gray_interlock')
+  grid = np.linspace(0.0, 1.0, 1001)[:, None]
+  scores = []
+  for k, h in enumerate((0.1, 0.2, 0.4)):
+    centre = np.array([2.0, 3.0, 0.2, 1.5]) * (1 + k)  # per field
+    qf = centre * (1 - h + 2 * h * grid)  # (1001, fields): uniform quantiles
+    scores.append({'truth': centre, 'qf': qf, 'rank': np.full(4, 0.5)})
+  cell = calibration.summarise(scores, space, bayes=False)
+  for f in calibration.FIELDS:  # a log-scaled field: half the log width
+    log = f in calibration_scores.LOG_FIELDS
+    want = math.log(1.1 / 0.9) / 2 if log else 0.2 / 2
+    assert cell[f]['half_width_50'] == pytest.approx(want, rel=1e-3), f
+  out = {'held_out': {'video': cell}}
+  (line,) = [
+    x for x in calibration_report._half_width_line(out['held_out']['video']) if x
+  ]
+  assert 'wind_speed 10.0%' in line and 'bending_scale x1.11' in line

@@ -49,6 +49,16 @@ def test_half_widths_on_the_truths_side():
   assert windy_rig.half_widths(_row(2.0, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(2.0)
 
 
+def test_the_50_percent_width_beside_the_median_by_hand(tmp_path):
+  # median 3, 50% interval [2.5, 4]: half-width 0.75, a quarter of the median
+  assert windy_rig.width_50(_row(3.5, 3.0, 2.5, 4.0, 2, 5)) == pytest.approx(0.25)
+  rows = [_row(3.0, 2.0, 1.9, 2.1, 1, 3), _row(3.0, 3.0, 2.5, 4.0, 2, 5),
+          _row(3.0, 4.0, 2.0, 6.0, 1, 7)]  # fmt: skip
+  (group, _) = windy_rig.pooled([{**r, 'drawn': True, 'table': 't'} for r in rows])
+  assert group['median_width_50'] == pytest.approx(0.25)  # of 0.05, 0.25, 0.5
+  assert '| 25.0% |' in windy_rig.pool_table([group])
+
+
 def test_runs_are_pooled_by_fabric_and_table(tmp_path):
   a = _run(tmp_path / 'a.json', [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6),
                                  _row(4.0, 3.0, 2.8, 3.2, 2.5, 3.8)], draws=7)  # fmt: skip
