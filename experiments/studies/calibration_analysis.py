@@ -298,7 +298,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
   folds = max(2, min(config.folds, len({r['seq'] // 2 for r in runs})))
   everyone = {r['seq'] for r in runs}
   sweep, best, fold_choice, cross, never_under, by_fold = {}, {}, {}, {}, {}, {}
-  by_material, by_camera = {}, {}
+  by_material, by_camera, by_wind = {}, {}, {}
   levels = [lv / 100 for lv in LEVELS]
   for form in bo.posterior.DISCREPANCY_LIKELIHOODS:
     by_c = {c: posteriors(config, runs, form, c) for c in config.sharpness_grid}
@@ -341,6 +341,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
       for k in range(folds)
     ]  # fmt: skip
     by_camera[form] = by_camera_error(config, held['video'], space)
+    by_wind[form] = by_wind_place(held['video'], space)
     by_material[form] = {
       m: summarise([s for s in held['video'] if s.get('material') == m], space)
       for m in study_materials(config)
@@ -351,6 +352,7 @@ def analyse(config: Config, runs: list[dict]) -> dict:
     'cross_validated_by_fold': by_fold,
     'cross_validated_by_material': by_material,
     'cross_validated_by_camera_error': by_camera,
+    'cross_validated_by_wind': by_wind,
     'sharpest_never_under_covering': never_under,
   }  # fmt: skip
 
@@ -383,6 +385,29 @@ def by_camera_error(config: Config, held: list[dict], space) -> dict:
   for s in held:
     bands.setdefault(camera_band(config, s['seq']), []).append(s)
   return {CAMERA_BANDS[b]: summarise(bands[b], space) for b in sorted(bands)}
+
+
+# Recordings grouped by where their wind lies in its prior: thirds of the box.
+WIND_BANDS = ('lowest third', 'middle third', 'highest third')
+
+
+def wind_band(score: dict, space: physsim.SearchSpace) -> int:
+  """Which third of its fabric's wind range (``space``'s where the score
+  names no fabric) recording ``score``'s true wind lies in (0, 1, 2)."""
+  lo, hi = (physsim.search_space(score['material']) if score.get('material')
+            else space).wind_speed  # fmt: skip
+  place = (score['truth'][FIELDS.index('wind_speed')] - lo) / (hi - lo)
+  return min(2, max(0, int(place * 3)))
+
+
+def by_wind_place(held: list[dict], space) -> dict:
+  """Held-out recordings' coverage by where their true wind lies in its
+  prior (``wind_band``): tables pooled over the prior average their coverage
+  over it, and a check whose winds sit in one part of it reads that part's."""
+  bands = {}
+  for s in held:
+    bands.setdefault(wind_band(s, space), []).append(s)
+  return {WIND_BANDS[b]: summarise(bands[b], space) for b in sorted(bands)}
 
 
 def coverage_of(summary: dict) -> dict:

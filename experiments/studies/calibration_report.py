@@ -178,6 +178,12 @@ def table(out: dict) -> str:
     "recordings by the camera error each carried (the mean of its shift's and "
     "tilt's place in their ranges), video alone, held out",
   )
+  lines += _group_lines(
+    a.get('cross_validated_by_wind', {}).get('gibbs'),
+    'true wind',
+    'recordings by where their wind lies in its prior (thirds of its range), '
+    'video alone, held out',
+  )
   return '\n'.join(lines)
 
 

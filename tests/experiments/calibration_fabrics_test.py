@@ -24,6 +24,7 @@ from experiments.pipeline import datasets as gen
 from experiments.pipeline.objective import EstimateConfig
 from experiments.studies import (
   calibration,
+  calibration_analysis,
   calibration_check,
   calibration_report,
   calibration_scores,
@@ -720,3 +721,25 @@ def test_the_50pct_half_width_is_read_beside_the_median():
     x for x in calibration_report._half_width_line(out['held_out']['video']) if x
   ]
   assert 'wind_speed 10.0%' in line and 'bending_scale x1.11' in line
+
+
+def test_recordings_are_grouped_by_where_their_wind_lies_in_the_prior():
+  """Thirds of the fabric's 1-6 m/s: 2.66 is the lowest, 2.7 the middle, 6
+  (the box's top) the highest; a group's coverage is its own recordings'."""
+  space = physsim.search_space('gray_interlock')
+  assert space.wind_speed == (1.0, 6.0)
+  grid = np.linspace(0.0, 1.0, 1001)[:, None]
+  held = []
+  for wind, inside in ((2.66, True), (2.7, False), (4.0, True), (6.0, True)):
+    truth = np.array([1.0, wind, 0.2, 1.0])
+    centre = truth if inside else truth * 2  # this one's 50% interval misses
+    held.append({'truth': truth, 'qf': centre * (0.8 + 0.4 * grid),
+                 'rank': np.full(4, 0.5), 'material': 'gray_interlock',
+                 'prior_point': truth})  # fmt: skip
+  bands = [calibration_analysis.wind_band(s, space) for s in held]
+  assert bands == [0, 1, 1, 2]
+  by = calibration_analysis.by_wind_place(held, space)
+  assert list(by) == ['lowest third', 'middle third', 'highest third']
+  assert by['middle third']['n'] == 2
+  assert by['middle third']['wind_speed']['interval_50'] == 0.5
+  assert by['lowest third']['wind_speed']['interval_50'] == 1.0
