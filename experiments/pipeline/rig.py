@@ -147,25 +147,30 @@ SMOKE = Recipe(
 def with_fields(recipe: Recipe, text: str) -> Recipe:
   """``recipe`` with ``text``'s comma-separated ``field=value`` pairs: a number
   parsed as its field's type, a point (``eye``, ``target``, ``world_shift``)
-  written ``x:y:z`` in metres, so that a study moves the camera or changes the
-  physics without a recipe of its own.
+  written ``x:y:z`` in metres, a number of the depth noise written
+  ``noise.<field>`` (e.g. ``noise.sigma_b=0.0015``, the estimator's own), so
+  that a study moves the camera or changes the physics or the sensor without
+  a recipe of its own.
 
   Raises:
     ValueError: naming ``--recipe_fields``, the item and the fields it may
       change.
   """
-  fields = {f.name: getattr(recipe, f.name) for f in dataclasses.fields(recipe)}
-  numeric = sorted(n for n, v in fields.items() if type(v) in (int, float))
-  points = sorted(n for n, v in fields.items() if isinstance(v, tuple) and len(v) == 3)
-  out = {}
+  fields = _numbers(recipe)
+  points = sorted(
+    f.name for f in dataclasses.fields(recipe)
+    if isinstance(getattr(recipe, f.name), tuple) and len(getattr(recipe, f.name)) == 3
+  )  # fmt: skip
+  noise = {f'noise.{n}': t for n, t in _numbers(recipe.noise).items()}
+  out, sensed = {}, {}
   for item in (x for x in text.split(',') if x):
     name, _, value = item.partition('=')
-    if name not in numeric + points or not value:
+    kind = {**fields, **noise, **dict.fromkeys(points, float)}.get(name)
+    if kind is None or not value:
       raise ValueError(
-        f'--recipe_fields={text}: {item!r} is not field=number of {numeric} or '
-        f'field=x:y:z of {points}'
+        f'--recipe_fields={text}: {item!r} is not field=number of '
+        f'{sorted(fields) + sorted(noise)} or field=x:y:z of {points}'
       )
-    kind = float if name in points else type(fields[name])
     parts = value.split(':') if name in points else [value]
     try:
       got = tuple(kind(v) for v in parts)
@@ -176,8 +181,25 @@ def with_fields(recipe: Recipe, text: str) -> Recipe:
     if not np.all(np.isfinite(got)) or len(got) != (3 if name in points else 1):
       shape = 'three finite numbers x:y:z' if name in points else 'a finite number'
       raise ValueError(f'--recipe_fields={text}: {value!r} is not {shape}')
-    out[name] = got if name in points else got[0]
+    if name in noise:
+      sensed[name.removeprefix('noise.')] = got[0]
+    else:
+      out[name] = got if name in points else got[0]
+  if sensed:
+    try:
+      out['noise'] = dataclasses.replace(recipe.noise, **sensed)
+    except ValueError as e:  # the sensor's own range checks
+      raise ValueError(f'--recipe_fields={text}: {e}') from None
   return dataclasses.replace(recipe, **out)
+
+
+def _numbers(obj) -> dict[str, type]:
+  """A dataclass's int and float fields, each with its type."""
+  return {
+    f.name: type(getattr(obj, f.name))
+    for f in dataclasses.fields(obj)
+    if type(getattr(obj, f.name)) in (int, float)
+  }
 
 
 def drawn_fabric(recipe: Recipe, rng: np.random.Generator) -> Recipe:

@@ -39,12 +39,22 @@ def test_recipe_fields_move_the_camera_as_points():
   )
 
 
+def test_recipe_fields_change_the_depth_noise_by_its_own_numbers():
+  args = windy_rig.Args(recipe_fields='noise.sigma_a=0.00035,noise.native_width=848')
+  ((_, r),) = windy_rig.recordings(args)
+  assert r.noise.sigma_a == 0.00035 and r.noise.native_width == 848
+  assert r.noise.sigma_b == rig.Recipe().noise.sigma_b  # the rest as the recipe's
+  assert dataclasses.replace(r, noise=rig.Recipe().noise) == rig.Recipe()
+
+
 @pytest.mark.parametrize(
   'fields, named',
   [('gusts=0.2', "'gusts=0.2'"), ('cloth_resolution=2.5', "'2.5' is not a int"),
    ('material=black_denim', "'material=black_denim'"), ('warmup=', "'warmup='"),
    ('eye=1:2', "'1:2' is not three finite"), ('target=0:a:1', "'0:a:1' is not a float"),
-   ('wind_speed=nan', "'nan' is not a finite number")],
+   ('wind_speed=nan', "'nan' is not a finite number"),
+   ('noise.blur=1', "'noise.blur=1'"), ('noise.native_width=6.5', "'6.5' is not a int"),
+   ('noise=0.1', "'noise=0.1'"), ('noise.sigma_a=-1', 'sigma_a must be >= 0')],
 )  # fmt: skip
 def test_bad_recipe_fields_are_refused_naming_the_item(fields, named):
   with pytest.raises(ValueError, match='--recipe_fields') as e:
