@@ -94,6 +94,9 @@ class Args:
     pool: comma-separated earlier ``windy_rig.json`` files or globs: instead
       of recording, their rows pooled by fabric and table (``pooled``) into
       the workdir's pooled.json and pooled.png.
+    pool_by: with ``pool``, group the rows by fabric and table ('table') or
+      by the file each came from ('run': recordings of one recipe change
+      each, side by side).
   """
 
   workdir: str = 'out/benchmarks/windy_rig'
@@ -109,6 +112,7 @@ class Args:
   parallel: int = 1
   fabric_draws: int = -1
   pool: str = ''
+  pool_by: str = cli.choice('table', ('table', 'run'))
 
 
 PRESETS = {
@@ -321,11 +325,13 @@ def read_rows(paths: list[str]) -> list[dict]:
   return rows
 
 
-def pooled(rows: list[dict]) -> list[dict]:
-  """Per (fabric, table) group and over all: counts, intervals, errors."""
+def pooled(rows: list[dict], by: str = 'table') -> list[dict]:
+  """Per (fabric, table) group (``by`` 'run': per file, its fabric and
+  table as its rows' first) and over all: counts, intervals, errors."""
   groups = {}
   for r in rows:
-    key = ('drawn over the prior' if r['drawn'] else "the recipe's own", r['table'])
+    fabric = 'drawn over the prior' if r['drawn'] else "the recipe's own"
+    key = (fabric, r['table']) if by == 'table' else (r['run'], r['table'])
     groups.setdefault(key, []).append(r)
   out = []
   for (fabric, table), rs in [*sorted(groups.items()), (('all', 'all'), rows)]:
@@ -342,9 +348,10 @@ def pooled(rows: list[dict]) -> list[dict]:
   return out
 
 
-def pool_table(groups: list[dict]) -> str:
+def pool_table(groups: list[dict], by: str = 'table') -> str:
   lines = [
-    '| fabric | tables quoted | n | wind error | 90% held [90% CI] | '
+    f'| {"fabric" if by == "table" else "run"} | tables quoted | n | wind error | '
+    '90% held [90% CI] | '
     '50% held [90% CI] | median half-widths | 50% half-width / median |',
     '|---|---|---|---|---|---|---|---|',
   ]
@@ -359,22 +366,28 @@ def pool_table(groups: list[dict]) -> str:
   return '\n'.join(lines)
 
 
-def figure(rows: list[dict], path: str) -> None:
+def figure(rows: list[dict], path: str, by: str = 'table') -> None:
   """Each recording's truth in its 50% interval's half-widths, a row per
   group, with the 50% interval's edge (1) and where a Gaussian's 90% one
   would be (2.44)."""
   plt = files.pyplot()
-  keys = sorted({(r['drawn'], r['table']) for r in rows})
+  key_of = lambda r: (r['drawn'], r['table']) if by == 'table' else (r['run'],)  # noqa: E731
+  keys = sorted({key_of(r) for r in rows})
   fig, ax = plt.subplots(figsize=(8, 0.8 * len(keys) + 1.4))
   for i, key in enumerate(keys):
-    x = [min(half_widths(r), 4.0) for r in rows if (r['drawn'], r['table']) == key]
+    x = [min(half_widths(r), 4.0) for r in rows if key_of(r) == key]
     ax.plot(x, np.full(len(x), i), 'o', alpha=0.6)
   for edge, words in ((1.0, '50% edge'), (2.44, "a Gaussian's 90% edge")):
     ax.axvline(edge, color='gray', ls='--', lw=1)
     ax.text(edge, len(keys) - 0.4, f' {words}', fontsize=8, color='gray')
   ax.set_yticks(range(len(keys)))
   ax.set_yticklabels(
-    [textwrap.fill(f'{"drawn" if d else "centre"}: {t}', 32) for d, t in keys],
+    [
+      textwrap.fill(
+        f'{"drawn" if k[0] else "centre"}: {k[1]}' if by == 'table' else k[0], 32
+      )
+      for k in keys
+    ],  # fmt: skip
     fontsize=8,
   )
   ax.set_ylim(-0.6, len(keys) - 0.1)
@@ -399,7 +412,7 @@ def pool_runs(args: Args) -> None:
   rows = read_rows(paths)
   if not rows:
     raise ValueError(f'--pool={args.pool!r}: no estimated recordings in {paths}')
-  groups = pooled(rows)
+  groups = pooled(rows, args.pool_by)
   os.makedirs(args.workdir, exist_ok=True)
   keep = ('run', 'recording', 'truth', 'median', 'error', 'holds', 'holds_50',
           'drawn', 'table')  # fmt: skip
@@ -410,8 +423,8 @@ def pool_runs(args: Args) -> None:
       for r in rows
     ],
   })  # fmt: skip
-  figure(rows, os.path.join(args.workdir, 'pooled.png'))
-  print(pool_table(groups))
+  figure(rows, os.path.join(args.workdir, 'pooled.png'), args.pool_by)
+  print(pool_table(groups, args.pool_by))
   print(f'wrote {out} and pooled.png')
 
 

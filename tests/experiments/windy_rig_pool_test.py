@@ -114,3 +114,17 @@ def test_main_writes_the_pool_and_its_picture(tmp_path):
   # and from there into another folder: the runs' folder's pool is skipped too
   windy_rig.main(windy_rig.Args(pool=str(tmp_path / '*.json'), workdir=str(out)))
   assert len(json.loads((out / 'pooled.json').read_text())['rows']) == 2
+
+
+def test_runs_side_by_side_with_pool_by_run(tmp_path):
+  a = _run(tmp_path / 'a.json', [_row(3.0, 3.1, 2.9, 3.3, 2.5, 3.6),
+                                 _row(4.0, 3.0, 2.8, 3.2, 2.5, 3.8)], draws=7)  # fmt: skip
+  b = _run(tmp_path / 'b.json', [_row(3.0, 3.0, 2.7, 3.3, 2.5, 3.6)], draws=7)
+  out = tmp_path / 'pool'
+  windy_rig.main(windy_rig.Args(workdir=str(out), pool=f'{a},{b}', pool_by='run'))
+  groups = json.loads((out / 'pooled.json').read_text())['groups']
+  by_run = {g['fabric']: g for g in groups}
+  assert (by_run['a.json']['n'], by_run['a.json']['held_50']) == (2, 1)
+  assert by_run['b.json']['median_width_50'] == pytest.approx(0.1)
+  assert by_run['all']['n'] == 3
+  assert (out / 'pooled.png').stat().st_size > 0
