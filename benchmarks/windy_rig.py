@@ -38,6 +38,8 @@ from intervals too wide throughout.
   python -m benchmarks.windy_rig --preset=gpu --recipe=mismatched
   python -m benchmarks.windy_rig --workdir=out/intake_pool \
       --pool='benchmarks/results/camera_intake_claim_tables/*.json'
+  python -m benchmarks.windy_rig --workdir=out/factors --pool_by=run \
+      --pool='benchmarks/results/intake_factors/?_*.json'  # one run a row
 """
 
 from __future__ import annotations
