@@ -328,8 +328,8 @@ def read_rows(paths: list[str]) -> list[dict]:
 
 
 def pooled(rows: list[dict], by: str = 'table') -> list[dict]:
-  """Per (fabric, table) group (``by`` 'run': per file, its fabric and
-  table as its rows' first) and over all: counts, intervals, errors."""
+  """Per (fabric, table) group (``by`` 'run': per (file, table)) and over
+  all: counts, intervals, errors."""
   groups = {}
   for r in rows:
     fabric = 'drawn over the prior' if r['drawn'] else "the recipe's own"
@@ -353,8 +353,8 @@ def pooled(rows: list[dict], by: str = 'table') -> list[dict]:
 def pool_table(groups: list[dict], by: str = 'table') -> str:
   lines = [
     f'| {"fabric" if by == "table" else "run"} | tables quoted | n | wind error | '
-    '90% held [90% CI] | '
-    '50% held [90% CI] | median half-widths | 50% half-width / median |',
+    '90% held [90% CI] | 50% held [90% CI] | median half-widths | '
+    '50% half-width / median |',
     '|---|---|---|---|---|---|---|---|',
   ]
   for g in groups:

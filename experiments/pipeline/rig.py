@@ -162,10 +162,11 @@ def with_fields(recipe: Recipe, text: str) -> Recipe:
     if isinstance(getattr(recipe, f.name), tuple) and len(getattr(recipe, f.name)) == 3
   )  # fmt: skip
   noise = {f'noise.{n}': t for n, t in _numbers(recipe.noise).items()}
+  kinds = {**fields, **noise, **dict.fromkeys(points, float)}
   out, sensed = {}, {}
   for item in (x for x in text.split(',') if x):
     name, _, value = item.partition('=')
-    kind = {**fields, **noise, **dict.fromkeys(points, float)}.get(name)
+    kind = kinds.get(name)
     if kind is None or not value:
       raise ValueError(
         f'--recipe_fields={text}: {item!r} is not field=number of '
