@@ -82,7 +82,10 @@
 #                    default mismatched; WINDS, default six; RIG=field=value,...:
 #                    the rig changed, e.g. its camera, rig.with_fields;
 #                    DRAWS=SEED: each its own fabric drawn over the prior, as
-#                    the tables' are) taken in
+#                    the tables' are; RIG_PAIRS=N with DRAWS: N pairs drawn as
+#                    the tables draw theirs, the seven fabrics in turn, their
+#                    estimates' files tarred into $OUT for calibrate --rig_runs)
+#                    taken in
 #                    as a user's, with the tables of RUN, one estimate at a
 #                    time (three at once overrun an H100).
 # Training: at most EPOCHS (30) epochs, chosen on VAL (0.2) of the training
@@ -494,8 +497,11 @@ camera() (  # SUB [RUN]: see the header
       XLA_PYTHON_CLIENT_PREALLOCATE=false step intake "$((limit + 60))" python -m benchmarks.windy_rig --preset=gpu \
         --recipe="${RECIPE:-mismatched}" --parallel=1 --recipe_fields=seed="${SEED:-51}"${RIG:+,$RIG} \
         --winds="${WINDS:-2.5,2.9,3.3,3.7,4.1,4.5}" --workdir="$R/intake_${SEED:-51}" \
-        ${DRAWS:+--fabric_draws=$DRAWS}
+        ${DRAWS:+--fabric_draws=$DRAWS} ${RIG_PAIRS:+--pairs=$RIG_PAIRS --materials=$(IFS=,; echo "${FABRICS[*]}")}
       cp "$R/intake_${SEED:-51}/windy_rig.json" "$OUT/intake_${SEED:-51}.json"
+      # what a table fitted on these recordings reads (calibrate --rig_runs)
+      (cd "$R" && find "intake_${SEED:-51}" -path '*recording/*.json' -o -name estimate.json \
+        -o -name posterior.npz | tar -cf - -T - | split -b 15m - "$OUT/rig_${SEED:-51}.tar.")
       tail -14 "$R/logs/intake.log"
       ;;
     *) echo "unknown camera stage $sub" >&2; exit 2 ;;

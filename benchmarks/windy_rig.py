@@ -38,6 +38,10 @@ from intervals too wide throughout.
   python -m benchmarks.windy_rig --preset=gpu --recipe=mismatched
   python -m benchmarks.windy_rig --workdir=out/intake_pool \
       --pool='benchmarks/results/camera_intake_claim_tables/*.json'
+  python -m benchmarks.windy_rig --recipe=mismatched --modes=world_up \
+      --pairs=7 --fabric_draws=400 --recipe_fields=seed=400 \
+      --materials=white_tablecloth,gray_interlock,...  # recordings to fit
+      # tables on (experiments.calibrate --rig_runs)
   python -m benchmarks.windy_rig --workdir=out/factors --pool_by=run \
       --pool='benchmarks/results/intake_factors/?_*.json'  # one run a row
 """
@@ -57,6 +61,7 @@ from concurrent import futures
 
 import numpy as np
 
+import physsim
 from bo.calibration import binomial_interval
 from bo.design import Z90
 from experiments.pipeline import cli, files, objective, rig
@@ -93,6 +98,13 @@ class Args:
       centre of the estimate's prior); else the seed of each recording's own fabric drawn as the
       calibration tables draw theirs (``rig.drawn_fabric``), so that a check of
       coverage is one of what the tables promise.
+    pairs: instead of ``winds``, that many pairs of recordings drawn as the
+      calibration tables draw theirs (``drawn_pairs``: each pair one fabric,
+      each recording its own wind, all over the prior; needs
+      ``fabric_draws``, their seed): recordings a calibration table can be
+      fitted on (``experiments.calibrate --rig_runs``).
+    materials: comma-separated fabrics, one per pair in turn ('': the
+      recipe's).
     pool: comma-separated earlier ``windy_rig.json`` files or globs: instead
       of recording, their rows pooled by fabric and table (``pooled``) into
       the workdir's pooled.json and pooled.png.
@@ -113,6 +125,8 @@ class Args:
   recipe_fields: str = ''
   parallel: int = 1
   fabric_draws: int = -1
+  pairs: int = 0
+  materials: str = ''
   pool: str = ''
   pool_by: str = cli.choice('table', ('table', 'run'))
 
@@ -149,6 +163,8 @@ def recordings(args: Args) -> list[tuple[str, rig.Recipe]]:
     }  # fmt: skip
     recipe = dataclasses.replace(rig.SMOKE, **changed)
   recipe = rig.with_fields(recipe, args.recipe_fields)
+  if args.pairs:
+    return drawn_pairs(recipe, args)
   if not args.winds:
     return [('', recipe)]
   try:
@@ -166,6 +182,39 @@ def recordings(args: Args) -> list[tuple[str, rig.Recipe]]:
   return out
 
 
+def drawn_pairs(recipe: rig.Recipe, args: Args) -> list[tuple[str, rig.Recipe]]:
+  """``args.pairs`` pairs of recordings as ``calibration_config.truths``
+  draws the tables' (pair ``j``: recordings ``2j`` and ``2j + 1``): each
+  pair's bending and area weight, and each recording's wind, uniform in the
+  unit cube of its fabric's search box; fabrics ``args.materials`` in turn;
+  recording ``k`` with the recipe's seed + k (its own gusts, noise, IMU)."""
+  if args.pairs < 0 or args.fabric_draws < 0:
+    raise ValueError(
+      f'--pairs={args.pairs} needs --fabric_draws=SEED (>= 0) and pairs >= 0'
+    )
+  mats = [m for m in args.materials.split(',') if m] or [recipe.material]
+  for m in mats:
+    try:
+      physsim.search_space(m)
+    except (KeyError, ValueError) as e:
+      raise ValueError(f'--materials: no fabric {m!r} ({e})') from e
+  out = []
+  for j in range(args.pairs):
+    mat = mats[j % len(mats)]
+    u = np.random.default_rng([args.fabric_draws, j]).uniform(-1.0, 1.0, (2, 3))
+    u[1, 0], u[1, 2] = u[0, 0], u[0, 2]  # one fabric, two fan settings
+    p = physsim.from_unit(u, physsim.search_space(mat))
+    for i in range(2):
+      k = 2 * j + i
+      r = dataclasses.replace(
+        recipe, material=mat, seed=recipe.seed + k,
+        bending_scale=float(p.bending_scale[i]), wind_speed=float(p.wind_speed[i]),
+        area_weight=float(p.area_weight[i]),
+      )  # fmt: skip
+      out.append((f'rec{k:02d}', r))
+  return out
+
+
 def _flags(mode: str, paths: dict) -> list[str]:
   cam = paths['camera_imu' if mode == 'imu' else 'camera']
   extra = {
@@ -176,12 +225,16 @@ def _flags(mode: str, paths: dict) -> list[str]:
   return [f'--camera_json={cam}', *extra.get(mode, [])]
 
 
-def _estimate(args: Args, mode: str, paths: dict, where: str, truth: float) -> dict:
-  """One estimate as a user runs it; its outcome, read from its files."""
+def _estimate(
+  args: Args, mode: str, paths: dict, where: str, truth: float, material: str
+) -> dict:
+  """One estimate as a user runs it (naming the fabric); its outcome, read
+  from its files."""
   workdir = os.path.join(where, f'est_{mode}')
   command = [
     sys.executable, '-m', 'experiments.estimate', f'--recording={paths["depth"]}',
     *_flags(mode, paths), f'--workdir={workdir}', f'--distance={args.distance}',
+    f'--material={material}',
     f'--backend={args.backend}', f'--max_iter={args.max_iter}',
     *(['--preset=smoke'] if args.smoke else []),
   ]  # fmt: skip
@@ -450,7 +503,7 @@ def main(args: Args) -> None:
     )
     rows = []
     for mode in modes:
-      row = _estimate(args, mode, paths, where, recipe.wind_speed)
+      row = _estimate(args, mode, paths, where, recipe.wind_speed, recipe.material)
       print(
         f'== {name or "-"} {mode}: exit {row["exit"]}, {row["seconds"]} s', flush=True
       )

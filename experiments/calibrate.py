@@ -32,6 +32,11 @@ benchmarks/results/alignment_error/claim_mismatched.json --physics=mismatched \
       # GPU: each recording of another physics, its camera off as a measured
       # intake erred, its estimate carrying that intake's claim; the tables
       # correct the width alone: the shipped tables of the intake's own claims
+  python -m experiments.calibrate --preset=paper --physics=mismatched \
+      --centred_levels --rig_runs='out/rig_tables/s*' --workdir=out/cal_rig --install
+      # no simulation: tables fitted on a user's rig's recordings taken in
+      # through the intake (benchmarks.windy_rig --pairs), shipped as
+      # ..._camera_intake_rig_...json, which an intake's estimate quotes first
 
 What it measures: ``experiments.studies.calibration``. With ``--install`` the
 held-out coverage is copied into the package (``experiments/pipeline/
@@ -71,7 +76,7 @@ from absl import logging
 import bo
 import physsim
 from experiments.pipeline import calibration_tables, cli, distributed, files
-from experiments.studies import calibration, calibration_check
+from experiments.studies import calibration, calibration_check, calibration_rig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,14 +120,35 @@ class Args:
 PRESETS = {k: Args(study=v) for k, v in calibration.PRESETS.items()}
 
 
-def main(args: Args) -> None:
-  logging.set_verbosity(logging.WARNING)
+def resolved(args: Args) -> Args:
+  """``args`` with the study's camera errors set from the intakes' files or
+  the rig's recordings (``with_intake_errors``, ``with_rig_runs``).
+
+  Raises:
+    ValueError: a likelihood the calibration cannot re-read, or the rig's
+      recordings beside a check or measured intake errors.
+  """
   args = dataclasses.replace(args, study=calibration.with_intake_errors(args.study))
   if args.study.estimate.scoring.likelihood not in bo.posterior.DISCREPANCY_LIKELIHOODS:
     raise ValueError(
       f'--likelihood={args.study.estimate.scoring.likelihood}: the calibration re-reads '
       f'likelihoods of one discrepancy ({", ".join(bo.posterior.DISCREPANCY_LIKELIHOODS)})'
     )
+  if not args.study.rig_runs:
+    return args
+  if args.check or args.study.camera_errors:
+    raise ValueError(
+      '--rig_runs fits tables on their own claims: drop --check and --camera_errors'
+    )
+  runs = calibration_rig.rig_runs(args.study.rig_runs)
+  return dataclasses.replace(
+    args, study=calibration_rig.with_rig_runs(args.study, runs)
+  )
+
+
+def main(args: Args) -> None:
+  logging.set_verbosity(logging.WARNING)
+  args = resolved(args)
   modes = tuple(m.strip() for m in args.install_modes.split(';') if m.strip())
   unknown = [m for m in modes if m not in calibration.MODES]
   if unknown or (modes and not args.install):
@@ -156,6 +182,7 @@ def main(args: Args) -> None:
     dest = calibration_tables.shipped_calibration(
       scoring.distance, args.study.size, (scoring.camera_sd_m, scoring.camera_sd_deg),
       args.study.camera_sd_spread, scoring.camera_sd_from,
+      'rig' if args.study.rig_runs else '',
     )  # fmt: skip
     src = f'{args.workdir}/{calibration.RESULT_FILE}'
     new = physsim.dataset.read_json(src)

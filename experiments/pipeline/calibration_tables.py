@@ -24,22 +24,12 @@ from experiments.pipeline import carried_errors, embedding, files
 # the default distance's (its networks' recipe) and the shape distance's (no
 # network), at the demo's size; and the shape distance's at the estimate's own
 # (paper) size, every fabric.
-CALIBRATION_FILE = os.path.join(os.path.dirname(__file__), 'calibration.json')
-
-
-SHAPE_CALIBRATION_FILE = os.path.join(
-  os.path.dirname(__file__), 'calibration_shape.json'
-)
-
-
-SHAPE_PAPER_CALIBRATION_FILE = os.path.join(
-  os.path.dirname(__file__), 'calibration_shape_paper.json'
-)
-
-
-PAPER_CALIBRATION_FILE = os.path.join(
-  os.path.dirname(__file__), 'calibration_paper.json'
-)  # none shipped yet: the study trains demo-size networks only
+_HERE = os.path.dirname(__file__)
+CALIBRATION_FILE = os.path.join(_HERE, 'calibration.json')
+SHAPE_CALIBRATION_FILE = os.path.join(_HERE, 'calibration_shape.json')
+SHAPE_PAPER_CALIBRATION_FILE = os.path.join(_HERE, 'calibration_shape_paper.json')
+# none shipped yet: the study trains demo-size networks only
+PAPER_CALIBRATION_FILE = os.path.join(_HERE, 'calibration_paper.json')
 
 
 SIZES = ('demo', 'paper')
@@ -51,14 +41,15 @@ def shipped_calibration(
   camera: tuple[float, float] = (0.0, 0.0),
   spread: float = 0.0,
   source: str = 'given',
+  recordings: str = '',
 ) -> str:
   """Where the calibration of estimates with ``distance`` at the study's
   ``size`` is shipped (and ``--install`` puts it): the shape distance's own
   files, every other distance's the default ones (whose networks they
   record); tables measured with a camera error (``camera``: metres,
   degrees; ``spread``: drawn per recording over a range about it;
-  ``source``: 'intake' where the cameras were displaced as the intake errs)
-  beside them (``carried_errors.camera_path``)."""
+  ``source``: 'intake' where the cameras were displaced as the intake errs;
+  ``recordings``: 'rig', a user's rig's) beside them (``carried_errors.camera_path``)."""
   if size not in SIZES:
     raise ValueError(f'no calibration size {size!r}: one of {SIZES}')
   shape = distance == 'shape'
@@ -66,7 +57,7 @@ def shipped_calibration(
     base = SHAPE_CALIBRATION_FILE if shape else CALIBRATION_FILE
   else:
     base = SHAPE_PAPER_CALIBRATION_FILE if shape else PAPER_CALIBRATION_FILE
-  return carried_errors.camera_path(base, camera, spread, source)
+  return carried_errors.camera_path(base, camera, spread, source, recordings)
 
 
 def shipped_calibrations(distance: str) -> list[str]:
@@ -81,7 +72,8 @@ def calibration_file(config=None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
   (``config.scoring.calibration``), else of those shipped for its distance the
   one whose settings differ from it least (then whose readings' range holds
-  its readings, then the one whose recordings' camera errors were most like
+  its readings, then one of a user's rig's recordings where its error came from
+  the intake, then the one whose recordings' camera errors were most like
   its own: ``carried_errors.recordings_gap``), else (none shipped
   for it) the default one, whose note then names what differs."""
   scoring = getattr(config, 'scoring', None)
@@ -98,6 +90,7 @@ def calibration_file(config=None) -> str:
     len(differing_fields(config, cal := read_calibration(p))),
     len(_reading_gaps(config, cal)),
     carried_errors.table_source(cal) != source,  # displaced as this error errs
+    carried_errors.table_recordings(cal) != 'rig',  # taken in as a user's are
     carried_errors.recordings_gap(carried_errors.table_of(cal), mine),
   ))  # fmt: skip
 

@@ -133,6 +133,13 @@ def table_source(cal: dict) -> str:
   return source_of(cal.get('config', {}).get('estimate', {}))
 
 
+def table_recordings(cal: dict) -> str:
+  """Whose recordings a calibration ``cal``'s tables were fitted on: 'rig'
+  (a user's rig's, taken in through the intake: ``calibrate --rig_runs``)
+  or 'simulated' (the study's own)."""
+  return 'rig' if cal.get('config', {}).get('rig_runs') else 'simulated'
+
+
 def source_holds(table: str, mine: str) -> bool:
   """Whether tables of cameras displaced as ``table`` says hold for an
   estimate whose error came from ``mine``: the full claimed error's for any
@@ -223,18 +230,24 @@ def camera_difference(
 
 
 def camera_path(
-  base: str, sd: tuple[float, float], spread: float = 0.0, source: str = 'given'
+  base: str,
+  sd: tuple[float, float],
+  spread: float = 0.0,
+  source: str = 'given',
+  recordings: str = '',
 ) -> str:
   """Where tables measured with camera error ``sd`` are shipped beside the
   file ``base`` of exact cameras: ``base`` itself for (0, 0), else
   ``<base>_camera_<cm>cm_<deg>deg.json``, or for a range drawn per recording
   (``spread``) ``<base>_camera_<cm>-<cm>cm_<deg>-<deg>deg.json``; with
   ``_camera_intake_`` where the cameras were displaced as the intake errs
-  (``source`` 'intake')."""
+  (``source`` 'intake'), ``_camera_intake_rig_`` where the recordings were
+  a user's rig's taken in through the intake (``recordings`` 'rig')."""
   if not any(sd):
     return base
   words = table_words((*sd, spread)).replace(' ', '').replace('/', '_')
   kind = 'camera_intake' if source == 'intake' else 'camera'
+  kind += '_rig' if recordings == 'rig' else ''
   return f'{base.removesuffix(".json")}_{kind}_{words}.json'
 
 

@@ -68,6 +68,7 @@ import time
 from experiments.pipeline import distributed, files
 from experiments.studies import calibration_analysis as _analysis
 from experiments.studies import calibration_report as _report
+from experiments.studies import calibration_rig
 from experiments.studies import calibration_runs as _runs
 from experiments.studies import calibration_scores as _scores
 from experiments.studies.calibration_analysis import (
@@ -144,10 +145,17 @@ def run(config: Config, workdir: str, analyse_only: bool = False,
   writes ``calibration.json``, ``calibration.md`` and figures."""
   if analyse_only and simulate_only:
     raise ValueError('analyse_only and simulate_only leave nothing to do')
+  if config.rig_runs and simulate_only:
+    raise ValueError('--rig_runs reads estimates made already: drop --simulate_only')
   check_config(config)
   t0 = time.time()
   os.makedirs(workdir, exist_ok=True)
-  runs = saved_runs(workdir) if analyse_only else simulate_and_estimate(config, workdir)
+  if config.rig_runs:  # a user's rig's recordings, estimated already
+    runs = calibration_rig.rig_runs(config.rig_runs)
+  elif analyse_only:
+    runs = saved_runs(workdir)
+  else:
+    runs = simulate_and_estimate(config, workdir)
   if not distributed.is_main():
     return {}
   if simulate_only:

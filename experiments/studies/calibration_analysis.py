@@ -379,7 +379,7 @@ def by_camera_error(config: Config, held: list[dict], space) -> dict:
   """Held-out recordings' coverage by the camera error each carried
   (``camera_band``), where the study drew each its own (``camera_sd_spread``):
   whether the pooled tables hold at both ends of the range; {} otherwise."""
-  if not config.camera_sd_spread:
+  if not config.camera_sd_spread or config.rig_runs:  # a rig's claims: its own
     return {}
   bands = {}
   for s in held:

@@ -121,6 +121,11 @@ class Config:
       posterior's median (``bo.calibration.centred_levels``): for tables of
       another physics, whose bias in one direction a real recording need
       not share.
+    rig_runs: windy-rig workdirs (comma-separated paths or globs;
+      ``benchmarks.windy_rig --pairs``) whose recordings, made as a user's
+      rig makes them and taken in through the intake, the tables are fitted
+      on instead of the study's own (``calibration_rig``: nothing is
+      simulated; the fabrics, pairs and carried camera errors are theirs).
   """
 
   material: str = 'gray_interlock'
@@ -151,6 +156,7 @@ class Config:
   check_reading: str = cli.choice('none', ('none', 'wind_speed', 'area_weight'))
   physics: str = cli.choice('own', tuple(physsim.MISMATCHES))
   centred_levels: bool = False
+  rig_runs: str = ''
 
 
 PRESETS = {

@@ -89,6 +89,11 @@ def _camera_text(config: Config) -> str:
   if not any(sd):
     return ''
   words = carried_errors.table_words((*sd, config.camera_sd_spread))
+  if config.rig_runs:
+    return (
+      ", taken in through the intake from a user's rig (benchmarks.windy_rig), "
+      f"each estimate carrying its intake's claim (claims {words})"
+    )
   if config.camera_errors:
     return (
       f', cameras off as {len(intake_errors(tuple(config.camera_errors)))} measured '
@@ -145,7 +150,8 @@ def table(out: dict) -> str:
   video does not inform the quantity and its nominal levels are kept)."""
   rc = out['recalibration']
   lines = [
-    f'Simulated recordings: {out["n"]} ({out["setting"]}); each read with the '
+    f'{"Rig" if out.get("config", {}).get("rig_runs") else "Simulated"} '
+    f'recordings: {out["n"]} ({out["setting"]}); each read with the '
     f'sharpness and levels chosen on the other {out["analysis"]["folds"] - 1} of '
     f'{out["analysis"]["folds"]} folds (by pairs); the shipped tables use all '
     f'{rc["n_calibration_recordings"]}',
