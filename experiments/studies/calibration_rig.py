@@ -115,15 +115,21 @@ def rig_runs(patterns: str) -> list[dict]:
 def claims_range(runs: list[dict]) -> tuple[float, float, float]:
   """(metres, degrees, spread): the intake claims ``runs``' estimates
   carried, as ``carried_errors.table_of`` reads a table's: each component's
-  geometric centre of its smallest and largest claim, and the smaller
-  half-width in log of the two ranges, so both lie inside what was carried."""
+  geometric centre of its smallest and largest claim, and the larger
+  half-width in log of the two ranges. An intake's claimed tilt follows its
+  claimed shift (both are one placement's error, ``intake_alignment``), so
+  the shifts' range is the one that says which claims the recordings
+  covered; the tilts' range, as wide in log, reaches past the tilts seen,
+  where no claim of a shift in range falls. (The study's tables take the
+  smaller, ``told_cameras.intake_range``: their claims were drawn, each
+  component jittered on its own.)"""
   claims = np.array([r['claim'] for r in runs], np.float64)
   if np.any(claims <= 0):
     raise ValueError(
       'a rig estimate carried no camera error: run them through the intake'
     )
   lo, hi = claims.min(0), claims.max(0)
-  spread = float(np.min(np.log(hi / lo)) / 2)
+  spread = float(np.max(np.log(hi / lo)) / 2)
   centre = np.sqrt(lo * hi)
   return round(float(centre[0]), 6), round(float(centre[1]), 5), round(spread, 4)
 

@@ -121,11 +121,11 @@ def test_the_claims_range_holds_every_claim_worked_by_hand(rig_dirs):
   m, deg, spread = calibration_rig.claims_range(
     calibration_rig.rig_runs(f'{rig_dirs}/rig_*')
   )
-  # metres 1-4 cm: centre 2 cm; degrees 1-2: centre sqrt(2); the narrower
-  # log half-range: log(2) / 2
+  # metres 1-4 cm: centre 2 cm; degrees 1-2: centre sqrt(2); the wider
+  # log half-range, the shifts': log(4) / 2
   assert m == pytest.approx(0.02, abs=1e-6)
   assert deg == pytest.approx(math.sqrt(2), abs=1e-5)
-  assert spread == pytest.approx(math.log(2) / 2, abs=1e-4)
+  assert spread == pytest.approx(math.log(4) / 2, abs=1e-4)
 
 
 def test_a_rig_searched_otherwise_is_refused_naming_the_folder_and_setting(tmp_path):
@@ -160,7 +160,7 @@ def test_the_study_fits_every_mode_on_the_rigs_recordings(rig_dirs):
   assert out['n'] == 5 and out['recalibration']['n_calibration_recordings'] == 5
   assert out['held_out_uncalibrated']['joint pair']['n'] == 4  # rec00 of rig_a alone
   assert (
-    "from a user's rig" in out['setting'] and '1.4-2.8 cm / 1-2 deg' in out['setting']
+    "from a user's rig" in out['setting'] and '1-4 cm / 0.71-2.8 deg' in out['setting']
   )
   assert carried_errors.table_recordings(out) == 'rig'
   assert 'Rig recordings: 5' in (rig_dirs / 'work' / 'calibration.md').read_text()
