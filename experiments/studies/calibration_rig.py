@@ -88,28 +88,44 @@ def _recording(folder: str, k: int) -> dict | None:
 
 def rig_runs(patterns: str) -> list[dict]:
   """The finished estimates of the windy-rig workdirs ``patterns`` names, as
-  ``calibration_runs.saved_runs`` returns the study's: ``seq`` numbers the
-  pairs across folders (pair ``j`` of the ``i``-th folder's recordings keep
-  ``2 p + 0/1``, ``p`` counting every folder's pairs before), so the
-  analysis pairs only recordings of one fabric, and folds whole pairs.
+  ``calibration_runs.saved_runs`` returns the study's. ``seq`` numbers the
+  pairs across folders: recordings ``rec2j`` and ``rec2j+1`` of one fabric
+  (``--pairs``) are pair ``p``'s ``2 p`` and ``2 p + 1``; a recording whose
+  neighbour is of another fabric (``--winds`` with ``--fabric_draws``: each
+  its own) is a pair of its own, ``2 p`` alone. So the analysis joins only
+  recordings of one fabric, and folds whole pairs.
 
   Raises:
     ValueError: no folder, or none holds a finished estimate.
   """
   runs, pair = [], 0
   for folder in rig_folders(patterns):
-    names = sorted(
-      n for n in os.listdir(folder) if n.startswith('rec') and n[3:].isdigit()
-    )
+    names = [n for n in os.listdir(folder) if n.startswith('rec') and n[3:].isdigit()]
     count = max((int(n[3:]) for n in names), default=-1) + 1
-    for k in range(count):
-      rec = _recording(folder, k)
-      if rec is not None:
-        runs.append({'seq': 2 * (pair + k // 2) + k % 2, **rec})
-    pair += (count + 1) // 2
+    k = 0
+    while k < count:
+      group = [k, k + 1] if k % 2 == 0 and _one_fabric(folder, k, k + 1) else [k]
+      for i, kk in enumerate(group):
+        if (rec := _recording(folder, kk)) is not None:
+          runs.append({'seq': 2 * pair + i, **rec})
+      pair, k = pair + 1, k + len(group)
   if not runs:
     raise ValueError(f'--rig_runs={patterns}: no finished estimate in those folders')
   return runs
+
+
+def _one_fabric(folder: str, a: int, b: int) -> bool:
+  """Whether recordings ``a`` and ``b`` of a windy-rig workdir are of one
+  fabric (its recipe's material, bending and area weight), as ``--pairs``
+  draws them."""
+  fabric = []
+  for k in (a, b):
+    path = os.path.join(folder, f'rec{k:02d}', _RECIPE)
+    if not os.path.isfile(path):
+      return False
+    r = read_json(path)
+    fabric.append(tuple(r.get(f) for f in ('material', 'bending_scale', 'area_weight')))
+  return fabric[0] == fabric[1]
 
 
 def claims_range(runs: list[dict]) -> tuple[float, float, float]:

@@ -66,11 +66,15 @@ def _saved_gp(truth: dict, material: str) -> dict:
 
 
 def _rig_recording(root, k: int, material: str, truth: dict, claim, **config):
-  """A windy-rig recording ``rec<k>`` with a finished estimate's files."""
+  """A windy-rig recording ``rec<k>`` with a finished estimate's files (none
+  where ``claim`` is None: refused)."""
   where = root / f'rec{k:02d}'
   (where / 'recording').mkdir(parents=True)
   (where / 'recording' / 'truth.json').write_text(json.dumps(truth))
-  (where / 'recording' / 'recipe.json').write_text(json.dumps({'material': material}))
+  recipe = {'material': material, **truth}
+  (where / 'recording' / 'recipe.json').write_text(json.dumps(recipe))
+  if claim is None:
+    return
   est = where / 'est_world_up'
   est.mkdir()
   flat = {**PAPER.estimate.flat(), 'camera_sd_from': 'intake', **config}
@@ -81,40 +85,42 @@ def _rig_recording(root, k: int, material: str, truth: dict, claim, **config):
   np.savez(est / layout.POSTERIOR_FILE, **_saved_gp(truth, material))
 
 
-def _truth(rng, material, wind=None, fabric=None) -> dict:
-  u = rng.uniform(-1, 1, 3)
-  p = physsim.from_unit(u, physsim.search_space(material))
+def _truth(rng, material, fabric=None) -> dict:
+  p = physsim.from_unit(rng.uniform(-1, 1, 3), physsim.search_space(material))
   out = {
     f: float(getattr(p, f)) for f in ('bending_scale', 'wind_speed', 'area_weight')
   }
-  return {**out, **(fabric or {})} if wind is None else {**out, 'wind_speed': wind}
+  return {**out, **(fabric or {})}
 
 
 @pytest.fixture
 def rig_dirs(tmp_path):
-  """Two rig workdirs: the first's rec01 unfinished (rec00 then alone),
-  claims (1 cm, 1 deg) to (4 cm, 2 deg)."""
+  """Three rig workdirs: two of pairs (``--pairs``; the first's rec01
+  refused, so its rec00 is read alone), one of two recordings each of its own
+  fabric (``--winds`` with ``--fabric_draws``); claims (1 cm, 1 deg) to
+  (4 cm, 2 deg)."""
   rng = np.random.default_rng(0)
-  first, second = tmp_path / 'rig_a', tmp_path / 'rig_b'
-  claims = iter([(0.01, 1.0), (0.02, 1.5), (0.03, 1.2), (0.04, 2.0), (0.02, 1.1)])
-  for root, ks, mat in ((first, (0, 2, 3), MATS[0]), (second, (0, 1), MATS[1])):
+  claims = iter([(0.01, 1.0), None, (0.02, 1.5), (0.03, 1.2), (0.04, 2.0), (0.02, 1.1),
+                 (0.015, 1.1), (0.025, 1.6)])  # fmt: skip
+  for name, mat, paired in (('rig_a', MATS[0], True), ('rig_b', MATS[1], True),
+                            ('rig_c', MATS[0], False)):  # fmt: skip
     fabric = None
-    for k in ks:
-      t = _truth(rng, mat, fabric=fabric if k % 2 else None)
+    for k in range(4 if name == 'rig_a' else 2):
+      t = _truth(rng, mat, fabric=fabric if k % 2 and paired else None)
       fabric = {f: t[f] for f in ('bending_scale', 'area_weight')}
-      _rig_recording(root, k, mat, t, next(claims))
-  (first / 'rec01').mkdir()  # refused: no estimate
+      _rig_recording(tmp_path / name, k, mat, t, next(claims))
   return tmp_path
 
 
 def test_rig_runs_number_pairs_across_folders_and_skip_unfinished(rig_dirs):
   runs = calibration_rig.rig_runs(f'{rig_dirs}/rig_*')
-  assert [r['seq'] for r in runs] == [0, 2, 3, 4, 5]
-  assert [r['material'] for r in runs] == [MATS[0]] * 3 + [MATS[1]] * 2
+  assert [r['seq'] for r in runs] == [0, 2, 3, 4, 5, 6, 8]
+  assert [r['material'] for r in runs] == [MATS[0]] * 3 + [MATS[1]] * 2 + [MATS[0]] * 2
   by = {r['seq']: r['truth'] for r in runs}
   for s in (2, 4):  # pairs: one fabric, two winds
     assert by[s]['bending_scale'] == by[s + 1]['bending_scale']
     assert by[s]['wind_speed'] != by[s + 1]['wind_speed']
+  assert by[6]['bending_scale'] != by[8]['bending_scale']  # each its own
 
 
 def test_the_claims_range_holds_every_claim_worked_by_hand(rig_dirs):
@@ -154,16 +160,16 @@ def test_the_study_fits_every_mode_on_the_rigs_recordings(rig_dirs):
   )
   runs = calibration_rig.rig_runs(config.rig_runs)
   config = calibration_rig.with_rig_runs(config, runs)
-  assert config.materials == MATS and config.pairs == 2
+  assert config.materials == MATS and config.pairs == 4  # rig_a's and rig_c's
   assert config.estimate.scoring.camera_sd_from == 'intake'
   out = calibration.run(config, str(rig_dirs / 'work'), analyse_only=True)
-  assert out['n'] == 5 and out['recalibration']['n_calibration_recordings'] == 5
+  assert out['n'] == 7 and out['recalibration']['n_calibration_recordings'] == 7
   assert out['held_out_uncalibrated']['joint pair']['n'] == 4  # rec00 of rig_a alone
   assert (
     "from a user's rig" in out['setting'] and '1-4 cm / 0.71-2.8 deg' in out['setting']
   )
   assert carried_errors.table_recordings(out) == 'rig'
-  assert 'Rig recordings: 5' in (rig_dirs / 'work' / 'calibration.md').read_text()
+  assert 'Rig recordings: 7' in (rig_dirs / 'work' / 'calibration.md').read_text()
 
 
 def test_rig_tables_ship_beside_the_others_and_an_intake_estimate_quotes_them(
