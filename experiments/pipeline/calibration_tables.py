@@ -68,11 +68,11 @@ def shipped_calibrations(distance: str) -> list[str]:
   return [p for p in own if os.path.isfile(p)]
 
 
-def calibration_file(config=None) -> str:
+def calibration_file(config=None, mode: str | None = None) -> str:
   """The calibration an estimate with ``config`` quotes: its own
   (``config.scoring.calibration``), else of those shipped for its distance the
   one whose settings differ from it least (then whose readings' range holds
-  its readings, then one of a user's rig's recordings where its error came from
+  its readings, then one with tables of its ``mode``, then one of a user's rig's recordings where its error came from
   the intake, then the one whose recordings' camera errors were most like
   its own: ``carried_errors.recordings_gap``), else (none shipped
   for it) the default one, whose note then names what differs."""
@@ -88,6 +88,7 @@ def calibration_file(config=None) -> str:
   mine, source = carried_errors.camera_of(flat), carried_errors.source_of(flat)
   return min(own, key=lambda p: (
     len(differing_fields(config, cal := read_calibration(p))),
+    mode is not None and mode not in (cal.get('recalibration') or {}).get('modes', {mode: 0}),
     len(_reading_gaps(config, cal)),
     carried_errors.table_source(cal) != source,  # displaced as this error errs
     carried_errors.table_recordings(cal) != 'rig',  # taken in as a user's are
@@ -500,7 +501,8 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   knows no calibration measured (recordings sharing a fan setting), each
   named among the differences.
   """
-  path = calibration_file(config)
+  mode = None if config is None else calibration_mode(config.measured, joint)
+  path = calibration_file(config, mode)
   if not os.path.isfile(path):
     return None
   cal = read_calibration(path)
@@ -508,7 +510,6 @@ def calibration_note(config=None, *, joint: bool = False, recordings: int = 1,
   head['networks'] = len(cal.get('network', {}).get('seeds', [0]))
   if config is None:
     return {'matches': True, **head, 'coverage': cal['coverage']}
-  mode = calibration_mode(config.measured, joint)
   differs = _differences(config, cal, mode, joint, recordings, network, uncalibrated)
   if differs:
     return {'matches': False, 'differs': differs, **head}

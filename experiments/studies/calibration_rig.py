@@ -36,6 +36,10 @@ from experiments.pipeline.recording import read_json
 _TRUTH = os.path.join('recording', 'truth.json')
 _RECIPE = os.path.join('recording', 'recipe.json')
 _ESTIMATE = 'est_world_up'
+# A mode whose tables were fitted and checked on fewer recordings is not
+# shipped (a rig's pairs are few: its joint modes read a handful); its
+# estimates quote another calibration's tables for it.
+MIN_RECORDINGS = 20
 # The settings every rig estimate must share with the study's searches.
 _SHARED = ('cloth_resolution', 'fps', 'frames', 'cameras', 'distance', 'likelihood',
            'sharpness', 'model_error', 'gusts', 'warmup', 'posterior_grid', 'q',
@@ -196,3 +200,17 @@ def _differs(a, b) -> bool:
   if isinstance(a, (int, float)) and isinstance(b, (int, float)):
     return not math.isclose(float(a), float(b), rel_tol=1e-9)
   return a != b
+
+
+def shippable(out: dict) -> tuple[dict, list[str]]:
+  """Calibration ``out`` (``calibration_report.result``) without the tables
+  of modes held out on fewer than ``MIN_RECORDINGS`` recordings, and those
+  modes: their coverage stays in the report, their levels are not shipped."""
+  rec = out['recalibration']
+  few = [
+    m for m in rec['modes']
+    if out['held_out'].get(m, {}).get('n', 0) < MIN_RECORDINGS
+  ]  # fmt: skip
+  kept = {**rec, 'modes': {m: v for m, v in rec['modes'].items() if m not in few},
+          'weights': {m: v for m, v in rec.get('weights', {}).items() if m not in few}}  # fmt: skip
+  return {**out, 'recalibration': kept}, few

@@ -151,10 +151,11 @@ def test_no_folder_or_no_estimate_is_refused(tmp_path):
     calibration_rig.rig_runs(str(tmp_path / 'rig'))
 
 
-def test_the_study_fits_every_mode_on_the_rigs_recordings(rig_dirs):
+def test_the_study_fits_every_mode_on_the_rigs_recordings(rig_dirs, monkeypatch):
   """The analysis reads the rig's runs as its own: every recording in the
   video's tables, the joint pair only where both of a pair finished, and the
   setting says whose recordings they were."""
+  monkeypatch.setattr(calibration_rig, 'MIN_RECORDINGS', 5)
   config = dataclasses.replace(
     PAPER, centred_levels=True, rig_runs=f'{rig_dirs}/rig_*', folds=2
   )
@@ -165,6 +166,15 @@ def test_the_study_fits_every_mode_on_the_rigs_recordings(rig_dirs):
   out = calibration.run(config, str(rig_dirs / 'work'), analyse_only=True)
   assert out['n'] == 7 and out['recalibration']['n_calibration_recordings'] == 7
   assert out['held_out_uncalibrated']['joint pair']['n'] == 4  # rec00 of rig_a alone
+  # a mode held out on fewer than MIN_RECORDINGS is reported, not shipped
+  assert set(out['recalibration']['modes']) == set(calibration.MODES) - {
+    'joint pair',
+    'joint pair, known winds',
+  }
+  assert (
+    'not shipped (fewer than 5 held out): joint pair, joint pair, known winds'
+    in (rig_dirs / 'work' / 'calibration.md').read_text()
+  )
   assert (
     "from a user's rig" in out['setting'] and '1-4 cm / 0.71-2.8 deg' in out['setting']
   )
@@ -194,6 +204,12 @@ def test_rig_tables_ship_beside_the_others_and_an_intake_estimate_quotes_them(
   config = estimate.Args().search.replace(camera_sd_m=0.02, camera_sd_deg=1.5)
   intake = config.replace(camera_sd_from='intake')
   assert calibration_tables.calibration_file(intake) == mine
+  # a joint estimate: the rig's tables lack its mode, the study's have it
+  cal = json.loads(open(mine).read())
+  del cal['recalibration']['modes']['joint pair']
+  open(mine, 'w').write(json.dumps(cal))
+  assert calibration_tables.calibration_file(intake, 'joint pair') == sim
+  assert calibration_tables.calibration_file(intake, 'video') == mine
   # a user's own claim: the rig's cameras erred as the intake does, not as it may
   cal = calibration_tables.read_calibration(mine)
   assert 'camera_sd_from' in calibration_tables.differing_fields(config, cal)
