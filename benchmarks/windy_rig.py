@@ -40,7 +40,7 @@ from intervals too wide throughout.
       --pool='benchmarks/results/camera_intake_claim_tables/*.json'
   python -m benchmarks.windy_rig --recipe=mismatched --modes=world_up \
       --pairs=7 --fabric_draws=400 --recipe_fields=seed=400 \
-      --materials=white_tablecloth,gray_interlock,...  # recordings to fit
+      --materials=white_tablecloth,gray_interlock,black_denim  # recordings to fit
       # tables on (experiments.calibrate --rig_runs)
   python -m benchmarks.windy_rig --workdir=out/factors --pool_by=run \
       --pool='benchmarks/results/intake_factors/?_*.json'  # one run a row
