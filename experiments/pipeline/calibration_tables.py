@@ -88,12 +88,18 @@ def calibration_file(config=None, mode: str | None = None) -> str:
   mine, source = carried_errors.camera_of(flat), carried_errors.source_of(flat)
   return min(own, key=lambda p: (
     len(differing_fields(config, cal := read_calibration(p))),
-    mode is not None and mode not in (cal.get('recalibration') or {}).get('modes', {mode: 0}),
+    _lacks(cal, mode),  # no tables of this estimate's mode
     len(_reading_gaps(config, cal)),
     carried_errors.table_source(cal) != source,  # displaced as this error errs
     carried_errors.table_recordings(cal) != 'rig',  # taken in as a user's are
     carried_errors.recordings_gap(carried_errors.table_of(cal), mine),
   ))  # fmt: skip
+
+
+def _lacks(cal: dict, mode: str | None) -> bool:
+  """Whether calibration ``cal`` has tables but none of ``mode``."""
+  rec = cal.get('recalibration')
+  return bool(mode and rec and 'modes' in rec and mode not in rec['modes'])
 
 
 def _reading_gaps(config, cal: dict) -> list[str]:

@@ -171,12 +171,12 @@ def run(config: Config, workdir: str, analyse_only: bool = False,
   if config.rig_runs:
     out, few = calibration_rig.shippable(out)
   files.write_json(os.path.join(workdir, RESULT_FILE), out)
-  text = table(out) + (
-    f'\n\nnot shipped (fewer than {calibration_rig.MIN_RECORDINGS} held out): '
-    + ', '.join(few)
-    if few
-    else ''
-  )
+  text = table(out)
+  if few:
+    text += (
+      f'\n\nnot shipped (fewer than {calibration_rig.MIN_RECORDINGS} held out): '
+      + ', '.join(few)
+    )
   files.write_text(os.path.join(workdir, 'calibration.md'), text + '\n')
   plot_ranks(
     out['held_out_uncalibrated'], os.path.join(workdir, 'calibration_ranks.png')

@@ -31,6 +31,7 @@ import numpy as np
 
 from experiments.pipeline import layout
 from experiments.pipeline.recording import read_json
+from experiments.studies import calibration_runs, told_cameras
 
 # Where a windy-rig recording keeps its truth and its estimate (world_up).
 _TRUTH = os.path.join('recording', 'truth.json')
@@ -82,7 +83,13 @@ def _recording(folder: str, k: int) -> dict | None:
       f'{recipe.get("material")!r}'
     )
   align = result.get('alignment') or {}
+  try:  # read now: a damaged file is named here, not deep in the analysis
+    saved = calibration_runs.saved_gp({'workdir': est})
+  except (OSError, ValueError, KeyError, EOFError) as e:
+    path = os.path.join(est, layout.POSTERIOR_FILE)
+    raise ValueError(f"{path}: not a finished estimate's posterior ({e})") from e
   return {
+    'saved': saved,
     'truth': {f: float(truth[f]) for f in ('bending_scale', 'wind_speed', 'area_weight')},
     'material': result['material'], 'workdir': est,
     'claim': (float(align.get('camera_sd_m', 0.0)), float(align.get('camera_sd_deg', 0.0))),
@@ -148,10 +155,7 @@ def claims_range(runs: list[dict]) -> tuple[float, float, float]:
     raise ValueError(
       'a rig estimate carried no camera error: run them through the intake'
     )
-  lo, hi = claims.min(0), claims.max(0)
-  spread = float(np.max(np.log(hi / lo)) / 2)
-  centre = np.sqrt(lo * hi)
-  return round(float(centre[0]), 6), round(float(centre[1]), 5), round(spread, 4)
+  return told_cameras.claims_box(claims, widest=True)
 
 
 def with_rig_runs(config, runs: list[dict]):

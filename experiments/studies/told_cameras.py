@@ -185,9 +185,18 @@ def intake_range(
   hold for, as ``carried_errors.table_of`` reads a table's: each component's
   geometric centre, and the smaller half-width (in log) of the two ranges
   drawn, so that both lie inside what was drawn."""
-  claims = np.array([e.claim for e in errors])
+  return claims_box([e.claim for e in errors], jitter)
+
+
+def claims_box(claims, jitter: float = 0.0, widest: bool = False):
+  """(metres, degrees, spread) of claims (n, 2), each widened by
+  exp(+-``jitter``): each component's geometric centre of its smallest and
+  largest, and the smaller half-width in log of the two ranges (both lie
+  inside), or with ``widest`` the larger (the wider range's ends are its)."""
+  claims = np.asarray(claims, np.float64)
   lo, hi = claims.min(0) * math.exp(-jitter), claims.max(0) * math.exp(jitter)
-  spread = float(np.min(np.log(hi / lo)) / 2)
+  half = np.log(hi / lo) / 2
+  spread = float(np.max(half) if widest else np.min(half))
   centre = np.sqrt(lo * hi)
   return round(float(centre[0]), 6), round(float(centre[1]), 5), round(spread, 4)
 

@@ -151,6 +151,13 @@ def test_no_folder_or_no_estimate_is_refused(tmp_path):
     calibration_rig.rig_runs(str(tmp_path / 'rig'))
 
 
+def test_a_damaged_posterior_is_refused_naming_it(rig_dirs):
+  path = rig_dirs / 'rig_b' / 'rec01' / 'est_world_up' / layout.POSTERIOR_FILE
+  path.write_bytes(b'')
+  with pytest.raises(ValueError, match=rf'{path}: not a finished estimate'):
+    calibration_rig.rig_runs(f'{rig_dirs}/rig_*')
+
+
 def test_the_study_fits_every_mode_on_the_rigs_recordings(rig_dirs, monkeypatch):
   """The analysis reads the rig's runs as its own: every recording in the
   video's tables, the joint pair only where both of a pair finished, and the
